@@ -1,0 +1,1 @@
+//! Benchmarks and their report (filled below).

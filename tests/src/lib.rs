@@ -1,0 +1,1 @@
+//! Cross-crate integration tests that run the real binaries on real data; see `tests/`.

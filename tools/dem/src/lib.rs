@@ -1,0 +1,1 @@
+//! DEM readers (being written).

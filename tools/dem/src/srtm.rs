@@ -1,0 +1,284 @@
+//! SRTM `.hgt` tiles: headerless big-endian i16, 1201² (3", SRTM3) or 3601² (1", SRTM1)
+//! samples, -32768 = void. The name (N42E001) is the south-west corner of the 1°x1° cell;
+//! several tiles given together are mosaicked by their names, sharing edge rows/columns.
+
+use std::path::{Path, PathBuf};
+
+use crate::error::label;
+use crate::raster::{Georef, Raster};
+use crate::{DemError, ReadOptions};
+
+const VOID: i16 = -32768;
+
+/// The 1°x1° cell a tile covers, by its south-west corner in whole degrees (S, W negative).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+struct Cell {
+    lat: i32,
+    lon: i32,
+}
+
+impl Cell {
+    /// `N42E001`, `s12w077.hgt`, `N42E001.SRTMGL1.hgt`: the first seven characters of the file
+    /// name, any case, any directory.
+    fn from_path(path: &Path) -> Option<Cell> {
+        let name = path.file_name()?.to_str()?.get(..7)?.to_ascii_uppercase();
+        let b = name.as_bytes();
+        let lat: i32 = name.get(1..3)?.parse().ok()?;
+        let lon: i32 = name.get(4..7)?.parse().ok()?;
+        if !b[1..3].iter().chain(&b[4..7]).all(u8::is_ascii_digit) {
+            return None; // "+1" parses as an i32 but is no tile name
+        }
+        let lat = match b[0] {
+            b'N' if lat <= 89 => lat,
+            b'S' if (1..=90).contains(&lat) => -lat,
+            _ => return None,
+        };
+        let lon = match b[3] {
+            b'E' if lon <= 179 => lon,
+            b'W' if (1..=180).contains(&lon) => -lon,
+            _ => return None,
+        };
+        Some(Cell { lat, lon })
+    }
+
+    fn name(self) -> String {
+        let ns = if self.lat < 0 { 'S' } else { 'N' };
+        let ew = if self.lon < 0 { 'W' } else { 'E' };
+        format!("{ns}{:02}{ew}{:03}", self.lat.abs(), self.lon.abs())
+    }
+}
+
+/// Samples per side from the file length: the only thing that tells SRTM1 from SRTM3.
+fn side_from_len(file: &str, len: u64) -> Result<usize, DemError> {
+    match len {
+        0 => Err(DemError::Empty {
+            file: file.to_string(),
+        }),
+        2_884_802 => Ok(1201),
+        25_934_402 => Ok(3601),
+        _ => Err(DemError::Malformed {
+            file: file.to_string(),
+            problem: format!(
+                "size {len} bytes is neither 1201² nor 3601² samples (truncated or not an SRTM tile)"
+            ),
+        }),
+    }
+}
+
+/// Reads one tile, or mosaics several.
+pub fn read(paths: &[PathBuf], opts: &ReadOptions) -> Result<Raster, DemError> {
+    // Sizes and names first, so a bad mosaic is refused before any tile is read.
+    let mut tiles = Vec::with_capacity(paths.len());
+    for path in paths {
+        let file = label(path);
+        let len = std::fs::metadata(path)
+            .map_err(|source| DemError::Io {
+                file: file.clone(),
+                source,
+            })?
+            .len();
+        let side = side_from_len(&file, len)?;
+        tiles.push((path, file, side, Cell::from_path(path)));
+    }
+
+    let [(path, file, side, cell)] = &tiles[..] else {
+        return read_mosaic(&tiles, opts);
+    };
+    let side = *side;
+    let mut samples = vec![f32::NAN; side * side];
+    read_tile(path, file, side, &mut samples, opts.vertical_scale())?;
+    let arc = if side == 1201 { 3 } else { 1 };
+    let (georef, description) = match cell {
+        Some(cell) => (georef(cell.lat + 1, side), format!("SRTM{arc} {}", cell.name())),
+        None if opts.spacing.is_some() => (Georef::None, format!("SRTM{arc} (unnamed tile)")),
+        None => {
+            return Err(DemError::Option {
+                file: file.clone(),
+                problem: "the name does not say where the tile lies (expected like N42E001.hgt): \
+                          rename it or pass --spacing"
+                    .to_string(),
+            })
+        }
+    };
+    Ok(Raster {
+        width: side,
+        height: side,
+        samples,
+        georef,
+        description,
+    })
+}
+
+/// Row 0 of a tile or mosaic lies on the northern edge of its top cells.
+fn georef(lat_north: i32, side: usize) -> Georef {
+    let step = 1.0 / (side - 1) as f64;
+    Georef::Degrees {
+        step_lon: step,
+        step_lat: step,
+        lat_row0: f64::from(lat_north),
+    }
+}
+
+type Tile<'a> = (&'a PathBuf, String, usize, Option<Cell>);
+
+fn read_mosaic(tiles: &[Tile<'_>], opts: &ReadOptions) -> Result<Raster, DemError> {
+    let mosaic_error = |file: &str, problem: String| DemError::Mosaic {
+        file: file.to_string(),
+        problem,
+    };
+    let (_, first_file, side, _) = &tiles[0];
+    let side = *side;
+    let arc = |s: usize| if s == 1201 { "1201² (3\")" } else { "3601² (1\")" };
+    let mut cells: Vec<(Cell, &Tile<'_>)> = Vec::with_capacity(tiles.len());
+    for tile in tiles {
+        let (_, file, tile_side, cell) = tile;
+        if *tile_side != side {
+            return Err(mosaic_error(
+                file,
+                format!("it is {} but {first_file} is {}", arc(*tile_side), arc(side)),
+            ));
+        }
+        let Some(cell) = cell else {
+            return Err(mosaic_error(
+                file,
+                "its name does not say where it lies (expected like N42E001.hgt)".to_string(),
+            ));
+        };
+        if let Some((_, other)) = cells.iter().find(|(c, _)| c == cell) {
+            return Err(mosaic_error(
+                file,
+                format!("cell {} is given twice (also {})", cell.name(), other.1),
+            ));
+        }
+        cells.push((*cell, tile));
+    }
+
+    let lat_min = cells.iter().map(|(c, _)| c.lat).min().unwrap_or(0);
+    let lat_max = cells.iter().map(|(c, _)| c.lat).max().unwrap_or(0);
+    let lon_min = cells.iter().map(|(c, _)| c.lon).min().unwrap_or(0);
+    let lon_max = cells.iter().map(|(c, _)| c.lon).max().unwrap_or(0);
+    let rows = (lat_max - lat_min + 1) as usize;
+    let cols = (lon_max - lon_min + 1) as usize;
+    if rows * cols != cells.len() {
+        // Name the first hole so the user knows which tile to add.
+        let missing = (lat_min..=lat_max)
+            .rev()
+            .flat_map(|lat| (lon_min..=lon_max).map(move |lon| Cell { lat, lon }))
+            .find(|c| !cells.iter().any(|(d, _)| d == c));
+        let sw = Cell {
+            lat: lat_min,
+            lon: lon_min,
+        };
+        let ne = Cell {
+            lat: lat_max,
+            lon: lon_max,
+        };
+        return Err(mosaic_error(
+            first_file,
+            format!(
+                "the {} tiles do not fill the rectangle {}..{}: {} is missing",
+                cells.len(),
+                sw.name(),
+                ne.name(),
+                missing.map_or_else(|| "a tile".to_string(), Cell::name)
+            ),
+        ));
+    }
+
+    // Tiles overlap by one row/column; rows * cols == number of files, so this is bounded by
+    // the files' own sizes.
+    let step = side - 1;
+    let width = cols * step + 1;
+    let height = rows * step + 1;
+    let mut samples = vec![f32::NAN; width * height];
+    let mut tile_samples = vec![f32::NAN; side * side];
+    cells.sort_by_key(|(c, _)| (std::cmp::Reverse(c.lat), c.lon));
+    for (cell, (path, file, _, _)) in &cells {
+        read_tile(path, file, side, &mut tile_samples, opts.vertical_scale())?;
+        let row0 = (lat_max - cell.lat) as usize * step;
+        let col0 = (cell.lon - lon_min) as usize * step;
+        for (r, src) in tile_samples.chunks_exact(side).enumerate() {
+            let dst = &mut samples[(row0 + r) * width + col0..][..side];
+            for (d, &s) in dst.iter_mut().zip(src) {
+                // On shared edges keep a valid sample over a void (the neighbour may have it).
+                if !s.is_nan() {
+                    *d = s;
+                }
+            }
+        }
+    }
+
+    let sw = Cell {
+        lat: lat_min,
+        lon: lon_min,
+    };
+    let ne = Cell {
+        lat: lat_max,
+        lon: lon_max,
+    };
+    let arc = if side == 1201 { 3 } else { 1 };
+    Ok(Raster {
+        width,
+        height,
+        samples,
+        georef: georef(lat_max + 1, side),
+        description: format!(
+            "SRTM{arc} mosaic {}..{} ({} files)",
+            sw.name(),
+            ne.name(),
+            cells.len()
+        ),
+    })
+}
+
+/// Reads a tile whose length was already checked into `out` (`side` x `side`), voids as NaN,
+/// heights times `scale`.
+fn read_tile(
+    path: &Path,
+    file: &str,
+    side: usize,
+    out: &mut [f32],
+    scale: f64,
+) -> Result<(), DemError> {
+    let bytes = std::fs::read(path).map_err(|source| DemError::Io {
+        file: file.to_string(),
+        source,
+    })?;
+    // The file may have changed since its length was checked.
+    if bytes.len() != side * side * 2 {
+        return Err(DemError::Malformed {
+            file: file.to_string(),
+            problem: format!("size changed while reading (now {} bytes)", bytes.len()),
+        });
+    }
+    for (d, b) in out.iter_mut().zip(bytes.chunks_exact(2)) {
+        let v = i16::from_be_bytes([b[0], b[1]]);
+        *d = if v == VOID {
+            f32::NAN
+        } else {
+            (f64::from(v) * scale) as f32
+        };
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cells_from_names() {
+        let c = |s: &str| Cell::from_path(Path::new(s));
+        assert_eq!(c("N42E001.hgt"), Some(Cell { lat: 42, lon: 1 }));
+        assert_eq!(c("/x/y/s12w077.HGT"), Some(Cell { lat: -12, lon: -77 }));
+        assert_eq!(c("N42E001.SRTMGL1.hgt"), Some(Cell { lat: 42, lon: 1 }));
+        assert_eq!(c("S90W180.hgt"), Some(Cell { lat: -90, lon: -180 }));
+        assert_eq!(c("N90E000.hgt"), None);
+        assert_eq!(c("N42E180.hgt"), None);
+        assert_eq!(c("N+1E001.hgt"), None);
+        assert_eq!(c("tile.hgt"), None);
+        assert_eq!(c("N4"), None);
+        assert_eq!(Cell { lat: -12, lon: -77 }.name(), "S12W077");
+        assert_eq!(Cell { lat: 0, lon: 0 }.name(), "N00E000");
+    }
+}

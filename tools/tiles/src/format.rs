@@ -1,0 +1,583 @@
+//! The `.vkt` tile-set file: one memory-mappable file per dataset.
+//!
+//! Layout (all integers and floats little-endian, every section 4-byte aligned, tiles 16-byte
+//! aligned):
+//!
+//! ```text
+//! FileHeader      256 bytes   magic "VKTILES\0", version, grid, spacing, levels, crc of header+directory
+//! DirEntry * T    40 bytes    per tile (row-major by tile): offset, length, crc32 of the tile blob,
+//!                             room for the tile's texture (offset, length; 0 = none yet)
+//! tile blobs      ...         TileHeader, LevelEntry * levels, then per level i:
+//!                               block i positions   block_len * u32 (packed vertex, see `pack`)
+//!                               block i morph       i * block_len * i8, level-major (see `pack`)
+//!                               level i indices     index_count * u16|u32, restart = all ones
+//!                               level i border      4 lists of u32 vertex indices (N, E, S, W)
+//! ```
+//!
+//! Writing goes to a hidden temporary file in the destination folder which is renamed over the
+//! destination only after everything, header last, is written and synced: an interrupted build
+//! never leaves a file that looks valid. Reading validates the header, the directory, each
+//! tile's checksum and every count, offset and index before handing out slices, so a corrupted
+//! or hostile file gives a [`FormatError`], never a panic or an out-of-bounds read.
+
+use std::fs::File;
+use std::io::{BufWriter, Seek, SeekFrom, Write};
+use std::mem::size_of;
+use std::path::{Path, PathBuf};
+
+use bytemuck::{Pod, Zeroable};
+
+use crate::mesh::TILE_CELLS;
+use crate::quantise::Quantiser;
+
+pub const MAGIC: [u8; 8] = *b"VKTILES\0";
+pub const TILE_MAGIC: [u8; 4] = *b"TILE";
+pub const VERSION: u32 = 1;
+/// The most levels a tile set may have (one morph byte per coarser level per vertex).
+pub const MAX_LEVELS: u32 = 16;
+/// Index value that restarts a fan (all ones at the index width).
+pub const RESTART_U16: u16 = u16::MAX;
+pub const RESTART_U32: u32 = u32::MAX;
+
+#[cfg(target_endian = "big")]
+compile_error!("the .vkt reader casts little-endian sections in place");
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct FileHeader {
+    pub magic: [u8; 8],
+    pub version: u32,
+    pub header_len: u32,
+    pub grid_width: u32,
+    pub grid_height: u32,
+    pub tiles_x: u32,
+    pub tiles_y: u32,
+    pub tile_size: u32,
+    pub levels: u32,
+    /// Metres between columns (east-west) and rows (north-south).
+    pub spacing_x: f64,
+    pub spacing_y: f64,
+    /// `e_{levels-1}` in metres; `e_i = base_error * 2^(levels-1-i)`.
+    pub base_error: f64,
+    pub height_min: f32,
+    pub height_max: f32,
+    pub voids_filled: u64,
+    pub directory_offset: u64,
+    pub directory_entry_len: u32,
+    /// 0 = no texture tiles (reserved for BC1 texture tiles).
+    pub texture_format: u32,
+    /// Where the heights came from, UTF-8, zero-padded.
+    pub description: [u8; 128],
+    pub reserved: [u32; 7],
+    /// crc32 of this header (with this field zero) followed by the directory.
+    pub header_crc: u32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct DirEntry {
+    pub offset: u64,
+    pub len: u64,
+    pub crc: u32,
+    pub flags: u32,
+    pub texture_offset: u64,
+    pub texture_len: u64,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct TileHeader {
+    pub magic: [u8; 4],
+    pub tx: u32,
+    pub ty: u32,
+    pub levels: u32,
+    /// Last local column / row of real data (inclusive).
+    pub data_max_x: u32,
+    pub data_max_y: u32,
+    /// Last local column / row the meshes cover (data extent rounded up to even).
+    pub mesh_max_x: u32,
+    pub mesh_max_y: u32,
+    pub height_min: f32,
+    pub height_step: f32,
+    pub vertex_count: u32,
+    pub reserved: u32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct LevelEntry {
+    /// `e_i`, metres.
+    pub error_bound: f32,
+    /// Measured max |source - mesh| over the tile's real samples, after quantisation, metres.
+    pub max_error: f32,
+    /// Where the spacing rule (or full resolution) stopped refinement above `e_i`: the largest
+    /// excess over `e_i` in metres, and how many fan triangles exceed.
+    pub limited_excess: f32,
+    pub limited_triangles: u32,
+    pub z_min: f32,
+    pub z_max: f32,
+    /// Metres per unit of this level's morph offsets (stored in finer blocks).
+    pub morph_unit: f32,
+    /// First vertex of block i; blocks are consecutive, so this is also the number of
+    /// vertices in blocks `0..i`.
+    pub block_start: u32,
+    pub block_len: u32,
+    pub positions_offset: u32,
+    pub morph_offset: u32,
+    pub index_offset: u32,
+    pub index_count: u32,
+    /// 2 or 4 bytes.
+    pub index_width: u32,
+    pub triangle_count: u32,
+    pub fan_count: u32,
+    pub border_offset: u32,
+    /// Vertices on the N, E, S, W tile sides at this level.
+    pub border_len: [u32; 4],
+    pub reserved: u32,
+}
+
+impl LevelEntry {
+    /// Vertices the level draws: blocks `0..=i`.
+    pub fn vertex_count(&self) -> u32 {
+        self.block_start + self.block_len
+    }
+}
+
+/// What went wrong reading or writing a `.vkt` file; shows as one line naming the file.
+#[derive(Debug, thiserror::Error)]
+pub enum FormatError {
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{}: {what}", path.display())]
+    Invalid { path: PathBuf, what: String },
+}
+
+fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> FormatError + '_ {
+    move |source| FormatError::Io { path: path.to_path_buf(), source }
+}
+
+fn align_up(n: u64, a: u64) -> u64 {
+    n.div_ceil(a) * a
+}
+
+/// Writes a tile set to a temporary file and renames it into place on [`finish`](Self::finish).
+/// Dropped unfinished, it deletes the temporary file.
+pub struct TileSetWriter {
+    path: PathBuf,
+    tmp_path: PathBuf,
+    file: Option<BufWriter<File>>,
+    header: FileHeader,
+    directory: Vec<DirEntry>,
+    written: Vec<bool>,
+    pos: u64,
+}
+
+impl TileSetWriter {
+    pub fn create(path: &Path, header: FileHeader) -> Result<Self, FormatError> {
+        let dir = match path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        let name = path
+            .file_name()
+            .ok_or_else(|| FormatError::Invalid { path: path.to_path_buf(), what: "not a file name".into() })?;
+        let tmp_path = dir.join(format!(".{}.tmp.{}", name.to_string_lossy(), std::process::id()));
+        let file = File::create(&tmp_path).map_err(io_err(path))?;
+        let tiles = header.tiles_x as usize * header.tiles_y as usize;
+        let pos = align_up((size_of::<FileHeader>() + tiles * size_of::<DirEntry>()) as u64, 16);
+        let mut writer = TileSetWriter {
+            path: path.to_path_buf(),
+            tmp_path,
+            file: Some(BufWriter::with_capacity(1 << 20, file)),
+            header,
+            directory: vec![DirEntry::default(); tiles],
+            written: vec![false; tiles],
+            pos,
+        };
+        writer.seek(pos)?;
+        Ok(writer)
+    }
+
+    fn file(&mut self) -> &mut BufWriter<File> {
+        self.file.as_mut().expect("the file lives until finish or drop")
+    }
+
+    fn seek(&mut self, pos: u64) -> Result<(), FormatError> {
+        let path = self.path.clone();
+        self.file().seek(SeekFrom::Start(pos)).map_err(io_err(&path))?;
+        Ok(())
+    }
+
+    fn write(&mut self, bytes: &[u8]) -> Result<(), FormatError> {
+        let path = self.path.clone();
+        self.file().write_all(bytes).map_err(io_err(&path))
+    }
+
+    /// Appends tile `(tx, ty)`'s blob (tiles may arrive in any order).
+    pub fn add_tile(&mut self, tx: u32, ty: u32, blob: &[u8]) -> Result<(), FormatError> {
+        let slot = ty as usize * self.header.tiles_x as usize + tx as usize;
+        let pad = align_up(self.pos, 16) - self.pos;
+        self.write(&[0u8; 16][..pad as usize])?;
+        self.pos += pad;
+        self.directory[slot] = DirEntry {
+            offset: self.pos,
+            len: blob.len() as u64,
+            crc: crc32fast::hash(blob),
+            ..DirEntry::default()
+        };
+        self.written[slot] = true;
+        self.write(blob)?;
+        self.pos += blob.len() as u64;
+        Ok(())
+    }
+
+    /// Writes directory and header, syncs, and renames the file into place.
+    pub fn finish(mut self) -> Result<(), FormatError> {
+        if let Some(missing) = self.written.iter().position(|w| !w) {
+            return Err(FormatError::Invalid {
+                path: self.path.clone(),
+                what: format!("internal: tile {missing} was never written"),
+            });
+        }
+        let mut header = self.header;
+        header.magic = MAGIC;
+        header.version = VERSION;
+        header.header_len = size_of::<FileHeader>() as u32;
+        header.directory_offset = size_of::<FileHeader>() as u64;
+        header.directory_entry_len = size_of::<DirEntry>() as u32;
+        header.header_crc = 0;
+        header.header_crc = header_crc(&header, bytemuck::cast_slice(&self.directory));
+        let directory = self.directory.clone();
+        self.seek(0)?;
+        self.write(bytemuck::bytes_of(&header))?;
+        self.write(bytemuck::cast_slice(&directory))?;
+        let path = self.path.clone();
+        let file = self.file.take().expect("the file lives until finish");
+        let file = file.into_inner().map_err(|e| FormatError::Io { path: path.clone(), source: e.into_error() })?;
+        file.sync_all().map_err(io_err(&path))?;
+        drop(file);
+        std::fs::rename(&self.tmp_path, &self.path).map_err(io_err(&path))?;
+        Ok(())
+    }
+}
+
+impl Drop for TileSetWriter {
+    fn drop(&mut self) {
+        if self.file.take().is_some() {
+            let _ = std::fs::remove_file(&self.tmp_path);
+        }
+    }
+}
+
+fn header_crc(header: &FileHeader, directory: &[u8]) -> u32 {
+    let mut h = *header;
+    h.header_crc = 0;
+    let mut hasher = crc32fast::Hasher::new();
+    hasher.update(bytemuck::bytes_of(&h));
+    hasher.update(directory);
+    hasher.finalize()
+}
+
+/// A memory-mapped, validated tile set.
+pub struct TileSet {
+    path: PathBuf,
+    map: memmap2::Mmap,
+    header: FileHeader,
+}
+
+impl std::fmt::Debug for TileSet {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TileSet").field("path", &self.path).field("header", &self.header).finish()
+    }
+}
+
+impl TileSet {
+    /// Maps `path` and validates its header and directory (not yet the tiles).
+    pub fn open(path: &Path) -> Result<TileSet, FormatError> {
+        let file = File::open(path).map_err(io_err(path))?;
+        // SAFETY: the map is read-only; a tile set that another process truncates while mapped
+        // could fault, which is the documented memmap2 caveat every mmap reader accepts.
+        let map = unsafe { memmap2::Mmap::map(&file) }.map_err(io_err(path))?;
+        let invalid = |what: String| FormatError::Invalid { path: path.to_path_buf(), what };
+        if map.len() < size_of::<FileHeader>() {
+            return Err(invalid(format!("{} bytes is too short for a tile set header", map.len())));
+        }
+        let header: FileHeader = bytemuck::pod_read_unaligned(&map[..size_of::<FileHeader>()]);
+        if header.magic != MAGIC {
+            return Err(invalid("not a vkterrain tile set (bad magic)".into()));
+        }
+        if header.version != VERSION {
+            return Err(invalid(format!("format version {} is not supported (this reader reads {VERSION})", header.version)));
+        }
+        if header.header_len as usize != size_of::<FileHeader>()
+            || header.directory_entry_len as usize != size_of::<DirEntry>()
+            || header.directory_offset != size_of::<FileHeader>() as u64
+        {
+            return Err(invalid("header or directory layout does not match this version".into()));
+        }
+        if header.tile_size != TILE_CELLS + 1 {
+            return Err(invalid(format!("tile size {} (expected {})", header.tile_size, TILE_CELLS + 1)));
+        }
+        if header.levels == 0 || header.levels > MAX_LEVELS {
+            return Err(invalid(format!("{} levels (expected 1..={MAX_LEVELS})", header.levels)));
+        }
+        let (tx, ty) = crate::build::tile_count(header.grid_width as usize, header.grid_height as usize)
+            .map_err(|e| invalid(format!("grid {}x{}: {e}", header.grid_width, header.grid_height)))?;
+        if (tx, ty) != (header.tiles_x, header.tiles_y) {
+            return Err(invalid(format!(
+                "{}x{} tiles does not match the {}x{} grid",
+                header.tiles_x, header.tiles_y, header.grid_width, header.grid_height
+            )));
+        }
+        let dir_len = tx as u64 * ty as u64 * size_of::<DirEntry>() as u64;
+        let dir_end = header.directory_offset + dir_len;
+        if dir_end > map.len() as u64 {
+            return Err(invalid(format!("directory of {} tiles runs past the end of the file (truncated?)", tx * ty)));
+        }
+        let directory = &map[header.directory_offset as usize..dir_end as usize];
+        if header_crc(&header, directory) != header.header_crc {
+            return Err(invalid("header checksum mismatch (corrupted file)".into()));
+        }
+        let set = TileSet { path: path.to_path_buf(), map, header };
+        for i in 0..(tx * ty) as usize {
+            let e = set.entry(i);
+            if e.offset % 16 != 0 || e.offset < dir_end || e.offset.checked_add(e.len).is_none_or(|end| end > set.map.len() as u64) {
+                return Err(invalid(format!(
+                    "tile {},{} lies outside the file (offset {}, length {}; truncated?)",
+                    i as u32 % tx,
+                    i as u32 / tx,
+                    e.offset,
+                    e.len
+                )));
+            }
+        }
+        Ok(set)
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    pub fn header(&self) -> &FileHeader {
+        &self.header
+    }
+
+    pub fn file_len(&self) -> u64 {
+        self.map.len() as u64
+    }
+
+    pub fn description(&self) -> String {
+        let d = &self.header.description;
+        let end = d.iter().position(|&b| b == 0).unwrap_or(d.len());
+        String::from_utf8_lossy(&d[..end]).into_owned()
+    }
+
+    /// `e_i` in metres.
+    pub fn level_error(&self, level: u32) -> f64 {
+        crate::build::level_error(self.header.base_error, self.header.levels, level)
+    }
+
+    fn entry(&self, i: usize) -> DirEntry {
+        let at = self.header.directory_offset as usize + i * size_of::<DirEntry>();
+        bytemuck::pod_read_unaligned(&self.map[at..at + size_of::<DirEntry>()])
+    }
+
+    pub fn dir_entry(&self, tx: u32, ty: u32) -> Option<DirEntry> {
+        (tx < self.header.tiles_x && ty < self.header.tiles_y)
+            .then(|| self.entry(ty as usize * self.header.tiles_x as usize + tx as usize))
+    }
+
+    /// Tile `(tx, ty)`, checksum and structure validated.
+    pub fn tile(&self, tx: u32, ty: u32) -> Result<Tile<'_>, FormatError> {
+        let invalid = |what: String| FormatError::Invalid { path: self.path.clone(), what: format!("tile {tx},{ty}: {what}") };
+        let e = self
+            .dir_entry(tx, ty)
+            .ok_or_else(|| invalid(format!("outside the {}x{} tiles", self.header.tiles_x, self.header.tiles_y)))?;
+        let blob = &self.map[e.offset as usize..(e.offset + e.len) as usize];
+        if crc32fast::hash(blob) != e.crc {
+            return Err(invalid("checksum mismatch (corrupted file)".into()));
+        }
+        Tile::parse(blob, tx, ty, self.header.levels).map_err(invalid)
+    }
+}
+
+/// Index array of one level.
+#[derive(Clone, Copy, Debug)]
+pub enum Indices<'a> {
+    U16(&'a [u16]),
+    U32(&'a [u32]),
+}
+
+impl Indices<'_> {
+    pub fn len(&self) -> usize {
+        match self {
+            Indices::U16(s) => s.len(),
+            Indices::U32(s) => s.len(),
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    pub fn bytes(&self) -> &[u8] {
+        match self {
+            Indices::U16(s) => bytemuck::cast_slice(s),
+            Indices::U32(s) => bytemuck::cast_slice(s),
+        }
+    }
+
+    /// Indices widened to u32, restarts as `None`.
+    pub fn iter(&self) -> impl Iterator<Item = Option<u32>> + '_ {
+        let (a, b) = match self {
+            Indices::U16(s) => (Some(s.iter().map(|&i| (i != RESTART_U16).then_some(u32::from(i)))), None),
+            Indices::U32(s) => (None, Some(s.iter().map(|&i| (i != RESTART_U32).then_some(i)))),
+        };
+        a.into_iter().flatten().chain(b.into_iter().flatten())
+    }
+
+    /// The fans: each a slice of vertex indices, centre first, closed perimeter after.
+    pub fn fans(&self) -> Vec<Vec<u32>> {
+        let mut fans = Vec::new();
+        let mut cur = Vec::new();
+        for i in self.iter() {
+            match i {
+                Some(v) => cur.push(v),
+                None => fans.push(std::mem::take(&mut cur)),
+            }
+        }
+        if !cur.is_empty() {
+            fans.push(cur);
+        }
+        fans
+    }
+}
+
+/// One tile of a mapped tile set.
+#[derive(Clone, Copy, Debug)]
+pub struct Tile<'a> {
+    blob: &'a [u8],
+    pub header: TileHeader,
+    levels: &'a [LevelEntry],
+}
+
+/// The data of one level of one tile, as stored.
+#[derive(Clone, Copy, Debug)]
+pub struct Level<'a> {
+    pub entry: LevelEntry,
+    /// Block i's packed vertices.
+    pub positions: &'a [u32],
+    /// Block i's morph offsets: `i` rows of `block_len` bytes, row k for coarser level k.
+    pub morph: &'a [i8],
+    pub indices: Indices<'a>,
+    /// Vertex indices on the N, E, S, W sides.
+    pub border: [&'a [u32]; 4],
+}
+
+fn section<'a, T: Pod>(blob: &'a [u8], offset: u32, count: u64, what: &str) -> Result<&'a [T], String> {
+    let bytes = count
+        .checked_mul(size_of::<T>() as u64)
+        .filter(|&b| (offset as u64).checked_add(b).is_some_and(|end| end <= blob.len() as u64))
+        .ok_or_else(|| format!("{what} ({count} items at {offset}) runs past the tile"))?;
+    let s = &blob[offset as usize..offset as usize + bytes as usize];
+    bytemuck::try_cast_slice(s).map_err(|_| format!("{what} at {offset} is misaligned"))
+}
+
+impl<'a> Tile<'a> {
+    fn parse(blob: &'a [u8], tx: u32, ty: u32, levels: u32) -> Result<Tile<'a>, String> {
+        let header: TileHeader = *section::<TileHeader>(blob, 0, 1, "tile header")?
+            .first()
+            .ok_or("empty tile")?;
+        if header.magic != TILE_MAGIC {
+            return Err("bad tile magic".into());
+        }
+        if (header.tx, header.ty) != (tx, ty) {
+            return Err(format!("directory points at tile {},{}", header.tx, header.ty));
+        }
+        if header.levels != levels {
+            return Err(format!("{} levels (the file says {levels})", header.levels));
+        }
+        let (dx, dy, mx, my) = (header.data_max_x, header.data_max_y, header.mesh_max_x, header.mesh_max_y);
+        if !(1..=TILE_CELLS).contains(&dx) || !(1..=TILE_CELLS).contains(&dy) || mx != (dx + 1) & !1 || my != (dy + 1) & !1 {
+            return Err(format!("bad data extent {dx}x{dy} / mesh extent {mx}x{my}"));
+        }
+        if !(header.height_step > 0.0) || !header.height_min.is_finite() || !header.height_step.is_finite() {
+            return Err("bad height quantisation".into());
+        }
+        let entries = section::<LevelEntry>(blob, size_of::<TileHeader>() as u32, levels as u64, "level table")?;
+        let tile = Tile { blob, header, levels: entries };
+        let mut start = 0u32;
+        for (i, e) in entries.iter().enumerate() {
+            let err = |what: String| format!("level {i}: {what}");
+            if e.block_start != start {
+                return Err(err(format!("block starts at vertex {} instead of {start}", e.block_start)));
+            }
+            start = start.checked_add(e.block_len).ok_or_else(|| err("vertex count overflows".into()))?;
+            if e.index_width == 2 && start > u32::from(RESTART_U16) {
+                return Err(err(format!("{start} vertices cannot be addressed with 16-bit indices")));
+            }
+            if e.index_width != 2 && e.index_width != 4 {
+                return Err(err(format!("index width {}", e.index_width)));
+            }
+            let level = tile.level_unchecked(i as u32).map_err(err)?;
+            let out_of_range = level.indices.iter().flatten().find(|&v| v >= start);
+            if let Some(v) = out_of_range {
+                return Err(err(format!("index {v} outside blocks 0..={i} ({start} vertices)")));
+            }
+            if let Some(v) = level.border.iter().flat_map(|b| b.iter()).find(|&&v| v >= start) {
+                return Err(err(format!("border vertex {v} outside blocks 0..={i}")));
+            }
+        }
+        if start != header.vertex_count {
+            return Err(format!("blocks hold {start} vertices, header says {}", header.vertex_count));
+        }
+        Ok(tile)
+    }
+
+    pub fn levels(&self) -> &'a [LevelEntry] {
+        self.levels
+    }
+
+    pub fn quantiser(&self) -> Quantiser {
+        Quantiser { min: self.header.height_min, step: self.header.height_step }
+    }
+
+    pub fn blob_len(&self) -> usize {
+        self.blob.len()
+    }
+
+    /// Level `i` (validated when the tile was parsed).
+    pub fn level(&self, i: u32) -> Option<Level<'a>> {
+        self.level_unchecked(i).ok()
+    }
+
+    fn level_unchecked(&self, i: u32) -> Result<Level<'a>, String> {
+        let e = *self.levels.get(i as usize).ok_or_else(|| format!("no level {i}"))?;
+        let n = u64::from(e.block_len);
+        let positions = section::<u32>(self.blob, e.positions_offset, n, "positions")?;
+        let morph = section::<i8>(self.blob, e.morph_offset, n * u64::from(i), "morph offsets")?;
+        let count = u64::from(e.index_count);
+        let indices = match e.index_width {
+            2 => Indices::U16(section::<u16>(self.blob, e.index_offset, count, "indices")?),
+            _ => Indices::U32(section::<u32>(self.blob, e.index_offset, count, "indices")?),
+        };
+        let total: u64 = e.border_len.iter().map(|&l| u64::from(l)).sum();
+        let all = section::<u32>(self.blob, e.border_offset, total, "border")?;
+        let (n0, n1, n2) = (e.border_len[0] as usize, e.border_len[1] as usize, e.border_len[2] as usize);
+        let border = [&all[..n0], &all[n0..n0 + n1], &all[n0 + n1..n0 + n1 + n2], &all[n0 + n1 + n2..]];
+        Ok(Level { entry: e, positions, morph, indices, border })
+    }
+
+    /// Every vertex of the tile, decoded: (x, y, height in metres), in index order.
+    pub fn vertices(&self) -> Vec<(u32, u32, f32)> {
+        let q = self.quantiser();
+        (0..self.header.levels)
+            .filter_map(|i| self.level(i))
+            .flat_map(|l| l.positions.iter().map(|&p| crate::pack::unpack(p)).collect::<Vec<_>>())
+            .map(|(x, y, h)| (x, y, q.height(h)))
+            .collect()
+    }
+}

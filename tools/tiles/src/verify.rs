@@ -1,0 +1,340 @@
+//! Independent checks of a written tile set: structure, nesting, fans, and (given the source
+//! heights) every level's error, recomputed from the stored meshes alone.
+//!
+//! Nothing here reuses the mesher: fans are read back from the index arrays, triangles are
+//! rasterised with their own barycentric code in f64, and the spacing rule is re-derived from
+//! each fan's geometry. A tile set that passes is what the renderer will draw.
+
+use std::collections::HashSet;
+
+use crate::build::{tile_samples, Grid};
+use crate::format::{Tile, TileSet};
+use crate::mesh::{TILE_CELLS, TILE_SIZE};
+
+/// One place where a level was allowed to exceed its bound (refinement forbidden there).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LimitedPlace {
+    pub tx: u32,
+    pub ty: u32,
+    pub level: u32,
+    pub triangles: u64,
+    pub excess: f64,
+}
+
+#[derive(Clone, Debug, Default)]
+pub struct VerifyReport {
+    pub tiles: u64,
+    pub levels_checked: u64,
+    /// With a source: the largest recomputed error per level over all tiles.
+    pub recomputed_max_error: Vec<f64>,
+    pub limited: Vec<LimitedPlace>,
+    /// Everything that does not hold, one line each.
+    pub problems: Vec<String>,
+}
+
+impl VerifyReport {
+    pub fn ok(&self) -> bool {
+        self.problems.is_empty()
+    }
+}
+
+/// Tolerance between a stored error figure and the recomputed one (f32 storage, f32 vs f64
+/// interpolation).
+fn tolerance(e: f64) -> f64 {
+    1e-3 + 1e-5 * e.abs()
+}
+
+/// Checks every tile; with `source`, also recomputes the errors against it.
+pub fn verify(set: &TileSet, source: Option<&Grid>) -> VerifyReport {
+    let h = set.header();
+    let mut report = VerifyReport { recomputed_max_error: vec![0.0; h.levels as usize], ..Default::default() };
+    if let Some(g) = source {
+        if (g.width, g.height) != (h.grid_width as usize, h.grid_height as usize) {
+            report.problems.push(format!(
+                "source is {}x{} samples, the tile set was built from {}x{}",
+                g.width, g.height, h.grid_width, h.grid_height
+            ));
+            return report;
+        }
+    }
+    for ty in 0..h.tiles_y {
+        for tx in 0..h.tiles_x {
+            report.tiles += 1;
+            match set.tile(tx, ty) {
+                Ok(tile) => check_tile(set, &tile, source, &mut report),
+                Err(e) => report.problems.push(e.to_string()),
+            }
+        }
+    }
+    report
+}
+
+fn check_tile(set: &TileSet, tile: &Tile, source: Option<&Grid>, report: &mut VerifyReport) {
+    let th = tile.header;
+    let (tx, ty) = (th.tx, th.ty);
+    let fh = set.header();
+    let cells = TILE_CELLS as usize;
+    let want_x = (fh.grid_width as usize - 1 - tx as usize * cells).min(cells) as u32;
+    let want_y = (fh.grid_height as usize - 1 - ty as usize * cells).min(cells) as u32;
+    let mut problem = |level: Option<u32>, what: String| {
+        let at = match level {
+            Some(l) => format!("tile {tx},{ty} level {l}"),
+            None => format!("tile {tx},{ty}"),
+        };
+        report.problems.push(format!("{}: {at}: {what}", set.path().display()));
+    };
+    if (th.data_max_x, th.data_max_y) != (want_x, want_y) {
+        problem(None, format!("data extent {}x{} should be {want_x}x{want_y}", th.data_max_x, th.data_max_y));
+        return;
+    }
+    let vertices = tile.vertices();
+    let samples = source.map(|g| tile_samples(g, tx, ty));
+    let mut previous: HashSet<u32> = HashSet::new();
+    for level in 0..th.levels {
+        report.levels_checked += 1;
+        let Some(l) = tile.level(level) else {
+            problem(Some(level), "unreadable".into());
+            continue;
+        };
+        let e = &l.entry;
+        let bound = set.level_error(level);
+        if (f64::from(e.error_bound) - bound).abs() > tolerance(bound) {
+            problem(Some(level), format!("error bound {} should be {bound}", e.error_bound));
+        }
+        let fans = l.indices.fans();
+        if fans.len() != e.fan_count as usize {
+            problem(Some(level), format!("{} fans, table says {}", fans.len(), e.fan_count));
+        }
+        let used: HashSet<u32> = fans.iter().flatten().copied().collect();
+        // Nesting: V_i ⊆ V_{i+1}, and block i holds exactly the vertices level i introduces.
+        if let Some(v) = previous.iter().find(|v| !used.contains(v)) {
+            problem(Some(level), format!("vertex {v} of level {} is missing (levels not nested)", level.saturating_sub(1)));
+        }
+        let block = e.block_start..e.vertex_count();
+        if used.len() != e.vertex_count() as usize || !block.clone().all(|v| used.contains(&v)) {
+            problem(Some(level), "vertices in use differ from blocks 0..=level".into());
+        }
+        let mut presence = vec![false; TILE_SIZE * TILE_SIZE];
+        let pos = |v: u32| vertices.get(v as usize).map(|&(x, y, _)| (x, y));
+        for &v in &used {
+            if let Some((x, y)) = pos(v) {
+                if x > th.mesh_max_x || y > th.mesh_max_y {
+                    problem(Some(level), format!("vertex {v} at {x},{y} lies outside the mesh extent"));
+                    return;
+                }
+                presence[y as usize * TILE_SIZE + x as usize] = true;
+            }
+        }
+        // Fans: each a closed CCW ring on the square around its centre; together they tile the
+        // mesh extent exactly once, and no level vertex sits inside a fan edge (no T-vertex).
+        let mut covered = vec![false; (TILE_CELLS * TILE_CELLS) as usize];
+        let mut triangles = 0u64;
+        let mut bad_fan = None;
+        for (f, fan) in fans.iter().enumerate() {
+            match check_fan(fan, &vertices, &presence, &mut covered) {
+                Ok(t) => triangles += t,
+                Err(what) => {
+                    bad_fan = Some(format!("fan {f}: {what}"));
+                    break;
+                }
+            }
+        }
+        if let Some(what) = bad_fan {
+            problem(Some(level), what);
+            continue;
+        }
+        let area = (th.mesh_max_x * th.mesh_max_y) as usize;
+        let inside = covered.iter().filter(|&&c| c).count();
+        let all_inside = (0..th.mesh_max_y).all(|y| (0..th.mesh_max_x).all(|x| covered[(y * TILE_CELLS + x) as usize]));
+        if inside != area || !all_inside {
+            problem(Some(level), format!("fans cover {inside} of the {area} cells of the mesh extent"));
+        }
+        if triangles != u64::from(e.triangle_count) {
+            problem(Some(level), format!("{triangles} triangles, table says {}", e.triangle_count));
+        }
+        // Border lists: exactly the level's vertices on each side, in order along it.
+        let sides = [
+            (|x: u32, y: u32, _: u32, _: u32| (y == 0).then_some(x)) as fn(u32, u32, u32, u32) -> Option<u32>,
+            |x, y, mx, _| (x == mx).then_some(y),
+            |x, y, _, my| (y == my).then_some(x),
+            |x, y, _, _| (x == 0).then_some(y),
+        ];
+        for (k, side) in sides.iter().enumerate() {
+            let mut want: Vec<(u32, u32)> = used
+                .iter()
+                .filter_map(|&v| pos(v).and_then(|(x, y)| side(x, y, th.mesh_max_x, th.mesh_max_y)).map(|t| (t, v)))
+                .collect();
+            want.sort_unstable();
+            let want: Vec<u32> = want.into_iter().map(|(_, v)| v).collect();
+            if want != l.border[k] {
+                problem(Some(level), format!("border list {k} does not match the level's side vertices"));
+            }
+        }
+        // Heights of the level's vertices bound the level's box.
+        let (zlo, zhi) = used
+            .iter()
+            .filter_map(|&v| vertices.get(v as usize))
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &(_, _, z)| (lo.min(z), hi.max(z)));
+        if zlo < e.z_min || zhi > e.z_max {
+            problem(Some(level), format!("vertex heights {zlo}..{zhi} leave the box {}..{}", e.z_min, e.z_max));
+        }
+        if let Some(s) = &samples {
+            let min_spacing = fh.spacing_x.min(fh.spacing_y);
+            let (worst, limited, excess, unexplained) =
+                measure_level(&fans, &vertices, &s.heights, th.data_max_x, th.data_max_y, bound, min_spacing);
+            let slot = &mut report.recomputed_max_error[level as usize];
+            *slot = slot.max(worst);
+            if (worst - f64::from(e.max_error)).abs() > tolerance(worst) {
+                problem(Some(level), format!("recomputed max error {worst:.4} m, stored {:.4} m", e.max_error));
+            }
+            if unexplained > 0.0 {
+                problem(Some(level), format!(
+                    "error exceeds e = {bound} m by {unexplained:.4} m where the spacing rule did not stop refinement"
+                ));
+            }
+            if limited as u32 != e.limited_triangles || (excess - f64::from(e.limited_excess)).abs() > tolerance(excess) {
+                problem(Some(level), format!(
+                    "{limited} triangles over the bound by up to {excess:.4} m; stored {} by {:.4} m",
+                    e.limited_triangles, e.limited_excess
+                ));
+            }
+            if limited > 0 {
+                report.limited.push(LimitedPlace { tx, ty, level, triangles: limited, excess });
+            }
+        } else if e.limited_triangles > 0 {
+            report.limited.push(LimitedPlace {
+                tx,
+                ty,
+                level,
+                triangles: u64::from(e.limited_triangles),
+                excess: f64::from(e.limited_excess),
+            });
+        }
+        previous = used;
+    }
+}
+
+/// Checks one fan's shape and marks its cells; returns its triangle count.
+fn check_fan(fan: &[u32], vertices: &[(u32, u32, f32)], presence: &[bool], covered: &mut [bool]) -> Result<u64, String> {
+    let at = |v: u32| vertices.get(v as usize).map(|&(x, y, _)| (i64::from(x), i64::from(y))).ok_or("vertex out of range");
+    if fan.len() < 6 || fan.len() > 10 {
+        return Err(format!("{} indices (a fan has a centre and 5..=9 ring entries)", fan.len()));
+    }
+    let c = at(fan[0])?;
+    let ring: Vec<(i64, i64)> = fan[1..].iter().map(|&v| at(v)).collect::<Result<_, _>>()?;
+    if ring.first() != ring.last() {
+        return Err("ring is not closed".into());
+    }
+    let h = (ring[0].0 - c.0).abs();
+    if h == 0 || !(h as u64).is_power_of_two() || (ring[0].1 - c.1).abs() != h {
+        return Err("ring does not start at a corner of a power-of-two cell".into());
+    }
+    let mut corners = 0;
+    for w in ring.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        let (ax, ay) = (a.0 - c.0, a.1 - c.1);
+        if ax.abs().max(ay.abs()) != h || (ax.abs() != h && ax != 0) || (ay.abs() != h && ay != 0) {
+            return Err("ring vertex off the cell's corners and midpoints".into());
+        }
+        if ax.abs() == h && ay.abs() == h {
+            corners += 1;
+        }
+        // Consecutive ring vertices lie along one side, h (to or from a midpoint) or 2h (corner
+        // to corner) apart, counter-clockwise seen from above: with y pointing south that is a
+        // negative cross product (c->a) x (c->b) in (x, y).
+        let (bx, by) = (b.0 - c.0, b.1 - c.1);
+        let step = (a.0 - b.0).abs() + (a.1 - b.1).abs();
+        if (a.0 != b.0 && a.1 != b.1) || (step != h && step != 2 * h) || ax * by - ay * bx >= 0 {
+            return Err("ring is not a counter-clockwise walk of the cell boundary".into());
+        }
+        // No lattice point strictly inside this edge may be a vertex of the level.
+        let (dx, dy) = ((b.0 - a.0).signum(), (b.1 - a.1).signum());
+        for s in 1..h {
+            let (x, y) = (a.0 + dx * s, a.1 + dy * s);
+            if presence[y as usize * TILE_SIZE + x as usize] {
+                return Err(format!("T-vertex at {x},{y}"));
+            }
+        }
+    }
+    if corners != 4 {
+        return Err(format!("{corners} corners on the ring"));
+    }
+    for y in (c.1 - h)..(c.1 + h) {
+        for x in (c.0 - h)..(c.0 + h) {
+            let cell = &mut covered[(y * i64::from(TILE_CELLS) + x) as usize];
+            if *cell {
+                return Err(format!("cell {x},{y} drawn twice"));
+            }
+            *cell = true;
+        }
+    }
+    Ok(ring.len() as u64 - 1)
+}
+
+/// Recomputes a level's error from its fans: (max error, triangles over `bound` where
+/// refinement was forbidden, their largest excess, the largest excess where it was not).
+fn measure_level(
+    fans: &[Vec<u32>],
+    vertices: &[(u32, u32, f32)],
+    source: &[f32],
+    max_x: u32,
+    max_y: u32,
+    bound: f64,
+    min_spacing: f64,
+) -> (f64, u64, f64, f64) {
+    let (mut worst, mut limited, mut excess, mut unexplained) = (0.0f64, 0u64, 0.0f64, 0.0f64);
+    for fan in fans {
+        let v = |i: u32| vertices[i as usize];
+        let c = v(fan[0]);
+        let ring: Vec<_> = fan[1..].iter().map(|&i| v(i)).collect();
+        let half = c.0.abs_diff(ring[0].0);
+        let cell = 2 * half;
+        for w in ring.windows(2) {
+            let (a, b) = (w[0], w[1]);
+            let err = triangle_error([c, a, b], source, max_x, max_y);
+            worst = worst.max(err);
+            if err > bound {
+                // A ring edge as long as the cell side can still get its midpoint (spacing
+                // cell/2); a half edge only by splitting the cell (spacing cell/4).
+                let full = a.0.abs_diff(b.0) + a.1.abs_diff(b.1) == cell;
+                let forbidden = if full {
+                    f64::from(cell / 2) * min_spacing < bound
+                } else {
+                    cell < 4 || f64::from(cell / 4) * min_spacing < bound
+                };
+                if forbidden {
+                    limited += 1;
+                    excess = excess.max(err - bound);
+                } else {
+                    unexplained = unexplained.max(err - bound);
+                }
+            }
+        }
+    }
+    (worst, limited, excess, unexplained)
+}
+
+/// Max |source - plane| over the real samples inside (or on) a triangle, in f64.
+fn triangle_error(t: [(u32, u32, f32); 3], source: &[f32], max_x: u32, max_y: u32) -> f64 {
+    let p = t.map(|(x, y, z)| (f64::from(x), f64::from(y), f64::from(z)));
+    let det = (p[1].1 - p[2].1) * (p[0].0 - p[2].0) + (p[2].0 - p[1].0) * (p[0].1 - p[2].1);
+    let xs = t.map(|v| v.0);
+    let ys = t.map(|v| v.1);
+    let (x0, x1) = (*xs.iter().min().unwrap_or(&0), (*xs.iter().max().unwrap_or(&0)).min(max_x));
+    let (y0, y1) = (*ys.iter().min().unwrap_or(&0), (*ys.iter().max().unwrap_or(&0)).min(max_y));
+    let mut worst = 0.0f64;
+    for y in y0..=y1 {
+        for x in x0..=x1 {
+            let (fx, fy) = (f64::from(x), f64::from(y));
+            let l0 = ((p[1].1 - p[2].1) * (fx - p[2].0) + (p[2].0 - p[1].0) * (fy - p[2].1)) / det;
+            let l1 = ((p[2].1 - p[0].1) * (fx - p[2].0) + (p[0].0 - p[2].0) * (fy - p[2].1)) / det;
+            let l2 = 1.0 - l0 - l1;
+            if l0 < -1e-9 || l1 < -1e-9 || l2 < -1e-9 {
+                continue;
+            }
+            let z = l0 * p[0].2 + l1 * p[1].2 + l2 * p[2].2;
+            worst = worst.max((f64::from(source[y as usize * TILE_SIZE + x as usize]) - z).abs());
+        }
+    }
+    worst
+}
