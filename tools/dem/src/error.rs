@@ -22,7 +22,9 @@ pub enum DemError {
         source: std::io::Error,
     },
 
-    #[error("{file}: unknown kind of file: expected .hgt, .tif/.tiff, .png, .jpg/.jpeg, .r16 or .f32")]
+    #[error(
+        "{file}: unknown kind of file: expected .hgt, .tif/.tiff, .png, .jpg/.jpeg, .r16 or .f32"
+    )]
     UnknownFormat { file: String },
 
     #[error("{file}: empty file")]
@@ -41,7 +43,9 @@ pub enum DemError {
     #[error("{file}: {problem}")]
     Option { file: String, problem: String },
 
-    #[error("{file}: wrong --size {width}x{height}: that needs {expected} bytes, the file has {actual}")]
+    #[error(
+        "{file}: wrong --size {width}x{height}: that needs {expected} bytes, the file has {actual}"
+    )]
     WrongSize {
         file: String,
         width: usize,

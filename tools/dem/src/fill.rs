@@ -162,7 +162,13 @@ mod tests {
     fn constant_stays_constant_and_valid_samples_are_kept() {
         let (w, h) = (33, 17);
         let mut g: Vec<f32> = (0..w * h)
-            .map(|i| if i % 3 == 0 || (i / w > 5 && i / w < 12) { f32::NAN } else { 7.5 })
+            .map(|i| {
+                if i % 3 == 0 || (i / w > 5 && i / w < 12) {
+                    f32::NAN
+                } else {
+                    7.5
+                }
+            })
             .collect();
         let voids = g.iter().filter(|v| v.is_nan()).count() as u64;
         assert_eq!(fill_voids(&mut g, w, h), Some(voids));

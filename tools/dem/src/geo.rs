@@ -21,7 +21,10 @@ const EQUATOR_M: f64 = 40_075_016.686;
 /// Latitude in degrees of a point `t` of the way down the web-mercator world (0 = top edge at
 /// about 85.05 N, 1 = bottom edge).
 pub fn mercator_latitude(t: f64) -> f64 {
-    (std::f64::consts::PI * (1.0 - 2.0 * t)).sinh().atan().to_degrees()
+    (std::f64::consts::PI * (1.0 - 2.0 * t))
+        .sinh()
+        .atan()
+        .to_degrees()
 }
 
 /// Ground metres per pixel at `lat_deg` for a zoom-`zoom` tile `tile_px` pixels wide.
@@ -55,12 +58,10 @@ pub fn tile_address(name: &str) -> Option<(u32, u64, u64)> {
             continue;
         }
         // Runs chained on by another `-digits` belong to a longer chain (1-2-3-4): skip.
-        let chained_before = w[0].0 >= 2
-            && bytes[w[0].0 - 1] == b'-'
-            && bytes[w[0].0 - 2].is_ascii_digit();
-        let chained_after = w[2].1 + 1 < bytes.len()
-            && bytes[w[2].1] == b'-'
-            && bytes[w[2].1 + 1].is_ascii_digit();
+        let chained_before =
+            w[0].0 >= 2 && bytes[w[0].0 - 1] == b'-' && bytes[w[0].0 - 2].is_ascii_digit();
+        let chained_after =
+            w[2].1 + 1 < bytes.len() && bytes[w[2].1] == b'-' && bytes[w[2].1 + 1].is_ascii_digit();
         if chained_before || chained_after {
             continue;
         }

@@ -9,7 +9,7 @@ use std::fs::File;
 use std::io::BufReader;
 use std::path::Path;
 
-use tiff::decoder::{Decoder, DecodingResult, Limits};
+use tiff::decoder::{ChunkType, Decoder, DecodingResult, Limits};
 use tiff::tags::Tag;
 use tiff::ColorType;
 
@@ -86,7 +86,6 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<Raster, DemError> {
         problem: what,
     })?;
     let photometric = tag_u16(&mut decoder, Tag::PhotometricInterpretation, 1)?;
-    let sample_format = tag_u16(&mut decoder, Tag::SampleFormat, 1)?;
     let bits = match decoder.colortype() {
         Ok(ColorType::Gray(bits)) if photometric == 1 => bits,
         Ok(ColorType::Gray(_)) => {
@@ -95,11 +94,19 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<Raster, DemError> {
             ))
         }
         Ok(ColorType::Multiband { num_samples, .. }) => {
-            return Err(unsupported(format!("TIFF with {num_samples} samples per pixel")))
+            return Err(unsupported(format!(
+                "TIFF with {num_samples} samples per pixel"
+            )))
         }
         Ok(other) => return Err(unsupported(format!("{other:?} TIFF"))),
         Err(e) => return Err(unsupported(format!("TIFF layout ({})", one_line(e)))),
     };
+    // One value per sample; with one sample per pixel (checked above) the first is it.
+    let sample_format = decoder
+        .find_tag_unsigned_vec::<u16>(Tag::SampleFormat)
+        .map_err(malformed)?
+        .and_then(|v| v.first().copied())
+        .unwrap_or(1);
     let sample_type = match (sample_format, bits) {
         (1, 8 | 16 | 32 | 64) => format!("u{bits}"),
         (2, 8 | 16 | 32 | 64) => format!("i{bits}"),
@@ -121,12 +128,17 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<Raster, DemError> {
         bytes_per_sample,
         max_bytes,
     )?;
-    let layout = match decoder.get_chunk_type() {
-        tiff::decoder::ChunkType::Tile => {
-            let (tw, th) = decoder.chunk_dimensions();
-            format!("tiled {tw}x{th}")
-        }
-        tiff::decoder::ChunkType::Strip => "stripped".to_string(),
+    let chunks = chunk_grid(&mut decoder, width, height).map_err(|e| match e {
+        ChunkError::Tiff(e) => malformed(e),
+        ChunkError::Bad(problem) => DemError::Malformed {
+            file: file.clone(),
+            problem,
+        },
+    })?;
+    let layout = if chunks.tiled {
+        format!("tiled {}x{}", chunks.width, chunks.height)
+    } else {
+        "stripped".to_string()
     };
 
     let nodata = match decoder.find_tag(Tag::GdalNodata).map_err(malformed)? {
@@ -161,45 +173,66 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<Raster, DemError> {
         })?
     };
 
+    // One chunk at a time, so the only whole-grid buffer is the f32 output. A chunk is stored
+    // whole (padding included), so the same file-size bound holds for it.
+    let chunk_bytes = u64::from(chunks.width)
+        .saturating_mul(u64::from(chunks.height))
+        .saturating_mul(bytes_per_sample);
+    if chunk_bytes > max_bytes {
+        return Err(DemError::TooLarge {
+            file,
+            width: chunks.width.into(),
+            height: chunks.height.into(),
+            problem: format!("in each chunk, {chunk_bytes} bytes, more than this file can hold"),
+        });
+    }
     let mut limits = Limits::default();
-    limits.decoding_buffer_size = samples * bytes_per_sample as usize + (1 << 20);
+    limits.decoding_buffer_size = usize::try_from(chunk_bytes)
+        .unwrap_or(usize::MAX)
+        .saturating_add(1 << 20);
     limits.intermediate_buffer_size = limits
         .intermediate_buffer_size
         .max(usize::try_from(file_len).unwrap_or(usize::MAX));
     let mut decoder = decoder.with_limits(limits);
-    let data = decoder.read_image().map_err(malformed)?;
 
-    let scale = opts.vertical_scale() * vertical;
     let mut converter = Converter {
         file: &file,
-        width: width as usize,
         nodata,
-        scale,
-        out: Vec::with_capacity(samples),
+        scale: opts.vertical_scale() * vertical,
+        width: width as usize,
+        out: vec![f32::NAN; samples],
     };
-    match data {
-        DecodingResult::U8(v) => converter.ints(&v, f64::from),
-        DecodingResult::U16(v) => converter.ints(&v, f64::from),
-        DecodingResult::U32(v) => converter.ints(&v, f64::from),
-        DecodingResult::U64(v) => converter.ints(&v, |x| x as f64),
-        DecodingResult::I8(v) => converter.ints(&v, f64::from),
-        DecodingResult::I16(v) => converter.ints(&v, f64::from),
-        DecodingResult::I32(v) => converter.ints(&v, f64::from),
-        DecodingResult::I64(v) => converter.ints(&v, |x| x as f64),
-        DecodingResult::F16(v) => converter.floats(&v, |x| f64::from(f32::from(x)))?,
-        DecodingResult::F32(v) => converter.floats(&v, f64::from)?,
-        DecodingResult::F64(v) => converter.floats(&v, |x| x)?,
+    let mut buffer = DecodingResult::U8(Vec::new());
+    for index in 0..chunks.count {
+        let (x0, y0, w, h) = chunks.rect(index, width, height);
+        // Read each chunk at its full stored width: the tiff crate's row-by-row path for
+        // narrower edge tiles can fail on valid LZW data ("no lzw end code found").
+        let stride = chunks.width as usize;
+        decoder
+            .read_chunk_to_buffer(&mut buffer, index, stride * bytes_per_sample as usize)
+            .map_err(malformed)?;
+        let window = Window {
+            x0,
+            y0,
+            width: w,
+            height: h,
+            stride,
+        };
+        match &buffer {
+            DecodingResult::U8(v) => converter.ints(v, &window, f64::from),
+            DecodingResult::U16(v) => converter.ints(v, &window, f64::from),
+            DecodingResult::U32(v) => converter.ints(v, &window, f64::from),
+            DecodingResult::U64(v) => converter.ints(v, &window, |x| x as f64),
+            DecodingResult::I8(v) => converter.ints(v, &window, f64::from),
+            DecodingResult::I16(v) => converter.ints(v, &window, f64::from),
+            DecodingResult::I32(v) => converter.ints(v, &window, f64::from),
+            DecodingResult::I64(v) => converter.ints(v, &window, |x| x as f64),
+            DecodingResult::F16(v) => converter.floats(v, &window, |x| f64::from(f32::from(x))),
+            DecodingResult::F32(v) => converter.floats(v, &window, f64::from),
+            DecodingResult::F64(v) => converter.floats(v, &window, |x| x),
+        }?;
     }
     let out = converter.out;
-    if out.len() != samples {
-        return Err(DemError::Malformed {
-            file,
-            problem: format!(
-                "decoded {} samples for a {width}x{height} image",
-                out.len()
-            ),
-        });
-    }
     let nodata_text = match nodata {
         Some(n) => format!(", nodata {n}"),
         None => String::new(),
@@ -224,55 +257,179 @@ fn parse_nodata(text: &str) -> Option<f64> {
     t.parse().ok()
 }
 
-/// Turns decoded samples into metres, voids into NaN.
+/// How the image is cut into chunks (strips are chunks as wide as the image).
+struct ChunkGrid {
+    tiled: bool,
+    width: u32,
+    height: u32,
+    across: u32,
+    count: u32,
+}
+
+impl ChunkGrid {
+    /// Image rectangle `(x0, y0, width, height)` of chunk `index`, edge padding excluded.
+    fn rect(&self, index: u32, width: u32, height: u32) -> (usize, usize, usize, usize) {
+        let x0 = (index % self.across) * self.width;
+        let y0 = (index / self.across) * self.height;
+        (
+            x0 as usize,
+            y0 as usize,
+            self.width.min(width - x0) as usize,
+            self.height.min(height - y0) as usize,
+        )
+    }
+}
+
+enum ChunkError {
+    Tiff(tiff::TiffError),
+    Bad(String),
+}
+
+impl From<tiff::TiffError> for ChunkError {
+    fn from(e: tiff::TiffError) -> Self {
+        ChunkError::Tiff(e)
+    }
+}
+
+/// The chunk layout from the tags, checked against the number of chunks the file lists, so
+/// that no chunk index or rectangle can fall outside the image.
+fn chunk_grid<R: std::io::Read + std::io::Seek>(
+    decoder: &mut Decoder<R>,
+    width: u32,
+    height: u32,
+) -> Result<ChunkGrid, ChunkError> {
+    let tiled = decoder.get_chunk_type() == ChunkType::Tile;
+    let (cw, ch, count) = if tiled {
+        let tw = decoder
+            .find_tag_unsigned::<u32>(Tag::TileWidth)?
+            .unwrap_or(0);
+        let th = decoder
+            .find_tag_unsigned::<u32>(Tag::TileLength)?
+            .unwrap_or(0);
+        (tw, th, decoder.tile_count()?)
+    } else {
+        let rows = decoder
+            .find_tag_unsigned::<u32>(Tag::RowsPerStrip)?
+            .unwrap_or(u32::MAX)
+            .min(height);
+        (width, rows, decoder.strip_count()?)
+    };
+    if cw == 0 || ch == 0 {
+        return Err(ChunkError::Bad(format!("TIFF chunk size {cw}x{ch}")));
+    }
+    let across = width.div_ceil(cw);
+    let expected = u64::from(across) * u64::from(height.div_ceil(ch));
+    if u64::from(count) != expected {
+        return Err(ChunkError::Bad(format!(
+            "TIFF lists {count} chunks, a {width}x{height} image in {cw}x{ch} chunks needs {expected}"
+        )));
+    }
+    Ok(ChunkGrid {
+        tiled,
+        width: cw,
+        height: ch,
+        across,
+        count,
+    })
+}
+
+/// Where a decoded chunk goes: its image rectangle and its row stride in samples.
+struct Window {
+    x0: usize,
+    y0: usize,
+    width: usize,
+    height: usize,
+    stride: usize,
+}
+
+/// Turns decoded samples into metres, voids into NaN, placing chunks in the output grid.
 struct Converter<'a> {
     file: &'a str,
-    width: usize,
     nodata: Option<f64>,
     scale: f64,
+    width: usize,
     out: Vec<f32>,
 }
 
 impl Converter<'_> {
-    fn ints<T: Copy>(&mut self, data: &[T], to_f64: impl Fn(T) -> f64) {
-        // A NaN or fractional nodata matches no integer: no voids.
-        let nodata = self.nodata.unwrap_or(f64::NAN);
-        self.out.extend(data.iter().map(|&x| {
-            let v = to_f64(x);
-            if v == nodata {
-                f32::NAN
-            } else {
-                (v * self.scale) as f32
-            }
-        }));
+    /// The chunk's rows of real samples, or an error if the decoder returned too few.
+    fn rows<'d, T>(
+        &self,
+        data: &'d [T],
+        w: &Window,
+    ) -> Result<impl Iterator<Item = (usize, &'d [T])> + 'd, DemError> {
+        let needed = (w.height.saturating_sub(1)) * w.stride + w.width;
+        if data.len() < needed || w.width > w.stride {
+            return Err(DemError::Malformed {
+                file: self.file.to_string(),
+                problem: format!(
+                    "TIFF chunk at {},{} decoded to {} samples, {needed} expected",
+                    w.x0,
+                    w.y0,
+                    data.len()
+                ),
+            });
+        }
+        let (y0, width, height, stride) = (w.y0, w.width, w.height, w.stride);
+        Ok((0..height).map(move |r| (y0 + r, &data[r * stride..][..width])))
     }
 
-    fn floats<T: Copy>(&mut self, data: &[T], to_f64: impl Fn(T) -> f64) -> Result<(), DemError> {
+    fn ints<T: Copy>(
+        &mut self,
+        data: &[T],
+        w: &Window,
+        to_f64: impl Fn(T) -> f64,
+    ) -> Result<(), DemError> {
+        // A NaN or fractional nodata matches no integer: no voids.
+        let nodata = self.nodata.unwrap_or(f64::NAN);
+        for (y, row) in self.rows(data, w)? {
+            let out = &mut self.out[y * self.width + w.x0..][..w.width];
+            for (o, &x) in out.iter_mut().zip(row) {
+                let v = to_f64(x);
+                *o = if v == nodata {
+                    f32::NAN
+                } else {
+                    (v * self.scale) as f32
+                };
+            }
+        }
+        Ok(())
+    }
+
+    fn floats<T: Copy>(
+        &mut self,
+        data: &[T],
+        w: &Window,
+        to_f64: impl Fn(T) -> f64,
+    ) -> Result<(), DemError> {
         // Compare in the file's own precision: GDAL writes f32 nodata as a decimal that only
         // equals the samples after rounding to f32.
         let nodata = self.nodata.map(|n| f64::from(n as f32));
         let nan_is_void = nodata.is_some_and(f64::is_nan);
-        for (i, &x) in data.iter().enumerate() {
-            let v = to_f64(x);
-            let h = if (v.is_nan() && nan_is_void) || Some(v) == nodata {
-                f32::NAN
-            } else {
-                let h = (v * self.scale) as f32;
-                if !h.is_finite() {
-                    return Err(DemError::BadSample {
-                        file: self.file.to_string(),
-                        x: i % self.width.max(1),
-                        y: i / self.width.max(1),
-                        problem: format!(
-                            "height {v} is not a finite number (and the nodata value is {})",
-                            self.nodata
-                                .map_or_else(|| "not set".to_string(), |n| n.to_string())
-                        ),
-                    });
-                }
-                h
-            };
-            self.out.push(h);
+        for (y, row) in self.rows(data, w)? {
+            let start = y * self.width + w.x0;
+            for (c, &x) in row.iter().enumerate() {
+                let v = to_f64(x);
+                let h = if (v.is_nan() && nan_is_void) || Some(v) == nodata {
+                    f32::NAN
+                } else {
+                    let h = (v * self.scale) as f32;
+                    if !h.is_finite() {
+                        return Err(DemError::BadSample {
+                            file: self.file.to_string(),
+                            x: w.x0 + c,
+                            y,
+                            problem: format!(
+                                "height {v} is not a finite number (and the nodata value is {})",
+                                self.nodata
+                                    .map_or_else(|| "not set".to_string(), |n| n.to_string())
+                            ),
+                        });
+                    }
+                    h
+                };
+                self.out[start + c] = h;
+            }
         }
         Ok(())
     }
@@ -359,9 +516,7 @@ fn georef<R: std::io::Read + std::io::Seek>(
         }
     };
     if !(sx.is_finite() && sy.is_finite() && sx > 0.0 && sy > 0.0) {
-        return Err(GeorefError::Unsupported(format!(
-            "pixel scale {sx} x {sy}"
-        )));
+        return Err(GeorefError::Unsupported(format!("pixel scale {sx} x {sy}")));
     }
 
     match keys.get(GT_MODEL_TYPE) {

@@ -87,8 +87,8 @@ impl FromStr for Crop {
             .trim()
             .parse()
             .map_err(|_| bad("Y is not a whole number"))?;
-        let (width, height) =
-            parse_dimensions(size.trim()).ok_or_else(|| bad("expected X,Y,WxH (e.g. 0,0,1025x1025)"))?;
+        let (width, height) = parse_dimensions(size.trim())
+            .ok_or_else(|| bad("expected X,Y,WxH (e.g. 0,0,1025x1025)"))?;
         if width == 0 || height == 0 {
             return Err(bad("the window must be at least 1x1"));
         }
@@ -208,7 +208,16 @@ mod tests {
         let c: Crop = " 10, 20 ,3X4".parse().unwrap();
         assert_eq!((c.x, c.y, c.width, c.height), (10, 20, 3, 4));
         assert_eq!(c.to_string(), "10,20,3x4");
-        for bad in ["", "1,2", "1,2,3", "1,2,3x", "a,2,3x4", "1,2,3x4,5", "-1,0,2x2", "0,0,0x4"] {
+        for bad in [
+            "",
+            "1,2",
+            "1,2,3",
+            "1,2,3x",
+            "a,2,3x4",
+            "1,2,3x4,5",
+            "-1,0,2x2",
+            "0,0,0x4",
+        ] {
             let e = bad.parse::<Crop>().unwrap_err().to_string();
             assert!(e.starts_with("--crop"), "{bad:?}: {e}");
         }
@@ -216,8 +225,14 @@ mod tests {
 
     #[test]
     fn parses_encoding_and_size() {
-        assert_eq!("terrain-rgb".parse::<Encoding>().unwrap(), Encoding::TerrainRgb);
-        assert_eq!("Terrarium".parse::<Encoding>().unwrap(), Encoding::Terrarium);
+        assert_eq!(
+            "terrain-rgb".parse::<Encoding>().unwrap(),
+            Encoding::TerrainRgb
+        );
+        assert_eq!(
+            "Terrarium".parse::<Encoding>().unwrap(),
+            Encoding::Terrarium
+        );
         assert!("rgb".parse::<Encoding>().is_err());
         assert_eq!(parse_size("1025x513").unwrap(), (1025, 513));
         assert!(parse_size("1025").is_err());

@@ -39,6 +39,10 @@ pub fn read(path: &Path, format: ImageFormat, opts: &ReadOptions) -> Result<Rast
         problem: format!("not a readable {kind}: {}", one_line(e)),
     };
 
+    if format == ImageFormat::Jpeg {
+        check_jpeg_ends(&file, &handle, file_len)?;
+    }
+
     let mut reader = ImageReader::with_format(BufReader::new(handle), format);
     // Only the header is read until `from_decoder`; the real limit is set once we know the size.
     reader.limits(limits(64 << 20));
@@ -46,14 +50,14 @@ pub fn read(path: &Path, format: ImageFormat, opts: &ReadOptions) -> Result<Rast
     let (width, height) = decoder.dimensions();
     let bytes_per_pixel = u64::from(decoder.color_type().bytes_per_pixel());
     let max_bytes = file_len.saturating_mul(MAX_COMPRESSION_RATIO);
-    let samples = check_dimensions(
+    let pixels = check_dimensions(
         &file,
         width.into(),
         height.into(),
         bytes_per_pixel,
         max_bytes,
     )?;
-    let needed = samples as u64 * bytes_per_pixel;
+    let needed = pixels as u64 * bytes_per_pixel;
     // Room for the picture plus the decoder's own row buffers.
     decoder
         .set_limits(limits(needed.saturating_mul(2).saturating_add(64 << 20)))
@@ -76,12 +80,16 @@ pub fn read(path: &Path, format: ImageFormat, opts: &ReadOptions) -> Result<Rast
             return Err(grey_with_encoding(e))
         }
         (DynamicImage::ImageLuma8(img), None) => (
-            img.pixels().map(|p| (f64::from(p.0[0]) * scale) as f32).collect(),
+            img.pixels()
+                .map(|p| (f64::from(p.0[0]) * scale) as f32)
+                .collect(),
             "8-bit grey",
             Georef::None,
         ),
         (DynamicImage::ImageLuma16(img), None) => (
-            img.pixels().map(|p| (f64::from(p.0[0]) * scale) as f32).collect(),
+            img.pixels()
+                .map(|p| (f64::from(p.0[0]) * scale) as f32)
+                .collect(),
             "16-bit grey",
             Georef::None,
         ),
@@ -109,7 +117,7 @@ pub fn read(path: &Path, format: ImageFormat, opts: &ReadOptions) -> Result<Rast
                     ((r - g).abs() + (g - b).abs() + (r - b).abs()) as f64 / 3.0
                 })
                 .sum::<f64>()
-                / samples as f64;
+                / pixels as f64;
             if spread > GREY_TOLERANCE {
                 return Err(unsupported("colour JPEG (heights must be grey)"));
             }
@@ -176,6 +184,46 @@ pub fn read(path: &Path, format: ImageFormat, opts: &ReadOptions) -> Result<Rast
         georef,
         description,
     })
+}
+
+/// The JPEG decoder fills a truncated file's missing rows with grey and reports success, which
+/// would turn a cut-off download into a plausible but false terrain. A complete JPEG ends with
+/// the end-of-image marker FF D9 (which cannot occur in entropy-coded data), so demand it,
+/// allowing for padding some writers append (and the start-of-image marker FF D8).
+fn check_jpeg_ends(file: &str, handle: &File, len: u64) -> Result<(), DemError> {
+    use std::io::{Read, Seek, SeekFrom};
+    let mut head = Vec::with_capacity(2);
+    let tail_len = len.min(256);
+    let mut tail = Vec::with_capacity(tail_len as usize);
+    let mut reader = handle;
+    reader
+        .seek(SeekFrom::Start(0))
+        .and_then(|_| reader.take(2).read_to_end(&mut head))
+        .and_then(|_| reader.seek(SeekFrom::Start(len - tail_len)))
+        .and_then(|_| reader.take(tail_len).read_to_end(&mut tail))
+        .and_then(|_| reader.seek(SeekFrom::Start(0)))
+        .map_err(|source| DemError::Io {
+            file: file.to_string(),
+            source,
+        })?;
+    if head != [0xFF, 0xD8] {
+        return Err(DemError::Malformed {
+            file: file.to_string(),
+            problem: "not a readable JPEG: no start-of-image marker".to_string(),
+        });
+    }
+    let end = tail
+        .iter()
+        .rposition(|&b| !matches!(b, 0 | b'\r' | b'\n' | b' '))
+        .map_or(0, |i| i + 1);
+    if tail[..end].ends_with(&[0xFF, 0xD9]) {
+        Ok(())
+    } else {
+        Err(DemError::Malformed {
+            file: file.to_string(),
+            problem: "truncated JPEG (no end-of-image marker)".to_string(),
+        })
+    }
 }
 
 fn limits(max_alloc: u64) -> Limits {

@@ -89,7 +89,10 @@ pub fn read(paths: &[PathBuf], opts: &ReadOptions) -> Result<Raster, DemError> {
     read_tile(path, file, side, &mut samples, opts.vertical_scale())?;
     let arc = if side == 1201 { 3 } else { 1 };
     let (georef, description) = match cell {
-        Some(cell) => (georef(cell.lat + 1, side), format!("SRTM{arc} {}", cell.name())),
+        Some(cell) => (
+            georef(cell.lat + 1, side),
+            format!("SRTM{arc} {}", cell.name()),
+        ),
         None if opts.spacing.is_some() => (Georef::None, format!("SRTM{arc} (unnamed tile)")),
         None => {
             return Err(DemError::Option {
@@ -126,16 +129,28 @@ fn read_mosaic(tiles: &[Tile<'_>], opts: &ReadOptions) -> Result<Raster, DemErro
         file: file.to_string(),
         problem,
     };
-    let (_, first_file, side, _) = &tiles[0];
+    let Some((_, first_file, side, _)) = tiles.first() else {
+        return Err(DemError::NoInput);
+    };
     let side = *side;
-    let arc = |s: usize| if s == 1201 { "1201² (3\")" } else { "3601² (1\")" };
+    let arc = |s: usize| {
+        if s == 1201 {
+            "1201² (3\")"
+        } else {
+            "3601² (1\")"
+        }
+    };
     let mut cells: Vec<(Cell, &Tile<'_>)> = Vec::with_capacity(tiles.len());
     for tile in tiles {
         let (_, file, tile_side, cell) = tile;
         if *tile_side != side {
             return Err(mosaic_error(
                 file,
-                format!("it is {} but {first_file} is {}", arc(*tile_side), arc(side)),
+                format!(
+                    "it is {} but {first_file} is {}",
+                    arc(*tile_side),
+                    arc(side)
+                ),
             ));
         }
         let Some(cell) = cell else {
@@ -272,7 +287,13 @@ mod tests {
         assert_eq!(c("N42E001.hgt"), Some(Cell { lat: 42, lon: 1 }));
         assert_eq!(c("/x/y/s12w077.HGT"), Some(Cell { lat: -12, lon: -77 }));
         assert_eq!(c("N42E001.SRTMGL1.hgt"), Some(Cell { lat: 42, lon: 1 }));
-        assert_eq!(c("S90W180.hgt"), Some(Cell { lat: -90, lon: -180 }));
+        assert_eq!(
+            c("S90W180.hgt"),
+            Some(Cell {
+                lat: -90,
+                lon: -180
+            })
+        );
         assert_eq!(c("N90E000.hgt"), None);
         assert_eq!(c("N42E180.hgt"), None);
         assert_eq!(c("N+1E001.hgt"), None);

@@ -7,7 +7,7 @@ use std::sync::mpsc::sync_channel;
 use rayon::prelude::*;
 
 use crate::format::{FileHeader, LevelEntry, TileHeader, TileSetWriter, MAX_LEVELS, TILE_MAGIC};
-use crate::mesh::{lattice, raster_triangle, Mesher, TileSamples, TILE_CELLS, TILE_SIZE};
+use crate::mesh::{lattice, plane, triangle_spans, Mesher, TileSamples, TILE_CELLS, TILE_SIZE};
 use crate::pack::{morph_offset, morph_unit, pack};
 use crate::quantise::Quantiser;
 use crate::BuildError;
@@ -151,19 +151,24 @@ pub fn build_tile(grid: &Grid, tx: u32, ty: u32, params: &BuildParams) -> Result
     let mut vertex_of = vec![NO_VERTEX; TILE_SIZE * TILE_SIZE];
     let mut lattice_of: Vec<u32> = Vec::new();
     let mut vertex_level: Vec<u8> = Vec::new();
-    // The surface of each level at every lattice point, for the morph offsets.
-    let mut surfaces: Vec<Vec<f32>> = Vec::with_capacity(n);
     let mut levels: Vec<LevelOut> = Vec::with_capacity(n);
+    // Each level's surface at every lattice point.
+    let mut surfaces: Vec<Vec<f32>> = Vec::with_capacity(n);
     let mut fan = Vec::with_capacity(10);
 
     for level in 0..n {
         let e = params.level_error(level as u32);
         mesher.refine(e);
-        let mut leaves = mesher.leaves();
-        leaves.sort_by_key(|q| {
-            let (x, y) = q.origin();
-            hilbert_index(TILE_CELLS / 2, x / 2, y / 2)
-        });
+        let mut keyed: Vec<(u32, _)> = mesher
+            .leaves()
+            .into_iter()
+            .map(|q| {
+                let (x, y) = q.origin();
+                (hilbert_index(TILE_CELLS / 2, x / 2, y / 2), q)
+            })
+            .collect();
+        keyed.sort_unstable_by_key(|&(key, _)| key);
+        let leaves: Vec<_> = keyed.into_iter().map(|(_, q)| q).collect();
 
         let block_start = lattice_of.len() as u32;
         let mut indices = Vec::with_capacity(leaves.len() * 10);
@@ -185,36 +190,43 @@ pub fn build_tile(grid: &Grid, tx: u32, ty: u32, params: &BuildParams) -> Result
         }
         indices.pop();
 
-        // Measured error, the places where refinement was not allowed, and the surface.
-        let mut surface = vec![f32::NAN; TILE_SIZE * TILE_SIZE];
-        let mut max_error = 0.0f32;
-        let mut limited_excess = 0.0f32;
+        // Measured error, and the places where refinement was not allowed.
+        let mut max_error = 0.0f64;
+        let mut limited_excess = 0.0f64;
         let mut limited_triangles = 0u32;
-        let heights = mesher.quantised_heights().to_vec();
         for &q in &leaves {
-            let tris: Vec<usize> = mesher.fan_triangles(q).collect();
-            for t in tris {
+            for &t in mesher.fan_triangles(q).as_slice() {
                 let err = mesher.triangle_error(q, t);
                 max_error = max_error.max(err);
-                if f64::from(err) > e {
+                if err > e {
                     if !mesher.refinement_forbidden(q, t, e) {
                         return Err(BuildError::Internal(format!(
                             "tile {tx},{ty} level {level}: a triangle of cell {q:?} exceeds {e} m by {} m",
-                            f64::from(err) - e
+                            err - e
                         )));
                     }
                     limited_triangles += 1;
-                    limited_excess = limited_excess.max((f64::from(err) - e) as f32);
+                    limited_excess = limited_excess.max(err - e);
                 }
+            }
+        }
+        // The level's surface at every lattice point, for the morph offsets of the vertices
+        // finer levels introduce.
+        let heights = mesher.quantised_heights();
+        let mut surface = vec![f32::NAN; TILE_SIZE * TILE_SIZE];
+        for &q in &leaves {
+            for &t in mesher.fan_triangles(q).as_slice() {
                 let tri = q.triangle(t);
-                raster_triangle(tri, mesh_max_x, mesh_max_y, |x, y, w| {
-                    surface[lattice(x, y)] = w[0] * heights[lattice(tri[0].0, tri[0].1)]
-                        + w[1] * heights[lattice(tri[1].0, tri[1].1)]
-                        + w[2] * heights[lattice(tri[2].0, tri[2].1)];
+                let (a, b, c) = plane(tri, tri.map(|(x, y)| f64::from(heights[lattice(x, y)])));
+                triangle_spans(q, t, mesh_max_x, mesh_max_y, |y, lo, hi| {
+                    let z0 = a + c * f64::from(y);
+                    for (x, z) in (lo..=hi).zip(&mut surface[lattice(lo, y)..=lattice(hi, y)]) {
+                        *z = (z0 + b * f64::from(x)) as f32;
+                    }
                 });
             }
         }
-
+        surfaces.push(surface);
         let block: Vec<u32> = lattice_of[block_start as usize..]
             .iter()
             .map(|&l| {
@@ -248,15 +260,14 @@ pub fn build_tile(grid: &Grid, tx: u32, ty: u32, params: &BuildParams) -> Result
             side.sort_unstable();
             side.into_iter().map(|(_, v)| v).collect::<Vec<u32>>()
         });
-        let unit = morph_unit(e, f64::from(max_error), f64::from(quantiser.step));
         let entry = LevelEntry {
             error_bound: e as f32,
-            max_error,
-            limited_excess,
+            // Rounded up so the stored figure is never below the measured one.
+            max_error: round_up_f32(max_error),
+            limited_excess: round_up_f32(limited_excess),
             limited_triangles,
             z_min,
             z_max,
-            morph_unit: unit as f32,
             block_start,
             block_len: vertex_count - block_start,
             index_count: indices.len() as u32,
@@ -266,11 +277,19 @@ pub fn build_tile(grid: &Grid, tx: u32, ty: u32, params: &BuildParams) -> Result
             border_len: [0, 1, 2, 3].map(|k| border[k].len() as u32),
             ..LevelEntry::default()
         };
-        surfaces.push(surface);
         levels.push(LevelOut { entry, block, indices, border });
     }
 
-    // Morph offsets: each vertex of block j, on every coarser level k < j.
+    // Morph offsets: each vertex of block j, on every coarser level k < j, in units sized so
+    // the largest deviation from level k's surface fits.
+    for k in 0..n {
+        let start = levels[k].entry.vertex_count() as usize;
+        let deviation = lattice_of[start..]
+            .iter()
+            .map(|&l| (f64::from(surfaces[k][l as usize]) - f64::from(mesher.quantised_heights()[l as usize])).abs())
+            .fold(0.0, f64::max);
+        levels[k].entry.morph_unit = morph_unit(levels[k].entry.error_bound.into(), deviation) as f32;
+    }
     let mut morph: Vec<Vec<i8>> = Vec::with_capacity(n);
     for (j, out) in levels.iter().enumerate() {
         let start = out.entry.block_start as usize;
@@ -302,6 +321,15 @@ pub fn build_tile(grid: &Grid, tx: u32, ty: u32, params: &BuildParams) -> Result
     };
     let (blob, stats) = serialise(&header, &mut levels, &morph);
     Ok(BuiltTile { tx, ty, blob, levels: stats })
+}
+
+fn round_up_f32(v: f64) -> f32 {
+    let f = v as f32;
+    if f64::from(f) < v {
+        f.next_up()
+    } else {
+        f
+    }
 }
 
 fn pad4(blob: &mut Vec<u8>) {

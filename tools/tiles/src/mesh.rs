@@ -176,10 +176,11 @@ pub struct Mesher<'a> {
     /// Midpoint presence per lattice point.
     present: Vec<bool>,
     /// Cached fan-triangle errors per cell (NaN = not computed yet).
-    errors: Vec<[f32; 12]>,
+    errors: Vec<[f64; 12]>,
     min_spacing: f64,
     mesh_max: (u32, u32),
 }
+
 
 pub(crate) fn lattice(x: u32, y: u32) -> usize {
     y as usize * TILE_SIZE + x as usize
@@ -199,7 +200,7 @@ impl<'a> Mesher<'a> {
             mesh_heights,
             nodes: vec![Node::Absent; NODE_COUNT],
             present: vec![false; TILE_SIZE * TILE_SIZE],
-            errors: vec![[f32::NAN; 12]; NODE_COUNT],
+            errors: vec![[f64::NAN; 12]; NODE_COUNT],
             min_spacing,
             mesh_max: samples.mesh_max(),
         };
@@ -289,24 +290,42 @@ impl<'a> Mesher<'a> {
     }
 
     /// Max deviation of fan triangle `t` of `q` from the source samples, cached.
-    pub fn triangle_error(&mut self, q: Quad, t: usize) -> f32 {
+    pub fn triangle_error(&mut self, q: Quad, t: usize) -> f64 {
         let cached = self.errors[q.index()][t];
         if !cached.is_nan() {
             return cached;
         }
-        let e = self.measure(q.triangle(t));
+        let e = self.measure(q, t);
         self.errors[q.index()][t] = e;
         e
     }
 
     /// Max |source - interpolated| over the real data samples in a triangle (edges included).
-    fn measure(&self, tri: [(u32, u32); 3]) -> f32 {
-        let mut worst = 0.0f32;
-        raster_triangle(tri, self.samples.data_max_x, self.samples.data_max_y, |x, y, w| {
-            let z = w[0] * self.mesh_heights[lattice(tri[0].0, tri[0].1)]
-                + w[1] * self.mesh_heights[lattice(tri[1].0, tri[1].1)]
-                + w[2] * self.mesh_heights[lattice(tri[2].0, tri[2].1)];
-            worst = worst.max((self.samples.heights[lattice(x, y)] - z).abs());
+    fn measure(&self, q: Quad, t: usize) -> f64 {
+        let tri = q.triangle(t);
+        let (a, b, c) = plane(tri, tri.map(|(x, y)| f64::from(self.mesh_heights[lattice(x, y)])));
+        let mut worst = 0.0f64;
+        triangle_spans(q, t, self.samples.data_max_x, self.samples.data_max_y, |y, lo, hi| {
+            let row = &self.samples.heights[lattice(0, y)..][lo as usize..=hi as usize];
+            let z0 = a + c * f64::from(y) + b * f64::from(lo);
+            // Four independent maxima so the loop vectorises (a single running max cannot be
+            // reordered without fast-math).
+            let mut lanes = [0.0f64; 4];
+            let mut chunks = row.chunks_exact(4);
+            let mut i = 0.0;
+            for chunk in &mut chunks {
+                for (l, &h) in lanes.iter_mut().zip(chunk) {
+                    let d = (f64::from(h) - (z0 + b * i)).abs();
+                    *l = if d > *l { d } else { *l };
+                    i += 1.0;
+                }
+            }
+            for &h in chunks.remainder() {
+                let d = (f64::from(h) - (z0 + b * i)).abs();
+                lanes[0] = if d > lanes[0] { d } else { lanes[0] };
+                i += 1.0;
+            }
+            worst = lanes.iter().fold(worst, |w, &l| if l > w { l } else { w });
         });
         worst
     }
@@ -322,7 +341,6 @@ impl<'a> Mesher<'a> {
     /// Refines the current mesh until every fan triangle is within `e` metres of the source,
     /// or the rule above forbids refining it further.
     pub fn refine(&mut self, e: f64) {
-        let e32 = e as f32;
         let mut work = self.leaves();
         'next: while let Some(q) = work.pop() {
             if self.state(q) != Node::Leaf {
@@ -331,11 +349,11 @@ impl<'a> Mesher<'a> {
             for k in 0..4 {
                 if self.midpoint_present(q, k) {
                     let worst = self.triangle_error(q, 4 + 2 * k).max(self.triangle_error(q, 5 + 2 * k));
-                    if worst > e32 && self.may_split(q, e) {
+                    if worst > e && self.may_split(q, e) {
                         self.split(q, &mut work);
                         continue 'next;
                     }
-                } else if self.triangle_error(q, k) > e32 && self.may_activate(q, e) {
+                } else if self.triangle_error(q, k) > e && self.may_activate(q, e) {
                     match self.across(q, k) {
                         Across::Free(n) => {
                             let (x, y) = q.midpoint(k);
@@ -394,53 +412,121 @@ impl<'a> Mesher<'a> {
     }
 
     /// The fan triangles of leaf `q` as indices into [`Quad::triangle`].
-    pub fn fan_triangles(&self, q: Quad) -> impl Iterator<Item = usize> + '_ {
-        (0..4).flat_map(move |k| {
+    pub fn fan_triangles(&self, q: Quad) -> FanTriangles {
+        let mut out = FanTriangles { ids: [0; 8], len: 0 };
+        for k in 0..4 {
             if self.midpoint_present(q, k) {
-                [Some(4 + 2 * k), Some(5 + 2 * k)]
+                out.ids[out.len] = 4 + 2 * k;
+                out.ids[out.len + 1] = 5 + 2 * k;
+                out.len += 2;
             } else {
-                [Some(k), None]
+                out.ids[out.len] = k;
+                out.len += 1;
             }
-            .into_iter()
-            .flatten()
-        })
+        }
+        out
     }
 }
 
-/// Visits every lattice point inside triangle `tri` (edges included) with `x <= max_x` and
-/// `y <= max_y`, passing its barycentric weights. Integer edge functions: exact inside tests.
-pub(crate) fn raster_triangle(
-    tri: [(u32, u32); 3],
-    max_x: u32,
-    max_y: u32,
-    mut visit: impl FnMut(u32, u32, [f32; 3]),
-) {
-    let p: [(i64, i64); 3] = tri.map(|(x, y)| (i64::from(x), i64::from(y)));
-    let area = (p[1].0 - p[0].0) * (p[2].1 - p[0].1) - (p[1].1 - p[0].1) * (p[2].0 - p[0].0);
-    if area == 0 {
-        return;
+/// The triangles of one fan (4 to 8), without borrowing the mesher.
+#[derive(Clone, Copy, Debug)]
+pub struct FanTriangles {
+    ids: [usize; 8],
+    len: usize,
+}
+
+impl FanTriangles {
+    pub fn as_slice(&self) -> &[usize] {
+        &self.ids[..self.len]
     }
-    let inv = 1.0 / area as f32;
-    let x0 = p.iter().map(|v| v.0).min().unwrap_or(0);
-    let x1 = p.iter().map(|v| v.0).max().unwrap_or(0).min(i64::from(max_x));
-    let y0 = p.iter().map(|v| v.1).min().unwrap_or(0);
-    let y1 = p.iter().map(|v| v.1).max().unwrap_or(0).min(i64::from(max_y));
-    // Edge function of the edge opposite vertex a, positive on a's side (scaled by `area`'s sign).
-    let edge = |a: usize, x: i64, y: i64| {
-        let (b, c) = (p[(a + 1) % 3], p[(a + 2) % 3]);
-        (c.0 - b.0) * (y - b.1) - (c.1 - b.1) * (x - b.0)
+}
+
+/// Calls `span(y, x_lo, x_hi)` for every row of lattice points inside fan triangle `t` of
+/// cell `q` (edges included), clipped to `x <= max_x`, `y <= max_y`. Every fan triangle is
+/// bounded by axis-aligned and diagonal edges, so its row spans follow from the row offset
+/// alone, without edge functions.
+pub(crate) fn triangle_spans(q: Quad, t: usize, max_x: u32, max_y: u32, mut span: impl FnMut(u32, u32, u32)) {
+    let (x0, y0) = q.origin();
+    let (s, h) = (q.size(), q.size() / 2);
+    // (first row, last row) as offsets from y0, and the span as offsets from x0 for offset r.
+    let (r0, r1): (u32, u32) = match t {
+        0 | 4 | 5 | 6 | 11 => (0, h),
+        1 | 3 => (0, s),
+        _ => (h, s),
     };
-    for y in y0..=y1 {
-        for x in x0..=x1 {
-            let w = [edge(0, x, y), edge(1, x, y), edge(2, x, y)];
-            let inside = if area > 0 {
-                w.iter().all(|&v| v >= 0)
-            } else {
-                w.iter().all(|&v| v <= 0)
-            };
-            if inside {
-                visit(x as u32, y as u32, w.map(|v| v as f32 * inv));
+    let last = (y0 + r1).min(max_y);
+    for y in (y0 + r0)..=last {
+        let r = y - y0;
+        let m = r.min(s - r);
+        let (lo, hi) = match t {
+            0 => (r, s - r),
+            1 => (s - m, s),
+            2 => (s - r, r),
+            3 => (0, m),
+            4 => (r, h),
+            5 => (h, s - r),
+            6 => (s - r, s),
+            7 => (r, s),
+            8 => (h, r),
+            9 => (s - r, h),
+            10 => (0, s - r),
+            _ => (0, r),
+        };
+        let hi = (x0 + hi).min(max_x);
+        if x0 + lo <= hi {
+            span(y, x0 + lo, hi);
+        }
+    }
+}
+
+/// The plane `z = a + b x + c y` through three lattice points with heights.
+pub(crate) fn plane(tri: [(u32, u32); 3], z: [f64; 3]) -> (f64, f64, f64) {
+    let [(x0, y0), (x1, y1), (x2, y2)] = tri.map(|(x, y)| (f64::from(x), f64::from(y)));
+    let det = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0);
+    let b = ((z[1] - z[0]) * (y2 - y0) - (z[2] - z[0]) * (y1 - y0)) / det;
+    let c = ((x1 - x0) * (z[2] - z[0]) - (x2 - x0) * (z[1] - z[0])) / det;
+    (z[0] - b * x0 - c * y0, b, c)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The span table visits exactly the lattice points a brute-force inside test finds, for
+    /// every fan triangle of cells of several sizes, clipped or not.
+    #[test]
+    fn triangle_spans_match_a_brute_force_inside_test() {
+        for q in [Quad { d: 7, i: 3, j: 5 }, Quad { d: 5, i: 1, j: 2 }, Quad { d: 2, i: 3, j: 0 }, Quad::ROOT] {
+            for t in 0..12 {
+                for (mx, my) in [(256, 256), (q.centre().0, 256), (256, q.centre().1 + 1)] {
+                    let mut spans = Vec::new();
+                    triangle_spans(q, t, mx, my, |y, lo, hi| spans.extend((lo..=hi).map(|x| (x, y))));
+                    let p = q.triangle(t).map(|(x, y)| (i64::from(x), i64::from(y)));
+                    let cross = |a: (i64, i64), b: (i64, i64), x: i64, y: i64| (b.0 - a.0) * (y - a.1) - (b.1 - a.1) * (x - a.0);
+                    let area = cross(p[0], p[1], p[2].0, p[2].1);
+                    let mut brute = Vec::new();
+                    for y in 0..=my {
+                        for x in 0..=mx {
+                            let (xi, yi) = (i64::from(x), i64::from(y));
+                            let w = [cross(p[1], p[2], xi, yi), cross(p[2], p[0], xi, yi), cross(p[0], p[1], xi, yi)];
+                            if w.iter().all(|&v| v * area.signum() >= 0) {
+                                brute.push((x, y));
+                            }
+                        }
+                    }
+                    spans.sort_unstable_by_key(|&(x, y)| (y, x));
+                    assert_eq!(spans, brute, "cell {q:?} triangle {t} clipped to {mx},{my}");
+                }
             }
+        }
+    }
+
+    #[test]
+    fn plane_interpolates_its_vertices() {
+        let tri = [(4, 4), (0, 0), (8, 0)];
+        let (a, b, c) = plane(tri, [10.0, 2.0, 6.0]);
+        for ((x, y), z) in tri.iter().zip([10.0, 2.0, 6.0]) {
+            assert!((a + b * f64::from(*x) + c * f64::from(*y) - z).abs() < 1e-12);
         }
     }
 }

@@ -10,12 +10,12 @@
 //! meshes `k < j`, so for each of them it stores where that mesh's surface lies at its position:
 //! `height_on_k = height + offset_k * unit_k`, with `offset_k` an `i8` and `unit_k` the
 //! `morph_unit` of level `k`'s [`LevelEntry`](crate::format::LevelEntry). The unit is
-//! `max(e_k, measured_error_k + step / 2) / 127`: the vertex is a source sample, so mesh `k`
-//! lies within `measured_error_k` of its exact height and within `step / 2` more of its
-//! quantised one; every offset therefore fits in `-127..=127`, even where the spacing rule let
-//! level `k` exceed `e_k`. The offset's own rounding (half a unit, `e_k / 254` in the common
-//! case) only touches heights mid-morph, never the stored level meshes, whose error is
-//! measured exactly.
+//! `max(e_k, d_k) / 127`, where `d_k` is the largest distance of any finer vertex from level
+//! `k`'s surface, measured by the builder; every offset therefore fits in `-127..=127`, also
+//! where the spacing rule let level `k` exceed `e_k`. Inside the data `d_k` is at most the
+//! measured error plus half a quantisation step (the vertex is a source sample), so in the
+//! common case the unit is `e_k / 127`. The offset's own rounding (half a unit) only touches
+//! heights mid-morph, never the stored level meshes, whose error is measured exactly.
 
 pub const COORD_BITS: u32 = 9;
 pub const HEIGHT_BITS: u32 = 14;
@@ -30,9 +30,10 @@ pub fn unpack(p: u32) -> (u32, u32, u16) {
     (p & mask, (p >> COORD_BITS) & mask, (p >> (2 * COORD_BITS)) as u16)
 }
 
-/// The morph unit of a level (metres per offset step).
-pub fn morph_unit(error_bound: f64, measured_error: f64, height_step: f64) -> f64 {
-    error_bound.max(measured_error + height_step * 0.5) / 127.0
+/// The morph unit of a level (metres per offset step): `max_deviation` is the largest
+/// distance of a finer vertex from the level's surface.
+pub fn morph_unit(error_bound: f64, max_deviation: f64) -> f64 {
+    error_bound.max(max_deviation) / 127.0
 }
 
 /// The morph offset that moves a vertex of height `h` to `target`.
@@ -53,12 +54,12 @@ mod tests {
 
     #[test]
     fn offsets_within_the_unit_range_round_trip() {
-        let unit = morph_unit(4.0, 3.2, 0.25);
+        let unit = morph_unit(4.0, 3.2);
         assert!((unit - 4.0 / 127.0).abs() < 1e-12);
         let o = morph_offset(100.0, 103.9, unit);
         assert!((f64::from(o) * unit - 3.9).abs() <= unit / 2.0 + 1e-9);
         // A level that exceeded its bound widens its unit, so its offsets still fit.
-        let wide = morph_unit(4.0, 9.0, 0.25);
+        let wide = morph_unit(4.0, 9.0);
         assert_eq!(morph_offset(0.0, -9.1, wide), -127);
     }
 }

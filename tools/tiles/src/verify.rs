@@ -210,7 +210,44 @@ fn check_tile(set: &TileSet, tile: &Tile, source: Option<&Grid>, report: &mut Ve
                 excess: f64::from(e.limited_excess),
             });
         }
+        check_morph(tile, level, &fans, &vertices, &mut problem);
         previous = used;
+    }
+}
+
+/// Every vertex of a finer block must morph onto level `k`'s surface: `height + offset * unit`
+/// within half a unit of where level `k`'s fans (rasterised here) put its position.
+fn check_morph(tile: &Tile, k: u32, fans: &[Vec<u32>], vertices: &[(u32, u32, f32)], problem: &mut impl FnMut(Option<u32>, String)) {
+    let levels = tile.header.levels;
+    if k + 1 >= levels {
+        return;
+    }
+    let mut surface = vec![f64::NAN; TILE_SIZE * TILE_SIZE];
+    for fan in fans {
+        let c = vertices[fan[0] as usize];
+        for w in fan[1..].windows(2) {
+            let tri = [c, vertices[w[0] as usize], vertices[w[1] as usize]];
+            raster_barycentric(tri, u32::MAX, u32::MAX, |x, y, z| surface[y as usize * TILE_SIZE + x as usize] = z);
+        }
+    }
+    let Some(coarse) = tile.level(k) else { return };
+    let unit = f64::from(coarse.entry.morph_unit);
+    let mut worst = 0.0f64;
+    for j in k + 1..levels {
+        let Some(block) = tile.level(j) else { return };
+        let n = block.entry.block_len as usize;
+        let row = &block.morph[k as usize * n..(k as usize + 1) * n];
+        for (i, &offset) in row.iter().enumerate() {
+            let (x, y, h) = vertices[block.entry.block_start as usize + i];
+            let target = surface[y as usize * TILE_SIZE + x as usize];
+            let miss = (f64::from(h) + f64::from(offset) * unit - target).abs();
+            if !(miss <= unit * 0.5 + 1e-3) {
+                worst = worst.max(if miss.is_nan() { f64::INFINITY } else { miss });
+            }
+        }
+    }
+    if worst > 0.0 {
+        problem(Some(k), format!("morph offsets of finer blocks miss this level's surface by up to {worst:.4} m (unit {unit:.4} m)"));
     }
 }
 
@@ -293,7 +330,8 @@ fn measure_level(
             let (a, b) = (w[0], w[1]);
             let err = triangle_error([c, a, b], source, max_x, max_y);
             worst = worst.max(err);
-            if err > bound {
+            // A micrometre of slack: the builder's and this f64 arithmetic round differently.
+            if err > bound + 1e-6 {
                 // A ring edge as long as the cell side can still get its midpoint (spacing
                 // cell/2); a half edge only by splitting the cell (spacing cell/4).
                 let full = a.0.abs_diff(b.0) + a.1.abs_diff(b.1) == cell;
@@ -316,13 +354,25 @@ fn measure_level(
 
 /// Max |source - plane| over the real samples inside (or on) a triangle, in f64.
 fn triangle_error(t: [(u32, u32, f32); 3], source: &[f32], max_x: u32, max_y: u32) -> f64 {
+    let mut worst = 0.0f64;
+    raster_barycentric(t, max_x, max_y, |x, y, z| {
+        worst = worst.max((f64::from(source[y as usize * TILE_SIZE + x as usize]) - z).abs());
+    });
+    worst
+}
+
+/// Visits the lattice points of a triangle (edges included, clipped to `max_x`, `max_y`) with
+/// the height interpolated there: a bounding-box scan with f64 barycentric weights.
+fn raster_barycentric(t: [(u32, u32, f32); 3], max_x: u32, max_y: u32, mut visit: impl FnMut(u32, u32, f64)) {
     let p = t.map(|(x, y, z)| (f64::from(x), f64::from(y), f64::from(z)));
     let det = (p[1].1 - p[2].1) * (p[0].0 - p[2].0) + (p[2].0 - p[1].0) * (p[0].1 - p[2].1);
+    if det == 0.0 {
+        return;
+    }
     let xs = t.map(|v| v.0);
     let ys = t.map(|v| v.1);
     let (x0, x1) = (*xs.iter().min().unwrap_or(&0), (*xs.iter().max().unwrap_or(&0)).min(max_x));
     let (y0, y1) = (*ys.iter().min().unwrap_or(&0), (*ys.iter().max().unwrap_or(&0)).min(max_y));
-    let mut worst = 0.0f64;
     for y in y0..=y1 {
         for x in x0..=x1 {
             let (fx, fy) = (f64::from(x), f64::from(y));
@@ -332,9 +382,7 @@ fn triangle_error(t: [(u32, u32, f32); 3], source: &[f32], max_x: u32, max_y: u3
             if l0 < -1e-9 || l1 < -1e-9 || l2 < -1e-9 {
                 continue;
             }
-            let z = l0 * p[0].2 + l1 * p[1].2 + l2 * p[2].2;
-            worst = worst.max((f64::from(source[y as usize * TILE_SIZE + x as usize]) - z).abs());
+            visit(x, y, l0 * p[0].2 + l1 * p[1].2 + l2 * p[2].2);
         }
     }
-    worst
 }

@@ -1,1 +1,275 @@
-fn main() {}
+//! `tiletool`: turns real DEMs into vkterrain tile sets and inspects them.
+//!
+//! ```text
+//! tiletool build N41E001.hgt N42E001.hgt -o catalonia.vkt
+//! tiletool info catalonia.vkt [--json]
+//! tiletool verify catalonia.vkt --source N41E001.hgt N42E001.hgt
+//! tiletool export catalonia.vkt --tile 2,3 --level 5 -o mesh.obj
+//! ```
+//!
+//! Every failure is one line naming the file and the problem, and a non-zero exit.
+
+mod export;
+mod info;
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+#[derive(Parser)]
+#[command(name = "tiletool", version, about = "Preprocess DEMs into vkterrain tile sets")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Build a tile set from one DEM (or several adjacent SRTM .hgt tiles).
+    Build {
+        #[command(flatten)]
+        input: InputArgs,
+        /// Output tile set (.vkt).
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Levels of detail per tile; level 0 is the coarsest.
+        #[arg(long, default_value_t = 9)]
+        levels: u32,
+        /// Error bound of the finest level in metres; level i gets base * 2^(levels-1-i).
+        #[arg(long, default_value_t = 1.0)]
+        base_error: f64,
+        /// No progress bar or summary.
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// Print a tile set's grid, levels and measured errors.
+    Info {
+        file: PathBuf,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Check a tile set's structure, and with --source its errors against the DEM.
+    Verify {
+        file: PathBuf,
+        /// The DEM the set was built from (same flags as build).
+        #[arg(long, num_args = 1..)]
+        source: Vec<PathBuf>,
+        #[command(flatten)]
+        read: ReadArgs,
+    },
+    /// Write one level of one tile as a Wavefront OBJ mesh.
+    Export {
+        file: PathBuf,
+        /// Tile column and row, e.g. 2,3.
+        #[arg(long, value_parser = parse_pair)]
+        tile: (u32, u32),
+        #[arg(long)]
+        level: u32,
+        #[arg(short, long)]
+        output: PathBuf,
+    },
+}
+
+#[derive(Args)]
+struct InputArgs {
+    /// DEM file(s): 16/8-bit grey PNG or JPEG, SRTM .hgt, GeoTIFF, Terrain-RGB/Terrarium PNG, raw .r16/.f32.
+    #[arg(required = true)]
+    inputs: Vec<PathBuf>,
+    #[command(flatten)]
+    read: ReadArgs,
+}
+
+#[derive(Args, Clone, Default)]
+struct ReadArgs {
+    /// Metres between samples, for formats that do not say (overrides the file).
+    #[arg(long)]
+    spacing: Option<f64>,
+    /// Metres per unit of the stored values (grey images, .r16).
+    #[arg(long)]
+    vertical_scale: Option<f64>,
+    /// Grid size of raw .r16/.f32 files, e.g. 1025x1025.
+    #[arg(long, value_parser = parse_size)]
+    size: Option<(usize, usize)>,
+    /// How RGB PNGs encode height: terrain-rgb or terrarium.
+    #[arg(long)]
+    encoding: Option<dem::Encoding>,
+    /// Use only a window of the grid: X,Y,WxH (columns and rows from the north-west corner).
+    #[arg(long)]
+    crop: Option<dem::Crop>,
+}
+
+fn parse_pair(s: &str) -> Result<(u32, u32), String> {
+    let (a, b) = s.split_once(',').ok_or("expected X,Y")?;
+    Ok((a.trim().parse().map_err(|_| "expected X,Y")?, b.trim().parse().map_err(|_| "expected X,Y")?))
+}
+
+fn parse_size(s: &str) -> Result<(usize, usize), String> {
+    let (a, b) = s.split_once(['x', 'X']).ok_or("expected WxH")?;
+    Ok((a.trim().parse().map_err(|_| "expected WxH")?, b.trim().parse().map_err(|_| "expected WxH")?))
+}
+
+impl ReadArgs {
+    fn options(&self) -> dem::ReadOptions {
+        dem::ReadOptions {
+            encoding: self.encoding,
+            size: self.size,
+            spacing: self.spacing,
+            vertical_scale: self.vertical_scale,
+            crop: self.crop,
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Build { input, output, levels, base_error, quiet } => {
+            build(&input, &output, tiles::BuildParams { levels, base_error }, quiet)
+        }
+        Command::Info { file, json } => info::run(&file, json),
+        Command::Verify { file, source, read } => verify(&file, &source, &read),
+        Command::Export { file, tile, level, output } => export::run(&file, tile, level, &output),
+    };
+    match result {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("tiletool: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn read_dem(inputs: &[PathBuf], read: &ReadArgs) -> Result<dem::HeightGrid> {
+    Ok(dem::read(inputs, &read.options())?)
+}
+
+fn build(input: &InputArgs, output: &Path, params: tiles::BuildParams, quiet: bool) -> Result<ExitCode> {
+    params.validate()?;
+    if output.is_dir() {
+        bail!("{}: is a folder, not an output file", output.display());
+    }
+    let start = Instant::now();
+    let grid = read_dem(&input.inputs, &input.read)?;
+    let decoded = start.elapsed();
+    let (tiles_x, tiles_y) = tiles::build::tile_count(grid.width, grid.height)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", input.inputs[0].display()))?;
+    let bar = ProgressBar::with_draw_target(Some(u64::from(tiles_x * tiles_y)), ProgressDrawTarget::hidden());
+    bar.set_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} tiles ({eta} left)")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    // The bar appears only for builds that take over a second.
+    let progress = || {
+        bar.inc(1);
+        if !quiet && bar.is_hidden() && start.elapsed() > Duration::from_secs(1) {
+            bar.set_draw_target(ProgressDrawTarget::stderr());
+        }
+    };
+    let meta = tiles::TileSetMeta { description: grid.description.clone(), voids_filled: grid.voids_filled };
+    let view = tiles::Grid {
+        width: grid.width,
+        height: grid.height,
+        heights: &grid.heights,
+        spacing_x: grid.spacing_x,
+        spacing_y: grid.spacing_y,
+    };
+    let summary = tiles::build_tileset(&view, &params, &meta, output, &progress)
+        .with_context(|| format!("building {}", output.display()))?;
+    bar.finish_and_clear();
+    let total = start.elapsed();
+    if !quiet {
+        let samples = (grid.width * grid.height) as f64;
+        let (lo, hi) = grid.min_max();
+        println!("{}  ->  {}", input.inputs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(" "), output.display());
+        println!("  source    {}", grid.description);
+        println!(
+            "  grid      {} x {} samples, spacing {:.2} x {:.2} m, heights {:.1}..{:.1} m, {} voids filled",
+            grid.width, grid.height, grid.spacing_x, grid.spacing_y, lo, hi, grid.voids_filled
+        );
+        println!("  tiles     {tiles_x} x {tiles_y} of 257 x 257, {} levels, base error {} m", params.levels, params.base_error);
+        println!("  level     e_i (m)   max err (m)     vertices    triangles        bytes   limited");
+        for (i, l) in summary.levels.iter().enumerate() {
+            let limited = if l.limited_triangles > 0 {
+                format!("{} by <= {:.2} m", l.limited_triangles, l.limited_excess)
+            } else {
+                "-".into()
+            };
+            println!(
+                "  {i:>5} {:>11} {:>13.3} {:>12} {:>12} {:>12}   {limited}",
+                params.level_error(i as u32),
+                l.max_error,
+                l.vertices,
+                l.triangles,
+                l.bytes
+            );
+        }
+        let secs = total.as_secs_f64();
+        println!(
+            "  file      {:.1} MB; {:.2} s (decode {:.2} s), {:.0} M samples/min{}",
+            summary.file_bytes as f64 / 1e6,
+            secs,
+            decoded.as_secs_f64(),
+            samples / secs * 60.0 / 1e6,
+            peak_memory().map(|m| format!(", peak memory {:.0} MB", m as f64 / 1e6)).unwrap_or_default()
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Peak resident memory of this process (Linux), bytes.
+fn peak_memory() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+fn verify(file: &Path, source: &[PathBuf], read: &ReadArgs) -> Result<ExitCode> {
+    let set = tiles::TileSet::open(file)?;
+    let grid = if source.is_empty() { None } else { Some(read_dem(source, read)?) };
+    let view = grid.as_ref().map(|g| tiles::Grid {
+        width: g.width,
+        height: g.height,
+        heights: &g.heights,
+        spacing_x: g.spacing_x,
+        spacing_y: g.spacing_y,
+    });
+    let report = tiles::verify::verify(&set, view.as_ref());
+    for p in report.problems.iter().take(50) {
+        eprintln!("{p}");
+    }
+    if report.problems.len() > 50 {
+        eprintln!("... and {} more problems", report.problems.len() - 50);
+    }
+    let what = if grid.is_some() { "structure and errors against the source" } else { "structure" };
+    if report.ok() {
+        println!(
+            "{}: OK ({what}): {} tiles, {} tile levels checked",
+            file.display(),
+            report.tiles,
+            report.levels_checked
+        );
+        if let Some(g) = &grid {
+            let errs: Vec<String> = report.recomputed_max_error.iter().map(|e| format!("{e:.3}")).collect();
+            println!("  recomputed max error per level (m): {}", errs.join(" "));
+            if g.voids_filled > 0 {
+                println!("  (source voids filled: {})", g.voids_filled);
+            }
+        }
+        if !report.limited.is_empty() {
+            println!(
+                "  {} tile levels exceed e_i where the spacing rule stopped refinement (see `tiletool info`)",
+                report.limited.len()
+            );
+        }
+        Ok(ExitCode::SUCCESS)
+    } else {
+        eprintln!("{}: FAILED: {} problems", file.display(), report.problems.len());
+        Ok(ExitCode::FAILURE)
+    }
+}

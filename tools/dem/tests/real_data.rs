@@ -1,0 +1,326 @@
+//! Reads every file of the shared real data set (/work/shared/data, see its README) and checks
+//! sizes, value ranges, void counts and spacings against what the README and the file headers
+//! say.
+
+mod common;
+
+use std::path::PathBuf;
+
+use common::{assert_close, data, read_err};
+use dem::{metres_per_degree_lat, metres_per_degree_lon, Crop, Encoding, ReadOptions};
+
+fn read(paths: &[PathBuf], opts: &ReadOptions) -> dem::HeightGrid {
+    dem::read(paths, opts).unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn read_one(rel: &str) -> dem::HeightGrid {
+    read(&[data(rel)], &ReadOptions::default())
+}
+
+/// The raw big-endian samples of an .hgt file.
+fn hgt_samples(rel: &str) -> Vec<i16> {
+    let bytes = std::fs::read(data(rel)).expect("read hgt");
+    bytes
+        .chunks_exact(2)
+        .map(|b| i16::from_be_bytes([b[0], b[1]]))
+        .collect()
+}
+
+/// Spacing of a 3" grid at latitude `lat`, by the formula the crate documents.
+fn srtm3_spacing(lat: f64) -> (f64, f64) {
+    (
+        metres_per_degree_lon(lat) / 1200.0,
+        metres_per_degree_lat(lat) / 1200.0,
+    )
+}
+
+fn check(grid: &dem::HeightGrid, size: (usize, usize), range: (f32, f32), voids: u64) {
+    assert_eq!((grid.width, grid.height), size, "{}", grid.description);
+    assert_eq!(grid.heights.len(), size.0 * size.1);
+    assert_eq!(grid.min_max(), range, "{}", grid.description);
+    assert_eq!(grid.voids_filled, voids, "{}", grid.description);
+    assert!(grid.heights.iter().all(|h| h.is_finite()));
+}
+
+#[test]
+fn srtm3_n41e001() {
+    let g = read_one("srtm/N41E001.hgt");
+    check(&g, (1201, 1201), (-20.0, 1204.0), 134);
+    assert_eq!(g.description, "SRTM3 N41E001");
+    // Centre latitude 41.5: ~69.6 m east-west, ~92.6 m north-south.
+    let (dx, dy) = srtm3_spacing(41.5);
+    assert_close(g.spacing_x, dx, 1e-9, "spacing_x");
+    assert_close(g.spacing_y, dy, 1e-9, "spacing_y");
+    assert_close(g.spacing_x, 69.58, 0.05, "spacing_x");
+    assert_close(g.spacing_y, 92.55, 0.05, "spacing_y");
+    // Row 0 is the first (northern) row of the file; valid samples are kept exactly.
+    let raw = hgt_samples("srtm/N41E001.hgt");
+    for (i, (&r, &h)) in raw.iter().zip(&g.heights).enumerate() {
+        if r != -32768 {
+            assert_eq!(f32::from(r), h, "sample {i}");
+        }
+    }
+}
+
+#[test]
+fn srtm3_other_tiles() {
+    let g = read_one("srtm/N42E001.hgt");
+    check(&g, (1201, 1201), (349.0, 3100.0), 7652);
+    let g = read_one("srtm/N43E007.hgt");
+    check(&g, (1201, 1201), (-11.0, 2064.0), 1595);
+    let g = read_one("srtm/N55W003.hgt");
+    check(&g, (1201, 1201), (-22.0, 816.0), 0);
+    let (dx, _) = srtm3_spacing(55.5);
+    assert_close(g.spacing_x, dx, 1e-9, "N55W003 spacing_x");
+}
+
+#[test]
+fn srtm1_n48w125_half_void() {
+    let g = read_one("srtm/N48W125.hgt");
+    check(&g, (3601, 3601), (-13.0, 1095.0), 6_483_876);
+    assert_eq!(g.description, "SRTM1 N48W125");
+    assert_close(
+        g.spacing_y,
+        metres_per_degree_lat(48.5) / 3600.0,
+        1e-9,
+        "spacing_y",
+    );
+    assert_close(g.spacing_y, 30.9, 0.1, "spacing_y");
+    assert_close(
+        g.spacing_x,
+        metres_per_degree_lon(48.5) / 3600.0,
+        1e-9,
+        "spacing_x",
+    );
+    // The void northern half (Canada) is filled smoothly: no cliffs between neighbours.
+    let mut worst = 0.0f32;
+    for y in 0..1000 {
+        for x in 1..g.width {
+            worst = worst.max((g.get(x, y) - g.get(x - 1, y)).abs());
+        }
+    }
+    assert!(
+        worst < 50.0,
+        "largest east-west step in the filled north: {worst} m"
+    );
+}
+
+#[test]
+fn srtm3_mosaic_n41_n42() {
+    let n41 = data("srtm/N41E001.hgt");
+    let n42 = data("srtm/N42E001.hgt");
+    let g = read(&[n41.clone(), n42.clone()], &ReadOptions::default());
+    // The order the files are given in does not matter.
+    let g2 = read(&[n42, n41], &ReadOptions::default());
+    assert_eq!(g.heights, g2.heights);
+    assert_eq!((g.width, g.height), (1201, 2401));
+    assert_eq!(g.min_max(), (-20.0, 3100.0));
+    assert_eq!(g.description, "SRTM3 mosaic N41E001..N42E001 (2 files)");
+
+    // N42 on top; they share N42's last row = N41's first row.
+    let top = hgt_samples("srtm/N42E001.hgt");
+    let bottom = hgt_samples("srtm/N41E001.hgt");
+    let mut voids = 0;
+    for y in 0..2401 {
+        for x in 0..1201 {
+            let from_top = (y <= 1200).then(|| top[y * 1201 + x]);
+            let from_bottom = (y >= 1200).then(|| bottom[(y - 1200) * 1201 + x]);
+            let valid = [from_top, from_bottom]
+                .into_iter()
+                .flatten()
+                .find(|&v| v != -32768);
+            match valid {
+                Some(v) => assert_eq!(g.get(x, y), f32::from(v), "{x},{y}"),
+                None => voids += 1,
+            }
+        }
+    }
+    assert_eq!(g.voids_filled, voids);
+    assert!(voids <= 134 + 7652);
+    // Centre latitude 42.0.
+    let (dx, dy) = srtm3_spacing(42.0);
+    assert_close(g.spacing_x, dx, 1e-9, "spacing_x");
+    assert_close(g.spacing_y, dy, 1e-9, "spacing_y");
+}
+
+#[test]
+fn crop_of_a_mosaic() {
+    let opts = ReadOptions {
+        crop: Some("100,1000,1025x1025".parse::<Crop>().unwrap()),
+        ..ReadOptions::default()
+    };
+    let paths = [data("srtm/N41E001.hgt"), data("srtm/N42E001.hgt")];
+    let g = read(&paths, &opts);
+    assert_eq!((g.width, g.height), (1025, 1025));
+    assert!(g.description.ends_with(", crop 100,1000,1025x1025"));
+    let top = hgt_samples("srtm/N42E001.hgt");
+    let v = top[1000 * 1201 + 100];
+    assert_ne!(v, -32768);
+    assert_eq!(g.get(0, 0), f32::from(v));
+    // The spacing is taken at the window's centre row (1512 of 2401: 42 - 1512/1200 deg).
+    let (dx, _) = srtm3_spacing(43.0 - 1512.0 / 1200.0);
+    assert_close(g.spacing_x, dx, 1e-9, "spacing_x");
+    // A window reaching past the mosaic is refused.
+    let opts = ReadOptions {
+        crop: Some("200,1400,1025x1025".parse().unwrap()),
+        ..ReadOptions::default()
+    };
+    let e = read_err(&paths, &opts);
+    assert!(
+        e.contains("crop 200,1400,1025x1025 does not fit inside the 1201x2401 grid"),
+        "{e}"
+    );
+}
+
+#[test]
+fn puget_16bit_png() {
+    let path = data("puget/ps_height_1k.png");
+    let e = read_err(std::slice::from_ref(&path), &ReadOptions::default());
+    assert!(
+        e.contains("ps_height_1k.png") && e.contains("--spacing"),
+        "{e}"
+    );
+    let opts = ReadOptions {
+        spacing: Some(160.0),
+        vertical_scale: Some(0.1),
+        ..ReadOptions::default()
+    };
+    let g = read(&[path], &opts);
+    assert_eq!((g.width, g.height), (1025, 1025));
+    assert_eq!(g.min_max(), (0.0, (43798.0f64 * 0.1) as f32));
+    assert_eq!((g.spacing_x, g.spacing_y), (160.0, 160.0));
+    assert_eq!(g.voids_filled, 0);
+    assert_eq!(g.description, "PNG 16-bit grey 1025x1025");
+}
+
+#[test]
+fn puget_8bit_jpeg() {
+    let opts = ReadOptions {
+        spacing: Some(40.0),
+        vertical_scale: Some(25.7),
+        ..ReadOptions::default()
+    };
+    let g = read(&[data("puget/ps_height_4k_8bit.jpg")], &opts);
+    assert_eq!((g.width, g.height), (4096, 4096));
+    let (lo, hi) = g.min_max();
+    // README: 0..171 steps (JPEG noise may move the extremes by a step or two).
+    assert!((0.0..=2.0 * 25.7).contains(&lo), "{lo}");
+    assert!((hi / 25.7 - 171.0).abs() <= 2.0, "{hi}");
+    assert!(
+        g.description.starts_with("JPEG 8-bit grey"),
+        "{}",
+        g.description
+    );
+}
+
+#[test]
+fn fuji_terrain_rgb() {
+    let path = data("terrainrgb/fuji_terrain_rgb.png");
+    let e = read_err(std::slice::from_ref(&path), &ReadOptions::default());
+    assert!(e.contains("--encoding"), "{e}");
+    // No tile address in the name: the spacing must be given.
+    let opts = ReadOptions {
+        encoding: Some(Encoding::TerrainRgb),
+        ..ReadOptions::default()
+    };
+    let e = read_err(std::slice::from_ref(&path), &opts);
+    assert!(e.contains("--spacing"), "{e}");
+    let opts = ReadOptions {
+        spacing: Some(20.0),
+        ..opts
+    };
+    let g = read(&[path], &opts);
+    assert_eq!((g.width, g.height), (512, 512));
+    let (lo, hi) = g.min_max();
+    assert_close(f64::from(lo), 13.7, 0.06, "min");
+    assert_close(f64::from(hi), 3751.0, 0.6, "max");
+    assert_eq!(g.voids_filled, 0);
+    assert_eq!(g.description, "terrain-rgb PNG RGBA 512x512");
+}
+
+#[test]
+fn berkeley_terrain_rgb_spacing_from_tile_name() {
+    let opts = ReadOptions {
+        encoding: Some(Encoding::TerrainRgb),
+        ..ReadOptions::default()
+    };
+    let g = read(
+        &[data("terrainrgb/berkeley_14-2625-6369_terrain_rgb.png")],
+        &opts,
+    );
+    assert_eq!((g.width, g.height), (512, 512));
+    let (lo, hi) = g.min_max();
+    assert!(
+        (18.5..=19.5).contains(&lo) && (251.5..=252.5).contains(&hi),
+        "{lo}..{hi}"
+    );
+    assert!(
+        g.description.contains("tile z14 y6369"),
+        "{}",
+        g.description
+    );
+    // Tile row 6369 of 2^14 has its centre at 37.14 N (web mercator).
+    let n = 16384.0f64;
+    let lat = (std::f64::consts::PI * (1.0 - 2.0 * (6369.5 / n)))
+        .sinh()
+        .atan()
+        .to_degrees();
+    assert_close(lat, 37.14, 0.01, "tile centre latitude");
+    let expected = 40_075_016.686 * lat.to_radians().cos() / (n * 512.0);
+    assert_close(g.spacing_x, expected, 1e-9, "spacing_x");
+    assert_eq!(g.spacing_x, g.spacing_y);
+    // Within 1% of the same formula at Berkeley's 37.85 N (~3.77 m).
+    let at_berkeley = 40_075_016.686 * 37.85f64.to_radians().cos() / (n * 512.0);
+    assert_close(
+        g.spacing_x,
+        at_berkeley,
+        0.01 * at_berkeley,
+        "spacing vs 37.85 N",
+    );
+    // --spacing wins over the name.
+    let opts = ReadOptions {
+        spacing: Some(5.0),
+        ..opts
+    };
+    let g = read(
+        &[data("terrainrgb/berkeley_14-2625-6369_terrain_rgb.png")],
+        &opts,
+    );
+    assert_eq!((g.spacing_x, g.spacing_y), (5.0, 5.0));
+}
+
+#[test]
+fn geotiff_mt_rainier_geographic() {
+    let g = read_one("geotiff/mt_rainier_90m.tif");
+    check(&g, (1201, 1201), (263.0, 4371.0), 9033);
+    assert_eq!(
+        g.description,
+        "GeoTIFF i16 uncompressed, tiled 256x256, geographic, nodata -32768"
+    );
+    // 3" cells centred from 47.0 N down to 46.0 N: centre 46.5 N.
+    let (dx, dy) = srtm3_spacing(46.5);
+    assert_close(g.spacing_x, dx, 1e-6, "spacing_x");
+    assert_close(g.spacing_y, dy, 1e-6, "spacing_y");
+    assert_close(g.spacing_y, 92.6, 0.1, "spacing_y");
+    assert_close(g.spacing_x, 64.0, 0.1, "spacing_x");
+}
+
+#[test]
+fn geotiff_mt_fuji() {
+    let g = read_one("geotiff/mt_fuji_90m.tif");
+    check(&g, (1201, 1201), (-16.0, 3742.0), 2437);
+    let (dx, dy) = srtm3_spacing(35.5);
+    assert_close(g.spacing_x, dx, 1e-6, "spacing_x");
+    assert_close(g.spacing_y, dy, 1e-6, "spacing_y");
+}
+
+#[test]
+fn geotiff_bigtujunga_projected() {
+    let g = read_one("geotiff/bigtujunga.tif");
+    check(&g, (1197, 643), (315.0, 2295.0), 0);
+    assert_eq!((g.spacing_x, g.spacing_y), (30.0, 30.0));
+    assert_eq!(
+        g.description,
+        "GeoTIFF i16 uncompressed, tiled 128x128, projected (metres), nodata 32767"
+    );
+}

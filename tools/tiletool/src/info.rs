@@ -1,0 +1,131 @@
+//! `tiletool info`: what a tile set holds, per level, from the file alone.
+
+use std::path::Path;
+use std::process::ExitCode;
+
+use anyhow::Result;
+use serde::Serialize;
+
+#[derive(Serialize, Default, Clone)]
+struct LevelInfo {
+    level: u32,
+    error_bound_m: f64,
+    max_error_m: f64,
+    vertices: u64,
+    triangles: u64,
+    indices: u64,
+    bytes: u64,
+    /// Tile levels where the spacing rule (or full resolution) left the error above e_i.
+    limited_tiles: u64,
+    limited_triangles: u64,
+    limited_max_excess_m: f64,
+    limited_worst_tile: Option<(u32, u32)>,
+}
+
+#[derive(Serialize)]
+struct Info {
+    file: String,
+    file_bytes: u64,
+    format_version: u32,
+    description: String,
+    grid_width: u32,
+    grid_height: u32,
+    spacing_x_m: f64,
+    spacing_y_m: f64,
+    height_min_m: f32,
+    height_max_m: f32,
+    voids_filled: u64,
+    tiles_x: u32,
+    tiles_y: u32,
+    tile_size: u32,
+    base_error_m: f64,
+    levels: Vec<LevelInfo>,
+}
+
+pub fn run(file: &Path, json: bool) -> Result<ExitCode> {
+    let set = tiles::TileSet::open(file)?;
+    let h = *set.header();
+    let mut levels: Vec<LevelInfo> = (0..h.levels)
+        .map(|i| LevelInfo { level: i, error_bound_m: set.level_error(i), ..Default::default() })
+        .collect();
+    for ty in 0..h.tiles_y {
+        for tx in 0..h.tiles_x {
+            let tile = set.tile(tx, ty)?;
+            let mut block_bytes = 0u64;
+            for (i, e) in tile.levels().iter().enumerate() {
+                let l = &mut levels[i];
+                block_bytes += u64::from(e.block_len) * (4 + i as u64);
+                l.max_error_m = l.max_error_m.max(f64::from(e.max_error));
+                l.vertices += u64::from(e.vertex_count());
+                l.triangles += u64::from(e.triangle_count);
+                l.indices += u64::from(e.index_count);
+                l.bytes += block_bytes + u64::from(e.index_count) * u64::from(e.index_width);
+                if e.limited_triangles > 0 {
+                    l.limited_tiles += 1;
+                    l.limited_triangles += u64::from(e.limited_triangles);
+                    if f64::from(e.limited_excess) >= l.limited_max_excess_m {
+                        l.limited_max_excess_m = f64::from(e.limited_excess);
+                        l.limited_worst_tile = Some((tx, ty));
+                    }
+                }
+            }
+        }
+    }
+    let info = Info {
+        file: file.display().to_string(),
+        file_bytes: set.file_len(),
+        format_version: h.version,
+        description: set.description(),
+        grid_width: h.grid_width,
+        grid_height: h.grid_height,
+        spacing_x_m: h.spacing_x,
+        spacing_y_m: h.spacing_y,
+        height_min_m: h.height_min,
+        height_max_m: h.height_max,
+        voids_filled: h.voids_filled,
+        tiles_x: h.tiles_x,
+        tiles_y: h.tiles_y,
+        tile_size: h.tile_size,
+        base_error_m: h.base_error,
+        levels,
+    };
+    if json {
+        println!("{}", serde_json::to_string_pretty(&info)?);
+        return Ok(ExitCode::SUCCESS);
+    }
+    println!("{}  ({:.1} MB, format v{})", info.file, info.file_bytes as f64 / 1e6, info.format_version);
+    println!("  source    {}", info.description);
+    println!(
+        "  grid      {} x {} samples, spacing {:.2} x {:.2} m, heights {:.1}..{:.1} m, {} voids filled",
+        info.grid_width, info.grid_height, info.spacing_x_m, info.spacing_y_m, info.height_min_m, info.height_max_m, info.voids_filled
+    );
+    println!(
+        "  tiles     {} x {} ({}) of {} x {}, {} levels, base error {} m",
+        info.tiles_x,
+        info.tiles_y,
+        info.tiles_x * info.tiles_y,
+        info.tile_size,
+        info.tile_size,
+        info.levels.len(),
+        info.base_error_m
+    );
+    println!("  level     e_i (m)   max err (m)     vertices    triangles        bytes");
+    for l in &info.levels {
+        println!(
+            "  {:>5} {:>11} {:>13.3} {:>12} {:>12} {:>12}",
+            l.level, l.error_bound_m, l.max_error_m, l.vertices, l.triangles, l.bytes
+        );
+    }
+    let limited: Vec<&LevelInfo> = info.levels.iter().filter(|l| l.limited_tiles > 0).collect();
+    if !limited.is_empty() {
+        println!("  where the spacing rule (cell spacing below e_i) stopped refinement above e_i:");
+        for l in limited {
+            let (wx, wy) = l.limited_worst_tile.unwrap_or_default();
+            println!(
+                "    level {}: {} tiles, {} triangles, up to {:.3} m over e_i = {} m (worst: tile {wx},{wy})",
+                l.level, l.limited_tiles, l.limited_triangles, l.limited_max_excess_m, l.error_bound_m
+            );
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
