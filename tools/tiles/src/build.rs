@@ -214,7 +214,9 @@ pub fn build_tile(grid: &Grid, tx: u32, ty: u32, params: &BuildParams) -> Result
         // finer levels introduce.
         let heights = mesher.quantised_heights();
         let mut surface = vec![f32::NAN; TILE_SIZE * TILE_SIZE];
-        for &q in &leaves {
+        // The finest level has no finer vertices to morph.
+        let leaves_to_draw = if level + 1 < n { &leaves[..] } else { &[] };
+        for &q in leaves_to_draw {
             for &t in mesher.fan_triangles(q).as_slice() {
                 let tri = q.triangle(t);
                 let (a, b, c) = plane(tri, tri.map(|(x, y)| f64::from(heights[lattice(x, y)])));

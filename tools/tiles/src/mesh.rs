@@ -303,6 +303,9 @@ impl<'a> Mesher<'a> {
     /// Max |source - interpolated| over the real data samples in a triangle (edges included).
     fn measure(&self, q: Quad, t: usize) -> f64 {
         let tri = q.triangle(t);
+        if q.size() == 2 {
+            return self.measure_smallest(tri);
+        }
         let (a, b, c) = plane(tri, tri.map(|(x, y)| f64::from(self.mesh_heights[lattice(x, y)])));
         let mut worst = 0.0f64;
         triangle_spans(q, t, self.samples.data_max_x, self.samples.data_max_y, |y, lo, hi| {
@@ -327,6 +330,32 @@ impl<'a> Mesher<'a> {
             }
             worst = lanes.iter().fold(worst, |w, &l| if l > w { l } else { w });
         });
+        worst
+    }
+
+    /// [`Self::measure`] for the fan triangles of the finest cells, which hold no samples but
+    /// their vertices and, for a full triangle, the midpoint of its long edge.
+    fn measure_smallest(&self, tri: [(u32, u32); 3]) -> f64 {
+        let (mx, my) = (self.samples.data_max_x, self.samples.data_max_y);
+        let deviation = |(x, y): (u32, u32), z: f32| {
+            if x <= mx && y <= my {
+                f64::from((self.samples.heights[lattice(x, y)] - z).abs())
+            } else {
+                0.0
+            }
+        };
+        let mut worst = 0.0f64;
+        for &p in &tri {
+            worst = worst.max(deviation(p, self.mesh_heights[lattice(p.0, p.1)]));
+        }
+        let (a, b) = (tri[1], tri[2]);
+        if a.0.abs_diff(b.0) + a.1.abs_diff(b.1) == 2 {
+            let mid = ((a.0 + b.0) / 2, (a.1 + b.1) / 2);
+            let z = (f64::from(self.mesh_heights[lattice(a.0, a.1)]) + f64::from(self.mesh_heights[lattice(b.0, b.1)])) * 0.5;
+            if mid.0 <= mx && mid.1 <= my {
+                worst = worst.max((f64::from(self.samples.heights[lattice(mid.0, mid.1)]) - z).abs());
+            }
+        }
         worst
     }
 
