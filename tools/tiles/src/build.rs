@@ -32,17 +32,26 @@ pub struct BuildParams {
 
 impl Default for BuildParams {
     fn default() -> Self {
-        BuildParams { levels: 9, base_error: 1.0 }
+        BuildParams {
+            levels: 9,
+            base_error: 1.0,
+        }
     }
 }
 
 impl BuildParams {
     pub fn validate(&self) -> Result<(), BuildError> {
         if self.levels == 0 || self.levels > MAX_LEVELS {
-            return Err(BuildError::Params(format!("--levels {} is outside 1..={MAX_LEVELS}", self.levels)));
+            return Err(BuildError::Params(format!(
+                "--levels {} is outside 1..={MAX_LEVELS}",
+                self.levels
+            )));
         }
         if !(self.base_error > 0.0 && self.base_error.is_finite()) {
-            return Err(BuildError::Params(format!("--base-error {} must be a positive number of metres", self.base_error)));
+            return Err(BuildError::Params(format!(
+                "--base-error {} must be a positive number of metres",
+                self.base_error
+            )));
         }
         Ok(())
     }
@@ -64,7 +73,10 @@ pub fn tile_count(width: usize, height: usize) -> Result<(u32, u32), String> {
     }
     let cells = TILE_CELLS as usize;
     let (tx, ty) = ((width - 1).div_ceil(cells), (height - 1).div_ceil(cells));
-    if tx > u32::MAX as usize / 2 || ty > u32::MAX as usize / 2 || (width as u64) * (height as u64) > 1 << 40 {
+    if tx > u32::MAX as usize / 2
+        || ty > u32::MAX as usize / 2
+        || (width as u64) * (height as u64) > 1 << 40
+    {
         return Err("too many samples".into());
     }
     Ok((tx as u32, ty as u32))
@@ -81,7 +93,11 @@ pub fn tile_samples(grid: &Grid, tx: u32, ty: u32) -> TileSamples {
         let row = (y0 + y.min(data_max_y)) * grid.width;
         heights.extend((0..TILE_SIZE).map(|x| grid.heights[row + x0 + x.min(data_max_x)]));
     }
-    TileSamples { heights, data_max_x: data_max_x as u32, data_max_y: data_max_y as u32 }
+    TileSamples {
+        heights,
+        data_max_x: data_max_x as u32,
+        data_max_y: data_max_y as u32,
+    }
 }
 
 /// Per-level figures of a built tile, for summaries.
@@ -136,12 +152,19 @@ struct LevelOut {
 }
 
 /// Builds every level of tile `(tx, ty)` and serialises it.
-pub fn build_tile(grid: &Grid, tx: u32, ty: u32, params: &BuildParams) -> Result<BuiltTile, BuildError> {
+pub fn build_tile(
+    grid: &Grid,
+    tx: u32,
+    ty: u32,
+    params: &BuildParams,
+) -> Result<BuiltTile, BuildError> {
     let samples = tile_samples(grid, tx, ty);
     let (lo, hi) = samples
         .heights
         .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &h| (lo.min(h), hi.max(h)));
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &h| {
+            (lo.min(h), hi.max(h))
+        });
     let quantiser = Quantiser::spanning(lo, hi);
     let mut mesher = Mesher::new(&samples, &quantiser, grid.spacing_x.min(grid.spacing_y));
     let (mesh_max_x, mesh_max_y) = samples.mesh_max();
@@ -273,13 +296,22 @@ pub fn build_tile(grid: &Grid, tx: u32, ty: u32, params: &BuildParams) -> Result
             block_start,
             block_len: vertex_count - block_start,
             index_count: indices.len() as u32,
-            index_width: if vertex_count <= u32::from(u16::MAX) { 2 } else { 4 },
+            index_width: if vertex_count <= u32::from(u16::MAX) {
+                2
+            } else {
+                4
+            },
             triangle_count: triangles,
             fan_count: leaves.len() as u32,
             border_len: [0, 1, 2, 3].map(|k| border[k].len() as u32),
             ..LevelEntry::default()
         };
-        levels.push(LevelOut { entry, block, indices, border });
+        levels.push(LevelOut {
+            entry,
+            block,
+            indices,
+            border,
+        });
     }
 
     // Morph offsets: each vertex of block j, on every coarser level k < j, in units sized so
@@ -288,9 +320,14 @@ pub fn build_tile(grid: &Grid, tx: u32, ty: u32, params: &BuildParams) -> Result
         let start = levels[k].entry.vertex_count() as usize;
         let deviation = lattice_of[start..]
             .iter()
-            .map(|&l| (f64::from(surfaces[k][l as usize]) - f64::from(mesher.quantised_heights()[l as usize])).abs())
+            .map(|&l| {
+                (f64::from(surfaces[k][l as usize])
+                    - f64::from(mesher.quantised_heights()[l as usize]))
+                .abs()
+            })
             .fold(0.0, f64::max);
-        levels[k].entry.morph_unit = morph_unit(levels[k].entry.error_bound.into(), deviation) as f32;
+        levels[k].entry.morph_unit =
+            morph_unit(levels[k].entry.error_bound.into(), deviation) as f32;
     }
     let mut morph: Vec<Vec<i8>> = Vec::with_capacity(n);
     for (j, out) in levels.iter().enumerate() {
@@ -303,7 +340,9 @@ pub fn build_tile(grid: &Grid, tx: u32, ty: u32, params: &BuildParams) -> Result
                 morph_offset(h, surfaces[k][l as usize], unit)
             }));
         }
-        debug_assert!(vertex_level[start..start + out.block.len()].iter().all(|&v| v as usize == j));
+        debug_assert!(vertex_level[start..start + out.block.len()]
+            .iter()
+            .all(|&v| v as usize == j));
         morph.push(rows);
     }
 
@@ -322,7 +361,12 @@ pub fn build_tile(grid: &Grid, tx: u32, ty: u32, params: &BuildParams) -> Result
         reserved: 0,
     };
     let (blob, stats) = serialise(&header, &mut levels, &morph);
-    Ok(BuiltTile { tx, ty, blob, levels: stats })
+    Ok(BuiltTile {
+        tx,
+        ty,
+        blob,
+        levels: stats,
+    })
 }
 
 fn round_up_f32(v: f64) -> f32 {
@@ -335,13 +379,18 @@ fn round_up_f32(v: f64) -> f32 {
 }
 
 fn pad4(blob: &mut Vec<u8>) {
-    while blob.len() % 4 != 0 {
+    while !blob.len().is_multiple_of(4) {
         blob.push(0);
     }
 }
 
-fn serialise(header: &TileHeader, levels: &mut [LevelOut], morph: &[Vec<i8>]) -> (Vec<u8>, Vec<LevelStats>) {
-    let table = std::mem::size_of::<TileHeader>() + levels.len() * std::mem::size_of::<LevelEntry>();
+fn serialise(
+    header: &TileHeader,
+    levels: &mut [LevelOut],
+    morph: &[Vec<i8>],
+) -> (Vec<u8>, Vec<LevelStats>) {
+    let table =
+        std::mem::size_of::<TileHeader>() + levels.len() * std::mem::size_of::<LevelEntry>();
     let mut blob = vec![0u8; table];
     let mut stats = Vec::with_capacity(levels.len());
     let mut block_bytes = 0u64;
@@ -409,15 +458,21 @@ pub fn build_tileset(
     params.validate()?;
     let (tiles_x, tiles_y) = tile_count(grid.width, grid.height).map_err(BuildError::Params)?;
     if grid.heights.len() != grid.width * grid.height {
-        return Err(BuildError::Params("height grid length does not match its size".into()));
+        return Err(BuildError::Params(
+            "height grid length does not match its size".into(),
+        ));
     }
     if let Some(bad) = grid.heights.iter().find(|h| !h.is_finite()) {
-        return Err(BuildError::Params(format!("height grid holds a non-finite value ({bad})")));
+        return Err(BuildError::Params(format!(
+            "height grid holds a non-finite value ({bad})"
+        )));
     }
     let (lo, hi) = grid
         .heights
         .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &h| (lo.min(h), hi.max(h)));
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &h| {
+            (lo.min(h), hi.max(h))
+        });
     let mut description = [0u8; 128];
     let text = meta.description.as_bytes();
     let mut cut = text.len().min(description.len());
@@ -442,8 +497,13 @@ pub fn build_tileset(
         ..bytemuck::Zeroable::zeroed()
     };
     let mut writer = TileSetWriter::create(out, header)?;
-    let mut summary = BuildSummary { levels: vec![LevelStats::default(); params.levels as usize], ..Default::default() };
-    let jobs: Vec<(u32, u32)> = (0..tiles_y).flat_map(|ty| (0..tiles_x).map(move |tx| (tx, ty))).collect();
+    let mut summary = BuildSummary {
+        levels: vec![LevelStats::default(); params.levels as usize],
+        ..Default::default()
+    };
+    let jobs: Vec<(u32, u32)> = (0..tiles_y)
+        .flat_map(|ty| (0..tiles_x).map(move |tx| (tx, ty)))
+        .collect();
     let in_flight = 2 * rayon::current_num_threads();
     let (send, receive) = sync_channel::<Result<BuiltTile, BuildError>>(in_flight);
     std::thread::scope(|scope| -> Result<(), BuildError> {
@@ -500,7 +560,10 @@ mod tests {
 
     #[test]
     fn level_errors_halve_per_level() {
-        let p = BuildParams { levels: 9, base_error: 1.0 };
+        let p = BuildParams {
+            levels: 9,
+            base_error: 1.0,
+        };
         assert_eq!(p.level_error(0), 256.0);
         assert_eq!(p.level_error(8), 1.0);
     }

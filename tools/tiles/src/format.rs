@@ -146,17 +146,22 @@ impl LevelEntry {
 /// What went wrong reading or writing a `.vkt` file; shows as one line naming the file.
 #[derive(Debug, thiserror::Error)]
 pub enum FormatError {
-    #[error("{}: {source}", path.display())]
+    /// The io error is part of the one-line message, not a separate cause, so that error
+    /// chains do not print it twice.
+    #[error("{}: {error}", path.display())]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        error: std::io::Error,
     },
     #[error("{}: {what}", path.display())]
     Invalid { path: PathBuf, what: String },
 }
 
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> FormatError + '_ {
-    move |source| FormatError::Io { path: path.to_path_buf(), source }
+    move |error| FormatError::Io {
+        path: path.to_path_buf(),
+        error,
+    }
 }
 
 fn align_up(n: u64, a: u64) -> u64 {
@@ -181,13 +186,21 @@ impl TileSetWriter {
             Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
             _ => PathBuf::from("."),
         };
-        let name = path
-            .file_name()
-            .ok_or_else(|| FormatError::Invalid { path: path.to_path_buf(), what: "not a file name".into() })?;
-        let tmp_path = dir.join(format!(".{}.tmp.{}", name.to_string_lossy(), std::process::id()));
+        let name = path.file_name().ok_or_else(|| FormatError::Invalid {
+            path: path.to_path_buf(),
+            what: "not a file name".into(),
+        })?;
+        let tmp_path = dir.join(format!(
+            ".{}.tmp.{}",
+            name.to_string_lossy(),
+            std::process::id()
+        ));
         let file = File::create(&tmp_path).map_err(io_err(path))?;
         let tiles = header.tiles_x as usize * header.tiles_y as usize;
-        let pos = align_up((size_of::<FileHeader>() + tiles * size_of::<DirEntry>()) as u64, 16);
+        let pos = align_up(
+            (size_of::<FileHeader>() + tiles * size_of::<DirEntry>()) as u64,
+            16,
+        );
         let mut writer = TileSetWriter {
             path: path.to_path_buf(),
             tmp_path,
@@ -202,12 +215,16 @@ impl TileSetWriter {
     }
 
     fn file(&mut self) -> &mut BufWriter<File> {
-        self.file.as_mut().expect("the file lives until finish or drop")
+        self.file
+            .as_mut()
+            .expect("the file lives until finish or drop")
     }
 
     fn seek(&mut self, pos: u64) -> Result<(), FormatError> {
         let path = self.path.clone();
-        self.file().seek(SeekFrom::Start(pos)).map_err(io_err(&path))?;
+        self.file()
+            .seek(SeekFrom::Start(pos))
+            .map_err(io_err(&path))?;
         Ok(())
     }
 
@@ -256,7 +273,10 @@ impl TileSetWriter {
         self.write(bytemuck::cast_slice(&directory))?;
         let path = self.path.clone();
         let file = self.file.take().expect("the file lives until finish");
-        let file = file.into_inner().map_err(|e| FormatError::Io { path: path.clone(), source: e.into_error() })?;
+        let file = file.into_inner().map_err(|e| FormatError::Io {
+            path: path.clone(),
+            error: e.into_error(),
+        })?;
         file.sync_all().map_err(io_err(&path))?;
         drop(file);
         std::fs::rename(&self.tmp_path, &self.path).map_err(io_err(&path))?;
@@ -290,7 +310,10 @@ pub struct TileSet {
 
 impl std::fmt::Debug for TileSet {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("TileSet").field("path", &self.path).field("header", &self.header).finish()
+        f.debug_struct("TileSet")
+            .field("path", &self.path)
+            .field("header", &self.header)
+            .finish()
     }
 }
 
@@ -301,31 +324,55 @@ impl TileSet {
         // SAFETY: the map is read-only; a tile set that another process truncates while mapped
         // could fault, which is the documented memmap2 caveat every mmap reader accepts.
         let map = unsafe { memmap2::Mmap::map(&file) }.map_err(io_err(path))?;
-        let invalid = |what: String| FormatError::Invalid { path: path.to_path_buf(), what };
+        let invalid = |what: String| FormatError::Invalid {
+            path: path.to_path_buf(),
+            what,
+        };
         if map.len() < size_of::<FileHeader>() {
-            return Err(invalid(format!("{} bytes is too short for a tile set header", map.len())));
+            return Err(invalid(format!(
+                "{} bytes is too short for a tile set header",
+                map.len()
+            )));
         }
         let header: FileHeader = bytemuck::pod_read_unaligned(&map[..size_of::<FileHeader>()]);
         if header.magic != MAGIC {
             return Err(invalid("not a vkterrain tile set (bad magic)".into()));
         }
         if header.version != VERSION {
-            return Err(invalid(format!("format version {} is not supported (this reader reads {VERSION})", header.version)));
+            return Err(invalid(format!(
+                "format version {} is not supported (this reader reads {VERSION})",
+                header.version
+            )));
         }
         if header.header_len as usize != size_of::<FileHeader>()
             || header.directory_entry_len as usize != size_of::<DirEntry>()
             || header.directory_offset != size_of::<FileHeader>() as u64
         {
-            return Err(invalid("header or directory layout does not match this version".into()));
+            return Err(invalid(
+                "header or directory layout does not match this version".into(),
+            ));
         }
         if header.tile_size != TILE_CELLS + 1 {
-            return Err(invalid(format!("tile size {} (expected {})", header.tile_size, TILE_CELLS + 1)));
+            return Err(invalid(format!(
+                "tile size {} (expected {})",
+                header.tile_size,
+                TILE_CELLS + 1
+            )));
         }
         if header.levels == 0 || header.levels > MAX_LEVELS {
-            return Err(invalid(format!("{} levels (expected 1..={MAX_LEVELS})", header.levels)));
+            return Err(invalid(format!(
+                "{} levels (expected 1..={MAX_LEVELS})",
+                header.levels
+            )));
         }
-        let (tx, ty) = crate::build::tile_count(header.grid_width as usize, header.grid_height as usize)
-            .map_err(|e| invalid(format!("grid {}x{}: {e}", header.grid_width, header.grid_height)))?;
+        let (tx, ty) =
+            crate::build::tile_count(header.grid_width as usize, header.grid_height as usize)
+                .map_err(|e| {
+                    invalid(format!(
+                        "grid {}x{}: {e}",
+                        header.grid_width, header.grid_height
+                    ))
+                })?;
         if (tx, ty) != (header.tiles_x, header.tiles_y) {
             return Err(invalid(format!(
                 "{}x{} tiles does not match the {}x{} grid",
@@ -335,16 +382,28 @@ impl TileSet {
         let dir_len = tx as u64 * ty as u64 * size_of::<DirEntry>() as u64;
         let dir_end = header.directory_offset + dir_len;
         if dir_end > map.len() as u64 {
-            return Err(invalid(format!("directory of {} tiles runs past the end of the file (truncated?)", tx * ty)));
+            return Err(invalid(format!(
+                "directory of {} tiles runs past the end of the file (truncated?)",
+                tx * ty
+            )));
         }
         let directory = &map[header.directory_offset as usize..dir_end as usize];
         if header_crc(&header, directory) != header.header_crc {
             return Err(invalid("header checksum mismatch (corrupted file)".into()));
         }
-        let set = TileSet { path: path.to_path_buf(), map, header };
+        let set = TileSet {
+            path: path.to_path_buf(),
+            map,
+            header,
+        };
         for i in 0..(tx * ty) as usize {
             let e = set.entry(i);
-            if e.offset % 16 != 0 || e.offset < dir_end || e.offset.checked_add(e.len).is_none_or(|end| end > set.map.len() as u64) {
+            if !e.offset.is_multiple_of(16)
+                || e.offset < dir_end
+                || e.offset
+                    .checked_add(e.len)
+                    .is_none_or(|end| end > set.map.len() as u64)
+            {
                 return Err(invalid(format!(
                     "tile {},{} lies outside the file (offset {}, length {}; truncated?)",
                     i as u32 % tx,
@@ -392,10 +451,16 @@ impl TileSet {
 
     /// Tile `(tx, ty)`, checksum and structure validated.
     pub fn tile(&self, tx: u32, ty: u32) -> Result<Tile<'_>, FormatError> {
-        let invalid = |what: String| FormatError::Invalid { path: self.path.clone(), what: format!("tile {tx},{ty}: {what}") };
-        let e = self
-            .dir_entry(tx, ty)
-            .ok_or_else(|| invalid(format!("outside the {}x{} tiles", self.header.tiles_x, self.header.tiles_y)))?;
+        let invalid = |what: String| FormatError::Invalid {
+            path: self.path.clone(),
+            what: format!("tile {tx},{ty}: {what}"),
+        };
+        let e = self.dir_entry(tx, ty).ok_or_else(|| {
+            invalid(format!(
+                "outside the {}x{} tiles",
+                self.header.tiles_x, self.header.tiles_y
+            ))
+        })?;
         let blob = &self.map[e.offset as usize..(e.offset + e.len) as usize];
         if crc32fast::hash(blob) != e.crc {
             return Err(invalid("checksum mismatch (corrupted file)".into()));
@@ -433,8 +498,17 @@ impl Indices<'_> {
     /// Indices widened to u32, restarts as `None`.
     pub fn iter(&self) -> impl Iterator<Item = Option<u32>> + '_ {
         let (a, b) = match self {
-            Indices::U16(s) => (Some(s.iter().map(|&i| (i != RESTART_U16).then_some(u32::from(i)))), None),
-            Indices::U32(s) => (None, Some(s.iter().map(|&i| (i != RESTART_U32).then_some(i)))),
+            Indices::U16(s) => (
+                Some(
+                    s.iter()
+                        .map(|&i| (i != RESTART_U16).then_some(u32::from(i))),
+                ),
+                None,
+            ),
+            Indices::U32(s) => (
+                None,
+                Some(s.iter().map(|&i| (i != RESTART_U32).then_some(i))),
+            ),
         };
         a.into_iter().flatten().chain(b.into_iter().flatten())
     }
@@ -477,10 +551,19 @@ pub struct Level<'a> {
     pub border: [&'a [u32]; 4],
 }
 
-fn section<'a, T: Pod>(blob: &'a [u8], offset: u32, count: u64, what: &str) -> Result<&'a [T], String> {
+fn section<'a, T: Pod>(
+    blob: &'a [u8],
+    offset: u32,
+    count: u64,
+    what: &str,
+) -> Result<&'a [T], String> {
     let bytes = count
         .checked_mul(size_of::<T>() as u64)
-        .filter(|&b| (offset as u64).checked_add(b).is_some_and(|end| end <= blob.len() as u64))
+        .filter(|&b| {
+            (offset as u64)
+                .checked_add(b)
+                .is_some_and(|end| end <= blob.len() as u64)
+        })
         .ok_or_else(|| format!("{what} ({count} items at {offset}) runs past the tile"))?;
     let s = &blob[offset as usize..offset as usize + bytes as usize];
     bytemuck::try_cast_slice(s).map_err(|_| format!("{what} at {offset} is misaligned"))
@@ -495,29 +578,60 @@ impl<'a> Tile<'a> {
             return Err("bad tile magic".into());
         }
         if (header.tx, header.ty) != (tx, ty) {
-            return Err(format!("directory points at tile {},{}", header.tx, header.ty));
+            return Err(format!(
+                "directory points at tile {},{}",
+                header.tx, header.ty
+            ));
         }
         if header.levels != levels {
             return Err(format!("{} levels (the file says {levels})", header.levels));
         }
-        let (dx, dy, mx, my) = (header.data_max_x, header.data_max_y, header.mesh_max_x, header.mesh_max_y);
-        if !(1..=TILE_CELLS).contains(&dx) || !(1..=TILE_CELLS).contains(&dy) || mx != (dx + 1) & !1 || my != (dy + 1) & !1 {
+        let (dx, dy, mx, my) = (
+            header.data_max_x,
+            header.data_max_y,
+            header.mesh_max_x,
+            header.mesh_max_y,
+        );
+        if !(1..=TILE_CELLS).contains(&dx)
+            || !(1..=TILE_CELLS).contains(&dy)
+            || mx != (dx + 1) & !1
+            || my != (dy + 1) & !1
+        {
             return Err(format!("bad data extent {dx}x{dy} / mesh extent {mx}x{my}"));
         }
-        if !(header.height_step > 0.0) || !header.height_min.is_finite() || !header.height_step.is_finite() {
+        if header.height_step.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
+            || !header.height_min.is_finite()
+            || !header.height_step.is_finite()
+        {
             return Err("bad height quantisation".into());
         }
-        let entries = section::<LevelEntry>(blob, size_of::<TileHeader>() as u32, levels as u64, "level table")?;
-        let tile = Tile { blob, header, levels: entries };
+        let entries = section::<LevelEntry>(
+            blob,
+            size_of::<TileHeader>() as u32,
+            levels as u64,
+            "level table",
+        )?;
+        let tile = Tile {
+            blob,
+            header,
+            levels: entries,
+        };
         let mut start = 0u32;
         for (i, e) in entries.iter().enumerate() {
             let err = |what: String| format!("level {i}: {what}");
             if e.block_start != start {
-                return Err(err(format!("block starts at vertex {} instead of {start}", e.block_start)));
+                return Err(err(format!(
+                    "block starts at vertex {} instead of {start}",
+                    e.block_start
+                )));
             }
-            start = start.checked_add(e.block_len).ok_or_else(|| err("vertex count overflows".into()))?;
+            start = start
+                .checked_add(e.block_len)
+                .ok_or_else(|| err("vertex count overflows".into()))?;
             if e.index_width == 2 && start > u32::from(RESTART_U16) {
-                return Err(err(format!("{start} vertices cannot be addressed with 16-bit indices")));
+                return Err(err(format!(
+                    "{start} vertices cannot be addressed with 16-bit indices"
+                )));
             }
             if e.index_width != 2 && e.index_width != 4 {
                 return Err(err(format!("index width {}", e.index_width)));
@@ -525,14 +639,24 @@ impl<'a> Tile<'a> {
             let level = tile.level_unchecked(i as u32).map_err(err)?;
             let out_of_range = level.indices.iter().flatten().find(|&v| v >= start);
             if let Some(v) = out_of_range {
-                return Err(err(format!("index {v} outside blocks 0..={i} ({start} vertices)")));
+                return Err(err(format!(
+                    "index {v} outside blocks 0..={i} ({start} vertices)"
+                )));
             }
-            if let Some(v) = level.border.iter().flat_map(|b| b.iter()).find(|&&v| v >= start) {
+            if let Some(v) = level
+                .border
+                .iter()
+                .flat_map(|b| b.iter())
+                .find(|&&v| v >= start)
+            {
                 return Err(err(format!("border vertex {v} outside blocks 0..={i}")));
             }
         }
         if start != header.vertex_count {
-            return Err(format!("blocks hold {start} vertices, header says {}", header.vertex_count));
+            return Err(format!(
+                "blocks hold {start} vertices, header says {}",
+                header.vertex_count
+            ));
         }
         Ok(tile)
     }
@@ -542,7 +666,10 @@ impl<'a> Tile<'a> {
     }
 
     pub fn quantiser(&self) -> Quantiser {
-        Quantiser { min: self.header.height_min, step: self.header.height_step }
+        Quantiser {
+            min: self.header.height_min,
+            step: self.header.height_step,
+        }
     }
 
     pub fn blob_len(&self) -> usize {
@@ -555,7 +682,10 @@ impl<'a> Tile<'a> {
     }
 
     fn level_unchecked(&self, i: u32) -> Result<Level<'a>, String> {
-        let e = *self.levels.get(i as usize).ok_or_else(|| format!("no level {i}"))?;
+        let e = *self
+            .levels
+            .get(i as usize)
+            .ok_or_else(|| format!("no level {i}"))?;
         let n = u64::from(e.block_len);
         let positions = section::<u32>(self.blob, e.positions_offset, n, "positions")?;
         let morph = section::<i8>(self.blob, e.morph_offset, n * u64::from(i), "morph offsets")?;
@@ -566,9 +696,24 @@ impl<'a> Tile<'a> {
         };
         let total: u64 = e.border_len.iter().map(|&l| u64::from(l)).sum();
         let all = section::<u32>(self.blob, e.border_offset, total, "border")?;
-        let (n0, n1, n2) = (e.border_len[0] as usize, e.border_len[1] as usize, e.border_len[2] as usize);
-        let border = [&all[..n0], &all[n0..n0 + n1], &all[n0 + n1..n0 + n1 + n2], &all[n0 + n1 + n2..]];
-        Ok(Level { entry: e, positions, morph, indices, border })
+        let (n0, n1, n2) = (
+            e.border_len[0] as usize,
+            e.border_len[1] as usize,
+            e.border_len[2] as usize,
+        );
+        let border = [
+            &all[..n0],
+            &all[n0..n0 + n1],
+            &all[n0 + n1..n0 + n1 + n2],
+            &all[n0 + n1 + n2..],
+        ];
+        Ok(Level {
+            entry: e,
+            positions,
+            morph,
+            indices,
+            border,
+        })
     }
 
     /// Every vertex of the tile, decoded: (x, y, height in metres), in index order.
@@ -576,7 +721,12 @@ impl<'a> Tile<'a> {
         let q = self.quantiser();
         (0..self.header.levels)
             .filter_map(|i| self.level(i))
-            .flat_map(|l| l.positions.iter().map(|&p| crate::pack::unpack(p)).collect::<Vec<_>>())
+            .flat_map(|l| {
+                l.positions
+                    .iter()
+                    .map(|&p| crate::pack::unpack(p))
+                    .collect::<Vec<_>>()
+            })
             .map(|(x, y, h)| (x, y, q.height(h)))
             .collect()
     }

@@ -44,10 +44,7 @@ impl TileSamples {
     /// Last column / row the mesh covers: the data extent rounded up to even, because the
     /// finest cell is two samples wide. At most one padded column/row is meshed, never measured.
     pub fn mesh_max(&self) -> (u32, u32) {
-        (
-            (self.data_max_x + 1) & !1,
-            (self.data_max_y + 1) & !1,
-        )
+        ((self.data_max_x + 1) & !1, (self.data_max_y + 1) & !1)
     }
 }
 
@@ -71,11 +68,17 @@ impl Quad {
     }
 
     fn index(self) -> usize {
-        ((1usize << (2 * self.d)) - 1) / 3 + (self.j as usize) * (1usize << self.d) + self.i as usize
+        ((1usize << (2 * self.d)) - 1) / 3
+            + (self.j as usize) * (1usize << self.d)
+            + self.i as usize
     }
 
     fn parent(self) -> Quad {
-        Quad { d: self.d - 1, i: self.i / 2, j: self.j / 2 }
+        Quad {
+            d: self.d - 1,
+            i: self.i / 2,
+            j: self.j / 2,
+        }
     }
 
     fn children(self) -> [Quad; 4] {
@@ -84,7 +87,11 @@ impl Quad {
             Quad { d, i, j },
             Quad { d, i: i + 1, j },
             Quad { d, i, j: j + 1 },
-            Quad { d, i: i + 1, j: j + 1 },
+            Quad {
+                d,
+                i: i + 1,
+                j: j + 1,
+            },
         ]
     }
 
@@ -97,7 +104,11 @@ impl Quad {
             2 => (Some(self.i), Some(self.j + 1).filter(|&j| j < n)),
             _ => (self.i.checked_sub(1), Some(self.j)),
         };
-        Some(Quad { d: self.d, i: i?, j: j? })
+        Some(Quad {
+            d: self.d,
+            i: i?,
+            j: j?,
+        })
     }
 
     pub fn centre(self) -> (u32, u32) {
@@ -138,7 +149,7 @@ impl Quad {
             [c, self.corner(t), self.corner(t + 1)]
         } else {
             let k = (t - 4) / 2;
-            if t % 2 == 0 {
+            if t.is_multiple_of(2) {
                 [c, self.corner(k), self.midpoint(k)]
             } else {
                 [c, self.midpoint(k), self.corner(k + 1)]
@@ -180,7 +191,6 @@ pub struct Mesher<'a> {
     min_spacing: f64,
     mesh_max: (u32, u32),
 }
-
 
 pub(crate) fn lattice(x: u32, y: u32) -> usize {
     y as usize * TILE_SIZE + x as usize
@@ -276,7 +286,11 @@ impl<'a> Mesher<'a> {
             }
         }
         for c in q.children() {
-            let state = if self.outside(c) { Node::Outside } else { Node::Leaf };
+            let state = if self.outside(c) {
+                Node::Outside
+            } else {
+                Node::Leaf
+            };
             self.nodes[c.index()] = state;
             if state == Node::Leaf {
                 changed.push(c);
@@ -306,30 +320,39 @@ impl<'a> Mesher<'a> {
         if q.size() == 2 {
             return self.measure_smallest(tri);
         }
-        let (a, b, c) = plane(tri, tri.map(|(x, y)| f64::from(self.mesh_heights[lattice(x, y)])));
+        let (a, b, c) = plane(
+            tri,
+            tri.map(|(x, y)| f64::from(self.mesh_heights[lattice(x, y)])),
+        );
         let mut worst = 0.0f64;
-        triangle_spans(q, t, self.samples.data_max_x, self.samples.data_max_y, |y, lo, hi| {
-            let row = &self.samples.heights[lattice(0, y)..][lo as usize..=hi as usize];
-            let z0 = a + c * f64::from(y) + b * f64::from(lo);
-            // Four independent maxima so the loop vectorises (a single running max cannot be
-            // reordered without fast-math).
-            let mut lanes = [0.0f64; 4];
-            let mut chunks = row.chunks_exact(4);
-            let mut i = 0.0;
-            for chunk in &mut chunks {
-                for (l, &h) in lanes.iter_mut().zip(chunk) {
+        triangle_spans(
+            q,
+            t,
+            self.samples.data_max_x,
+            self.samples.data_max_y,
+            |y, lo, hi| {
+                let row = &self.samples.heights[lattice(0, y)..][lo as usize..=hi as usize];
+                let z0 = a + c * f64::from(y) + b * f64::from(lo);
+                // Four independent maxima so the loop vectorises (a single running max cannot be
+                // reordered without fast-math).
+                let mut lanes = [0.0f64; 4];
+                let mut chunks = row.chunks_exact(4);
+                let mut i = 0.0;
+                for chunk in &mut chunks {
+                    for (l, &h) in lanes.iter_mut().zip(chunk) {
+                        let d = (f64::from(h) - (z0 + b * i)).abs();
+                        *l = if d > *l { d } else { *l };
+                        i += 1.0;
+                    }
+                }
+                for &h in chunks.remainder() {
                     let d = (f64::from(h) - (z0 + b * i)).abs();
-                    *l = if d > *l { d } else { *l };
+                    lanes[0] = if d > lanes[0] { d } else { lanes[0] };
                     i += 1.0;
                 }
-            }
-            for &h in chunks.remainder() {
-                let d = (f64::from(h) - (z0 + b * i)).abs();
-                lanes[0] = if d > lanes[0] { d } else { lanes[0] };
-                i += 1.0;
-            }
-            worst = lanes.iter().fold(worst, |w, &l| if l > w { l } else { w });
-        });
+                worst = lanes.iter().fold(worst, |w, &l| if l > w { l } else { w });
+            },
+        );
         worst
     }
 
@@ -351,9 +374,12 @@ impl<'a> Mesher<'a> {
         let (a, b) = (tri[1], tri[2]);
         if a.0.abs_diff(b.0) + a.1.abs_diff(b.1) == 2 {
             let mid = ((a.0 + b.0) / 2, (a.1 + b.1) / 2);
-            let z = (f64::from(self.mesh_heights[lattice(a.0, a.1)]) + f64::from(self.mesh_heights[lattice(b.0, b.1)])) * 0.5;
+            let z = (f64::from(self.mesh_heights[lattice(a.0, a.1)])
+                + f64::from(self.mesh_heights[lattice(b.0, b.1)]))
+                * 0.5;
             if mid.0 <= mx && mid.1 <= my {
-                worst = worst.max((f64::from(self.samples.heights[lattice(mid.0, mid.1)]) - z).abs());
+                worst =
+                    worst.max((f64::from(self.samples.heights[lattice(mid.0, mid.1)]) - z).abs());
             }
         }
         worst
@@ -377,7 +403,9 @@ impl<'a> Mesher<'a> {
             }
             for k in 0..4 {
                 if self.midpoint_present(q, k) {
-                    let worst = self.triangle_error(q, 4 + 2 * k).max(self.triangle_error(q, 5 + 2 * k));
+                    let worst = self
+                        .triangle_error(q, 4 + 2 * k)
+                        .max(self.triangle_error(q, 5 + 2 * k));
                     if worst > e && self.may_split(q, e) {
                         self.split(q, &mut work);
                         continue 'next;
@@ -394,7 +422,9 @@ impl<'a> Mesher<'a> {
                             self.split(c, &mut work);
                             work.push(q);
                         }
-                        Across::Finer => unreachable!("a split neighbour marks the midpoint present"),
+                        Across::Finer => {
+                            unreachable!("a split neighbour marks the midpoint present")
+                        }
                     }
                     continue 'next;
                 }
@@ -442,7 +472,10 @@ impl<'a> Mesher<'a> {
 
     /// The fan triangles of leaf `q` as indices into [`Quad::triangle`].
     pub fn fan_triangles(&self, q: Quad) -> FanTriangles {
-        let mut out = FanTriangles { ids: [0; 8], len: 0 };
+        let mut out = FanTriangles {
+            ids: [0; 8],
+            len: 0,
+        };
         for k in 0..4 {
             if self.midpoint_present(q, k) {
                 out.ids[out.len] = 4 + 2 * k;
@@ -474,7 +507,13 @@ impl FanTriangles {
 /// cell `q` (edges included), clipped to `x <= max_x`, `y <= max_y`. Every fan triangle is
 /// bounded by axis-aligned and diagonal edges, so its row spans follow from the row offset
 /// alone, without edge functions.
-pub(crate) fn triangle_spans(q: Quad, t: usize, max_x: u32, max_y: u32, mut span: impl FnMut(u32, u32, u32)) {
+pub(crate) fn triangle_spans(
+    q: Quad,
+    t: usize,
+    max_x: u32,
+    max_y: u32,
+    mut span: impl FnMut(u32, u32, u32),
+) {
     let (x0, y0) = q.origin();
     let (s, h) = (q.size(), q.size() / 2);
     // (first row, last row) as offsets from y0, and the span as offsets from x0 for offset r.
@@ -525,19 +564,32 @@ mod tests {
     /// every fan triangle of cells of several sizes, clipped or not.
     #[test]
     fn triangle_spans_match_a_brute_force_inside_test() {
-        for q in [Quad { d: 7, i: 3, j: 5 }, Quad { d: 5, i: 1, j: 2 }, Quad { d: 2, i: 3, j: 0 }, Quad::ROOT] {
+        for q in [
+            Quad { d: 7, i: 3, j: 5 },
+            Quad { d: 5, i: 1, j: 2 },
+            Quad { d: 2, i: 3, j: 0 },
+            Quad::ROOT,
+        ] {
             for t in 0..12 {
                 for (mx, my) in [(256, 256), (q.centre().0, 256), (256, q.centre().1 + 1)] {
                     let mut spans = Vec::new();
-                    triangle_spans(q, t, mx, my, |y, lo, hi| spans.extend((lo..=hi).map(|x| (x, y))));
+                    triangle_spans(q, t, mx, my, |y, lo, hi| {
+                        spans.extend((lo..=hi).map(|x| (x, y)))
+                    });
                     let p = q.triangle(t).map(|(x, y)| (i64::from(x), i64::from(y)));
-                    let cross = |a: (i64, i64), b: (i64, i64), x: i64, y: i64| (b.0 - a.0) * (y - a.1) - (b.1 - a.1) * (x - a.0);
+                    let cross = |a: (i64, i64), b: (i64, i64), x: i64, y: i64| {
+                        (b.0 - a.0) * (y - a.1) - (b.1 - a.1) * (x - a.0)
+                    };
                     let area = cross(p[0], p[1], p[2].0, p[2].1);
                     let mut brute = Vec::new();
                     for y in 0..=my {
                         for x in 0..=mx {
                             let (xi, yi) = (i64::from(x), i64::from(y));
-                            let w = [cross(p[1], p[2], xi, yi), cross(p[2], p[0], xi, yi), cross(p[0], p[1], xi, yi)];
+                            let w = [
+                                cross(p[1], p[2], xi, yi),
+                                cross(p[2], p[0], xi, yi),
+                                cross(p[0], p[1], xi, yi),
+                            ];
                             if w.iter().all(|&v| v * area.signum() >= 0) {
                                 brute.push((x, y));
                             }

@@ -27,7 +27,11 @@ pub fn pack(x: u32, y: u32, q: u16) -> u32 {
 
 pub fn unpack(p: u32) -> (u32, u32, u16) {
     let mask = (1 << COORD_BITS) - 1;
-    (p & mask, (p >> COORD_BITS) & mask, (p >> (2 * COORD_BITS)) as u16)
+    (
+        p & mask,
+        (p >> COORD_BITS) & mask,
+        (p >> (2 * COORD_BITS)) as u16,
+    )
 }
 
 /// The morph unit of a level (metres per offset step): `max_deviation` is the largest
@@ -38,7 +42,9 @@ pub fn morph_unit(error_bound: f64, max_deviation: f64) -> f64 {
 
 /// The morph offset that moves a vertex of height `h` to `target`.
 pub fn morph_offset(h: f32, target: f32, unit: f64) -> i8 {
-    ((f64::from(target) - f64::from(h)) / unit).round().clamp(-127.0, 127.0) as i8
+    ((f64::from(target) - f64::from(h)) / unit)
+        .round()
+        .clamp(-127.0, 127.0) as i8
 }
 
 #[cfg(test)]

@@ -20,7 +20,11 @@ impl Quantiser {
     pub fn spanning(min: f32, max: f32) -> Self {
         let range = max - min;
         // A flat tile still needs a positive step so heights decode to `min`.
-        let step = if range > 0.0 { range / f32::from(HEIGHT_MAX_CODE) } else { 1.0 };
+        let step = if range > 0.0 {
+            range / f32::from(HEIGHT_MAX_CODE)
+        } else {
+            1.0
+        };
         Quantiser { min, step }
     }
 
@@ -47,7 +51,11 @@ mod tests {
             let h = -13.0 + 4384.0 * (i as f32 / 99_999.0);
             worst = worst.max((q.height(q.quantise(h)) - h).abs());
         }
-        assert!(worst <= q.step * 0.5 + 1e-3, "worst {worst}, step {}", q.step);
+        assert!(
+            worst <= q.step * 0.5 + 1e-3,
+            "worst {worst}, step {}",
+            q.step
+        );
         assert_eq!(q.quantise(4371.0), HEIGHT_MAX_CODE);
         assert_eq!(q.quantise(-13.0), 0);
     }

@@ -47,7 +47,10 @@ fn tolerance(e: f64) -> f64 {
 /// Checks every tile; with `source`, also recomputes the errors against it.
 pub fn verify(set: &TileSet, source: Option<&Grid>) -> VerifyReport {
     let h = set.header();
-    let mut report = VerifyReport { recomputed_max_error: vec![0.0; h.levels as usize], ..Default::default() };
+    let mut report = VerifyReport {
+        recomputed_max_error: vec![0.0; h.levels as usize],
+        ..Default::default()
+    };
     if let Some(g) = source {
         if (g.width, g.height) != (h.grid_width as usize, h.grid_height as usize) {
             report.problems.push(format!(
@@ -81,10 +84,18 @@ fn check_tile(set: &TileSet, tile: &Tile, source: Option<&Grid>, report: &mut Ve
             Some(l) => format!("tile {tx},{ty} level {l}"),
             None => format!("tile {tx},{ty}"),
         };
-        report.problems.push(format!("{}: {at}: {what}", set.path().display()));
+        report
+            .problems
+            .push(format!("{}: {at}: {what}", set.path().display()));
     };
     if (th.data_max_x, th.data_max_y) != (want_x, want_y) {
-        problem(None, format!("data extent {}x{} should be {want_x}x{want_y}", th.data_max_x, th.data_max_y));
+        problem(
+            None,
+            format!(
+                "data extent {}x{} should be {want_x}x{want_y}",
+                th.data_max_x, th.data_max_y
+            ),
+        );
         return;
     }
     let vertices = tile.vertices();
@@ -99,27 +110,45 @@ fn check_tile(set: &TileSet, tile: &Tile, source: Option<&Grid>, report: &mut Ve
         let e = &l.entry;
         let bound = set.level_error(level);
         if (f64::from(e.error_bound) - bound).abs() > tolerance(bound) {
-            problem(Some(level), format!("error bound {} should be {bound}", e.error_bound));
+            problem(
+                Some(level),
+                format!("error bound {} should be {bound}", e.error_bound),
+            );
         }
         let fans = l.indices.fans();
         if fans.len() != e.fan_count as usize {
-            problem(Some(level), format!("{} fans, table says {}", fans.len(), e.fan_count));
+            problem(
+                Some(level),
+                format!("{} fans, table says {}", fans.len(), e.fan_count),
+            );
         }
         let used: HashSet<u32> = fans.iter().flatten().copied().collect();
         // Nesting: V_i ⊆ V_{i+1}, and block i holds exactly the vertices level i introduces.
         if let Some(v) = previous.iter().find(|v| !used.contains(v)) {
-            problem(Some(level), format!("vertex {v} of level {} is missing (levels not nested)", level.saturating_sub(1)));
+            problem(
+                Some(level),
+                format!(
+                    "vertex {v} of level {} is missing (levels not nested)",
+                    level.saturating_sub(1)
+                ),
+            );
         }
         let block = e.block_start..e.vertex_count();
         if used.len() != e.vertex_count() as usize || !block.clone().all(|v| used.contains(&v)) {
-            problem(Some(level), "vertices in use differ from blocks 0..=level".into());
+            problem(
+                Some(level),
+                "vertices in use differ from blocks 0..=level".into(),
+            );
         }
         let mut presence = vec![false; TILE_SIZE * TILE_SIZE];
         let pos = |v: u32| vertices.get(v as usize).map(|&(x, y, _)| (x, y));
         for &v in &used {
             if let Some((x, y)) = pos(v) {
                 if x > th.mesh_max_x || y > th.mesh_max_y {
-                    problem(Some(level), format!("vertex {v} at {x},{y} lies outside the mesh extent"));
+                    problem(
+                        Some(level),
+                        format!("vertex {v} at {x},{y} lies outside the mesh extent"),
+                    );
                     return;
                 }
                 presence[y as usize * TILE_SIZE + x as usize] = true;
@@ -145,16 +174,24 @@ fn check_tile(set: &TileSet, tile: &Tile, source: Option<&Grid>, report: &mut Ve
         }
         let area = (th.mesh_max_x * th.mesh_max_y) as usize;
         let inside = covered.iter().filter(|&&c| c).count();
-        let all_inside = (0..th.mesh_max_y).all(|y| (0..th.mesh_max_x).all(|x| covered[(y * TILE_CELLS + x) as usize]));
+        let all_inside = (0..th.mesh_max_y)
+            .all(|y| (0..th.mesh_max_x).all(|x| covered[(y * TILE_CELLS + x) as usize]));
         if inside != area || !all_inside {
-            problem(Some(level), format!("fans cover {inside} of the {area} cells of the mesh extent"));
+            problem(
+                Some(level),
+                format!("fans cover {inside} of the {area} cells of the mesh extent"),
+            );
         }
         if triangles != u64::from(e.triangle_count) {
-            problem(Some(level), format!("{triangles} triangles, table says {}", e.triangle_count));
+            problem(
+                Some(level),
+                format!("{triangles} triangles, table says {}", e.triangle_count),
+            );
         }
         // Border lists: exactly the level's vertices on each side, in order along it.
         let sides = [
-            (|x: u32, y: u32, _: u32, _: u32| (y == 0).then_some(x)) as fn(u32, u32, u32, u32) -> Option<u32>,
+            (|x: u32, y: u32, _: u32, _: u32| (y == 0).then_some(x))
+                as fn(u32, u32, u32, u32) -> Option<u32>,
             |x, y, mx, _| (x == mx).then_some(y),
             |x, y, _, my| (y == my).then_some(x),
             |x, y, _, _| (x == 0).then_some(y),
@@ -162,44 +199,78 @@ fn check_tile(set: &TileSet, tile: &Tile, source: Option<&Grid>, report: &mut Ve
         for (k, side) in sides.iter().enumerate() {
             let mut want: Vec<(u32, u32)> = used
                 .iter()
-                .filter_map(|&v| pos(v).and_then(|(x, y)| side(x, y, th.mesh_max_x, th.mesh_max_y)).map(|t| (t, v)))
+                .filter_map(|&v| {
+                    pos(v)
+                        .and_then(|(x, y)| side(x, y, th.mesh_max_x, th.mesh_max_y))
+                        .map(|t| (t, v))
+                })
                 .collect();
             want.sort_unstable();
             let want: Vec<u32> = want.into_iter().map(|(_, v)| v).collect();
             if want != l.border[k] {
-                problem(Some(level), format!("border list {k} does not match the level's side vertices"));
+                problem(
+                    Some(level),
+                    format!("border list {k} does not match the level's side vertices"),
+                );
             }
         }
         // Heights of the level's vertices bound the level's box.
-        let (zlo, zhi) = used
-            .iter()
-            .filter_map(|&v| vertices.get(v as usize))
-            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &(_, _, z)| (lo.min(z), hi.max(z)));
+        let (zlo, zhi) = used.iter().filter_map(|&v| vertices.get(v as usize)).fold(
+            (f32::INFINITY, f32::NEG_INFINITY),
+            |(lo, hi), &(_, _, z)| (lo.min(z), hi.max(z)),
+        );
         if zlo < e.z_min || zhi > e.z_max {
-            problem(Some(level), format!("vertex heights {zlo}..{zhi} leave the box {}..{}", e.z_min, e.z_max));
+            problem(
+                Some(level),
+                format!(
+                    "vertex heights {zlo}..{zhi} leave the box {}..{}",
+                    e.z_min, e.z_max
+                ),
+            );
         }
         if let Some(s) = &samples {
             let min_spacing = fh.spacing_x.min(fh.spacing_y);
-            let (worst, limited, excess, unexplained) =
-                measure_level(&fans, &vertices, &s.heights, th.data_max_x, th.data_max_y, bound, min_spacing);
+            let (worst, limited, excess, unexplained) = measure_level(
+                &fans,
+                &vertices,
+                &s.heights,
+                th.data_max_x,
+                th.data_max_y,
+                bound,
+                min_spacing,
+            );
             let slot = &mut report.recomputed_max_error[level as usize];
             *slot = slot.max(worst);
             if (worst - f64::from(e.max_error)).abs() > tolerance(worst) {
-                problem(Some(level), format!("recomputed max error {worst:.4} m, stored {:.4} m", e.max_error));
+                problem(
+                    Some(level),
+                    format!(
+                        "recomputed max error {worst:.4} m, stored {:.4} m",
+                        e.max_error
+                    ),
+                );
             }
             if unexplained > 0.0 {
                 problem(Some(level), format!(
                     "error exceeds e = {bound} m by {unexplained:.4} m where the spacing rule did not stop refinement"
                 ));
             }
-            if limited as u32 != e.limited_triangles || (excess - f64::from(e.limited_excess)).abs() > tolerance(excess) {
+            if limited as u32 != e.limited_triangles
+                || (excess - f64::from(e.limited_excess)).abs() > tolerance(excess)
+            {
                 problem(Some(level), format!(
                     "{limited} triangles over the bound by up to {excess:.4} m; stored {} by {:.4} m",
                     e.limited_triangles, e.limited_excess
                 ));
             }
             if limited > 0 {
-                report.limited.push(LimitedPlace { tx, ty, level, triangles: limited, excess });
+                report.limited.push(LimitedPlace {
+                    tx,
+                    ty,
+                    level,
+                    triangles: limited,
+                    excess,
+                });
             }
         } else if e.limited_triangles > 0 {
             report.limited.push(LimitedPlace {
@@ -217,7 +288,13 @@ fn check_tile(set: &TileSet, tile: &Tile, source: Option<&Grid>, report: &mut Ve
 
 /// Every vertex of a finer block must morph onto level `k`'s surface: `height + offset * unit`
 /// within half a unit of where level `k`'s fans (rasterised here) put its position.
-fn check_morph(tile: &Tile, k: u32, fans: &[Vec<u32>], vertices: &[(u32, u32, f32)], problem: &mut impl FnMut(Option<u32>, String)) {
+fn check_morph(
+    tile: &Tile,
+    k: u32,
+    fans: &[Vec<u32>],
+    vertices: &[(u32, u32, f32)],
+    problem: &mut impl FnMut(Option<u32>, String),
+) {
     let levels = tile.header.levels;
     if k + 1 >= levels {
         return;
@@ -227,7 +304,9 @@ fn check_morph(tile: &Tile, k: u32, fans: &[Vec<u32>], vertices: &[(u32, u32, f3
         let c = vertices[fan[0] as usize];
         for w in fan[1..].windows(2) {
             let tri = [c, vertices[w[0] as usize], vertices[w[1] as usize]];
-            raster_barycentric(tri, u32::MAX, u32::MAX, |x, y, z| surface[y as usize * TILE_SIZE + x as usize] = z);
+            raster_barycentric(tri, u32::MAX, u32::MAX, |x, y, z| {
+                surface[y as usize * TILE_SIZE + x as usize] = z
+            });
         }
     }
     let Some(coarse) = tile.level(k) else { return };
@@ -241,7 +320,7 @@ fn check_morph(tile: &Tile, k: u32, fans: &[Vec<u32>], vertices: &[(u32, u32, f3
             let (x, y, h) = vertices[block.entry.block_start as usize + i];
             let target = surface[y as usize * TILE_SIZE + x as usize];
             let miss = (f64::from(h) + f64::from(offset) * unit - target).abs();
-            if !(miss <= unit * 0.5 + 1e-3) {
+            if miss.is_nan() || miss > unit * 0.5 + 1e-3 {
                 worst = worst.max(if miss.is_nan() { f64::INFINITY } else { miss });
             }
         }
@@ -252,10 +331,23 @@ fn check_morph(tile: &Tile, k: u32, fans: &[Vec<u32>], vertices: &[(u32, u32, f3
 }
 
 /// Checks one fan's shape and marks its cells; returns its triangle count.
-fn check_fan(fan: &[u32], vertices: &[(u32, u32, f32)], presence: &[bool], covered: &mut [bool]) -> Result<u64, String> {
-    let at = |v: u32| vertices.get(v as usize).map(|&(x, y, _)| (i64::from(x), i64::from(y))).ok_or("vertex out of range");
+fn check_fan(
+    fan: &[u32],
+    vertices: &[(u32, u32, f32)],
+    presence: &[bool],
+    covered: &mut [bool],
+) -> Result<u64, String> {
+    let at = |v: u32| {
+        vertices
+            .get(v as usize)
+            .map(|&(x, y, _)| (i64::from(x), i64::from(y)))
+            .ok_or("vertex out of range")
+    };
     if fan.len() < 6 || fan.len() > 10 {
-        return Err(format!("{} indices (a fan has a centre and 5..=9 ring entries)", fan.len()));
+        return Err(format!(
+            "{} indices (a fan has a centre and 5..=9 ring entries)",
+            fan.len()
+        ));
     }
     let c = at(fan[0])?;
     let ring: Vec<(i64, i64)> = fan[1..].iter().map(|&v| at(v)).collect::<Result<_, _>>()?;
@@ -363,7 +455,12 @@ fn triangle_error(t: [(u32, u32, f32); 3], source: &[f32], max_x: u32, max_y: u3
 
 /// Visits the lattice points of a triangle (edges included, clipped to `max_x`, `max_y`) with
 /// the height interpolated there: a bounding-box scan with f64 barycentric weights.
-fn raster_barycentric(t: [(u32, u32, f32); 3], max_x: u32, max_y: u32, mut visit: impl FnMut(u32, u32, f64)) {
+fn raster_barycentric(
+    t: [(u32, u32, f32); 3],
+    max_x: u32,
+    max_y: u32,
+    mut visit: impl FnMut(u32, u32, f64),
+) {
     let p = t.map(|(x, y, z)| (f64::from(x), f64::from(y), f64::from(z)));
     let det = (p[1].1 - p[2].1) * (p[0].0 - p[2].0) + (p[2].0 - p[1].0) * (p[0].1 - p[2].1);
     if det == 0.0 {
@@ -371,8 +468,14 @@ fn raster_barycentric(t: [(u32, u32, f32); 3], max_x: u32, max_y: u32, mut visit
     }
     let xs = t.map(|v| v.0);
     let ys = t.map(|v| v.1);
-    let (x0, x1) = (*xs.iter().min().unwrap_or(&0), (*xs.iter().max().unwrap_or(&0)).min(max_x));
-    let (y0, y1) = (*ys.iter().min().unwrap_or(&0), (*ys.iter().max().unwrap_or(&0)).min(max_y));
+    let (x0, x1) = (
+        *xs.iter().min().unwrap_or(&0),
+        (*xs.iter().max().unwrap_or(&0)).min(max_x),
+    );
+    let (y0, y1) = (
+        *ys.iter().min().unwrap_or(&0),
+        (*ys.iter().max().unwrap_or(&0)).min(max_y),
+    );
     for y in y0..=y1 {
         for x in x0..=x1 {
             let (fx, fy) = (f64::from(x), f64::from(y));

@@ -7,7 +7,11 @@ use tiles::{build_tileset, verify::verify, BuildParams, Grid, TileSet, TileSetMe
 
 fn data(rel: &str) -> PathBuf {
     let p = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data")).join(rel);
-    assert!(p.exists(), "test data missing: {} (the shared data folder must sit beside the repo)", p.display());
+    assert!(
+        p.exists(),
+        "test data missing: {} (the shared data folder must sit beside the repo)",
+        p.display()
+    );
     p
 }
 
@@ -29,11 +33,21 @@ fn odd_sized_crop_builds_and_verifies_against_its_source() {
     // 300 x 190: two tiles across (the second 43 samples wide, odd), one down, partial.
     let (w, h) = (300, 190);
     let heights = srtm_crop(100, 200, w, h);
-    let grid = Grid { width: w, height: h, heights: &heights, spacing_x: 53.2, spacing_y: 92.6 };
+    let grid = Grid {
+        width: w,
+        height: h,
+        heights: &heights,
+        spacing_x: 53.2,
+        spacing_y: 92.6,
+    };
     let dir = tempfile::tempdir().expect("temp dir");
     let out = dir.path().join("crop.vkt");
-    let params = BuildParams { levels: 7, base_error: 1.0 };
-    let summary = build_tileset(&grid, &params, &TileSetMeta::default(), &out, &|| {}).expect("build");
+    let params = BuildParams {
+        levels: 7,
+        base_error: 1.0,
+    };
+    let summary =
+        build_tileset(&grid, &params, &TileSetMeta::default(), &out, &|| {}).expect("build");
     assert_eq!(summary.tiles, 2);
     let set = TileSet::open(&out).expect("open");
     let report = verify(&set, Some(&grid));
@@ -48,6 +62,9 @@ fn odd_sized_crop_builds_and_verifies_against_its_source() {
     let counts: Vec<u32> = tile.levels().iter().map(|l| l.vertex_count()).collect();
     assert!(counts.windows(2).all(|w| w[0] < w[1]), "{counts:?}");
     // No temporary file left behind.
-    let names: Vec<_> = std::fs::read_dir(dir.path()).expect("dir").map(|e| e.expect("entry").file_name()).collect();
+    let names: Vec<_> = std::fs::read_dir(dir.path())
+        .expect("dir")
+        .map(|e| e.expect("entry").file_name())
+        .collect();
     assert_eq!(names.len(), 1, "{names:?}");
 }

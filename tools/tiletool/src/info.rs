@@ -46,7 +46,11 @@ pub fn run(file: &Path, json: bool) -> Result<ExitCode> {
     let set = tiles::TileSet::open(file)?;
     let h = *set.header();
     let mut levels: Vec<LevelInfo> = (0..h.levels)
-        .map(|i| LevelInfo { level: i, error_bound_m: set.level_error(i), ..Default::default() })
+        .map(|i| LevelInfo {
+            level: i,
+            error_bound_m: set.level_error(i),
+            ..Default::default()
+        })
         .collect();
     for ty in 0..h.tiles_y {
         for tx in 0..h.tiles_x {
@@ -93,7 +97,12 @@ pub fn run(file: &Path, json: bool) -> Result<ExitCode> {
         println!("{}", serde_json::to_string_pretty(&info)?);
         return Ok(ExitCode::SUCCESS);
     }
-    println!("{}  ({:.1} MB, format v{})", info.file, info.file_bytes as f64 / 1e6, info.format_version);
+    println!(
+        "{}  ({:.1} MB, format v{})",
+        info.file,
+        info.file_bytes as f64 / 1e6,
+        info.format_version
+    );
     println!("  source    {}", info.description);
     println!(
         "  grid      {} x {} samples, spacing {:.2} x {:.2} m, heights {:.1}..{:.1} m, {} voids filled",

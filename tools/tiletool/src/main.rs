@@ -16,12 +16,16 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 #[derive(Parser)]
-#[command(name = "tiletool", version, about = "Preprocess DEMs into vkterrain tile sets")]
+#[command(
+    name = "tiletool",
+    version,
+    about = "Preprocess DEMs into vkterrain tile sets"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -104,12 +108,18 @@ struct ReadArgs {
 
 fn parse_pair(s: &str) -> Result<(u32, u32), String> {
     let (a, b) = s.split_once(',').ok_or("expected X,Y")?;
-    Ok((a.trim().parse().map_err(|_| "expected X,Y")?, b.trim().parse().map_err(|_| "expected X,Y")?))
+    Ok((
+        a.trim().parse().map_err(|_| "expected X,Y")?,
+        b.trim().parse().map_err(|_| "expected X,Y")?,
+    ))
 }
 
 fn parse_size(s: &str) -> Result<(usize, usize), String> {
     let (a, b) = s.split_once(['x', 'X']).ok_or("expected WxH")?;
-    Ok((a.trim().parse().map_err(|_| "expected WxH")?, b.trim().parse().map_err(|_| "expected WxH")?))
+    Ok((
+        a.trim().parse().map_err(|_| "expected WxH")?,
+        b.trim().parse().map_err(|_| "expected WxH")?,
+    ))
 }
 
 impl ReadArgs {
@@ -127,12 +137,26 @@ impl ReadArgs {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Build { input, output, levels, base_error, quiet } => {
-            build(&input, &output, tiles::BuildParams { levels, base_error }, quiet)
-        }
+        Command::Build {
+            input,
+            output,
+            levels,
+            base_error,
+            quiet,
+        } => build(
+            &input,
+            &output,
+            tiles::BuildParams { levels, base_error },
+            quiet,
+        ),
         Command::Info { file, json } => info::run(&file, json),
         Command::Verify { file, source, read } => verify(&file, &source, &read),
-        Command::Export { file, tile, level, output } => export::run(&file, tile, level, &output),
+        Command::Export {
+            file,
+            tile,
+            level,
+            output,
+        } => export::run(&file, tile, level, &output),
     };
     match result {
         Ok(code) => code,
@@ -147,7 +171,12 @@ fn read_dem(inputs: &[PathBuf], read: &ReadArgs) -> Result<dem::HeightGrid> {
     Ok(dem::read(inputs, &read.options())?)
 }
 
-fn build(input: &InputArgs, output: &Path, params: tiles::BuildParams, quiet: bool) -> Result<ExitCode> {
+fn build(
+    input: &InputArgs,
+    output: &Path,
+    params: tiles::BuildParams,
+    quiet: bool,
+) -> Result<ExitCode> {
     params.validate()?;
     if output.is_dir() {
         bail!("{}: is a folder, not an output file", output.display());
@@ -157,7 +186,10 @@ fn build(input: &InputArgs, output: &Path, params: tiles::BuildParams, quiet: bo
     let decoded = start.elapsed();
     let (tiles_x, tiles_y) = tiles::build::tile_count(grid.width, grid.height)
         .map_err(|e| anyhow::anyhow!("{}: {e}", input.inputs[0].display()))?;
-    let bar = ProgressBar::with_draw_target(Some(u64::from(tiles_x * tiles_y)), ProgressDrawTarget::hidden());
+    let bar = ProgressBar::with_draw_target(
+        Some(u64::from(tiles_x * tiles_y)),
+        ProgressDrawTarget::hidden(),
+    );
     bar.set_style(
         ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} tiles ({eta} left)")
             .unwrap_or_else(|_| ProgressStyle::default_bar())
@@ -170,7 +202,10 @@ fn build(input: &InputArgs, output: &Path, params: tiles::BuildParams, quiet: bo
             bar.set_draw_target(ProgressDrawTarget::stderr());
         }
     };
-    let meta = tiles::TileSetMeta { description: grid.description.clone(), voids_filled: grid.voids_filled };
+    let meta = tiles::TileSetMeta {
+        description: grid.description.clone(),
+        voids_filled: grid.voids_filled,
+    };
     let view = tiles::Grid {
         width: grid.width,
         height: grid.height,
@@ -178,21 +213,34 @@ fn build(input: &InputArgs, output: &Path, params: tiles::BuildParams, quiet: bo
         spacing_x: grid.spacing_x,
         spacing_y: grid.spacing_y,
     };
-    let summary = tiles::build_tileset(&view, &params, &meta, output, &progress)
-        .with_context(|| format!("building {}", output.display()))?;
+    let summary = tiles::build_tileset(&view, &params, &meta, output, &progress)?;
     bar.finish_and_clear();
     let total = start.elapsed();
     if !quiet {
         let samples = (grid.width * grid.height) as f64;
         let (lo, hi) = grid.min_max();
-        println!("{}  ->  {}", input.inputs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(" "), output.display());
+        println!(
+            "{}  ->  {}",
+            input
+                .inputs
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(" "),
+            output.display()
+        );
         println!("  source    {}", grid.description);
         println!(
             "  grid      {} x {} samples, spacing {:.2} x {:.2} m, heights {:.1}..{:.1} m, {} voids filled",
             grid.width, grid.height, grid.spacing_x, grid.spacing_y, lo, hi, grid.voids_filled
         );
-        println!("  tiles     {tiles_x} x {tiles_y} of 257 x 257, {} levels, base error {} m", params.levels, params.base_error);
-        println!("  level     e_i (m)   max err (m)     vertices    triangles        bytes   limited");
+        println!(
+            "  tiles     {tiles_x} x {tiles_y} of 257 x 257, {} levels, base error {} m",
+            params.levels, params.base_error
+        );
+        println!(
+            "  level     e_i (m)   max err (m)     vertices    triangles        bytes   limited"
+        );
         for (i, l) in summary.levels.iter().enumerate() {
             let limited = if l.limited_triangles > 0 {
                 format!("{} by <= {:.2} m", l.limited_triangles, l.limited_excess)
@@ -215,7 +263,9 @@ fn build(input: &InputArgs, output: &Path, params: tiles::BuildParams, quiet: bo
             secs,
             decoded.as_secs_f64(),
             samples / secs * 60.0 / 1e6,
-            peak_memory().map(|m| format!(", peak memory {:.0} MB", m as f64 / 1e6)).unwrap_or_default()
+            peak_memory()
+                .map(|m| format!(", peak memory {:.0} MB", m as f64 / 1e6))
+                .unwrap_or_default()
         );
     }
     Ok(ExitCode::SUCCESS)
@@ -231,7 +281,11 @@ fn peak_memory() -> Option<u64> {
 
 fn verify(file: &Path, source: &[PathBuf], read: &ReadArgs) -> Result<ExitCode> {
     let set = tiles::TileSet::open(file)?;
-    let grid = if source.is_empty() { None } else { Some(read_dem(source, read)?) };
+    let grid = if source.is_empty() {
+        None
+    } else {
+        Some(read_dem(source, read)?)
+    };
     let view = grid.as_ref().map(|g| tiles::Grid {
         width: g.width,
         height: g.height,
@@ -246,7 +300,11 @@ fn verify(file: &Path, source: &[PathBuf], read: &ReadArgs) -> Result<ExitCode> 
     if report.problems.len() > 50 {
         eprintln!("... and {} more problems", report.problems.len() - 50);
     }
-    let what = if grid.is_some() { "structure and errors against the source" } else { "structure" };
+    let what = if grid.is_some() {
+        "structure and errors against the source"
+    } else {
+        "structure"
+    };
     if report.ok() {
         println!(
             "{}: OK ({what}): {} tiles, {} tile levels checked",
@@ -255,7 +313,11 @@ fn verify(file: &Path, source: &[PathBuf], read: &ReadArgs) -> Result<ExitCode> 
             report.levels_checked
         );
         if let Some(g) = &grid {
-            let errs: Vec<String> = report.recomputed_max_error.iter().map(|e| format!("{e:.3}")).collect();
+            let errs: Vec<String> = report
+                .recomputed_max_error
+                .iter()
+                .map(|e| format!("{e:.3}"))
+                .collect();
             println!("  recomputed max error per level (m): {}", errs.join(" "));
             if g.voids_filled > 0 {
                 println!("  (source voids filled: {})", g.voids_filled);
@@ -269,7 +331,11 @@ fn verify(file: &Path, source: &[PathBuf], read: &ReadArgs) -> Result<ExitCode> 
         }
         Ok(ExitCode::SUCCESS)
     } else {
-        eprintln!("{}: FAILED: {} problems", file.display(), report.problems.len());
+        eprintln!(
+            "{}: FAILED: {} problems",
+            file.display(),
+            report.problems.len()
+        );
         Ok(ExitCode::FAILURE)
     }
 }

@@ -1,0 +1,413 @@
+//! `tiletool` end to end on real data: build, info, verify, export, and what bad input gets.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn data(rel: &str) -> PathBuf {
+    let p = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data")).join(rel);
+    assert!(
+        p.exists(),
+        "test data missing: {} (the shared data folder must sit beside the repo)",
+        p.display()
+    );
+    p
+}
+
+fn sample() -> PathBuf {
+    let p = PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../sample/ps_height_1k.png"
+    ));
+    assert!(p.exists(), "bundled sample missing: {}", p.display());
+    p
+}
+
+fn tiletool(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_tiletool"))
+        .args(args)
+        .output()
+        .expect("tiletool runs")
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A failed command: non-zero exit, exactly one line on stderr that names `file`, no panic.
+fn assert_one_line_error(o: &Output, file: &str) -> String {
+    let err = stderr(o);
+    assert!(
+        !o.status.success(),
+        "expected failure, got success; stderr: {err}"
+    );
+    assert_eq!(o.status.code(), Some(1), "stderr: {err}");
+    assert!(!err.contains("panicked"), "panic: {err}");
+    assert_eq!(
+        err.trim_end().lines().count(),
+        1,
+        "want one line, got: {err}"
+    );
+    assert!(err.contains(file), "error does not name {file}: {err}");
+    err
+}
+
+fn dir_is_empty(dir: &Path) -> bool {
+    std::fs::read_dir(dir).expect("dir").next().is_none()
+}
+
+#[test]
+fn sample_builds_inspects_verifies_and_exports() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = dir.path().join("puget.vkt");
+    let src = sample();
+    let flags = ["--spacing", "160", "--vertical-scale", "0.1"];
+    let mut args = vec!["build", s(&src), "-o", s(&out)];
+    args.extend(flags);
+    let o = tiletool(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let summary = String::from_utf8_lossy(&o.stdout);
+    assert!(summary.contains("4 x 4 of 257 x 257"), "{summary}");
+
+    let o = tiletool(&["info", s(&out), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let info: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    assert_eq!(info["grid_width"], 1025);
+    assert_eq!(info["tiles_x"], 4);
+    let levels = info["levels"].as_array().expect("levels");
+    assert_eq!(levels.len(), 9);
+    // Every level below level 0 meets its bound on Puget (160 m spacing never stops refinement
+    // below 128 m); level 0 is limited by the spacing rule and says so.
+    for l in &levels[1..] {
+        let (e, err) = (
+            l["error_bound_m"].as_f64().expect("e"),
+            l["max_error_m"].as_f64().expect("err"),
+        );
+        assert!(err <= e, "level {}: {err} > {e}", l["level"]);
+        assert_eq!(l["limited_tiles"], 0);
+    }
+    let v: Vec<u64> = levels
+        .iter()
+        .map(|l| l["vertices"].as_u64().expect("v"))
+        .collect();
+    assert!(v.windows(2).all(|w| w[0] < w[1]), "{v:?}");
+
+    let o = tiletool(&["info", s(&out)]);
+    assert!(o.status.success());
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("spacing rule"),
+        "info should report the limited places"
+    );
+
+    let mut args = vec!["verify", s(&out), "--source", s(&src)];
+    args.extend(flags);
+    let o = tiletool(&args);
+    assert!(
+        o.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        stderr(&o)
+    );
+
+    let obj = dir.path().join("t.obj");
+    let o = tiletool(&[
+        "export",
+        s(&out),
+        "--tile",
+        "1,2",
+        "--level",
+        "3",
+        "-o",
+        s(&obj),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = std::fs::read_to_string(&obj).expect("obj");
+    let set = tiles::TileSet::open(&out).expect("open");
+    let level = set.tile(1, 2).expect("tile").level(3).expect("level");
+    let verts: Vec<Vec<f64>> = text
+        .lines()
+        .filter(|l| l.starts_with("v "))
+        .map(|l| {
+            l[2..]
+                .split(' ')
+                .map(|t| t.parse().expect("number"))
+                .collect()
+        })
+        .collect();
+    assert_eq!(verts.len() as u32, level.entry.vertex_count());
+    assert_eq!(
+        text.lines().filter(|l| l.starts_with("f ")).count() as u32,
+        level.entry.triangle_count
+    );
+    // Source columns and rows of tile (1, 2), heights in metres within Puget's range.
+    assert!(verts
+        .iter()
+        .all(|v| (256.0..=512.0).contains(&v[0]) && (512.0..=768.0).contains(&v[1])));
+    assert!(verts.iter().all(|v| (-1.0..=4400.0).contains(&v[2])));
+}
+
+#[test]
+fn srtm_mosaic_builds_and_verifies() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = dir.path().join("cat.vkt");
+    let (a, b) = (data("srtm/N42E001.hgt"), data("srtm/N41E001.hgt"));
+    let o = tiletool(&["build", s(&a), s(&b), "-o", s(&out), "--quiet"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(o.stdout.is_empty(), "--quiet prints nothing");
+    let o = tiletool(&["verify", s(&out), "--source", s(&a), s(&b)]);
+    assert!(
+        o.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        stderr(&o)
+    );
+    let o = tiletool(&["info", s(&out), "--json"]);
+    let info: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    assert_eq!(
+        (info["grid_width"].as_u64(), info["grid_height"].as_u64()),
+        (Some(1201), Some(2401))
+    );
+    assert_eq!(info["voids_filled"], 134 + 7652);
+}
+
+#[test]
+fn verify_against_the_wrong_source_fails() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = dir.path().join("a.vkt");
+    let o = tiletool(&[
+        "build",
+        s(&data("srtm/N43E007.hgt")),
+        "-o",
+        s(&out),
+        "--quiet",
+        "--levels",
+        "5",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // Same size, different terrain: the recomputed errors cannot match.
+    let o = tiletool(&["verify", s(&out), "--source", s(&data("srtm/N55W003.hgt"))]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("FAILED"), "{}", stderr(&o));
+}
+
+fn write(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, bytes).expect("write");
+    p
+}
+
+/// Builds `inputs` with `extra` flags into a fresh folder and checks the failure is one line
+/// naming `names` and that nothing, not even a temporary file, is left behind.
+fn build_fails(inputs: &[&Path], extra: &[&str], names: &str) -> String {
+    let out_dir = tempfile::tempdir().expect("temp dir");
+    let out = out_dir.path().join("out.vkt");
+    let mut args = vec!["build"];
+    args.extend(inputs.iter().map(|p| s(p)));
+    args.extend(["-o", s(&out)]);
+    args.extend(extra);
+    let o = tiletool(&args);
+    let err = assert_one_line_error(&o, names);
+    assert!(
+        dir_is_empty(out_dir.path()),
+        "output left behind after: {err}"
+    );
+    err
+}
+
+#[test]
+fn bad_inputs_fail_with_one_line_and_no_output() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let d = dir.path();
+
+    let empty = write(d, "empty.png", b"");
+    build_fails(&[&empty], &["--spacing", "10"], "empty.png");
+
+    let hgt = std::fs::read(data("srtm/N55W003.hgt")).expect("hgt");
+    let truncated = write(d, "N55W003.hgt", &hgt[..hgt.len() / 2]);
+    build_fails(&[&truncated], &[], "N55W003.hgt");
+
+    let raw = write(d, "grid.r16", &vec![0u8; 100 * 100 * 2]);
+    let err = build_fails(
+        &[&raw],
+        &["--size", "100x99", "--spacing", "10"],
+        "grid.r16",
+    );
+    assert!(err.contains("size"), "{err}");
+    // A size claiming ten billion samples is refused before anything is allocated.
+    build_fails(
+        &[&raw],
+        &["--size", "100000x100000", "--spacing", "10"],
+        "grid.r16",
+    );
+
+    // Mosaic of two resolutions.
+    let sub = d.join("mix");
+    std::fs::create_dir(&sub).expect("dir");
+    let a = write(&sub, "N10E010.hgt", &vec![0u8; 1201 * 1201 * 2]);
+    let b = write(&sub, "N11E010.hgt", &vec![0u8; 3601 * 3601 * 2]);
+    let err = build_fails(&[&a, &b], &[], "N10E010.hgt");
+    assert!(
+        err.to_lowercase().contains("mosaic") || err.contains("resolution"),
+        "{err}"
+    );
+
+    let void: Vec<u8> = std::iter::repeat_n([0x80u8, 0x00], 1201 * 1201)
+        .flatten()
+        .collect();
+    let all_void = write(d, "N20E020.hgt", &void);
+    build_fails(&[&all_void], &[], "N20E020.hgt");
+
+    let mut f32s: Vec<u8> = (0..64 * 64)
+        .flat_map(|i| (i as f32).to_le_bytes())
+        .collect();
+    f32s[400..404].copy_from_slice(&f32::NAN.to_le_bytes());
+    let nan = write(d, "nan.f32", &f32s);
+    build_fails(&[&nan], &["--size", "64x64", "--spacing", "5"], "nan.f32");
+
+    // A TIFF with three samples per pixel (RGB) is not a DEM.
+    let tiff = rgb_tiff();
+    let rgb = write(d, "rgb.tif", &tiff);
+    build_fails(&[&rgb], &["--spacing", "5"], "rgb.tif");
+
+    let garbage = write(
+        d,
+        "garbage.tif",
+        b"II*\0garbage that is not a tiff directory",
+    );
+    build_fails(&[&garbage], &["--spacing", "5"], "garbage.tif");
+
+    let missing = d.join("missing.hgt");
+    build_fails(&[&missing], &[], "missing.hgt");
+}
+
+/// A minimal little-endian RGB8 TIFF of 2 x 2 pixels.
+fn rgb_tiff() -> Vec<u8> {
+    let mut t = b"II*\0".to_vec();
+    t.extend(8u32.to_le_bytes());
+    let entries: [(u16, u16, u32, u32); 8] = [
+        (256, 3, 1, 2),                  // width
+        (257, 3, 1, 2),                  // height
+        (258, 3, 1, 8),                  // bits per sample (one value for brevity)
+        (259, 3, 1, 1),                  // no compression
+        (262, 3, 1, 2),                  // RGB
+        (273, 4, 1, 8 + 2 + 8 * 12 + 4), // strip offset: right after the directory
+        (277, 3, 1, 3),                  // samples per pixel
+        (279, 4, 1, 12),                 // strip byte count
+    ];
+    t.extend((entries.len() as u16).to_le_bytes());
+    for (tag, kind, count, value) in entries {
+        t.extend(tag.to_le_bytes());
+        t.extend(kind.to_le_bytes());
+        t.extend(count.to_le_bytes());
+        t.extend(value.to_le_bytes());
+    }
+    t.extend(0u32.to_le_bytes());
+    t.extend([200u8; 12]);
+    t
+}
+
+#[test]
+fn unwritable_output_fails_cleanly() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let src = data("srtm/N55W003.hgt");
+    let out = dir.path().join("no/such/folder/out.vkt");
+    let o = tiletool(&["build", s(&src), "-o", s(&out), "--levels", "3"]);
+    assert_one_line_error(&o, "out.vkt");
+    let o = tiletool(&["build", s(&src), "-o", s(dir.path()), "--levels", "3"]);
+    assert_one_line_error(&o, s(dir.path()));
+    assert!(dir_is_empty(dir.path()));
+}
+
+#[test]
+fn corrupted_tile_sets_are_rejected() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let good = dir.path().join("good.vkt");
+    let o = tiletool(&[
+        "build",
+        s(&data("srtm/N55W003.hgt")),
+        "-o",
+        s(&good),
+        "--levels",
+        "4",
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let bytes = std::fs::read(&good).expect("read");
+    let set = tiles::TileSet::open(&good).expect("open");
+    let tile_at = set.dir_entry(2, 3).expect("entry").offset as usize;
+    drop(set);
+
+    let cases: Vec<(&str, Vec<u8>, &str)> = vec![
+        ("empty.vkt", vec![], "too short"),
+        (
+            "magic.vkt",
+            {
+                let mut b = bytes.clone();
+                b[0] = b'X';
+                b
+            },
+            "magic",
+        ),
+        (
+            "version.vkt",
+            {
+                let mut b = bytes.clone();
+                b[8] = 99;
+                b
+            },
+            "version",
+        ),
+        (
+            "header.vkt",
+            {
+                let mut b = bytes.clone();
+                b[16] ^= 1;
+                b
+            },
+            "",
+        ),
+        (
+            "truncated.vkt",
+            bytes[..bytes.len() * 2 / 3].to_vec(),
+            "truncated",
+        ),
+        (
+            "tile.vkt",
+            {
+                let mut b = bytes.clone();
+                b[tile_at + 200] ^= 0x40;
+                b
+            },
+            "checksum",
+        ),
+    ];
+    for (name, content, what) in cases {
+        let p = write(dir.path(), name, &content);
+        for cmd in ["info", "verify"] {
+            let o = tiletool(&[cmd, s(&p)]);
+            let err = stderr(&o);
+            assert!(!o.status.success(), "{cmd} {name} succeeded");
+            assert!(!err.contains("panicked"), "{cmd} {name}: {err}");
+            assert!(err.contains(name), "{cmd} {name}: {err}");
+            assert!(err.contains(what), "{cmd} {name}: want {what:?} in {err}");
+        }
+        let o = tiletool(&[
+            "export",
+            s(&p),
+            "--tile",
+            "2,3",
+            "--level",
+            "1",
+            "-o",
+            s(&dir.path().join("x.obj")),
+        ]);
+        assert!(
+            !o.status.success() && !stderr(&o).contains("panicked"),
+            "export {name}"
+        );
+    }
+    assert!(!dir.path().join("x.obj").exists());
+}
