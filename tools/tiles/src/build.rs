@@ -144,6 +144,59 @@ fn hilbert_index(n: u32, mut x: u32, mut y: u32) -> u32 {
 
 const NO_VERTEX: u32 = u32::MAX;
 
+/// A model of a GPU's post-transform vertex cache (first in, first out, 16 entries, the size
+/// vertex-cache analyses use) over lattice points, to order each fan's ring.
+struct FifoCache {
+    /// 1 + the miss count at which each point entered the cache (0 = never).
+    entered: Vec<u32>,
+    misses: u32,
+}
+
+impl FifoCache {
+    const SIZE: u32 = 16;
+
+    fn new(points: usize) -> Self {
+        FifoCache {
+            entered: vec![0; points],
+            misses: 0,
+        }
+    }
+
+    fn holds(&self, p: usize) -> bool {
+        let e = self.entered[p];
+        e > 0 && self.misses - (e - 1) < Self::SIZE
+    }
+
+    fn touch(&mut self, p: usize) {
+        if !self.holds(p) {
+            self.misses += 1;
+            self.entered[p] = self.misses;
+        }
+    }
+
+    fn clear(&mut self) {
+        self.entered.fill(0);
+        self.misses = 0;
+    }
+}
+
+/// Rotates a closed fan (centre, ring..., first ring vertex again) so the ring starts with the
+/// longest run of vertices still in the cache. A FIFO cache then meets those shared vertices
+/// before this fan's new ones push them out (the fan stays the same triangles, same winding).
+fn rotate_ring(fan: &mut Vec<(u32, u32)>, recent: impl Fn((u32, u32)) -> bool) {
+    let ring = fan.len() - 2;
+    let seen: Vec<bool> = fan[1..=ring].iter().map(|&p| recent(p)).collect();
+    let run = |s: usize| (0..ring).take_while(|&i| seen[(s + i) % ring]).count();
+    let Some(start) = (0..ring).max_by_key(|&s| (run(s), std::cmp::Reverse(s))) else {
+        return;
+    };
+    if start == 0 || run(start) == 0 {
+        return;
+    }
+    fan[1..=ring].rotate_left(start);
+    fan[ring + 1] = fan[1];
+}
+
 struct LevelOut {
     entry: LevelEntry,
     block: Vec<u32>,
@@ -178,6 +231,7 @@ pub fn build_tile(
     // Each level's surface at every lattice point.
     let mut surfaces: Vec<Vec<f32>> = Vec::with_capacity(n);
     let mut fan = Vec::with_capacity(10);
+    let mut cache = FifoCache::new(TILE_SIZE * TILE_SIZE);
 
     for level in 0..n {
         let e = params.level_error(level as u32);
@@ -200,7 +254,9 @@ pub fn build_tile(
             fan.clear();
             mesher.fan(q, &mut fan);
             triangles += fan.len() as u32 - 2;
+            rotate_ring(&mut fan, |(x, y)| cache.holds(lattice(x, y)));
             for &(x, y) in &fan {
+                cache.touch(lattice(x, y));
                 let l = lattice(x, y);
                 if vertex_of[l] == NO_VERTEX {
                     vertex_of[l] = lattice_of.len() as u32;
@@ -212,6 +268,7 @@ pub fn build_tile(
             indices.push(NO_VERTEX);
         }
         indices.pop();
+        cache.clear();
 
         // Measured error, and the places where refinement was not allowed.
         let mut max_error = 0.0f64;

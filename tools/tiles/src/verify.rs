@@ -354,9 +354,11 @@ fn check_fan(
     if ring.first() != ring.last() {
         return Err("ring is not closed".into());
     }
-    let h = (ring[0].0 - c.0).abs();
-    if h == 0 || !(h as u64).is_power_of_two() || (ring[0].1 - c.1).abs() != h {
-        return Err("ring does not start at a corner of a power-of-two cell".into());
+    // The ring may start anywhere on the cell boundary (corner or midpoint): the half size is
+    // its Chebyshev distance from the centre.
+    let h = (ring[0].0 - c.0).abs().max((ring[0].1 - c.1).abs());
+    if h == 0 || !(h as u64).is_power_of_two() {
+        return Err("ring does not lie on a power-of-two cell".into());
     }
     let mut corners = 0;
     for w in ring.windows(2) {
@@ -416,7 +418,7 @@ fn measure_level(
         let v = |i: u32| vertices[i as usize];
         let c = v(fan[0]);
         let ring: Vec<_> = fan[1..].iter().map(|&i| v(i)).collect();
-        let half = c.0.abs_diff(ring[0].0);
+        let half = c.0.abs_diff(ring[0].0).max(c.1.abs_diff(ring[0].1));
         let cell = 2 * half;
         for w in ring.windows(2) {
             let (a, b) = (w[0], w[1]);

@@ -1,1 +1,0 @@
-//! Benchmarks and their report (filled below).
