@@ -7,7 +7,9 @@ use std::sync::mpsc::sync_channel;
 use rayon::prelude::*;
 
 use crate::format::{FileHeader, LevelEntry, TileHeader, TileSetWriter, MAX_LEVELS, TILE_MAGIC};
-use crate::mesh::{lattice, plane, triangle_spans, Mesher, TileSamples, TILE_CELLS, TILE_SIZE};
+use crate::mesh::{
+    lattice, plane, triangle_spans, Mesher, Quad, TileSamples, TILE_CELLS, TILE_SIZE,
+};
 use crate::pack::{morph_offset, morph_unit, pack};
 use crate::quantise::Quantiser;
 use crate::BuildError;
@@ -183,9 +185,12 @@ impl FifoCache {
 /// Rotates a closed fan (centre, ring..., first ring vertex again) so the ring starts with the
 /// longest run of vertices still in the cache. A FIFO cache then meets those shared vertices
 /// before this fan's new ones push them out (the fan stays the same triangles, same winding).
-fn rotate_ring(fan: &mut Vec<(u32, u32)>, recent: impl Fn((u32, u32)) -> bool) {
+fn rotate_ring(fan: &mut [(u32, u32)], recent: impl Fn((u32, u32)) -> bool) {
     let ring = fan.len() - 2;
-    let seen: Vec<bool> = fan[1..=ring].iter().map(|&p| recent(p)).collect();
+    let mut seen = [false; 8];
+    for (s, &p) in seen.iter_mut().zip(&fan[1..=ring]) {
+        *s = recent(p);
+    }
     let run = |s: usize| (0..ring).take_while(|&i| seen[(s + i) % ring]).count();
     let Some(start) = (0..ring).max_by_key(|&s| (run(s), std::cmp::Reverse(s))) else {
         return;
@@ -204,6 +209,128 @@ struct LevelOut {
     border: [Vec<u32>; 4],
 }
 
+/// The tile's vertices in index order: blocks by introducing level, each in first-use order.
+struct VertexOrder {
+    /// Global vertex index of each lattice point (`NO_VERTEX` if not a vertex yet).
+    index_of: Vec<u32>,
+    /// Lattice point of each vertex.
+    lattice_of: Vec<u32>,
+}
+
+impl VertexOrder {
+    fn index(&mut self, l: usize) -> u32 {
+        if self.index_of[l] == NO_VERTEX {
+            self.index_of[l] = self.lattice_of.len() as u32;
+            self.lattice_of.push(l as u32);
+        }
+        self.index_of[l]
+    }
+}
+
+fn xy(l: u32) -> (u32, u32) {
+    (l % TILE_SIZE as u32, l / TILE_SIZE as u32)
+}
+
+/// Leaves in P-order (Hilbert order of their cells).
+fn p_order(leaves: Vec<Quad>) -> Vec<Quad> {
+    let mut keyed: Vec<(u32, Quad)> = leaves
+        .into_iter()
+        .map(|q| {
+            let (x, y) = q.origin();
+            (hilbert_index(TILE_CELLS / 2, x / 2, y / 2), q)
+        })
+        .collect();
+    keyed.sort_unstable_by_key(|&(key, _)| key);
+    keyed.into_iter().map(|(_, q)| q).collect()
+}
+
+/// The level's index array (fans joined by restarts) and its triangle count; new vertices get
+/// the next indices, which makes them this level's block.
+fn emit_fans(
+    mesher: &Mesher,
+    leaves: &[Quad],
+    vertices: &mut VertexOrder,
+    cache: &mut FifoCache,
+) -> (Vec<u32>, u32) {
+    let mut indices = Vec::with_capacity(leaves.len() * 10);
+    let mut triangles = 0u32;
+    let mut fan = Vec::with_capacity(10);
+    cache.clear();
+    for &q in leaves {
+        fan.clear();
+        mesher.fan(q, &mut fan);
+        triangles += fan.len() as u32 - 2;
+        rotate_ring(&mut fan, |(x, y)| cache.holds(lattice(x, y)));
+        for &(x, y) in &fan {
+            let l = lattice(x, y);
+            cache.touch(l);
+            indices.push(vertices.index(l));
+        }
+        indices.push(NO_VERTEX);
+    }
+    indices.pop();
+    (indices, triangles)
+}
+
+/// The level's measured max error and, where refinement was forbidden, how many triangles
+/// exceed `e` and by how much at most. A triangle over `e` that could have been refined is a
+/// mesher bug, returned as the offending cell.
+fn measure_level(mesher: &mut Mesher, leaves: &[Quad], e: f64) -> Result<(f64, u32, f64), Quad> {
+    let (mut max_error, mut limited, mut excess) = (0.0f64, 0u32, 0.0f64);
+    for &q in leaves {
+        for &t in mesher.fan_triangles(q).as_slice() {
+            let err = mesher.triangle_error(q, t);
+            max_error = max_error.max(err);
+            if err > e {
+                if !mesher.refinement_forbidden(q, t, e) {
+                    return Err(q);
+                }
+                limited += 1;
+                excess = excess.max(err - e);
+            }
+        }
+    }
+    Ok((max_error, limited, excess))
+}
+
+/// The level's surface at every lattice point of the mesh extent.
+fn rasterise_surface(mesher: &Mesher, leaves: &[Quad], (max_x, max_y): (u32, u32)) -> Vec<f32> {
+    let heights = mesher.quantised_heights();
+    let mut surface = vec![f32::NAN; TILE_SIZE * TILE_SIZE];
+    for &q in leaves {
+        if q.size() == 2 {
+            // The finest cells hold only their fan's ring and centre: vertices keep their
+            // height, an absent midpoint lies halfway along its edge.
+            let (x0, y0) = q.origin();
+            for (dx, dy) in [(0, 0), (2, 0), (0, 2), (2, 2), (1, 1)] {
+                let l = lattice(x0 + dx, y0 + dy);
+                surface[l] = heights[l];
+            }
+            for k in 0..4 {
+                let (a, b, (mx, my)) = (q.corner(k), q.corner(k + 1), q.midpoint(k));
+                let l = lattice(mx, my);
+                surface[l] = if mesher.midpoint_present(q, k) {
+                    heights[l]
+                } else {
+                    (heights[lattice(a.0, a.1)] + heights[lattice(b.0, b.1)]) * 0.5
+                };
+            }
+            continue;
+        }
+        for &t in mesher.fan_triangles(q).as_slice() {
+            let tri = q.triangle(t);
+            let (a, b, c) = plane(tri, tri.map(|(x, y)| f64::from(heights[lattice(x, y)])));
+            triangle_spans(q, t, max_x, max_y, |y, lo, hi| {
+                let z0 = a + c * f64::from(y);
+                for (x, z) in (lo..=hi).zip(&mut surface[lattice(lo, y)..=lattice(hi, y)]) {
+                    *z = (z0 + b * f64::from(x)) as f32;
+                }
+            });
+        }
+    }
+    surface
+}
+
 /// Builds every level of tile `(tx, ty)` and serialises it.
 pub fn build_tile(
     grid: &Grid,
@@ -220,128 +347,66 @@ pub fn build_tile(
         });
     let quantiser = Quantiser::spanning(lo, hi);
     let mut mesher = Mesher::new(&samples, &quantiser, grid.spacing_x.min(grid.spacing_y));
-    let (mesh_max_x, mesh_max_y) = samples.mesh_max();
-
+    let mesh_max = samples.mesh_max();
     let n = params.levels as usize;
-    // Global vertex index of each lattice point, and the level that introduced it.
-    let mut vertex_of = vec![NO_VERTEX; TILE_SIZE * TILE_SIZE];
-    let mut lattice_of: Vec<u32> = Vec::new();
-    let mut vertex_level: Vec<u8> = Vec::new();
+    let mut vertices = VertexOrder {
+        index_of: vec![NO_VERTEX; TILE_SIZE * TILE_SIZE],
+        lattice_of: Vec::new(),
+    };
     let mut levels: Vec<LevelOut> = Vec::with_capacity(n);
-    // Each level's surface at every lattice point.
+    // Each level's surface at every lattice point (none for the finest: nothing morphs to it).
     let mut surfaces: Vec<Vec<f32>> = Vec::with_capacity(n);
-    let mut fan = Vec::with_capacity(10);
     let mut cache = FifoCache::new(TILE_SIZE * TILE_SIZE);
+    // Border lists and height range grow with each block.
+    let mut sides: [Vec<(u32, u32)>; 4] = Default::default();
+    let (mut z_min, mut z_max) = (f32::INFINITY, f32::NEG_INFINITY);
 
     for level in 0..n {
         let e = params.level_error(level as u32);
         mesher.refine(e);
-        let mut keyed: Vec<(u32, _)> = mesher
-            .leaves()
-            .into_iter()
-            .map(|q| {
-                let (x, y) = q.origin();
-                (hilbert_index(TILE_CELLS / 2, x / 2, y / 2), q)
-            })
-            .collect();
-        keyed.sort_unstable_by_key(|&(key, _)| key);
-        let leaves: Vec<_> = keyed.into_iter().map(|(_, q)| q).collect();
-
-        let block_start = lattice_of.len() as u32;
-        let mut indices = Vec::with_capacity(leaves.len() * 10);
-        let mut triangles = 0u32;
-        for &q in &leaves {
-            fan.clear();
-            mesher.fan(q, &mut fan);
-            triangles += fan.len() as u32 - 2;
-            rotate_ring(&mut fan, |(x, y)| cache.holds(lattice(x, y)));
-            for &(x, y) in &fan {
-                cache.touch(lattice(x, y));
-                let l = lattice(x, y);
-                if vertex_of[l] == NO_VERTEX {
-                    vertex_of[l] = lattice_of.len() as u32;
-                    lattice_of.push(l as u32);
-                    vertex_level.push(level as u8);
-                }
-                indices.push(vertex_of[l]);
-            }
-            indices.push(NO_VERTEX);
+        let leaves = p_order(mesher.leaves());
+        let block_start = vertices.lattice_of.len();
+        let (indices, triangles) = emit_fans(&mesher, &leaves, &mut vertices, &mut cache);
+        let (max_error, limited_triangles, limited_excess) = measure_level(&mut mesher, &leaves, e)
+            .map_err(|q| {
+                BuildError::Internal(format!(
+                    "tile {tx},{ty} level {level}: a triangle of cell {q:?} exceeds {e} m"
+                ))
+            })?;
+        if level + 1 < n {
+            surfaces.push(rasterise_surface(&mesher, &leaves, mesh_max));
         }
-        indices.pop();
-        cache.clear();
 
-        // Measured error, and the places where refinement was not allowed.
-        let mut max_error = 0.0f64;
-        let mut limited_excess = 0.0f64;
-        let mut limited_triangles = 0u32;
-        for &q in &leaves {
-            for &t in mesher.fan_triangles(q).as_slice() {
-                let err = mesher.triangle_error(q, t);
-                max_error = max_error.max(err);
-                if err > e {
-                    if !mesher.refinement_forbidden(q, t, e) {
-                        return Err(BuildError::Internal(format!(
-                            "tile {tx},{ty} level {level}: a triangle of cell {q:?} exceeds {e} m by {} m",
-                            err - e
-                        )));
-                    }
-                    limited_triangles += 1;
-                    limited_excess = limited_excess.max(err - e);
-                }
-            }
-        }
-        // The level's surface at every lattice point, for the morph offsets of the vertices
-        // finer levels introduce.
         let heights = mesher.quantised_heights();
-        let mut surface = vec![f32::NAN; TILE_SIZE * TILE_SIZE];
-        // The finest level has no finer vertices to morph.
-        let leaves_to_draw = if level + 1 < n { &leaves[..] } else { &[] };
-        for &q in leaves_to_draw {
-            for &t in mesher.fan_triangles(q).as_slice() {
-                let tri = q.triangle(t);
-                let (a, b, c) = plane(tri, tri.map(|(x, y)| f64::from(heights[lattice(x, y)])));
-                triangle_spans(q, t, mesh_max_x, mesh_max_y, |y, lo, hi| {
-                    let z0 = a + c * f64::from(y);
-                    for (x, z) in (lo..=hi).zip(&mut surface[lattice(lo, y)..=lattice(hi, y)]) {
-                        *z = (z0 + b * f64::from(x)) as f32;
-                    }
-                });
-            }
-        }
-        surfaces.push(surface);
-        let block: Vec<u32> = lattice_of[block_start as usize..]
+        let new = &vertices.lattice_of[block_start..];
+        let block: Vec<u32> = new
             .iter()
             .map(|&l| {
-                let (x, y) = (l % TILE_SIZE as u32, l / TILE_SIZE as u32);
+                let (x, y) = xy(l);
                 pack(x, y, quantiser.quantise(samples.heights[l as usize]))
             })
             .collect();
-        let vertex_count = lattice_of.len() as u32;
-        let (mut z_min, mut z_max) = (f32::INFINITY, f32::NEG_INFINITY);
-        let mut border: [Vec<(u32, u32)>; 4] = Default::default();
-        for &l in &lattice_of {
-            let (x, y) = (l % TILE_SIZE as u32, l / TILE_SIZE as u32);
-            let h = heights[l as usize];
-            z_min = z_min.min(h);
-            z_max = z_max.max(h);
-            let v = vertex_of[l as usize];
-            if y == 0 {
-                border[0].push((x, v));
-            }
-            if x == mesh_max_x {
-                border[1].push((y, v));
-            }
-            if y == mesh_max_y {
-                border[2].push((x, v));
-            }
-            if x == 0 {
-                border[3].push((y, v));
+        for (i, &l) in new.iter().enumerate() {
+            let (x, y) = xy(l);
+            let v = (block_start + i) as u32;
+            z_min = z_min.min(heights[l as usize]);
+            z_max = z_max.max(heights[l as usize]);
+            for (k, on_side) in [
+                (0, y == 0),
+                (1, x == mesh_max.0),
+                (2, y == mesh_max.1),
+                (3, x == 0),
+            ] {
+                if on_side {
+                    sides[k].push((if k % 2 == 0 { x } else { y }, v));
+                }
             }
         }
-        let border = border.map(|mut side| {
-            side.sort_unstable();
-            side.into_iter().map(|(_, v)| v).collect::<Vec<u32>>()
+        let border = [0, 1, 2, 3].map(|k| {
+            sides[k].sort_unstable();
+            sides[k].iter().map(|&(_, v)| v).collect::<Vec<u32>>()
         });
+        let vertex_count = vertices.lattice_of.len() as u32;
         let entry = LevelEntry {
             error_bound: e as f32,
             // Rounded up so the stored figure is never below the measured one.
@@ -350,8 +415,8 @@ pub fn build_tile(
             limited_triangles,
             z_min,
             z_max,
-            block_start,
-            block_len: vertex_count - block_start,
+            block_start: block_start as u32,
+            block_len: vertex_count - block_start as u32,
             index_count: indices.len() as u32,
             index_width: if vertex_count <= u32::from(u16::MAX) {
                 2
@@ -371,38 +436,12 @@ pub fn build_tile(
         });
     }
 
-    // Morph offsets: each vertex of block j, on every coarser level k < j, in units sized so
-    // the largest deviation from level k's surface fits.
-    for k in 0..n {
-        let start = levels[k].entry.vertex_count() as usize;
-        let deviation = lattice_of[start..]
-            .iter()
-            .map(|&l| {
-                (f64::from(surfaces[k][l as usize])
-                    - f64::from(mesher.quantised_heights()[l as usize]))
-                .abs()
-            })
-            .fold(0.0, f64::max);
-        levels[k].entry.morph_unit =
-            morph_unit(levels[k].entry.error_bound.into(), deviation) as f32;
-    }
-    let mut morph: Vec<Vec<i8>> = Vec::with_capacity(n);
-    for (j, out) in levels.iter().enumerate() {
-        let start = out.entry.block_start as usize;
-        let mut rows = Vec::with_capacity(j * out.block.len());
-        for (k, coarse) in levels.iter().enumerate().take(j) {
-            let unit = f64::from(coarse.entry.morph_unit);
-            rows.extend(lattice_of[start..start + out.block.len()].iter().map(|&l| {
-                let h = mesher.quantised_heights()[l as usize];
-                morph_offset(h, surfaces[k][l as usize], unit)
-            }));
-        }
-        debug_assert!(vertex_level[start..start + out.block.len()]
-            .iter()
-            .all(|&v| v as usize == j));
-        morph.push(rows);
-    }
-
+    let morph = morph_offsets(
+        &mut levels,
+        &surfaces,
+        &vertices.lattice_of,
+        mesher.quantised_heights(),
+    );
     let header = TileHeader {
         magic: TILE_MAGIC,
         tx,
@@ -410,11 +449,11 @@ pub fn build_tile(
         levels: params.levels,
         data_max_x: samples.data_max_x,
         data_max_y: samples.data_max_y,
-        mesh_max_x,
-        mesh_max_y,
+        mesh_max_x: mesh_max.0,
+        mesh_max_y: mesh_max.1,
         height_min: quantiser.min,
         height_step: quantiser.step,
-        vertex_count: lattice_of.len() as u32,
+        vertex_count: vertices.lattice_of.len() as u32,
         reserved: 0,
     };
     let (blob, stats) = serialise(&header, &mut levels, &morph);
@@ -424,6 +463,46 @@ pub fn build_tile(
         blob,
         levels: stats,
     })
+}
+
+/// Morph offsets of each block `j` toward every coarser level `k < j` (row-major by `k`), in
+/// units sized so the largest deviation from level `k`'s surface fits; sets each level's unit.
+fn morph_offsets(
+    levels: &mut [LevelOut],
+    surfaces: &[Vec<f32>],
+    lattice_of: &[u32],
+    heights: &[f32],
+) -> Vec<Vec<i8>> {
+    for out in levels.iter_mut() {
+        out.entry.morph_unit = morph_unit(out.entry.error_bound.into(), 0.0) as f32;
+    }
+    for (k, surface) in surfaces.iter().enumerate() {
+        let start = levels[k].entry.vertex_count() as usize;
+        let deviation = lattice_of[start..]
+            .iter()
+            .map(|&l| (f64::from(surface[l as usize]) - f64::from(heights[l as usize])).abs())
+            .fold(0.0, f64::max);
+        levels[k].entry.morph_unit =
+            morph_unit(levels[k].entry.error_bound.into(), deviation) as f32;
+    }
+    levels
+        .iter()
+        .enumerate()
+        .map(|(j, out)| {
+            let block =
+                &lattice_of[out.entry.block_start as usize..out.entry.vertex_count() as usize];
+            let mut rows = Vec::with_capacity(j * block.len());
+            for (k, surface) in surfaces.iter().enumerate().take(j) {
+                let unit = f64::from(levels[k].entry.morph_unit);
+                rows.extend(
+                    block
+                        .iter()
+                        .map(|&l| morph_offset(heights[l as usize], surface[l as usize], unit)),
+                );
+            }
+            rows
+        })
+        .collect()
 }
 
 fn round_up_f32(v: f64) -> f32 {

@@ -298,7 +298,7 @@ impl<'a> Mesher<'a> {
         }
     }
 
-    fn midpoint_present(&self, q: Quad, k: usize) -> bool {
+    pub fn midpoint_present(&self, q: Quad, k: usize) -> bool {
         let (x, y) = q.midpoint(k);
         self.present[lattice(x, y)]
     }
