@@ -11,7 +11,7 @@ use crate::mesh::{
     lattice, plane, triangle_spans, Mesher, Quad, TileSamples, TILE_CELLS, TILE_SIZE,
 };
 use crate::pack::{morph_offset, morph_unit, pack};
-use crate::quantise::Quantiser;
+use crate::quantise::{lattice_step, Quantiser};
 use crate::BuildError;
 
 /// A height field in metres, row-major, row 0 = north.
@@ -100,6 +100,32 @@ pub fn tile_samples(grid: &Grid, tx: u32, ty: u32) -> TileSamples {
         data_max_x: data_max_x as u32,
         data_max_y: data_max_y as u32,
     }
+}
+
+/// The height lattice step for a grid: fits the roughest tile's range in 14 bits.
+pub fn height_step(grid: &Grid) -> Result<f32, String> {
+    let (tiles_x, tiles_y) = tile_count(grid.width, grid.height)?;
+    let cells = TILE_CELLS as usize;
+    let (mut max_range, mut max_abs) = (0.0f32, 0.0f32);
+    for ty in 0..tiles_y as usize {
+        for tx in 0..tiles_x as usize {
+            let (x0, y0) = (tx * cells, ty * cells);
+            let (x1, y1) = (
+                (x0 + cells).min(grid.width - 1),
+                (y0 + cells).min(grid.height - 1),
+            );
+            let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+            for y in y0..=y1 {
+                for &h in &grid.heights[y * grid.width + x0..=y * grid.width + x1] {
+                    lo = lo.min(h);
+                    hi = hi.max(h);
+                }
+            }
+            max_range = max_range.max(hi - lo);
+            max_abs = max_abs.max(lo.abs()).max(hi.abs());
+        }
+    }
+    Ok(lattice_step(max_range, max_abs))
 }
 
 /// Per-level figures of a built tile, for summaries.
@@ -331,21 +357,21 @@ fn rasterise_surface(mesher: &Mesher, leaves: &[Quad], (max_x, max_y): (u32, u32
     surface
 }
 
-/// Builds every level of tile `(tx, ty)` and serialises it.
+/// Builds every level of tile `(tx, ty)` and serialises it. `step` is the tile set's height
+/// lattice step, [`height_step`] of the grid.
 pub fn build_tile(
     grid: &Grid,
     tx: u32,
     ty: u32,
     params: &BuildParams,
+    step: f32,
 ) -> Result<BuiltTile, BuildError> {
     let samples = tile_samples(grid, tx, ty);
-    let (lo, hi) = samples
+    let lo = samples
         .heights
         .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &h| {
-            (lo.min(h), hi.max(h))
-        });
-    let quantiser = Quantiser::spanning(lo, hi);
+        .fold(f32::INFINITY, |lo, &h| lo.min(h));
+    let quantiser = Quantiser::for_tile(lo, step);
     let mut mesher = Mesher::new(&samples, &quantiser, grid.spacing_x.min(grid.spacing_y));
     let mesh_max = samples.mesh_max();
     let n = params.levels as usize;
@@ -451,10 +477,10 @@ pub fn build_tile(
         data_max_y: samples.data_max_y,
         mesh_max_x: mesh_max.0,
         mesh_max_y: mesh_max.1,
-        height_min: quantiser.min,
+        height_min: quantiser.min(),
         height_step: quantiser.step,
         vertex_count: vertices.lattice_of.len() as u32,
-        reserved: 0,
+        height_base: quantiser.base,
     };
     let (blob, stats) = serialise(&header, &mut levels, &morph);
     Ok(BuiltTile {
@@ -609,6 +635,7 @@ pub fn build_tileset(
         .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &h| {
             (lo.min(h), hi.max(h))
         });
+    let step = height_step(grid).map_err(BuildError::Params)?;
     let mut description = [0u8; 128];
     let text = meta.description.as_bytes();
     let mut cut = text.len().min(description.len());
@@ -630,6 +657,7 @@ pub fn build_tileset(
         height_max: hi,
         voids_filled: meta.voids_filled,
         description,
+        height_step: step,
         ..bytemuck::Zeroable::zeroed()
     };
     let mut writer = TileSetWriter::create(out, header)?;
@@ -646,7 +674,8 @@ pub fn build_tileset(
         scope.spawn(move || {
             // A failed send means the writer stopped (an error): stop building too.
             let _ = jobs.par_iter().try_for_each_with(send, |send, &(tx, ty)| {
-                send.send(build_tile(grid, tx, ty, params)).map_err(|_| ())
+                send.send(build_tile(grid, tx, ty, params, step))
+                    .map_err(|_| ())
             });
         });
         for built in receive {

@@ -68,7 +68,9 @@ pub struct FileHeader {
     pub texture_format: u32,
     /// Where the heights came from, UTF-8, zero-padded.
     pub description: [u8; 128],
-    pub reserved: [u32; 7],
+    /// Metres per height code, the same for every tile (see `quantise`).
+    pub height_step: f32,
+    pub reserved: [u32; 6],
     /// crc32 of this header (with this field zero) followed by the directory.
     pub header_crc: u32,
 }
@@ -97,10 +99,13 @@ pub struct TileHeader {
     /// Last local column / row the meshes cover (data extent rounded up to even).
     pub mesh_max_x: u32,
     pub mesh_max_y: u32,
+    /// `height_base * height_step`, the lowest height the tile can hold (for reading only).
     pub height_min: f32,
     pub height_step: f32,
     pub vertex_count: u32,
-    pub reserved: u32,
+    /// The tile's lowest code on the tile set's height lattice: heights decode as
+    /// `(height_base + q) * height_step`.
+    pub height_base: i32,
 }
 
 #[repr(C)]
@@ -359,6 +364,18 @@ impl TileSet {
                 TILE_CELLS + 1
             )));
         }
+        if !(header.height_step.is_finite() && header.height_step > 0.0) {
+            return Err(invalid(format!(
+                "height step {} is not a positive number",
+                header.height_step
+            )));
+        }
+        if !(header.height_step.is_finite() && header.height_step > 0.0) {
+            return Err(invalid(format!(
+                "height step {} is not a positive number",
+                header.height_step
+            )));
+        }
         if header.levels == 0 || header.levels > MAX_LEVELS {
             return Err(invalid(format!(
                 "{} levels (expected 1..={MAX_LEVELS})",
@@ -465,7 +482,7 @@ impl TileSet {
         if crc32fast::hash(blob) != e.crc {
             return Err(invalid("checksum mismatch (corrupted file)".into()));
         }
-        Tile::parse(blob, tx, ty, self.header.levels).map_err(invalid)
+        Tile::parse(blob, tx, ty, self.header.levels, self.header.height_step).map_err(invalid)
     }
 }
 
@@ -570,7 +587,7 @@ fn section<'a, T: Pod>(
 }
 
 impl<'a> Tile<'a> {
-    fn parse(blob: &'a [u8], tx: u32, ty: u32, levels: u32) -> Result<Tile<'a>, String> {
+    fn parse(blob: &'a [u8], tx: u32, ty: u32, levels: u32, step: f32) -> Result<Tile<'a>, String> {
         let header: TileHeader = *section::<TileHeader>(blob, 0, 1, "tile header")?
             .first()
             .ok_or("empty tile")?;
@@ -599,11 +616,11 @@ impl<'a> Tile<'a> {
         {
             return Err(format!("bad data extent {dx}x{dy} / mesh extent {mx}x{my}"));
         }
-        if header.height_step.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
-            || !header.height_min.is_finite()
-            || !header.height_step.is_finite()
-        {
-            return Err("bad height quantisation".into());
+        if header.height_step.to_bits() != step.to_bits() {
+            return Err(format!(
+                "height step {} differs from the tile set's {step}",
+                header.height_step
+            ));
         }
         let entries = section::<LevelEntry>(
             blob,
@@ -667,7 +684,7 @@ impl<'a> Tile<'a> {
 
     pub fn quantiser(&self) -> Quantiser {
         Quantiser {
-            min: self.header.height_min,
+            base: self.header.height_base,
             step: self.header.height_step,
         }
     }

@@ -1,41 +1,64 @@
-//! Height quantisation: 14 bits per vertex, per tile.
+//! Height quantisation: 14 bits per vertex, on one height lattice for the whole tile set.
 //!
-//! A tile's heights are stored as `q` in `0..=16383` with `height = min + q * step`, where
-//! `min` and `step = (max - min) / 16383` come from the tile's own samples, so the rounding
-//! error is at most `step / 2` (0.12 m for a tile spanning 4 km of relief). The mesher measures
-//! every error bound against these quantised heights, never against the exact ones, so the
-//! quantisation counts toward `e_i` and the stored figure is what the GPU will draw.
+//! Every height is stored as `q` in `0..=16383` and decodes as `(base + q) * step`, where
+//! `step` is one number for the whole tile set and `base` an integer per tile (its lowest
+//! height in steps). Because the lattice is shared, a sample on the edge between two tiles
+//! decodes to the *same* f32 in both (the integer `base + q` is the same, and so is the
+//! product): the tiles' duplicated border vertices match bit for bit, which is what crack-free
+//! stitching needs. `step` is the largest height range of any one tile divided by 16382 (one
+//! code of slack for aligning `base`), so rounding moves a height by at most `step / 2` (0.12 m
+//! when the roughest tile spans 4 km). The mesher measures every error bound against these
+//! quantised heights, so quantisation counts toward `e_i` and the stored figure is what the
+//! GPU will draw.
 
 /// Largest quantised height (14 bits).
 pub const HEIGHT_MAX_CODE: u16 = (1 << 14) - 1;
 
+/// The tile set's height lattice step for tiles whose largest height range is `max_range`
+/// metres and whose largest absolute height is `max_abs`. The step stays large enough that
+/// `base + q` is exact in an f32 (below 2^23), so decoding is exact integer arithmetic plus
+/// one rounding.
+pub fn lattice_step(max_range: f32, max_abs: f32) -> f32 {
+    let step = (max_range / f32::from(HEIGHT_MAX_CODE - 1)).max(max_abs / (1 << 23) as f32);
+    if step > 0.0 && step.is_finite() {
+        // The next power of two up keeps base * step exact for any base.
+        2f32.powi(step.log2().ceil() as i32)
+    } else {
+        1.0
+    }
+}
+
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Quantiser {
-    pub min: f32,
+    /// The tile's lowest code on the shared lattice.
+    pub base: i32,
+    /// The tile set's step, metres.
     pub step: f32,
 }
 
 impl Quantiser {
-    /// The quantiser that spans `min..=max` with 14 bits.
-    pub fn spanning(min: f32, max: f32) -> Self {
-        let range = max - min;
-        // A flat tile still needs a positive step so heights decode to `min`.
-        let step = if range > 0.0 {
-            range / f32::from(HEIGHT_MAX_CODE)
-        } else {
-            1.0
-        };
-        Quantiser { min, step }
+    /// The quantiser of a tile whose heights start at `min`, on the lattice of `step`.
+    pub fn for_tile(min: f32, step: f32) -> Self {
+        Quantiser {
+            base: (f64::from(min) / f64::from(step)).floor() as i32,
+            step,
+        }
     }
 
     pub fn quantise(&self, h: f32) -> u16 {
-        let q = ((h - self.min) / self.step).round();
-        q.clamp(0.0, f32::from(HEIGHT_MAX_CODE)) as u16
+        let code = (f64::from(h) / f64::from(self.step)).round() - f64::from(self.base);
+        code.clamp(0.0, f64::from(HEIGHT_MAX_CODE)) as u16
     }
 
-    /// The stored height of code `q`. The renderer's vertex shader computes the same expression.
+    /// The stored height of code `q`. The renderer's vertex shader computes the same
+    /// expression: `float(base + q) * step`.
     pub fn height(&self, q: u16) -> f32 {
-        self.min + f32::from(q) * self.step
+        (self.base + i32::from(q)) as f32 * self.step
+    }
+
+    /// The lowest height the tile can represent.
+    pub fn min(&self) -> f32 {
+        self.height(0)
     }
 }
 
@@ -45,24 +68,42 @@ mod tests {
 
     #[test]
     fn round_trip_error_is_at_most_half_a_step() {
-        let q = Quantiser::spanning(-13.0, 4371.0);
+        let step = lattice_step(4384.0, 4371.0);
+        assert!(
+            step >= 4384.0 / 16382.0 && step < 2.0 * 4384.0 / 16382.0,
+            "{step}"
+        );
+        let q = Quantiser::for_tile(-13.0, step);
         let mut worst = 0.0f32;
         for i in 0..100_000 {
             let h = -13.0 + 4384.0 * (i as f32 / 99_999.0);
-            worst = worst.max((q.height(q.quantise(h)) - h).abs());
+            let code = q.quantise(h);
+            assert!(code < HEIGHT_MAX_CODE || h > 4370.0);
+            worst = worst.max((q.height(code) - h).abs());
         }
-        assert!(
-            worst <= q.step * 0.5 + 1e-3,
-            "worst {worst}, step {}",
-            q.step
-        );
-        assert_eq!(q.quantise(4371.0), HEIGHT_MAX_CODE);
-        assert_eq!(q.quantise(-13.0), 0);
+        assert!(worst <= step * 0.5 + 1e-4, "worst {worst}, step {step}");
     }
 
     #[test]
-    fn flat_tile_decodes_to_its_height() {
-        let q = Quantiser::spanning(12.5, 12.5);
-        assert_eq!(q.height(q.quantise(12.5)), 12.5);
+    fn neighbouring_tiles_decode_shared_heights_identically() {
+        let step = lattice_step(1000.0, 3000.0);
+        let (a, b) = (
+            Quantiser::for_tile(1500.3, step),
+            Quantiser::for_tile(1890.2, step),
+        );
+        for h in [1890.2f32, 2000.0, 2111.11, 2400.5] {
+            assert_eq!(
+                a.height(a.quantise(h)).to_bits(),
+                b.height(b.quantise(h)).to_bits(),
+                "{h}"
+            );
+        }
+    }
+
+    #[test]
+    fn flat_data_decodes_to_its_height() {
+        let step = lattice_step(0.0, 12.5);
+        let q = Quantiser::for_tile(12.5, step);
+        assert!((q.height(q.quantise(12.5)) - 12.5).abs() <= step / 2.0);
     }
 }

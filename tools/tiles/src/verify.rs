@@ -64,12 +64,68 @@ pub fn verify(set: &TileSet, source: Option<&Grid>) -> VerifyReport {
         for tx in 0..h.tiles_x {
             report.tiles += 1;
             match set.tile(tx, ty) {
-                Ok(tile) => check_tile(set, &tile, source, &mut report),
+                Ok(tile) => {
+                    check_tile(set, &tile, source, &mut report);
+                    check_shared_edges(set, &tile, &mut report);
+                }
                 Err(e) => report.problems.push(e.to_string()),
             }
         }
     }
     report
+}
+
+/// A grid point on the edge between two tiles must decode to the same height in both (the
+/// shared height lattice), or stitching could not close the seam exactly.
+fn check_shared_edges(set: &TileSet, tile: &Tile, report: &mut VerifyReport) {
+    let (tx, ty) = (tile.header.tx, tile.header.ty);
+    let side = |t: &Tile, on: &dyn Fn(u32, u32) -> Option<u32>| -> Vec<(u32, u32)> {
+        let mut v: Vec<(u32, u32)> = t
+            .vertices()
+            .iter()
+            .filter_map(|&(x, y, z)| on(x, y).map(|p| (p, z.to_bits())))
+            .collect();
+        v.sort_unstable();
+        v
+    };
+    let neighbours: [(
+        u32,
+        u32,
+        &dyn Fn(u32, u32) -> Option<u32>,
+        &dyn Fn(u32, u32) -> Option<u32>,
+    ); 2] = [
+        (
+            tx + 1,
+            ty,
+            &|x, y| (x == TILE_CELLS).then_some(y),
+            &|x, y| (x == 0).then_some(y),
+        ),
+        (
+            tx,
+            ty + 1,
+            &|x, y| (y == TILE_CELLS).then_some(x),
+            &|x, y| (y == 0).then_some(x),
+        ),
+    ];
+    for (nx, ny, mine, theirs) in neighbours {
+        if nx >= set.header().tiles_x || ny >= set.header().tiles_y {
+            continue;
+        }
+        let Ok(other) = set.tile(nx, ny) else {
+            continue;
+        };
+        let (a, b) = (side(tile, mine), side(&other, theirs));
+        let heights_b: std::collections::HashMap<u32, u32> = b.into_iter().collect();
+        if let Some(&(p, _)) = a
+            .iter()
+            .find(|(p, z)| heights_b.get(p).is_some_and(|zb| zb != z))
+        {
+            report.problems.push(format!(
+                "{}: tiles {tx},{ty} and {nx},{ny} store different heights for their shared point {p} (seam cannot close)",
+                set.path().display()
+            ));
+        }
+    }
 }
 
 fn check_tile(set: &TileSet, tile: &Tile, source: Option<&Grid>, report: &mut VerifyReport) {
