@@ -1,1 +1,20 @@
-//! The `vkterrain` renderer: Vulkan context, frame loop, culling, LOD, stitching and the frame-timing log. Filled by the renderer issue.
+//! The `vkterrain` renderer: a Vulkan (ash) frame loop over a `.vkt` tile set, with frustum
+//! culling, screen-space-error LOD from the projection's Jacobian, crack-free stitching
+//! between tiles, whole-tile residency within a GPU budget, and a frame-timing log.
+//!
+//! Terrain logic ([`cull`], [`lod`], [`stitch`], [`residency`], [`path`]) is plain Rust that
+//! tests drive without a GPU; [`vulkan`] is the thin layer that owns every Vulkan object, and
+//! [`frame`] turns one frame's decisions into commands.
+
+pub mod camera;
+pub mod cull;
+pub mod frame;
+pub mod headless;
+pub mod log;
+pub mod lod;
+pub mod path;
+pub mod residency;
+pub mod stitch;
+pub mod target;
+pub mod terrain;
+pub mod vulkan;

@@ -1,0 +1,78 @@
+//! Headless flights: render a path offscreen, frame `k` at path time `k * duration / N`
+//! however long frames take (so two runs see the same views), write screenshots and the log.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use crate::frame::{Renderer, Settings};
+use crate::log::FrameRecord;
+use crate::path::CameraPath;
+use crate::target::Target;
+use crate::terrain::Terrain;
+use crate::vulkan::{Gpu, VkError};
+
+pub struct Flight<'a> {
+    pub terrain: &'a Terrain,
+    pub path: &'a CameraPath,
+    pub frames: u64,
+    pub size: (u32, u32),
+    pub settings: Settings,
+    pub gpu_budget_bytes: u64,
+    /// Folder for screenshots, and how often (every k-th frame; 0 = never).
+    pub out: Option<PathBuf>,
+    pub screenshot_every: u64,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum FlightError {
+    #[error(transparent)]
+    Gpu(#[from] VkError),
+    #[error("{}: {error}", path.display())]
+    Write { path: PathBuf, error: String },
+}
+
+/// Writes an RGBA8 image as PNG through a temporary file.
+pub fn write_png(path: &Path, width: u32, height: u32, rgba: Vec<u8>) -> Result<(), FlightError> {
+    let err = |e: String| FlightError::Write { path: path.to_path_buf(), error: e };
+    let image = image::RgbaImage::from_raw(width, height, rgba).ok_or_else(|| err("pixel buffer has the wrong size".into()))?;
+    let tmp = path.with_extension("png.tmp");
+    image.save_with_format(&tmp, image::ImageFormat::Png).map_err(|e| err(e.to_string()))?;
+    std::fs::rename(&tmp, path).map_err(|e| err(e.to_string()))
+}
+
+/// Flies the path and returns one record per frame.
+pub fn fly(gpu: &Gpu, flight: &Flight) -> Result<Vec<FrameRecord>, FlightError> {
+    let mut renderer = Renderer::new(gpu, flight.gpu_budget_bytes)?;
+    let mut target = match Target::new(gpu, flight.size.0, flight.size.1) {
+        Ok(t) => t,
+        Err(e) => {
+            renderer.destroy(gpu);
+            return Err(e.into());
+        }
+    };
+    let result = run(gpu, flight, &mut renderer, &mut target);
+    target.destroy(gpu);
+    renderer.destroy(gpu);
+    result
+}
+
+fn run(gpu: &Gpu, flight: &Flight, renderer: &mut Renderer, target: &mut Target) -> Result<Vec<FrameRecord>, FlightError> {
+    let start = flight.path.keys[0].time;
+    let duration = flight.path.duration();
+    let mut records = Vec::with_capacity(flight.frames as usize);
+    for k in 0..flight.frames {
+        let t = k as f64 * duration / flight.frames as f64;
+        let camera = flight.path.at(start + t);
+        let shot = flight.out.is_some() && flight.screenshot_every > 0 && k % flight.screenshot_every == 0;
+        let begun = Instant::now();
+        let (mut record, pixels) = renderer.render(gpu, flight.terrain, &camera, &flight.settings, target, shot)?;
+        record.frame = k;
+        record.time_s = t;
+        record.frame_ms = begun.elapsed().as_secs_f64() * 1000.0;
+        if let (Some(dir), Some(pixels)) = (&flight.out, pixels) {
+            write_png(&dir.join(format!("frame_{k:06}.png")), flight.size.0, flight.size.1, pixels)?;
+        }
+        records.push(record);
+    }
+    Ok(records)
+}

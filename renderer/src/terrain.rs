@@ -1,0 +1,126 @@
+//! A mapped tile set as the renderer sees it: every tile validated once at open, its world
+//! bounding box, measured errors and border vertices kept in memory for culling, LOD and
+//! stitching; the vertex and index data stay in the mapped file until uploaded.
+
+use std::path::Path;
+
+use glam::DVec3;
+use tiles::format::{LevelEntry, TileHeader, TileSet};
+use tiles::mesh::TILE_CELLS;
+
+/// Cells per side of each tile's coarse height map (for ground-following paths).
+const HEIGHT_CELLS: usize = 8;
+
+pub struct TileInfo {
+    pub tx: u32,
+    pub ty: u32,
+    pub header: TileHeader,
+    pub levels: Vec<LevelEntry>,
+    /// World box over all levels: x east, y north, z up (metres).
+    pub min: DVec3,
+    pub max: DVec3,
+    /// Per level, per side (N, E, S, W): the packed border vertices in order along the side.
+    pub borders: Vec<[Vec<u32>; 4]>,
+    /// Bytes of all blocks and index arrays: what a whole-tile upload moves.
+    pub bytes: u64,
+    heights: [f32; HEIGHT_CELLS * HEIGHT_CELLS],
+}
+
+pub struct Terrain {
+    pub set: TileSet,
+    pub tiles: Vec<TileInfo>,
+    pub tiles_x: u32,
+    pub tiles_y: u32,
+    pub levels: u32,
+    pub spacing: (f64, f64),
+    pub height_step: f32,
+}
+
+impl Terrain {
+    /// Opens and validates every tile (checksums, offsets, indices), so a corrupted file is
+    /// refused before any GPU work.
+    pub fn open(path: &Path) -> Result<Terrain, tiles::FormatError> {
+        let set = TileSet::open(path)?;
+        let h = *set.header();
+        let (sx, sy) = (h.spacing_x, h.spacing_y);
+        let mut tiles = Vec::with_capacity((h.tiles_x * h.tiles_y) as usize);
+        for ty in 0..h.tiles_y {
+            for tx in 0..h.tiles_x {
+                let tile = set.tile(tx, ty)?;
+                let th = tile.header;
+                let levels: Vec<LevelEntry> = tile.levels().to_vec();
+                let z_min = levels.iter().map(|l| l.z_min).fold(f32::INFINITY, f32::min);
+                let z_max = levels.iter().map(|l| l.z_max).fold(f32::NEG_INFINITY, f32::max);
+                let (c0, r0) = (f64::from(tx * TILE_CELLS), f64::from(ty * TILE_CELLS));
+                let min = DVec3::new(c0 * sx, -(r0 + f64::from(th.mesh_max_y)) * sy, f64::from(z_min));
+                let max = DVec3::new((c0 + f64::from(th.mesh_max_x)) * sx, -r0 * sy, f64::from(z_max));
+                let mut packed: Vec<u32> = Vec::with_capacity(th.vertex_count as usize);
+                let mut bytes = 0u64;
+                for i in 0..h.levels {
+                    if let Some(l) = tile.level(i) {
+                        packed.extend_from_slice(l.positions);
+                        bytes += (l.positions.len() * 4 + l.indices.bytes().len()) as u64;
+                    }
+                }
+                let borders = (0..h.levels)
+                    .filter_map(|i| tile.level(i))
+                    .map(|l| l.border.map(|side| side.iter().map(|&v| packed[v as usize]).collect()))
+                    .collect();
+                let q = tile.quantiser();
+                let mut heights = [f32::NEG_INFINITY; HEIGHT_CELLS * HEIGHT_CELLS];
+                for &p in &packed {
+                    let (x, y, code) = tiles::pack::unpack(p);
+                    let cell = (y as usize * HEIGHT_CELLS / 257) * HEIGHT_CELLS + x as usize * HEIGHT_CELLS / 257;
+                    heights[cell] = heights[cell].max(q.height(code));
+                }
+                tiles.push(TileInfo { tx, ty, header: th, levels, min, max, borders, bytes, heights });
+            }
+        }
+        Ok(Terrain {
+            set,
+            tiles,
+            tiles_x: h.tiles_x,
+            tiles_y: h.tiles_y,
+            levels: h.levels,
+            spacing: (sx, sy),
+            height_step: h.height_step,
+        })
+    }
+
+    pub fn tile_index(&self, tx: u32, ty: u32) -> Option<usize> {
+        (tx < self.tiles_x && ty < self.tiles_y).then(|| (ty * self.tiles_x + tx) as usize)
+    }
+
+    /// World bounds of the whole dataset.
+    pub fn bounds(&self) -> (DVec3, DVec3) {
+        self.tiles.iter().fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), t| (lo.min(t.min), hi.max(t.max)))
+    }
+
+    /// The highest ground within `radius` metres of (x, y), from each tile's coarse height map.
+    pub fn max_height_near(&self, x: f64, y: f64, radius: f64) -> f64 {
+        let mut best = f64::NEG_INFINITY;
+        let (sx, sy) = self.spacing;
+        for t in &self.tiles {
+            for cy in 0..HEIGHT_CELLS {
+                for cx in 0..HEIGHT_CELLS {
+                    let h = t.heights[cy * HEIGHT_CELLS + cx];
+                    if h == f32::NEG_INFINITY {
+                        continue;
+                    }
+                    let cell = 257.0 / HEIGHT_CELLS as f64;
+                    let x0 = t.min.x + cx as f64 * cell * sx;
+                    let y1 = t.max.y - cy as f64 * cell * sy;
+                    let (x1, y0) = (x0 + cell * sx, y1 - cell * sy);
+                    if x1 >= x - radius && x0 <= x + radius && y1 >= y - radius && y0 <= y + radius {
+                        best = best.max(f64::from(h));
+                    }
+                }
+            }
+        }
+        if best.is_finite() {
+            best
+        } else {
+            self.bounds().1.z
+        }
+    }
+}

@@ -1,0 +1,270 @@
+//! Instance, validation, device choice, the device and its queue, and the memory allocator.
+
+use std::ffi::{c_void, CStr, CString};
+use std::mem::ManuallyDrop;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+
+use ash::vk;
+use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
+
+use super::{VkError, VkResult};
+
+const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
+
+#[derive(Clone, Debug, Default)]
+pub struct GpuOptions {
+    /// Enable the Khronos validation layer and count its messages (an error if it is missing).
+    pub validation: bool,
+    /// Pick the device whose name contains this (case-insensitive).
+    pub device: Option<String>,
+}
+
+/// The Vulkan device and everything that lives as long as it.
+pub struct Gpu {
+    _entry: ash::Entry,
+    pub instance: ash::Instance,
+    messenger: Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>,
+    debug_device: Option<ash::ext::debug_utils::Device>,
+    pub physical: vk::PhysicalDevice,
+    pub properties: vk::PhysicalDeviceProperties,
+    pub device_name: String,
+    pub device: ash::Device,
+    pub queue: vk::Queue,
+    pub queue_family: u32,
+    allocator: ManuallyDrop<Mutex<Allocator>>,
+    /// Validation warnings and errors seen so far.
+    validation_messages: Arc<AtomicU64>,
+    /// Raw pointer handed to the debug callback; reclaimed on drop.
+    callback_counter: *const AtomicU64,
+    pub wireframe_supported: bool,
+}
+
+unsafe extern "system" fn debug_callback(
+    severity: vk::DebugUtilsMessageSeverityFlagsEXT,
+    _types: vk::DebugUtilsMessageTypeFlagsEXT,
+    data: *const vk::DebugUtilsMessengerCallbackDataEXT<'_>,
+    user: *mut c_void,
+) -> vk::Bool32 {
+    if severity.intersects(vk::DebugUtilsMessageSeverityFlagsEXT::WARNING | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR) {
+        // SAFETY: `user` is the counter the Gpu keeps alive until the messenger is destroyed.
+        if let Some(counter) = unsafe { (user as *const AtomicU64).as_ref() } {
+            counter.fetch_add(1, Ordering::Relaxed);
+        }
+        // SAFETY: the layer passes a valid callback-data struct for the call's duration.
+        let message = unsafe { data.as_ref() }
+            .and_then(|d| (!d.p_message.is_null()).then(|| unsafe { CStr::from_ptr(d.p_message) }))
+            .map(|m| m.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        eprintln!("validation: {message}");
+    }
+    vk::FALSE
+}
+
+impl Gpu {
+    pub fn new(options: &GpuOptions) -> VkResult<Gpu> {
+        // SAFETY: loading the system Vulkan loader; failure is reported, not assumed.
+        let entry = unsafe { ash::Entry::load() }
+            .map_err(|e| VkError::Unsupported(format!("cannot load the Vulkan loader (install libvulkan1): {e}")))?;
+        // SAFETY: plain enumeration calls on a loaded entry.
+        let layers = unsafe { entry.enumerate_instance_layer_properties() }?;
+        let has_layer = layers.iter().any(|l| l.layer_name_as_c_str().is_ok_and(|n| n == VALIDATION_LAYER));
+        if options.validation && !has_layer {
+            return Err(VkError::Unsupported(
+                "--validation: the Khronos validation layer is not installed (Debian: vulkan-validationlayers)".into(),
+            ));
+        }
+        // SAFETY: as above.
+        let extensions = unsafe { entry.enumerate_instance_extension_properties(None) }?;
+        let has_debug_utils =
+            extensions.iter().any(|e| e.extension_name_as_c_str().is_ok_and(|n| n == ash::ext::debug_utils::NAME));
+
+        let app_name = c"vkterrain";
+        let app = vk::ApplicationInfo::default()
+            .application_name(app_name)
+            .engine_name(app_name)
+            .api_version(vk::API_VERSION_1_3);
+        let layer_names: Vec<*const i8> = if options.validation { vec![VALIDATION_LAYER.as_ptr()] } else { vec![] };
+        let ext_names: Vec<*const i8> = if has_debug_utils { vec![ash::ext::debug_utils::NAME.as_ptr()] } else { vec![] };
+        let create = vk::InstanceCreateInfo::default()
+            .application_info(&app)
+            .enabled_layer_names(&layer_names)
+            .enabled_extension_names(&ext_names);
+        // SAFETY: every pointer in `create` outlives the call.
+        let instance = unsafe { entry.create_instance(&create, None) }?;
+
+        let validation_messages = Arc::new(AtomicU64::new(0));
+        let callback_counter = Arc::into_raw(validation_messages.clone());
+        let messenger = if has_debug_utils && options.validation {
+            let loader = ash::ext::debug_utils::Instance::new(&entry, &instance);
+            let info = vk::DebugUtilsMessengerCreateInfoEXT::default()
+                .message_severity(
+                    vk::DebugUtilsMessageSeverityFlagsEXT::WARNING | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
+                )
+                .message_type(
+                    vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
+                        | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
+                        | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
+                )
+                .pfn_user_callback(Some(debug_callback))
+                .user_data(callback_counter as *mut c_void);
+            // SAFETY: the callback's user data lives until drop, after the messenger is destroyed.
+            let m = unsafe { loader.create_debug_utils_messenger(&info, None) }?;
+            Some((loader, m))
+        } else {
+            None
+        };
+
+        let result = Self::open_device(&instance, options);
+        let (physical, queue_family, wireframe_supported) = match result {
+            Ok(v) => v,
+            Err(e) => {
+                // SAFETY: nothing else was created from the instance yet.
+                unsafe {
+                    if let Some((loader, m)) = &messenger {
+                        loader.destroy_debug_utils_messenger(*m, None);
+                    }
+                    instance.destroy_instance(None);
+                    drop(Arc::from_raw(callback_counter));
+                }
+                return Err(e);
+            }
+        };
+        // SAFETY: physical comes from this instance.
+        let properties = unsafe { instance.get_physical_device_properties(physical) };
+        let device_name = properties.device_name_as_c_str().map(|c| c.to_string_lossy().into_owned()).unwrap_or_default();
+
+        let priorities = [1.0f32];
+        let queues = [vk::DeviceQueueCreateInfo::default().queue_family_index(queue_family).queue_priorities(&priorities)];
+        let mut v13 = vk::PhysicalDeviceVulkan13Features::default().dynamic_rendering(true);
+        let features = vk::PhysicalDeviceFeatures::default().fill_mode_non_solid(wireframe_supported);
+        let device_info = vk::DeviceCreateInfo::default()
+            .queue_create_infos(&queues)
+            .enabled_features(&features)
+            .push_next(&mut v13);
+        // SAFETY: the features were checked in open_device; pointers outlive the call.
+        let device = unsafe { instance.create_device(physical, &device_info, None) }?;
+        // SAFETY: family and index exist (one queue requested).
+        let queue = unsafe { device.get_device_queue(queue_family, 0) };
+        let debug_device = has_debug_utils.then(|| ash::ext::debug_utils::Device::new(&instance, &device));
+        let allocator = Allocator::new(&AllocatorCreateDesc {
+            instance: instance.clone(),
+            device: device.clone(),
+            physical_device: physical,
+            debug_settings: Default::default(),
+            buffer_device_address: false,
+            allocation_sizes: Default::default(),
+        })?;
+        let gpu = Gpu {
+            _entry: entry,
+            instance,
+            messenger,
+            debug_device,
+            physical,
+            properties,
+            device_name,
+            device,
+            queue,
+            queue_family,
+            allocator: ManuallyDrop::new(Mutex::new(allocator)),
+            validation_messages,
+            callback_counter,
+            wireframe_supported,
+        };
+        gpu.name(gpu.queue, "graphics queue");
+        Ok(gpu)
+    }
+
+    /// Chooses the device: `--device` by name, else discrete, integrated, virtual, then CPU
+    /// (lavapipe). Requires Vulkan 1.3 dynamic rendering and a graphics queue.
+    fn open_device(instance: &ash::Instance, options: &GpuOptions) -> VkResult<(vk::PhysicalDevice, u32, bool)> {
+        // SAFETY: enumeration on a valid instance.
+        let devices = unsafe { instance.enumerate_physical_devices() }?;
+        let mut candidates = Vec::new();
+        let mut rejected = Vec::new();
+        for pd in devices {
+            // SAFETY: pd comes from this instance.
+            let props = unsafe { instance.get_physical_device_properties(pd) };
+            let name = props.device_name_as_c_str().map(|c| c.to_string_lossy().into_owned()).unwrap_or_default();
+            if let Some(want) = &options.device {
+                if !name.to_lowercase().contains(&want.to_lowercase()) {
+                    rejected.push(format!("{name} (not named {want:?})"));
+                    continue;
+                }
+            }
+            let mut v13 = vk::PhysicalDeviceVulkan13Features::default();
+            let mut features = vk::PhysicalDeviceFeatures2::default().push_next(&mut v13);
+            // SAFETY: as above; the chain outlives the call.
+            unsafe { instance.get_physical_device_features2(pd, &mut features) };
+            let wireframe = features.features.fill_mode_non_solid == vk::TRUE;
+            if props.api_version < vk::API_VERSION_1_3 || v13.dynamic_rendering != vk::TRUE {
+                rejected.push(format!("{name} (lacks Vulkan 1.3 dynamic rendering)"));
+                continue;
+            }
+            // SAFETY: as above.
+            let families = unsafe { instance.get_physical_device_queue_family_properties(pd) };
+            let Some(family) = families.iter().position(|f| f.queue_flags.contains(vk::QueueFlags::GRAPHICS)) else {
+                rejected.push(format!("{name} (no graphics queue)"));
+                continue;
+            };
+            let rank = match props.device_type {
+                vk::PhysicalDeviceType::DISCRETE_GPU => 0,
+                vk::PhysicalDeviceType::INTEGRATED_GPU => 1,
+                vk::PhysicalDeviceType::VIRTUAL_GPU => 2,
+                vk::PhysicalDeviceType::CPU => 3,
+                _ => 4,
+            };
+            candidates.push((rank, pd, family as u32, wireframe));
+        }
+        candidates.sort_by_key(|c| c.0);
+        candidates.first().map(|&(_, pd, family, wireframe)| (pd, family, wireframe)).ok_or_else(|| {
+            VkError::Unsupported(if rejected.is_empty() {
+                "no Vulkan device found (on a machine without a GPU install mesa-vulkan-drivers for lavapipe)".into()
+            } else {
+                format!("no usable Vulkan device: {}", rejected.join("; "))
+            })
+        })
+    }
+
+    /// Validation warnings and errors so far (0 without `--validation`).
+    pub fn validation_messages(&self) -> u64 {
+        self.validation_messages.load(Ordering::Relaxed)
+    }
+
+    pub fn allocator(&self) -> MutexGuard<'_, Allocator> {
+        // A poisoned allocator means a panic elsewhere already; keep going with its state.
+        self.allocator.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Names a Vulkan object for validation messages and debuggers.
+    pub fn name<H: vk::Handle>(&self, handle: H, name: &str) {
+        if let (Some(d), Ok(name)) = (&self.debug_device, CString::new(name)) {
+            let info = vk::DebugUtilsObjectNameInfoEXT::default().object_handle(handle).object_name(&name);
+            // SAFETY: the handle belongs to this device; a failed name is harmless.
+            let _ = unsafe { d.set_debug_utils_object_name(&info) };
+        }
+    }
+
+    pub fn wait_idle(&self) {
+        // SAFETY: the device is valid; errors here mean loss, reported by the next submit.
+        let _ = unsafe { self.device.device_wait_idle() };
+    }
+}
+
+impl Drop for Gpu {
+    fn drop(&mut self) {
+        self.wait_idle();
+        // SAFETY: owners of buffers, images and pipelines destroyed theirs before the Gpu
+        // (they borrow it); the allocator goes before the device, the device before the
+        // instance, the messenger before its user data.
+        unsafe {
+            ManuallyDrop::drop(&mut self.allocator);
+            self.device.destroy_device(None);
+            if let Some((loader, m)) = &self.messenger {
+                loader.destroy_debug_utils_messenger(*m, None);
+            }
+            self.instance.destroy_instance(None);
+            drop(Arc::from_raw(self.callback_counter));
+        }
+    }
+}
