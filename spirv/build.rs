@@ -6,26 +6,38 @@ use std::path::PathBuf;
 
 const SHADERS: [(&str, &str, shaderc::ShaderKind); 2] = [
     ("TERRAIN_VERT", "terrain.vert", shaderc::ShaderKind::Vertex),
-    ("TERRAIN_FRAG", "terrain.frag", shaderc::ShaderKind::Fragment),
+    (
+        "TERRAIN_FRAG",
+        "terrain.frag",
+        shaderc::ShaderKind::Fragment,
+    ),
 ];
 
 fn main() {
-    let dir = PathBuf::from(std::env::var("CARGO_MANIFEST_DIR").expect("cargo sets it")).join("shaders");
+    let dir =
+        PathBuf::from(std::env::var("CARGO_MANIFEST_DIR").expect("cargo sets it")).join("shaders");
     let compiler = shaderc::Compiler::new().expect("shaderc initialises");
     let mut options = shaderc::CompileOptions::new().expect("shaderc options");
-    options.set_target_env(shaderc::TargetEnv::Vulkan, shaderc::EnvVersion::Vulkan1_2 as u32);
+    options.set_target_env(
+        shaderc::TargetEnv::Vulkan,
+        shaderc::EnvVersion::Vulkan1_2 as u32,
+    );
     options.set_optimization_level(shaderc::OptimizationLevel::Performance);
     options.set_warnings_as_errors();
     let mut out = String::new();
     for (name, file, kind) in SHADERS {
         let path = dir.join(file);
         println!("cargo:rerun-if-changed={}", path.display());
-        let source = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let source =
+            std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
         let binary = compiler
             .compile_into_spirv(&source, kind, file, "main", Some(&options))
             .unwrap_or_else(|e| panic!("{file}: {e}"));
         let words = binary.as_binary();
-        let _ = writeln!(out, "/// SPIR-V of `shaders/{file}`.\npub const {name}: &[u32] = &{words:?};");
+        let _ = writeln!(
+            out,
+            "/// SPIR-V of `shaders/{file}`.\npub const {name}: &[u32] = &{words:?};"
+        );
     }
     let dest = PathBuf::from(std::env::var("OUT_DIR").expect("cargo sets it")).join("shaders.rs");
     std::fs::write(&dest, out).unwrap_or_else(|e| panic!("{}: {e}", dest.display()));

@@ -35,12 +35,20 @@ pub struct View {
 
 impl Camera {
     pub fn forward(&self) -> DVec3 {
-        DVec3::new(self.pitch.cos() * self.yaw.cos(), self.pitch.cos() * self.yaw.sin(), self.pitch.sin())
+        DVec3::new(
+            self.pitch.cos() * self.yaw.cos(),
+            self.pitch.cos() * self.yaw.sin(),
+            self.pitch.sin(),
+        )
     }
 
     pub fn view(&self, width: u32, height: u32) -> View {
         let forward = self.forward().normalize();
-        let world_up = if forward.z.abs() > 0.999 { DVec3::Y } else { DVec3::Z };
+        let world_up = if forward.z.abs() > 0.999 {
+            DVec3::Y
+        } else {
+            DVec3::Z
+        };
         let right = forward.cross(world_up).normalize();
         let up = right.cross(forward);
         let back = -forward;
@@ -48,17 +56,26 @@ impl Camera {
         let f = 1.0 / (self.fov_y * 0.5).tan();
         // Vulkan clip space, reversed Z with an infinite far plane: depth = near / distance.
         let proj = Mat4::from_cols_array(&[
-            (f / aspect) as f32, 0.0, 0.0, 0.0,
-            0.0, -f as f32, 0.0, 0.0,
-            0.0, 0.0, 0.0, -1.0,
-            0.0, 0.0, NEAR as f32, 0.0,
+            (f / aspect) as f32,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            -f as f32,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            -1.0,
+            0.0,
+            0.0,
+            NEAR as f32,
+            0.0,
         ]);
         let (r, u, b) = (right.as_vec3(), up.as_vec3(), back.as_vec3());
         let view = Mat4::from_cols_array(&[
-            r.x, u.x, b.x, 0.0,
-            r.y, u.y, b.y, 0.0,
-            r.z, u.z, b.z, 0.0,
-            0.0, 0.0, 0.0, 1.0,
+            r.x, u.x, b.x, 0.0, r.y, u.y, b.y, 0.0, r.z, u.z, b.z, 0.0, 0.0, 0.0, 0.0, 1.0,
         ]);
         View {
             view_proj: proj * view,
@@ -67,7 +84,10 @@ impl Camera {
             right,
             up,
             back,
-            focal: (f / aspect * f64::from(width) * 0.5, f * f64::from(height) * 0.5),
+            focal: (
+                f / aspect * f64::from(width) * 0.5,
+                f * f64::from(height) * 0.5,
+            ),
         }
     }
 }
@@ -124,7 +144,12 @@ mod tests {
     use super::*;
 
     fn cam() -> Camera {
-        Camera { position: DVec3::new(0.0, 0.0, 100.0), yaw: 0.3, pitch: -0.2, fov_y: 60f64.to_radians() }
+        Camera {
+            position: DVec3::new(0.0, 0.0, 100.0),
+            yaw: 0.3,
+            pitch: -0.2,
+            fov_y: 60f64.to_radians(),
+        }
     }
 
     #[test]
@@ -145,8 +170,14 @@ mod tests {
     fn vertical_jacobian_matches_a_finite_difference() {
         let c = cam();
         let v = c.view(1024, 768);
-        for p in [DVec3::new(800.0, -50.0, -120.0), DVec3::new(200.0, 300.0, 40.0)] {
-            let (a, b) = (v.project(p).expect("front"), v.project(p + DVec3::Z * 1e-3).expect("front"));
+        for p in [
+            DVec3::new(800.0, -50.0, -120.0),
+            DVec3::new(200.0, 300.0, 40.0),
+        ] {
+            let (a, b) = (
+                v.project(p).expect("front"),
+                v.project(p + DVec3::Z * 1e-3).expect("front"),
+            );
             let fd = ((b.0 - a.0).powi(2) + (b.1 - a.1).powi(2)).sqrt() / 1e-3;
             let j = v.pixels_per_vertical_metre(p);
             assert!((fd - j).abs() / j < 1e-3, "fd {fd} jacobian {j}");
@@ -158,7 +189,11 @@ mod tests {
         let c = cam();
         let v = c.view(640, 480);
         let planes = v.frustum();
-        let inside = |p: DVec3| planes.iter().all(|pl| pl.truncate().dot(p.as_vec3()) + pl.w >= -1e-3);
+        let inside = |p: DVec3| {
+            planes
+                .iter()
+                .all(|pl| pl.truncate().dot(p.as_vec3()) + pl.w >= -1e-3)
+        };
         let ahead = c.forward() * 1000.0;
         assert!(inside(ahead));
         assert!(!inside(-ahead));

@@ -32,6 +32,8 @@ pub struct Settings {
     pub level_colours: bool,
     pub wireframe: bool,
     pub sky: [f32; 3],
+    /// Diagnostic: leave the seams open, to see (and test) what stitching closes.
+    pub no_stitch: bool,
 }
 
 /// Per-draw constants, laid out as the vertex shader's push-constant block.
@@ -49,7 +51,9 @@ struct DrawConstants {
     tint: [f32; 4],
 }
 
-const _: () = assert!(std::mem::size_of::<DrawConstants>() == crate::vulkan::pipeline::PUSH_CONSTANT_BYTES as usize);
+const _: () = assert!(
+    std::mem::size_of::<DrawConstants>() == crate::vulkan::pipeline::PUSH_CONSTANT_BYTES as usize
+);
 
 /// Debug colours of levels 0.. (coarse blue to fine red).
 const LEVEL_COLOURS: [[f32; 3]; 10] = [
@@ -100,9 +104,14 @@ impl Renderer {
         // SAFETY: valid create infos on a live device; each object is destroyed in `destroy`.
         let (pool, cmd, fence) = unsafe {
             let pool = gpu.device.create_command_pool(&pool_info, None)?;
-            let alloc = vk::CommandBufferAllocateInfo::default().command_pool(pool).level(vk::CommandBufferLevel::PRIMARY).command_buffer_count(1);
+            let alloc = vk::CommandBufferAllocateInfo::default()
+                .command_pool(pool)
+                .level(vk::CommandBufferLevel::PRIMARY)
+                .command_buffer_count(1);
             let cmd = gpu.device.allocate_command_buffers(&alloc)?[0];
-            let fence = gpu.device.create_fence(&vk::FenceCreateInfo::default(), None)?;
+            let fence = gpu
+                .device
+                .create_fence(&vk::FenceCreateInfo::default(), None)?;
             (pool, cmd, fence)
         };
         gpu.name(pool, "frame command pool");
@@ -134,7 +143,11 @@ impl Renderer {
     ) -> VkResult<(FrameRecord, Option<Vec<u8>>)> {
         let extent = target.extent();
         let view = camera.view(extent.width, extent.height);
-        let mut record = FrameRecord { frame: self.frame, tiles_per_level: vec![0; terrain.levels as usize], ..Default::default() };
+        let mut record = FrameRecord {
+            frame: self.frame,
+            tiles_per_level: vec![0; terrain.levels as usize],
+            ..Default::default()
+        };
 
         // 2. Cull, front to back.
         let t = Instant::now();
@@ -144,7 +157,15 @@ impl Renderer {
             .iter()
             .enumerate()
             .filter(|(_, tile)| cull::visible(&planes, camera.position, tile))
-            .map(|(i, tile)| (camera.position.clamp(tile.min, tile.max).distance_squared(camera.position), i))
+            .map(|(i, tile)| {
+                (
+                    camera
+                        .position
+                        .clamp(tile.min, tile.max)
+                        .distance_squared(camera.position),
+                    i,
+                )
+            })
             .collect();
         visible.sort_by(|a, b| a.0.total_cmp(&b.0));
         record.cpu_cull_ms = ms(t);
@@ -162,7 +183,10 @@ impl Renderer {
                 } else if let Some(l) = settings.forced_level {
                     l.min(finest)
                 } else {
-                    lod::level_for(tile, lod::tolerable_error(&view, camera.position, tile, settings.tau))
+                    lod::level_for(
+                        tile,
+                        lod::tolerable_error(&view, camera.position, tile, settings.tau),
+                    )
                 };
                 Draw { tile: i, level }
             })
@@ -178,7 +202,11 @@ impl Renderer {
             let mut s = Stitch::default();
             for (k, (dx, dy)) in [(1usize, (1i64, 0i64)), (2, (0, 1))] {
                 let (nx, ny) = (i64::from(a.tx) + dx, i64::from(a.ty) + dy);
-                let Some(j) = u32::try_from(nx).ok().zip(u32::try_from(ny).ok()).and_then(|(x, y)| terrain.tile_index(x, y)) else {
+                let Some(j) = u32::try_from(nx)
+                    .ok()
+                    .zip(u32::try_from(ny).ok())
+                    .and_then(|(x, y)| terrain.tile_index(x, y))
+                else {
                     continue;
                 };
                 if let Some(&lb) = level_of.get(&j) {
@@ -201,15 +229,22 @@ impl Renderer {
         let t = Instant::now();
         // SAFETY: the previous frame's fence was waited on, so the buffer is idle.
         unsafe {
-            gpu.device.reset_command_buffer(self.cmd, vk::CommandBufferResetFlags::empty())?;
-            gpu.device.begin_command_buffer(self.cmd, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT))?;
+            gpu.device
+                .reset_command_buffer(self.cmd, vk::CommandBufferResetFlags::empty())?;
+            gpu.device.begin_command_buffer(
+                self.cmd,
+                &vk::CommandBufferBeginInfo::default()
+                    .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
+            )?;
         }
         self.timestamps.begin(gpu, self.cmd);
         let in_use: std::collections::HashSet<usize> = draws.iter().map(|d| d.tile).collect();
         let mut staging: Vec<Buffer> = Vec::new();
         for d in &draws {
             let info = &terrain.tiles[d.tile];
-            let evicted = self.residency.admit(d.tile, info.bytes, self.frame, &|t| in_use.contains(&t));
+            let evicted = self
+                .residency
+                .admit(d.tile, info.bytes, self.frame, &|t| in_use.contains(&t));
             for e in evicted {
                 if let Some(old) = self.tiles.remove(&e) {
                     old.vertices.destroy(gpu);
@@ -227,7 +262,9 @@ impl Renderer {
         if !staging.is_empty() {
             let barrier = vk::MemoryBarrier::default()
                 .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                .dst_access_mask(vk::AccessFlags::VERTEX_ATTRIBUTE_READ | vk::AccessFlags::INDEX_READ);
+                .dst_access_mask(
+                    vk::AccessFlags::VERTEX_ATTRIBUTE_READ | vk::AccessFlags::INDEX_READ,
+                );
             // SAFETY: recording; the copies above write the buffers the draws below read.
             unsafe {
                 gpu.device.cmd_pipeline_barrier(
@@ -248,10 +285,17 @@ impl Renderer {
         // 6. Record the draws.
         let t = Instant::now();
         self.begin_rendering(gpu, target, settings.sky);
-        let pipeline = if settings.wireframe { self.pipeline.wireframe.unwrap_or(self.pipeline.fill) } else { self.pipeline.fill };
+        let pipeline = if settings.wireframe {
+            self.pipeline.wireframe.unwrap_or(self.pipeline.fill)
+        } else {
+            self.pipeline.fill
+        };
         let (sx, sy) = terrain.spacing;
         let cells = f64::from(tiles::mesh::TILE_CELLS);
-        let cam_tile = ((camera.position.x / (cells * sx)).floor(), (-camera.position.y / (cells * sy)).floor());
+        let cam_tile = (
+            (camera.position.x / (cells * sx)).floor(),
+            (-camera.position.y / (cells * sy)).floor(),
+        );
         let cam_rel = DVec3::new(
             camera.position.x - cam_tile.0 * cells * sx,
             camera.position.y + cam_tile.1 * cells * sy,
@@ -262,7 +306,12 @@ impl Renderer {
             let colour = LEVEL_COLOURS[(level as usize).min(LEVEL_COLOURS.len() - 1)];
             DrawConstants {
                 view_proj: view.view_proj.to_cols_array(),
-                camera: [cam_rel.x as f32, cam_rel.y as f32, cam_rel.z as f32, sx as f32],
+                camera: [
+                    cam_rel.x as f32,
+                    cam_rel.y as f32,
+                    cam_rel.z as f32,
+                    sx as f32,
+                ],
                 tile_offset: [
                     ((f64::from(info.tx) - cam_tile.0) * cells) as i32,
                     ((f64::from(info.ty) - cam_tile.1) * cells) as i32,
@@ -272,20 +321,36 @@ impl Renderer {
                 height_base: info.header.height_base,
                 level,
                 pad: [0; 2],
-                tint: [colour[0], colour[1], colour[2], if settings.level_colours { 0.65 } else { 0.0 }],
+                tint: [
+                    colour[0],
+                    colour[1],
+                    colour[2],
+                    if settings.level_colours { 0.65 } else { 0.0 },
+                ],
             }
         };
         // SAFETY: recording inside dynamic rendering; every bound buffer lives until the fence.
         unsafe {
-            gpu.device.cmd_bind_pipeline(self.cmd, vk::PipelineBindPoint::GRAPHICS, pipeline);
+            gpu.device
+                .cmd_bind_pipeline(self.cmd, vk::PipelineBindPoint::GRAPHICS, pipeline);
             let stages = vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT;
             for d in &draws {
-                let Some(g) = self.tiles.get(&d.tile) else { continue };
+                let Some(g) = self.tiles.get(&d.tile) else {
+                    continue;
+                };
                 let (offset, count, index_type) = g.levels[d.level as usize];
                 let c = constants(d.tile, d.level);
-                gpu.device.cmd_push_constants(self.cmd, self.pipeline.layout, stages, 0, bytemuck::bytes_of(&c));
-                gpu.device.cmd_bind_vertex_buffers(self.cmd, 0, &[g.vertices.raw], &[0]);
-                gpu.device.cmd_bind_index_buffer(self.cmd, g.indices.raw, offset, index_type);
+                gpu.device.cmd_push_constants(
+                    self.cmd,
+                    self.pipeline.layout,
+                    stages,
+                    0,
+                    bytemuck::bytes_of(&c),
+                );
+                gpu.device
+                    .cmd_bind_vertex_buffers(self.cmd, 0, &[g.vertices.raw], &[0]);
+                gpu.device
+                    .cmd_bind_index_buffer(self.cmd, g.indices.raw, offset, index_type);
                 gpu.device.cmd_draw_indexed(self.cmd, count, 1, 0, 0, 0);
                 let entry = &terrain.tiles[d.tile].levels[d.level as usize];
                 record.triangles += u64::from(entry.triangle_count);
@@ -293,12 +358,30 @@ impl Renderer {
                 record.tiles_drawn += 1;
                 record.tiles_per_level[d.level as usize] += 1;
             }
-            if let Some(buffer) = &self.stitch_buffer {
-                for ((tile, _), &(vertex_offset, index_offset, count)) in stitches.iter().zip(&stitch_ranges) {
+            if let Some(buffer) = self.stitch_buffer.as_ref().filter(|_| !settings.no_stitch) {
+                for ((tile, _), &(vertex_offset, index_offset, count)) in
+                    stitches.iter().zip(&stitch_ranges)
+                {
                     let c = constants(*tile, level_of[tile]);
-                    gpu.device.cmd_push_constants(self.cmd, self.pipeline.layout, stages, 0, bytemuck::bytes_of(&c));
-                    gpu.device.cmd_bind_vertex_buffers(self.cmd, 0, &[buffer.raw], &[vertex_offset]);
-                    gpu.device.cmd_bind_index_buffer(self.cmd, buffer.raw, index_offset, vk::IndexType::UINT32);
+                    gpu.device.cmd_push_constants(
+                        self.cmd,
+                        self.pipeline.layout,
+                        stages,
+                        0,
+                        bytemuck::bytes_of(&c),
+                    );
+                    gpu.device.cmd_bind_vertex_buffers(
+                        self.cmd,
+                        0,
+                        &[buffer.raw],
+                        &[vertex_offset],
+                    );
+                    gpu.device.cmd_bind_index_buffer(
+                        self.cmd,
+                        buffer.raw,
+                        index_offset,
+                        vk::IndexType::UINT32,
+                    );
                     gpu.device.cmd_draw_indexed(self.cmd, count, 1, 0, 0, 0);
                 }
             }
@@ -346,48 +429,94 @@ impl Renderer {
             while indices.len() % 4 != 0 {
                 indices.push(0);
             }
-            let index_type = if l.entry.index_width == 2 { vk::IndexType::UINT16 } else { vk::IndexType::UINT32 };
+            let index_type = if l.entry.index_width == 2 {
+                vk::IndexType::UINT16
+            } else {
+                vk::IndexType::UINT32
+            };
             levels.push((indices.len() as u64, l.entry.index_count, index_type));
             indices.extend_from_slice(l.indices.bytes());
         }
         let name = format!("tile {},{}", info.tx, info.ty);
-        let vertices = Buffer::new(gpu, BufferDesc::gpu_only(positions.len() as u64, vk::BufferUsageFlags::VERTEX_BUFFER), &format!("{name} vertex blocks"))?;
-        let index_buffer = Buffer::new(gpu, BufferDesc::gpu_only(indices.len() as u64, vk::BufferUsageFlags::INDEX_BUFFER), &format!("{name} index arrays"))?;
+        let vertices = Buffer::new(
+            gpu,
+            BufferDesc::gpu_only(positions.len() as u64, vk::BufferUsageFlags::VERTEX_BUFFER),
+            &format!("{name} vertex blocks"),
+        )?;
+        let index_buffer = Buffer::new(
+            gpu,
+            BufferDesc::gpu_only(indices.len() as u64, vk::BufferUsageFlags::INDEX_BUFFER),
+            &format!("{name} index arrays"),
+        )?;
         let mut staging = Buffer::new(
             gpu,
-            BufferDesc::upload((positions.len() + indices.len()) as u64, vk::BufferUsageFlags::TRANSFER_SRC),
+            BufferDesc::upload(
+                (positions.len() + indices.len()) as u64,
+                vk::BufferUsageFlags::TRANSFER_SRC,
+            ),
             &format!("{name} staging"),
         )?;
         if !(staging.write(0, &positions) && staging.write(positions.len(), &indices)) {
-            return Err(VkError::Unsupported("staging memory is not host-visible".into()));
+            return Err(VkError::Unsupported(
+                "staging memory is not host-visible".into(),
+            ));
         }
         // SAFETY: recording outside rendering; sizes match the buffers.
         unsafe {
-            gpu.device.cmd_copy_buffer(self.cmd, staging.raw, vertices.raw, &[vk::BufferCopy::default().size(positions.len() as u64)]);
+            gpu.device.cmd_copy_buffer(
+                self.cmd,
+                staging.raw,
+                vertices.raw,
+                &[vk::BufferCopy::default().size(positions.len() as u64)],
+            );
             gpu.device.cmd_copy_buffer(
                 self.cmd,
                 staging.raw,
                 index_buffer.raw,
-                &[vk::BufferCopy::default().src_offset(positions.len() as u64).size(indices.len() as u64)],
+                &[vk::BufferCopy::default()
+                    .src_offset(positions.len() as u64)
+                    .size(indices.len() as u64)],
             );
         }
-        Ok((GpuTile { vertices, indices: index_buffer, levels }, staging))
+        Ok((
+            GpuTile {
+                vertices,
+                indices: index_buffer,
+                levels,
+            },
+            staging,
+        ))
     }
 
     /// Writes this frame's stitches into the host-visible stitch buffer; returns per stitch
     /// (vertex byte offset, index byte offset, index count).
-    fn write_stitches(&mut self, gpu: &Gpu, stitches: &[(usize, Stitch)]) -> VkResult<Vec<(u64, u64, u32)>> {
-        let bytes: usize = stitches.iter().map(|(_, s)| 4 * (s.vertices.len() + s.indices.len())).sum();
+    fn write_stitches(
+        &mut self,
+        gpu: &Gpu,
+        stitches: &[(usize, Stitch)],
+    ) -> VkResult<Vec<(u64, u64, u32)>> {
+        let bytes: usize = stitches
+            .iter()
+            .map(|(_, s)| 4 * (s.vertices.len() + s.indices.len()))
+            .sum();
         if bytes == 0 {
             return Ok(Vec::new());
         }
-        if self.stitch_buffer.as_ref().is_none_or(|b| (b.size as usize) < bytes) {
+        if self
+            .stitch_buffer
+            .as_ref()
+            .is_none_or(|b| (b.size as usize) < bytes)
+        {
             if let Some(old) = self.stitch_buffer.take() {
                 old.destroy(gpu);
             }
             let size = (bytes as u64).next_power_of_two().max(1 << 16);
             let usage = vk::BufferUsageFlags::VERTEX_BUFFER | vk::BufferUsageFlags::INDEX_BUFFER;
-            self.stitch_buffer = Some(Buffer::new(gpu, BufferDesc::upload(size, usage), "stitch geometry")?);
+            self.stitch_buffer = Some(Buffer::new(
+                gpu,
+                BufferDesc::upload(size, usage),
+                "stitch geometry",
+            )?);
         }
         let buffer = self.stitch_buffer.as_mut().expect("created above");
         let mut ranges = Vec::with_capacity(stitches.len());
@@ -404,8 +533,14 @@ impl Renderer {
     }
 
     fn begin_rendering(&self, gpu: &Gpu, target: &Target, sky: [f32; 3]) {
-        let colour_range = vk::ImageSubresourceRange::default().aspect_mask(vk::ImageAspectFlags::COLOR).level_count(1).layer_count(1);
-        let depth_range = vk::ImageSubresourceRange::default().aspect_mask(vk::ImageAspectFlags::DEPTH).level_count(1).layer_count(1);
+        let colour_range = vk::ImageSubresourceRange::default()
+            .aspect_mask(vk::ImageAspectFlags::COLOR)
+            .level_count(1)
+            .layer_count(1);
+        let depth_range = vk::ImageSubresourceRange::default()
+            .aspect_mask(vk::ImageAspectFlags::DEPTH)
+            .level_count(1)
+            .layer_count(1);
         let barriers = [
             vk::ImageMemoryBarrier::default()
                 .dst_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
@@ -416,7 +551,10 @@ impl Renderer {
                 .image(target.color.raw)
                 .subresource_range(colour_range),
             vk::ImageMemoryBarrier::default()
-                .dst_access_mask(vk::AccessFlags::DEPTH_STENCIL_ATTACHMENT_WRITE | vk::AccessFlags::DEPTH_STENCIL_ATTACHMENT_READ)
+                .dst_access_mask(
+                    vk::AccessFlags::DEPTH_STENCIL_ATTACHMENT_WRITE
+                        | vk::AccessFlags::DEPTH_STENCIL_ATTACHMENT_READ,
+                )
                 .old_layout(vk::ImageLayout::UNDEFINED)
                 .new_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
                 .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
@@ -430,24 +568,49 @@ impl Renderer {
             .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
             .load_op(vk::AttachmentLoadOp::CLEAR)
             .store_op(vk::AttachmentStoreOp::STORE)
-            .clear_value(vk::ClearValue { color: vk::ClearColorValue { float32: [sky[0], sky[1], sky[2], 1.0] } })];
+            .clear_value(vk::ClearValue {
+                color: vk::ClearColorValue {
+                    float32: [sky[0], sky[1], sky[2], 1.0],
+                },
+            })];
         // Reversed Z: clear to 0 (infinitely far).
         let depth = vk::RenderingAttachmentInfo::default()
             .image_view(target.depth.view)
             .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
             .load_op(vk::AttachmentLoadOp::CLEAR)
             .store_op(vk::AttachmentStoreOp::DONT_CARE)
-            .clear_value(vk::ClearValue { depth_stencil: vk::ClearDepthStencilValue { depth: 0.0, stencil: 0 } });
-        let area = vk::Rect2D { offset: vk::Offset2D::default(), extent };
-        let info = vk::RenderingInfo::default().render_area(area).layer_count(1).color_attachments(&colour).depth_attachment(&depth);
-        let viewport = vk::Viewport { x: 0.0, y: 0.0, width: extent.width as f32, height: extent.height as f32, min_depth: 0.0, max_depth: 1.0 };
+            .clear_value(vk::ClearValue {
+                depth_stencil: vk::ClearDepthStencilValue {
+                    depth: 0.0,
+                    stencil: 0,
+                },
+            });
+        let area = vk::Rect2D {
+            offset: vk::Offset2D::default(),
+            extent,
+        };
+        let info = vk::RenderingInfo::default()
+            .render_area(area)
+            .layer_count(1)
+            .color_attachments(&colour)
+            .depth_attachment(&depth);
+        let viewport = vk::Viewport {
+            x: 0.0,
+            y: 0.0,
+            width: extent.width as f32,
+            height: extent.height as f32,
+            min_depth: 0.0,
+            max_depth: 1.0,
+        };
         // SAFETY: recording; the images are the target's and transition from UNDEFINED (their
         // previous contents are not needed).
         unsafe {
             gpu.device.cmd_pipeline_barrier(
                 self.cmd,
                 vk::PipelineStageFlags::TOP_OF_PIPE,
-                vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT | vk::PipelineStageFlags::EARLY_FRAGMENT_TESTS | vk::PipelineStageFlags::LATE_FRAGMENT_TESTS,
+                vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT
+                    | vk::PipelineStageFlags::EARLY_FRAGMENT_TESTS
+                    | vk::PipelineStageFlags::LATE_FRAGMENT_TESTS,
                 vk::DependencyFlags::empty(),
                 &[],
                 &[],

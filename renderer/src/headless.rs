@@ -33,10 +33,16 @@ pub enum FlightError {
 
 /// Writes an RGBA8 image as PNG through a temporary file.
 pub fn write_png(path: &Path, width: u32, height: u32, rgba: Vec<u8>) -> Result<(), FlightError> {
-    let err = |e: String| FlightError::Write { path: path.to_path_buf(), error: e };
-    let image = image::RgbaImage::from_raw(width, height, rgba).ok_or_else(|| err("pixel buffer has the wrong size".into()))?;
+    let err = |e: String| FlightError::Write {
+        path: path.to_path_buf(),
+        error: e,
+    };
+    let image = image::RgbaImage::from_raw(width, height, rgba)
+        .ok_or_else(|| err("pixel buffer has the wrong size".into()))?;
     let tmp = path.with_extension("png.tmp");
-    image.save_with_format(&tmp, image::ImageFormat::Png).map_err(|e| err(e.to_string()))?;
+    image
+        .save_with_format(&tmp, image::ImageFormat::Png)
+        .map_err(|e| err(e.to_string()))?;
     std::fs::rename(&tmp, path).map_err(|e| err(e.to_string()))
 }
 
@@ -56,21 +62,33 @@ pub fn fly(gpu: &Gpu, flight: &Flight) -> Result<Vec<FrameRecord>, FlightError> 
     result
 }
 
-fn run(gpu: &Gpu, flight: &Flight, renderer: &mut Renderer, target: &mut Target) -> Result<Vec<FrameRecord>, FlightError> {
+fn run(
+    gpu: &Gpu,
+    flight: &Flight,
+    renderer: &mut Renderer,
+    target: &mut Target,
+) -> Result<Vec<FrameRecord>, FlightError> {
     let start = flight.path.keys[0].time;
     let duration = flight.path.duration();
     let mut records = Vec::with_capacity(flight.frames as usize);
     for k in 0..flight.frames {
         let t = k as f64 * duration / flight.frames as f64;
         let camera = flight.path.at(start + t);
-        let shot = flight.out.is_some() && flight.screenshot_every > 0 && k % flight.screenshot_every == 0;
+        let shot =
+            flight.out.is_some() && flight.screenshot_every > 0 && k % flight.screenshot_every == 0;
         let begun = Instant::now();
-        let (mut record, pixels) = renderer.render(gpu, flight.terrain, &camera, &flight.settings, target, shot)?;
+        let (mut record, pixels) =
+            renderer.render(gpu, flight.terrain, &camera, &flight.settings, target, shot)?;
         record.frame = k;
         record.time_s = t;
         record.frame_ms = begun.elapsed().as_secs_f64() * 1000.0;
         if let (Some(dir), Some(pixels)) = (&flight.out, pixels) {
-            write_png(&dir.join(format!("frame_{k:06}.png")), flight.size.0, flight.size.1, pixels)?;
+            write_png(
+                &dir.join(format!("frame_{k:06}.png")),
+                flight.size.0,
+                flight.size.1,
+                pixels,
+            )?;
         }
         records.push(record);
     }

@@ -61,7 +61,11 @@ pub fn header(levels: u32) -> String {
 
 impl FrameRecord {
     pub fn csv_row(&self) -> String {
-        let gpu = if self.gpu_ms.is_nan() { String::new() } else { format!("{:.4}", self.gpu_ms) };
+        let gpu = if self.gpu_ms.is_nan() {
+            String::new()
+        } else {
+            format!("{:.4}", self.gpu_ms)
+        };
         let mut row = format!(
             "{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{gpu},{},{},{},{},{},{},{},{}",
             self.frame,
@@ -88,7 +92,11 @@ impl FrameRecord {
     }
 
     pub fn cpu_ms(&self) -> f64 {
-        self.cpu_cull_ms + self.cpu_lod_ms + self.cpu_stitch_ms + self.cpu_upload_ms + self.cpu_record_ms
+        self.cpu_cull_ms
+            + self.cpu_lod_ms
+            + self.cpu_stitch_ms
+            + self.cpu_upload_ms
+            + self.cpu_record_ms
     }
 }
 
@@ -124,15 +132,29 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
 }
 
 impl Summary {
-    pub fn of(records: &[FrameRecord], device: &str, size: (u32, u32), tau: f64, brute_force: bool, validation: u64) -> Summary {
+    pub fn of(
+        records: &[FrameRecord],
+        device: &str,
+        size: (u32, u32),
+        tau: f64,
+        brute_force: bool,
+        validation: u64,
+    ) -> Summary {
         let mut ms: Vec<f64> = records.iter().map(|r| r.frame_ms).collect();
         ms.sort_by(f64::total_cmp);
-        let mut gpu: Vec<f64> = records.iter().map(|r| r.gpu_ms).filter(|g| !g.is_nan()).collect();
+        let mut gpu: Vec<f64> = records
+            .iter()
+            .map(|r| r.gpu_ms)
+            .filter(|g| !g.is_nan())
+            .collect();
         gpu.sort_by(f64::total_cmp);
         let mut cpu: Vec<f64> = records.iter().map(FrameRecord::cpu_ms).collect();
         cpu.sort_by(f64::total_cmp);
         let total_ms: f64 = ms.iter().sum();
-        let tris: u64 = records.iter().map(|r| r.triangles + r.stitch_triangles).sum();
+        let tris: u64 = records
+            .iter()
+            .map(|r| r.triangles + r.stitch_triangles)
+            .sum();
         Summary {
             frames: records.len(),
             device: device.to_string(),
@@ -176,10 +198,19 @@ mod tests {
 
     #[test]
     fn rows_match_the_header_and_percentiles_are_exact_on_ranks() {
-        let r = FrameRecord { tiles_per_level: vec![1, 2, 3], gpu_ms: f64::NAN, ..Default::default() };
+        let r = FrameRecord {
+            tiles_per_level: vec![1, 2, 3],
+            gpu_ms: f64::NAN,
+            ..Default::default()
+        };
         assert_eq!(r.csv_row().split(',').count(), header(3).split(',').count());
-        let records: Vec<FrameRecord> =
-            (1..=100).map(|i| FrameRecord { frame_ms: f64::from(i), gpu_ms: f64::NAN, ..Default::default() }).collect();
+        let records: Vec<FrameRecord> = (1..=100)
+            .map(|i| FrameRecord {
+                frame_ms: f64::from(i),
+                gpu_ms: f64::NAN,
+                ..Default::default()
+            })
+            .collect();
         let s = Summary::of(&records, "test", (1, 1), 1.0, false, 0);
         assert_eq!(s.frame_ms_median, 51.0);
         assert_eq!(s.frame_ms_p95, 95.0);

@@ -18,7 +18,11 @@ use renderer::terrain::Terrain;
 use renderer::vulkan::{Gpu, GpuOptions};
 
 #[derive(Parser)]
-#[command(name = "vkterrain", version, about = "Fly over a vkterrain tile set with Vulkan")]
+#[command(
+    name = "vkterrain",
+    version,
+    about = "Fly over a vkterrain tile set with Vulkan"
+)]
 struct Cli {
     /// Tile set built by `tiletool build`.
     tileset: PathBuf,
@@ -67,6 +71,9 @@ struct Cli {
     level_colours: bool,
     #[arg(long)]
     wireframe: bool,
+    /// Diagnostic: do not draw the stitching triangles (shows the cracks they close).
+    #[arg(long)]
+    no_stitch: bool,
     /// Write the path flown (CSV keyframes) here.
     #[arg(long)]
     record: Option<PathBuf>,
@@ -74,7 +81,10 @@ struct Cli {
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
     let (w, h) = s.split_once(['x', 'X']).ok_or("expected WxH")?;
-    let (w, h): (u32, u32) = (w.parse().map_err(|_| "expected WxH")?, h.parse().map_err(|_| "expected WxH")?);
+    let (w, h): (u32, u32) = (
+        w.parse().map_err(|_| "expected WxH")?,
+        h.parse().map_err(|_| "expected WxH")?,
+    );
     if !(16..=16384).contains(&w) || !(16..=16384).contains(&h) {
         return Err("each side must be 16..=16384 pixels".into());
     }
@@ -82,7 +92,11 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
 }
 
 fn parse_rgb(s: &str) -> Result<[f32; 3], String> {
-    let v: Vec<f32> = s.split(',').map(|t| t.trim().parse::<f32>()).collect::<Result<_, _>>().map_err(|_| "expected R,G,B")?;
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| "expected R,G,B")?;
     match v[..] {
         [r, g, b] if v.iter().all(|c| (0.0..=1.0).contains(c)) => Ok([r, g, b]),
         _ => Err("expected R,G,B with each in 0..1".into()),
@@ -100,6 +114,8 @@ fn main() -> ExitCode {
 }
 
 fn run(cli: Cli) -> Result<ExitCode> {
+    // Offscreen is the only mode of this build, so --headless is accepted and implied.
+    let _ = cli.headless;
     let terrain = Terrain::open(&cli.tileset)?;
     let path = match cli.path.as_str() {
         "orbit" => CameraPath::orbit(&terrain),
@@ -108,19 +124,27 @@ fn run(cli: Cli) -> Result<ExitCode> {
     };
     if let Some(level) = cli.level {
         if level >= terrain.levels {
-            bail!("--level {level}: the tile set has levels 0..={}", terrain.levels - 1);
+            bail!(
+                "--level {level}: the tile set has levels 0..={}",
+                terrain.levels - 1
+            );
         }
     }
     if cli.frames == 0 {
         bail!("--frames must be at least 1");
     }
     if let Some(out) = &cli.out {
-        std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
+        std::fs::create_dir_all(out)
+            .with_context(|| format!("{}: cannot create", out.display()))?;
     }
     if let Some(record) = &cli.record {
-        std::fs::write(record, path.to_csv()).with_context(|| format!("{}: cannot write", record.display()))?;
+        std::fs::write(record, path.to_csv())
+            .with_context(|| format!("{}: cannot write", record.display()))?;
     }
-    let gpu = Gpu::new(&GpuOptions { validation: cli.validation, device: cli.device.clone() })?;
+    let gpu = Gpu::new(&GpuOptions {
+        validation: cli.validation,
+        device: cli.device.clone(),
+    })?;
     let settings = Settings {
         tau: cli.tau,
         forced_level: cli.level,
@@ -128,6 +152,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
         level_colours: cli.level_colours,
         wireframe: cli.wireframe,
         sky: cli.sky,
+        no_stitch: cli.no_stitch,
     };
     let flight = Flight {
         terrain: &terrain,
@@ -141,12 +166,21 @@ fn run(cli: Cli) -> Result<ExitCode> {
     };
     let records = fly(&gpu, &flight)?;
     let validation = gpu.validation_messages();
-    let summary = Summary::of(&records, &gpu.device_name, cli.size, cli.tau, cli.brute_force, validation);
+    let summary = Summary::of(
+        &records,
+        &gpu.device_name,
+        cli.size,
+        cli.tau,
+        cli.brute_force,
+        validation,
+    );
     let json = serde_json::to_string_pretty(&summary)?;
     if let Some(log) = &cli.log {
-        write_csv(log, terrain.levels, &records).with_context(|| format!("{}: cannot write", log.display()))?;
+        write_csv(log, terrain.levels, &records)
+            .with_context(|| format!("{}: cannot write", log.display()))?;
         let json_path = log.with_extension("json");
-        std::fs::write(&json_path, &json).with_context(|| format!("{}: cannot write", json_path.display()))?;
+        std::fs::write(&json_path, &json)
+            .with_context(|| format!("{}: cannot write", json_path.display()))?;
     }
     println!("{json}");
     drop(gpu);

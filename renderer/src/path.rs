@@ -57,10 +57,17 @@ impl CameraPath {
                 .collect::<Result<_, _>>()
                 .map_err(|_| format!("line {}: expected 7 numbers ({CSV_HEADER})", n + 1))?;
             if v.len() != 7 || v.iter().any(|x| !x.is_finite()) {
-                return Err(format!("line {}: expected 7 finite numbers ({CSV_HEADER})", n + 1));
+                return Err(format!(
+                    "line {}: expected 7 finite numbers ({CSV_HEADER})",
+                    n + 1
+                ));
             }
             if v[6] <= 0.0 || v[6] >= 180.0 {
-                return Err(format!("line {}: field of view {} is not in 0..180 degrees", n + 1, v[6]));
+                return Err(format!(
+                    "line {}: field of view {} is not in 0..180 degrees",
+                    n + 1,
+                    v[6]
+                ));
             }
             if keys.last().is_some_and(|k: &Keyframe| k.time >= v[0]) {
                 return Err(format!("line {}: times must increase", n + 1));
@@ -103,14 +110,24 @@ impl CameraPath {
     pub fn at(&self, t: f64) -> Camera {
         let keys = &self.keys;
         let t = t.clamp(keys[0].time, keys[keys.len() - 1].time);
-        let i = keys.partition_point(|k| k.time <= t).clamp(1, keys.len() - 1) - 1;
+        let i = keys
+            .partition_point(|k| k.time <= t)
+            .clamp(1, keys.len() - 1)
+            - 1;
         let (k1, k2) = (&keys[i], &keys[i + 1]);
         let u = (t - k1.time) / (k2.time - k1.time);
         let k0 = if i > 0 { &keys[i - 1] } else { k1 };
         let k3 = if i + 2 < keys.len() { &keys[i + 2] } else { k2 };
-        let p = catmull_rom(k0.camera.position, k1.camera.position, k2.camera.position, k3.camera.position, u);
+        let p = catmull_rom(
+            k0.camera.position,
+            k1.camera.position,
+            k2.camera.position,
+            k3.camera.position,
+            u,
+        );
         let mix_angle = |a: f64, b: f64| {
-            let d = (b - a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+            let d = (b - a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+                - std::f64::consts::PI;
             a + d * u
         };
         Camera {
@@ -131,7 +148,11 @@ impl CameraPath {
         let keys = (0..=24)
             .map(|i| {
                 let a = i as f64 / 24.0 * std::f64::consts::TAU;
-                let position = DVec3::new(centre.x + radius * a.cos(), centre.y + radius * a.sin(), height);
+                let position = DVec3::new(
+                    centre.x + radius * a.cos(),
+                    centre.y + radius * a.sin(),
+                    height,
+                );
                 let to = DVec3::new(centre.x, centre.y, (min.z + max.z) * 0.5) - position;
                 Keyframe {
                     time: i as f64 * 2.0,
@@ -159,7 +180,9 @@ impl CameraPath {
             let u = 0.08 + 0.84 * i as f64 / n as f64;
             // A gentle S-curve from the south-west to the north-east.
             let x = min.x + (max.x - min.x) * u;
-            let y = min.y + (max.y - min.y) * (u + 0.12 * (u * std::f64::consts::TAU).sin()).clamp(0.02, 0.98);
+            let y = min.y
+                + (max.y - min.y)
+                    * (u + 0.12 * (u * std::f64::consts::TAU).sin()).clamp(0.02, 0.98);
             let ground = terrain.max_height_near(x, y, 0.04 * extent);
             let z = ground + clearance * (1.0 + 2.0 * (u * 9.0).sin().abs());
             keys.push((x, y, z));
@@ -170,7 +193,11 @@ impl CameraPath {
             .map(|(i, &(x, y, z))| {
                 let (nx, ny, _) = keys[(i + 1).min(keys.len() - 1)];
                 let (px, py, _) = keys[i.saturating_sub(1)];
-                let (dx, dy) = if i + 1 < keys.len() { (nx - x, ny - y) } else { (x - px, y - py) };
+                let (dx, dy) = if i + 1 < keys.len() {
+                    (nx - x, ny - y)
+                } else {
+                    (x - px, y - py)
+                };
                 Keyframe {
                     time: i as f64 * 3.0,
                     camera: Camera {
@@ -189,7 +216,10 @@ impl CameraPath {
 
 fn catmull_rom(p0: DVec3, p1: DVec3, p2: DVec3, p3: DVec3, u: f64) -> DVec3 {
     let (u2, u3) = (u * u, u * u * u);
-    0.5 * ((2.0 * p1) + (-p0 + p2) * u + (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) * u2 + (-p0 + 3.0 * p1 - 3.0 * p2 + p3) * u3)
+    0.5 * ((2.0 * p1)
+        + (-p0 + p2) * u
+        + (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) * u2
+        + (-p0 + 3.0 * p1 - 3.0 * p2 + p3) * u3)
 }
 
 #[cfg(test)]
@@ -198,7 +228,9 @@ mod tests {
 
     #[test]
     fn csv_round_trips_and_interpolates_through_keys() {
-        let text = format!("{CSV_HEADER}\n0,0,0,100,0,-10,60\n1,100,0,100,90,-10,60\n2,200,50,120,180,0,50\n");
+        let text = format!(
+            "{CSV_HEADER}\n0,0,0,100,0,-10,60\n1,100,0,100,90,-10,60\n2,200,50,120,180,0,50\n"
+        );
         let path = CameraPath::parse(&text).expect("parses");
         let again = CameraPath::parse(&path.to_csv()).expect("round trip");
         assert_eq!(again.keys.len(), 3);
@@ -221,9 +253,17 @@ mod tests {
 
     #[test]
     fn bad_paths_are_rejected_with_the_line() {
-        assert!(CameraPath::parse("0,0,0,0,0,0,60\n").unwrap_err().contains("two keyframes"));
-        assert!(CameraPath::parse("0,0,0,0,0,0,60\n0,1,1,1,0,0,60\n").unwrap_err().contains("line 2"));
-        assert!(CameraPath::parse("0,0,0,0,0,0\n").unwrap_err().contains("line 1"));
-        assert!(CameraPath::parse("0,0,0,0,0,0,200\n1,0,0,0,0,0,60").unwrap_err().contains("field of view"));
+        assert!(CameraPath::parse("0,0,0,0,0,0,60\n")
+            .unwrap_err()
+            .contains("two keyframes"));
+        assert!(CameraPath::parse("0,0,0,0,0,0,60\n0,1,1,1,0,0,60\n")
+            .unwrap_err()
+            .contains("line 2"));
+        assert!(CameraPath::parse("0,0,0,0,0,0\n")
+            .unwrap_err()
+            .contains("line 1"));
+        assert!(CameraPath::parse("0,0,0,0,0,0,200\n1,0,0,0,0,0,60")
+            .unwrap_err()
+            .contains("field of view"));
     }
 }

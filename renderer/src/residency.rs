@@ -8,7 +8,13 @@ use std::collections::HashMap;
 pub trait Residency {
     /// Makes `tile` (needing `bytes`) resident at `frame`; returns the tiles to evict first.
     /// Tiles for which `in_use` is true are never evicted (they are drawn this frame).
-    fn admit(&mut self, tile: usize, bytes: u64, frame: u64, in_use: &dyn Fn(usize) -> bool) -> Vec<usize>;
+    fn admit(
+        &mut self,
+        tile: usize,
+        bytes: u64,
+        frame: u64,
+        in_use: &dyn Fn(usize) -> bool,
+    ) -> Vec<usize>;
     fn is_resident(&self, tile: usize) -> bool;
     fn resident_bytes(&self) -> u64;
 }
@@ -23,12 +29,22 @@ pub struct WholeTileLru {
 
 impl WholeTileLru {
     pub fn new(budget: u64) -> Self {
-        WholeTileLru { budget, used: 0, tiles: HashMap::new() }
+        WholeTileLru {
+            budget,
+            used: 0,
+            tiles: HashMap::new(),
+        }
     }
 }
 
 impl Residency for WholeTileLru {
-    fn admit(&mut self, tile: usize, bytes: u64, frame: u64, in_use: &dyn Fn(usize) -> bool) -> Vec<usize> {
+    fn admit(
+        &mut self,
+        tile: usize,
+        bytes: u64,
+        frame: u64,
+        in_use: &dyn Fn(usize) -> bool,
+    ) -> Vec<usize> {
         if let Some(entry) = self.tiles.get_mut(&tile) {
             entry.1 = frame;
             return Vec::new();
@@ -75,7 +91,10 @@ mod tests {
         assert_eq!(lru.admit(3, 40, 3, &|_| false), vec![2]);
         assert_eq!(lru.resident_bytes(), 80);
         // Tile 1 is in use: nothing can go, the budget is exceeded rather than the frame broken.
-        assert_eq!(lru.admit(4, 40, 4, &|t| t == 1 || t == 3), Vec::<usize>::new());
+        assert_eq!(
+            lru.admit(4, 40, 4, &|t| t == 1 || t == 3),
+            Vec::<usize>::new()
+        );
         assert_eq!(lru.resident_bytes(), 120);
         assert!(lru.is_resident(4));
         assert_eq!(lru.admit(5, 10, 5, &|t| t == 4), vec![1]);

@@ -46,21 +46,36 @@ fn rebase(p: u32, k: usize, from: &TileInfo, to: &TileInfo) -> Option<u32> {
         2 => (i64::from(x), i64::from(y) + cells),
         _ => (i64::from(x) - cells, i64::from(y)),
     };
-    let code = i64::from(code) + i64::from(from.header.height_base) - i64::from(to.header.height_base);
+    let code =
+        i64::from(code) + i64::from(from.header.height_base) - i64::from(to.header.height_base);
     let ok = (0..=cells).contains(&x) && (0..=cells).contains(&y) && (0..1 << 14).contains(&code);
     ok.then(|| pack(x as u32, y as u32, code as u16))
 }
 
 /// Adds the triangles between tile `a` (at `level_a`) and its neighbour `b` across side `k`
 /// of `a` (at `level_b`). Returns false if the borders do not line up (a broken file).
-pub fn stitch_side(out: &mut Stitch, a: &TileInfo, level_a: u32, b: &TileInfo, level_b: u32, k: usize) -> bool {
+pub fn stitch_side(
+    out: &mut Stitch,
+    a: &TileInfo,
+    level_a: u32,
+    b: &TileInfo,
+    level_b: u32,
+    k: usize,
+) -> bool {
     let mine = &a.borders[level_a as usize][k];
-    let theirs: Option<Vec<u32>> = b.borders[level_b as usize][(k + 2) % 4].iter().map(|&p| rebase(p, k, b, a)).collect();
+    let theirs: Option<Vec<u32>> = b.borders[level_b as usize][(k + 2) % 4]
+        .iter()
+        .map(|&p| rebase(p, k, b, a))
+        .collect();
     let Some(theirs) = theirs else { return false };
     if *mine == theirs {
         return true;
     }
-    if mine.len() < 2 || theirs.len() < 2 || mine.first() != theirs.first() || mine.last() != theirs.last() {
+    if mine.len() < 2
+        || theirs.len() < 2
+        || mine.first() != theirs.first()
+        || mine.last() != theirs.last()
+    {
         return false;
     }
     let base = out.vertices.len() as u32;
@@ -78,12 +93,21 @@ pub fn stitch_side(out: &mut Stitch, a: &TileInfo, level_a: u32, b: &TileInfo, l
     };
     let all: Vec<u32> = mine.iter().chain(&theirs).copied().collect();
     while i + 1 < mine.len() || j + 1 < theirs.len() {
-        let advance_theirs = j + 1 < theirs.len() && (i + 1 >= mine.len() || along(theirs[j + 1], k) <= along(mine[i + 1], k));
+        let advance_theirs = j + 1 < theirs.len()
+            && (i + 1 >= mine.len() || along(theirs[j + 1], k) <= along(mine[i + 1], k));
         if advance_theirs {
-            push(out, [base + i as u32, q0 + j as u32, q0 + j as u32 + 1], &all);
+            push(
+                out,
+                [base + i as u32, q0 + j as u32, q0 + j as u32 + 1],
+                &all,
+            );
             j += 1;
         } else {
-            push(out, [base + i as u32, base + i as u32 + 1, q0 + j as u32], &all);
+            push(
+                out,
+                [base + i as u32, base + i as u32 + 1, q0 + j as u32],
+                &all,
+            );
             i += 1;
         }
     }

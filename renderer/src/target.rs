@@ -34,8 +34,16 @@ impl Target {
             vk::ImageAspectFlags::DEPTH,
             "offscreen depth",
         )?;
-        let readback = Buffer::new(gpu, BufferDesc::readback(u64::from(width) * u64::from(height) * 4), "screenshot readback")?;
-        Ok(Target { color, depth, readback })
+        let readback = Buffer::new(
+            gpu,
+            BufferDesc::readback(u64::from(width) * u64::from(height) * 4),
+            "screenshot readback",
+        )?;
+        Ok(Target {
+            color,
+            depth,
+            readback,
+        })
     }
 
     pub fn extent(&self) -> vk::Extent2D {
@@ -45,7 +53,10 @@ impl Target {
     /// Records the copy of the rendered colour image into the readback buffer (the image is in
     /// COLOR_ATTACHMENT_OPTIMAL after rendering).
     pub fn record_readback(&self, gpu: &Gpu, cmd: vk::CommandBuffer) {
-        let range = vk::ImageSubresourceRange::default().aspect_mask(vk::ImageAspectFlags::COLOR).level_count(1).layer_count(1);
+        let range = vk::ImageSubresourceRange::default()
+            .aspect_mask(vk::ImageAspectFlags::COLOR)
+            .level_count(1)
+            .layer_count(1);
         let to_src = vk::ImageMemoryBarrier::default()
             .src_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
             .dst_access_mask(vk::AccessFlags::TRANSFER_READ)
@@ -57,8 +68,16 @@ impl Target {
             .subresource_range(range);
         let extent = self.extent();
         let region = vk::BufferImageCopy::default()
-            .image_subresource(vk::ImageSubresourceLayers::default().aspect_mask(vk::ImageAspectFlags::COLOR).layer_count(1))
-            .image_extent(vk::Extent3D { width: extent.width, height: extent.height, depth: 1 });
+            .image_subresource(
+                vk::ImageSubresourceLayers::default()
+                    .aspect_mask(vk::ImageAspectFlags::COLOR)
+                    .layer_count(1),
+            )
+            .image_extent(vk::Extent3D {
+                width: extent.width,
+                height: extent.height,
+                depth: 1,
+            });
         let to_host = vk::BufferMemoryBarrier::default()
             .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
             .dst_access_mask(vk::AccessFlags::HOST_READ)
@@ -77,7 +96,13 @@ impl Target {
                 &[],
                 &[to_src],
             );
-            gpu.device.cmd_copy_image_to_buffer(cmd, self.color.raw, vk::ImageLayout::TRANSFER_SRC_OPTIMAL, self.readback.raw, &[region]);
+            gpu.device.cmd_copy_image_to_buffer(
+                cmd,
+                self.color.raw,
+                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                self.readback.raw,
+                &[region],
+            );
             gpu.device.cmd_pipeline_barrier(
                 cmd,
                 vk::PipelineStageFlags::TRANSFER,

@@ -50,10 +50,21 @@ impl Terrain {
                 let th = tile.header;
                 let levels: Vec<LevelEntry> = tile.levels().to_vec();
                 let z_min = levels.iter().map(|l| l.z_min).fold(f32::INFINITY, f32::min);
-                let z_max = levels.iter().map(|l| l.z_max).fold(f32::NEG_INFINITY, f32::max);
+                let z_max = levels
+                    .iter()
+                    .map(|l| l.z_max)
+                    .fold(f32::NEG_INFINITY, f32::max);
                 let (c0, r0) = (f64::from(tx * TILE_CELLS), f64::from(ty * TILE_CELLS));
-                let min = DVec3::new(c0 * sx, -(r0 + f64::from(th.mesh_max_y)) * sy, f64::from(z_min));
-                let max = DVec3::new((c0 + f64::from(th.mesh_max_x)) * sx, -r0 * sy, f64::from(z_max));
+                let min = DVec3::new(
+                    c0 * sx,
+                    -(r0 + f64::from(th.mesh_max_y)) * sy,
+                    f64::from(z_min),
+                );
+                let max = DVec3::new(
+                    (c0 + f64::from(th.mesh_max_x)) * sx,
+                    -r0 * sy,
+                    f64::from(z_max),
+                );
                 let mut packed: Vec<u32> = Vec::with_capacity(th.vertex_count as usize);
                 let mut bytes = 0u64;
                 for i in 0..h.levels {
@@ -64,16 +75,30 @@ impl Terrain {
                 }
                 let borders = (0..h.levels)
                     .filter_map(|i| tile.level(i))
-                    .map(|l| l.border.map(|side| side.iter().map(|&v| packed[v as usize]).collect()))
+                    .map(|l| {
+                        l.border
+                            .map(|side| side.iter().map(|&v| packed[v as usize]).collect())
+                    })
                     .collect();
                 let q = tile.quantiser();
                 let mut heights = [f32::NEG_INFINITY; HEIGHT_CELLS * HEIGHT_CELLS];
                 for &p in &packed {
                     let (x, y, code) = tiles::pack::unpack(p);
-                    let cell = (y as usize * HEIGHT_CELLS / 257) * HEIGHT_CELLS + x as usize * HEIGHT_CELLS / 257;
+                    let cell = (y as usize * HEIGHT_CELLS / 257) * HEIGHT_CELLS
+                        + x as usize * HEIGHT_CELLS / 257;
                     heights[cell] = heights[cell].max(q.height(code));
                 }
-                tiles.push(TileInfo { tx, ty, header: th, levels, min, max, borders, bytes, heights });
+                tiles.push(TileInfo {
+                    tx,
+                    ty,
+                    header: th,
+                    levels,
+                    min,
+                    max,
+                    borders,
+                    bytes,
+                    heights,
+                });
             }
         }
         Ok(Terrain {
@@ -93,7 +118,11 @@ impl Terrain {
 
     /// World bounds of the whole dataset.
     pub fn bounds(&self) -> (DVec3, DVec3) {
-        self.tiles.iter().fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), t| (lo.min(t.min), hi.max(t.max)))
+        self.tiles
+            .iter()
+            .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), t| {
+                (lo.min(t.min), hi.max(t.max))
+            })
     }
 
     /// The highest ground within `radius` metres of (x, y), from each tile's coarse height map.
@@ -111,7 +140,8 @@ impl Terrain {
                     let x0 = t.min.x + cx as f64 * cell * sx;
                     let y1 = t.max.y - cy as f64 * cell * sy;
                     let (x1, y0) = (x0 + cell * sx, y1 - cell * sy);
-                    if x1 >= x - radius && x0 <= x + radius && y1 >= y - radius && y0 <= y + radius {
+                    if x1 >= x - radius && x0 <= x + radius && y1 >= y - radius && y0 <= y + radius
+                    {
                         best = best.max(f64::from(h));
                     }
                 }

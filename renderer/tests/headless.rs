@@ -11,12 +11,19 @@ const SKY: [u8; 3] = [255, 0, 255];
 
 fn data(rel: &str) -> PathBuf {
     let p = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data")).join(rel);
-    assert!(p.exists(), "test data missing: {} (the shared data folder must sit beside the repo)", p.display());
+    assert!(
+        p.exists(),
+        "test data missing: {} (the shared data folder must sit beside the repo)",
+        p.display()
+    );
     p
 }
 
 fn sample() -> PathBuf {
-    let p = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../sample/ps_height_1k.png"));
+    let p = PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../sample/ps_height_1k.png"
+    ));
     assert!(p.exists(), "bundled sample missing: {}", p.display());
     p
 }
@@ -24,18 +31,42 @@ fn sample() -> PathBuf {
 /// Builds a tile set in `dir` from a DEM.
 fn tileset(dir: &Path, input: &Path, opts: dem::ReadOptions) -> PathBuf {
     let grid = dem::read(&[input.to_path_buf()], &opts).unwrap_or_else(|e| panic!("{e}"));
-    let view = Grid { width: grid.width, height: grid.height, heights: &grid.heights, spacing_x: grid.spacing_x, spacing_y: grid.spacing_y };
+    let view = Grid {
+        width: grid.width,
+        height: grid.height,
+        heights: &grid.heights,
+        spacing_x: grid.spacing_x,
+        spacing_y: grid.spacing_y,
+    };
     let out = dir.join("set.vkt");
-    build_tileset(&view, &BuildParams::default(), &TileSetMeta::default(), &out, &|| {}).expect("build");
+    build_tileset(
+        &view,
+        &BuildParams::default(),
+        &TileSetMeta::default(),
+        &out,
+        &|| {},
+    )
+    .expect("build");
     out
 }
 
 fn puget(dir: &Path) -> PathBuf {
-    tileset(dir, &sample(), dem::ReadOptions { spacing: Some(160.0), vertical_scale: Some(0.1), ..Default::default() })
+    tileset(
+        dir,
+        &sample(),
+        dem::ReadOptions {
+            spacing: Some(160.0),
+            vertical_scale: Some(0.1),
+            ..Default::default()
+        },
+    )
 }
 
 fn vkterrain(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_vkterrain")).args(args).output().expect("vkterrain runs")
+    Command::new(env!("CARGO_BIN_EXE_vkterrain"))
+        .args(args)
+        .output()
+        .expect("vkterrain runs")
 }
 
 fn s(p: &Path) -> &str {
@@ -43,20 +74,50 @@ fn s(p: &Path) -> &str {
 }
 
 /// Runs a headless flight with validation and a magenta sky; returns the screenshots' pixels.
-fn flight(set: &Path, out: &Path, path: &str, frames: u32, extra: &[&str]) -> Vec<image::RgbaImage> {
+fn flight(
+    set: &Path,
+    out: &Path,
+    path: &str,
+    frames: u32,
+    extra: &[&str],
+) -> Vec<image::RgbaImage> {
     let log = out.join("frames.csv");
     let frames_s = frames.to_string();
     let mut args = vec![
-        s(set), "--headless", "--validation", "--path", path, "--frames", &frames_s, "--size", "256x192",
-        "--sky", "1,0,1", "--log", s(&log), "--out", s(out), "--screenshot-every", "1",
+        s(set),
+        "--headless",
+        "--validation",
+        "--path",
+        path,
+        "--frames",
+        &frames_s,
+        "--sky",
+        "1,0,1",
+        "--log",
+        s(&log),
+        "--out",
+        s(out),
+        "--screenshot-every",
+        "1",
     ];
+    if !extra.contains(&"--size") {
+        args.extend(["--size", "256x192"]);
+    }
     args.extend(extra);
     let o = vkterrain(&args);
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success(), "vkterrain failed ({:?}): {err}", o.status.code());
+    assert!(
+        o.status.success(),
+        "vkterrain failed ({:?}): {err}",
+        o.status.code()
+    );
     assert!(!err.contains("validation"), "validation messages: {err}");
     (0..frames)
-        .map(|k| image::open(out.join(format!("frame_{k:06}.png"))).expect("screenshot").to_rgba8())
+        .map(|k| {
+            image::open(out.join(format!("frame_{k:06}.png")))
+                .expect("screenshot")
+                .to_rgba8()
+        })
         .collect()
 }
 
@@ -69,7 +130,9 @@ fn is_sky(p: &image::Rgba<u8>) -> bool {
 fn cracks(lod: &image::RgbaImage, brute: &image::RgbaImage) -> Vec<(u32, u32)> {
     let (w, h) = lod.dimensions();
     let deep_terrain = |x: u32, y: u32| {
-        (x.saturating_sub(3)..=(x + 3).min(w - 1)).all(|i| (y.saturating_sub(3)..=(y + 3).min(h - 1)).all(|j| !is_sky(brute.get_pixel(i, j))))
+        (x.saturating_sub(3)..=(x + 3).min(w - 1)).all(|i| {
+            (y.saturating_sub(3)..=(y + 3).min(h - 1)).all(|j| !is_sky(brute.get_pixel(i, j)))
+        })
     };
     let mut found = Vec::new();
     for y in 1..h - 1 {
@@ -90,7 +153,41 @@ fn cracks(lod: &image::RgbaImage, brute: &image::RgbaImage) -> Vec<(u32, u32)> {
 /// Per column, the first terrain row from the top (the horizon), where there is one.
 fn horizon(img: &image::RgbaImage) -> Vec<Option<u32>> {
     let (w, h) = img.dimensions();
-    (0..w).map(|x| (0..h).find(|&y| !is_sky(img.get_pixel(x, y)))).collect()
+    (0..w)
+        .map(|x| (0..h).find(|&y| !is_sky(img.get_pixel(x, y))))
+        .collect()
+}
+
+/// The crack detector finds the seams when stitching is switched off (so a pass means
+/// something), and none with it.
+#[test]
+fn without_stitching_the_seams_show() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = puget(dir.path());
+    let (a, b) = (dir.path().join("open"), dir.path().join("brute"));
+    let open = flight(
+        &set,
+        &a,
+        "flyover",
+        6,
+        &["--no-stitch", "--size", "512x384"],
+    );
+    let brute = flight(
+        &set,
+        &b,
+        "flyover",
+        6,
+        &["--brute-force", "--size", "512x384"],
+    );
+    let total: usize = open
+        .iter()
+        .zip(&brute)
+        .map(|(o, b)| cracks(o, b).len())
+        .sum();
+    assert!(
+        total > 0,
+        "no crack pixels found with stitching off: the detector is blind"
+    );
 }
 
 fn compare_with_brute_force(set: &Path, path: &str, frames: u32, tau: f64) {
@@ -102,10 +199,23 @@ fn compare_with_brute_force(set: &Path, path: &str, frames: u32, tau: f64) {
     let mut terrain_seen = false;
     for (k, (l, b)) in lod.iter().zip(&brute).enumerate() {
         let c = cracks(l, b);
-        assert!(c.is_empty(), "{path} frame {k}: {} crack pixels, first at {:?}", c.len(), &c[..c.len().min(5)]);
+        assert!(
+            c.is_empty(),
+            "{path} frame {k}: {} crack pixels, first at {:?}",
+            c.len(),
+            &c[..c.len().min(5)]
+        );
         let (hl, hb) = (horizon(l), horizon(b));
-        let worst = hl.iter().zip(&hb).filter_map(|(x, y)| Some(x.as_ref()?.abs_diff(*y.as_ref()?))).max().unwrap_or(0);
-        assert!(f64::from(worst) <= tau + 1.0, "{path} frame {k}: silhouette off by {worst} px (tau {tau})");
+        let worst = hl
+            .iter()
+            .zip(&hb)
+            .filter_map(|(x, y)| Some(x.as_ref()?.abs_diff(*y.as_ref()?)))
+            .max()
+            .unwrap_or(0);
+        assert!(
+            f64::from(worst) <= tau + 1.0,
+            "{path} frame {k}: silhouette off by {worst} px (tau {tau})"
+        );
         terrain_seen |= hl.iter().any(Option::is_some);
     }
     assert!(terrain_seen, "{path}: no frame showed terrain");
@@ -120,7 +230,11 @@ fn puget_renders_terrain_with_a_log_and_no_validation_messages() {
     for (k, img) in shots.iter().enumerate() {
         let total = img.pixels().count() as f64;
         let terrain: Vec<&image::Rgba<u8>> = img.pixels().filter(|p| !is_sky(p)).collect();
-        assert!(terrain.len() as f64 > 0.2 * total, "frame {k}: only {} terrain pixels", terrain.len());
+        assert!(
+            terrain.len() as f64 > 0.2 * total,
+            "frame {k}: only {} terrain pixels",
+            terrain.len()
+        );
         // Shaded terrain, not one flat colour: many distinct colours.
         let mut colours: Vec<[u8; 3]> = terrain.iter().map(|p| [p.0[0], p.0[1], p.0[2]]).collect();
         colours.sort_unstable();
@@ -130,15 +244,32 @@ fn puget_renders_terrain_with_a_log_and_no_validation_messages() {
     let csv = std::fs::read_to_string(out.join("frames.csv")).expect("log");
     let mut lines = csv.lines();
     let header: Vec<&str> = lines.next().expect("header").split(',').collect();
-    for col in ["frame", "time_s", "frame_ms", "cpu_cull_ms", "gpu_ms", "tiles_visible", "triangles", "stitch_triangles", "upload_bytes", "resident_bytes", "evictions", "tiles_level_0"] {
+    for col in [
+        "frame",
+        "time_s",
+        "frame_ms",
+        "cpu_cull_ms",
+        "gpu_ms",
+        "tiles_visible",
+        "triangles",
+        "stitch_triangles",
+        "upload_bytes",
+        "resident_bytes",
+        "evictions",
+        "tiles_level_0",
+    ] {
         assert!(header.contains(&col), "missing column {col}");
     }
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     assert_eq!(rows.len(), 4);
     assert!(rows.iter().all(|r| r.len() == header.len()));
     let tri = header.iter().position(|c| *c == "triangles").expect("col");
-    assert!(rows.iter().all(|r| r[tri].parse::<u64>().expect("number") > 0));
-    let summary: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("frames.json")).expect("summary")).expect("json");
+    assert!(rows
+        .iter()
+        .all(|r| r[tri].parse::<u64>().expect("number") > 0));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("frames.json")).expect("summary"))
+            .expect("json");
     assert_eq!(summary["frames"], 4);
     assert_eq!(summary["validation_messages"], 0);
 }
@@ -154,7 +285,11 @@ fn puget_lod_has_no_cracks_and_keeps_the_silhouette() {
 #[test]
 fn srtm_grazing_flight_has_no_cracks() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let set = tileset(dir.path(), &data("srtm/N43E007.hgt"), dem::ReadOptions::default());
+    let set = tileset(
+        dir.path(),
+        &data("srtm/N43E007.hgt"),
+        dem::ReadOptions::default(),
+    );
     compare_with_brute_force(&set, "flyover", 6, 1.0);
 }
 

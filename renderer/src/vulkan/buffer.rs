@@ -17,17 +17,29 @@ pub struct BufferDesc {
 impl BufferDesc {
     /// Device memory the GPU reads (filled by copies from a staging buffer).
     pub fn gpu_only(size: u64, usage: vk::BufferUsageFlags) -> Self {
-        BufferDesc { size, usage: usage | vk::BufferUsageFlags::TRANSFER_DST, location: MemoryLocation::GpuOnly }
+        BufferDesc {
+            size,
+            usage: usage | vk::BufferUsageFlags::TRANSFER_DST,
+            location: MemoryLocation::GpuOnly,
+        }
     }
 
     /// Host-visible memory the CPU writes: staging, and per-frame geometry.
     pub fn upload(size: u64, usage: vk::BufferUsageFlags) -> Self {
-        BufferDesc { size, usage, location: MemoryLocation::CpuToGpu }
+        BufferDesc {
+            size,
+            usage,
+            location: MemoryLocation::CpuToGpu,
+        }
     }
 
     /// Host-visible memory the CPU reads back.
     pub fn readback(size: u64) -> Self {
-        BufferDesc { size, usage: vk::BufferUsageFlags::TRANSFER_DST, location: MemoryLocation::GpuToCpu }
+        BufferDesc {
+            size,
+            usage: vk::BufferUsageFlags::TRANSFER_DST,
+            location: MemoryLocation::GpuToCpu,
+        }
     }
 }
 
@@ -63,20 +75,30 @@ impl Buffer {
             }
         };
         // SAFETY: memory and offset come from the allocator for these requirements.
-        if let Err(e) = unsafe { gpu.device.bind_buffer_memory(raw, allocation.memory(), allocation.offset()) } {
+        if let Err(e) = unsafe {
+            gpu.device
+                .bind_buffer_memory(raw, allocation.memory(), allocation.offset())
+        } {
             let _ = gpu.allocator().free(allocation);
             // SAFETY: not in use.
             unsafe { gpu.device.destroy_buffer(raw, None) };
             return Err(e.into());
         }
         gpu.name(raw, name);
-        Ok(Buffer { raw, size: desc.size, allocation: Some(allocation) })
+        Ok(Buffer {
+            raw,
+            size: desc.size,
+            allocation: Some(allocation),
+        })
     }
 
     /// The CPU view of a host-visible buffer.
     pub fn mapped(&mut self) -> Option<&mut [u8]> {
         let size = self.size as usize;
-        self.allocation.as_mut()?.mapped_slice_mut().map(|s| &mut s[..size])
+        self.allocation
+            .as_mut()?
+            .mapped_slice_mut()
+            .map(|s| &mut s[..size])
     }
 
     pub fn write(&mut self, offset: usize, bytes: &[u8]) -> bool {

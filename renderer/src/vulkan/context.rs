@@ -46,7 +46,10 @@ unsafe extern "system" fn debug_callback(
     data: *const vk::DebugUtilsMessengerCallbackDataEXT<'_>,
     user: *mut c_void,
 ) -> vk::Bool32 {
-    if severity.intersects(vk::DebugUtilsMessageSeverityFlagsEXT::WARNING | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR) {
+    if severity.intersects(
+        vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
+            | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
+    ) {
         // SAFETY: `user` is the counter the Gpu keeps alive until the messenger is destroyed.
         if let Some(counter) = unsafe { (user as *const AtomicU64).as_ref() } {
             counter.fetch_add(1, Ordering::Relaxed);
@@ -64,11 +67,16 @@ unsafe extern "system" fn debug_callback(
 impl Gpu {
     pub fn new(options: &GpuOptions) -> VkResult<Gpu> {
         // SAFETY: loading the system Vulkan loader; failure is reported, not assumed.
-        let entry = unsafe { ash::Entry::load() }
-            .map_err(|e| VkError::Unsupported(format!("cannot load the Vulkan loader (install libvulkan1): {e}")))?;
+        let entry = unsafe { ash::Entry::load() }.map_err(|e| {
+            VkError::Unsupported(format!(
+                "cannot load the Vulkan loader (install libvulkan1): {e}"
+            ))
+        })?;
         // SAFETY: plain enumeration calls on a loaded entry.
         let layers = unsafe { entry.enumerate_instance_layer_properties() }?;
-        let has_layer = layers.iter().any(|l| l.layer_name_as_c_str().is_ok_and(|n| n == VALIDATION_LAYER));
+        let has_layer = layers
+            .iter()
+            .any(|l| l.layer_name_as_c_str().is_ok_and(|n| n == VALIDATION_LAYER));
         if options.validation && !has_layer {
             return Err(VkError::Unsupported(
                 "--validation: the Khronos validation layer is not installed (Debian: vulkan-validationlayers)".into(),
@@ -76,16 +84,26 @@ impl Gpu {
         }
         // SAFETY: as above.
         let extensions = unsafe { entry.enumerate_instance_extension_properties(None) }?;
-        let has_debug_utils =
-            extensions.iter().any(|e| e.extension_name_as_c_str().is_ok_and(|n| n == ash::ext::debug_utils::NAME));
+        let has_debug_utils = extensions.iter().any(|e| {
+            e.extension_name_as_c_str()
+                .is_ok_and(|n| n == ash::ext::debug_utils::NAME)
+        });
 
         let app_name = c"vkterrain";
         let app = vk::ApplicationInfo::default()
             .application_name(app_name)
             .engine_name(app_name)
             .api_version(vk::API_VERSION_1_3);
-        let layer_names: Vec<*const i8> = if options.validation { vec![VALIDATION_LAYER.as_ptr()] } else { vec![] };
-        let ext_names: Vec<*const i8> = if has_debug_utils { vec![ash::ext::debug_utils::NAME.as_ptr()] } else { vec![] };
+        let layer_names: Vec<*const i8> = if options.validation {
+            vec![VALIDATION_LAYER.as_ptr()]
+        } else {
+            vec![]
+        };
+        let ext_names: Vec<*const i8> = if has_debug_utils {
+            vec![ash::ext::debug_utils::NAME.as_ptr()]
+        } else {
+            vec![]
+        };
         let create = vk::InstanceCreateInfo::default()
             .application_info(&app)
             .enabled_layer_names(&layer_names)
@@ -99,7 +117,8 @@ impl Gpu {
             let loader = ash::ext::debug_utils::Instance::new(&entry, &instance);
             let info = vk::DebugUtilsMessengerCreateInfoEXT::default()
                 .message_severity(
-                    vk::DebugUtilsMessageSeverityFlagsEXT::WARNING | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
+                    vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
+                        | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
                 )
                 .message_type(
                     vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
@@ -132,12 +151,18 @@ impl Gpu {
         };
         // SAFETY: physical comes from this instance.
         let properties = unsafe { instance.get_physical_device_properties(physical) };
-        let device_name = properties.device_name_as_c_str().map(|c| c.to_string_lossy().into_owned()).unwrap_or_default();
+        let device_name = properties
+            .device_name_as_c_str()
+            .map(|c| c.to_string_lossy().into_owned())
+            .unwrap_or_default();
 
         let priorities = [1.0f32];
-        let queues = [vk::DeviceQueueCreateInfo::default().queue_family_index(queue_family).queue_priorities(&priorities)];
+        let queues = [vk::DeviceQueueCreateInfo::default()
+            .queue_family_index(queue_family)
+            .queue_priorities(&priorities)];
         let mut v13 = vk::PhysicalDeviceVulkan13Features::default().dynamic_rendering(true);
-        let features = vk::PhysicalDeviceFeatures::default().fill_mode_non_solid(wireframe_supported);
+        let features =
+            vk::PhysicalDeviceFeatures::default().fill_mode_non_solid(wireframe_supported);
         let device_info = vk::DeviceCreateInfo::default()
             .queue_create_infos(&queues)
             .enabled_features(&features)
@@ -146,7 +171,8 @@ impl Gpu {
         let device = unsafe { instance.create_device(physical, &device_info, None) }?;
         // SAFETY: family and index exist (one queue requested).
         let queue = unsafe { device.get_device_queue(queue_family, 0) };
-        let debug_device = has_debug_utils.then(|| ash::ext::debug_utils::Device::new(&instance, &device));
+        let debug_device =
+            has_debug_utils.then(|| ash::ext::debug_utils::Device::new(&instance, &device));
         let allocator = Allocator::new(&AllocatorCreateDesc {
             instance: instance.clone(),
             device: device.clone(),
@@ -177,7 +203,10 @@ impl Gpu {
 
     /// Chooses the device: `--device` by name, else discrete, integrated, virtual, then CPU
     /// (lavapipe). Requires Vulkan 1.3 dynamic rendering and a graphics queue.
-    fn open_device(instance: &ash::Instance, options: &GpuOptions) -> VkResult<(vk::PhysicalDevice, u32, bool)> {
+    fn open_device(
+        instance: &ash::Instance,
+        options: &GpuOptions,
+    ) -> VkResult<(vk::PhysicalDevice, u32, bool)> {
         // SAFETY: enumeration on a valid instance.
         let devices = unsafe { instance.enumerate_physical_devices() }?;
         let mut candidates = Vec::new();
@@ -185,7 +214,10 @@ impl Gpu {
         for pd in devices {
             // SAFETY: pd comes from this instance.
             let props = unsafe { instance.get_physical_device_properties(pd) };
-            let name = props.device_name_as_c_str().map(|c| c.to_string_lossy().into_owned()).unwrap_or_default();
+            let name = props
+                .device_name_as_c_str()
+                .map(|c| c.to_string_lossy().into_owned())
+                .unwrap_or_default();
             if let Some(want) = &options.device {
                 if !name.to_lowercase().contains(&want.to_lowercase()) {
                     rejected.push(format!("{name} (not named {want:?})"));
@@ -203,7 +235,10 @@ impl Gpu {
             }
             // SAFETY: as above.
             let families = unsafe { instance.get_physical_device_queue_family_properties(pd) };
-            let Some(family) = families.iter().position(|f| f.queue_flags.contains(vk::QueueFlags::GRAPHICS)) else {
+            let Some(family) = families
+                .iter()
+                .position(|f| f.queue_flags.contains(vk::QueueFlags::GRAPHICS))
+            else {
                 rejected.push(format!("{name} (no graphics queue)"));
                 continue;
             };
@@ -239,7 +274,9 @@ impl Gpu {
     /// Names a Vulkan object for validation messages and debuggers.
     pub fn name<H: vk::Handle>(&self, handle: H, name: &str) {
         if let (Some(d), Ok(name)) = (&self.debug_device, CString::new(name)) {
-            let info = vk::DebugUtilsObjectNameInfoEXT::default().object_handle(handle).object_name(&name);
+            let info = vk::DebugUtilsObjectNameInfoEXT::default()
+                .object_handle(handle)
+                .object_name(&name);
             // SAFETY: the handle belongs to this device; a failed name is harmless.
             let _ = unsafe { d.set_debug_utils_object_name(&info) };
         }

@@ -26,7 +26,11 @@ impl Image {
         let info = vk::ImageCreateInfo::default()
             .image_type(vk::ImageType::TYPE_2D)
             .format(format)
-            .extent(vk::Extent3D { width: extent.width, height: extent.height, depth: 1 })
+            .extent(vk::Extent3D {
+                width: extent.width,
+                height: extent.height,
+                depth: 1,
+            })
             .mip_levels(1)
             .array_layers(1)
             .samples(vk::SampleCountFlags::TYPE_1)
@@ -52,17 +56,31 @@ impl Image {
             }
         };
         // SAFETY: memory from the allocator for these requirements.
-        unsafe { gpu.device.bind_image_memory(raw, allocation.memory(), allocation.offset()) }?;
+        unsafe {
+            gpu.device
+                .bind_image_memory(raw, allocation.memory(), allocation.offset())
+        }?;
         let view_info = vk::ImageViewCreateInfo::default()
             .image(raw)
             .view_type(vk::ImageViewType::TYPE_2D)
             .format(format)
-            .subresource_range(vk::ImageSubresourceRange::default().aspect_mask(aspect).level_count(1).layer_count(1));
+            .subresource_range(
+                vk::ImageSubresourceRange::default()
+                    .aspect_mask(aspect)
+                    .level_count(1)
+                    .layer_count(1),
+            );
         // SAFETY: the image is bound and the view matches it.
         let view = unsafe { gpu.device.create_image_view(&view_info, None) }?;
         gpu.name(raw, name);
         gpu.name(view, name);
-        Ok(Image { raw, view, format, extent, allocation: Some(allocation) })
+        Ok(Image {
+            raw,
+            view,
+            format,
+            extent,
+            allocation: Some(allocation),
+        })
     }
 
     pub fn destroy(mut self, gpu: &Gpu) {

@@ -32,7 +32,9 @@ pub enum VkError {
 impl From<vk::Result> for VkError {
     fn from(r: vk::Result) -> Self {
         match r {
-            vk::Result::ERROR_OUT_OF_DEVICE_MEMORY | vk::Result::ERROR_OUT_OF_HOST_MEMORY => VkError::OutOfMemory,
+            vk::Result::ERROR_OUT_OF_DEVICE_MEMORY | vk::Result::ERROR_OUT_OF_HOST_MEMORY => {
+                VkError::OutOfMemory
+            }
             vk::Result::ERROR_DEVICE_LOST => VkError::DeviceLost,
             other => VkError::Unexpected(other),
         }

@@ -36,9 +36,27 @@ impl TerrainPipeline {
         gpu.name(layout, "terrain pipeline layout");
         let vert = shader(gpu, spirv::TERRAIN_VERT, "terrain.vert")?;
         let frag = shader(gpu, spirv::TERRAIN_FRAG, "terrain.frag")?;
-        let fill = Self::build(gpu, layout, vert, frag, color, depth, vk::PolygonMode::FILL, "terrain (fill)");
+        let fill = Self::build(
+            gpu,
+            layout,
+            vert,
+            frag,
+            color,
+            depth,
+            vk::PolygonMode::FILL,
+            "terrain (fill)",
+        );
         let wireframe = if gpu.wireframe_supported {
-            Some(Self::build(gpu, layout, vert, frag, color, depth, vk::PolygonMode::LINE, "terrain (wireframe)"))
+            Some(Self::build(
+                gpu,
+                layout,
+                vert,
+                frag,
+                color,
+                depth,
+                vk::PolygonMode::LINE,
+                "terrain (wireframe)",
+            ))
         } else {
             None
         };
@@ -49,7 +67,11 @@ impl TerrainPipeline {
         }
         let fill = fill?;
         let wireframe = wireframe.transpose()?;
-        Ok(TerrainPipeline { layout, fill, wireframe })
+        Ok(TerrainPipeline {
+            layout,
+            fill,
+            wireframe,
+        })
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -65,11 +87,24 @@ impl TerrainPipeline {
     ) -> VkResult<vk::Pipeline> {
         let entry: &CStr = c"main";
         let stages = [
-            vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::VERTEX).module(vert).name(entry),
-            vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::FRAGMENT).module(frag).name(entry),
+            vk::PipelineShaderStageCreateInfo::default()
+                .stage(vk::ShaderStageFlags::VERTEX)
+                .module(vert)
+                .name(entry),
+            vk::PipelineShaderStageCreateInfo::default()
+                .stage(vk::ShaderStageFlags::FRAGMENT)
+                .module(frag)
+                .name(entry),
         ];
-        let bindings = [vk::VertexInputBindingDescription::default().binding(0).stride(4).input_rate(vk::VertexInputRate::VERTEX)];
-        let attributes = [vk::VertexInputAttributeDescription::default().location(0).binding(0).format(vk::Format::R16G16_UINT).offset(0)];
+        let bindings = [vk::VertexInputBindingDescription::default()
+            .binding(0)
+            .stride(4)
+            .input_rate(vk::VertexInputRate::VERTEX)];
+        let attributes = [vk::VertexInputAttributeDescription::default()
+            .location(0)
+            .binding(0)
+            .format(vk::Format::R16G16_UINT)
+            .offset(0)];
         let vertex_input = vk::PipelineVertexInputStateCreateInfo::default()
             .vertex_binding_descriptions(&bindings)
             .vertex_attribute_descriptions(&attributes);
@@ -77,21 +112,26 @@ impl TerrainPipeline {
         let assembly = vk::PipelineInputAssemblyStateCreateInfo::default()
             .topology(vk::PrimitiveTopology::TRIANGLE_FAN)
             .primitive_restart_enable(true);
-        let viewport = vk::PipelineViewportStateCreateInfo::default().viewport_count(1).scissor_count(1);
+        let viewport = vk::PipelineViewportStateCreateInfo::default()
+            .viewport_count(1)
+            .scissor_count(1);
         // No culling: stitching triangles are seen edge-on from either side.
         let raster = vk::PipelineRasterizationStateCreateInfo::default()
             .polygon_mode(polygon)
             .cull_mode(vk::CullModeFlags::NONE)
             .front_face(vk::FrontFace::COUNTER_CLOCKWISE)
             .line_width(1.0);
-        let multisample = vk::PipelineMultisampleStateCreateInfo::default().rasterization_samples(vk::SampleCountFlags::TYPE_1);
+        let multisample = vk::PipelineMultisampleStateCreateInfo::default()
+            .rasterization_samples(vk::SampleCountFlags::TYPE_1);
         // Reversed Z with an infinite far plane: depth 1 at the near plane, 0 at infinity.
         let depth_state = vk::PipelineDepthStencilStateCreateInfo::default()
             .depth_test_enable(true)
             .depth_write_enable(true)
             .depth_compare_op(vk::CompareOp::GREATER_OR_EQUAL);
-        let blend_attachments = [vk::PipelineColorBlendAttachmentState::default().color_write_mask(vk::ColorComponentFlags::RGBA)];
-        let blend = vk::PipelineColorBlendStateCreateInfo::default().attachments(&blend_attachments);
+        let blend_attachments = [vk::PipelineColorBlendAttachmentState::default()
+            .color_write_mask(vk::ColorComponentFlags::RGBA)];
+        let blend =
+            vk::PipelineColorBlendStateCreateInfo::default().attachments(&blend_attachments);
         let dynamic = [vk::DynamicState::VIEWPORT, vk::DynamicState::SCISSOR];
         let dynamic_state = vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&dynamic);
         let color_formats = [color];
@@ -111,8 +151,11 @@ impl TerrainPipeline {
             .layout(layout)
             .push_next(&mut rendering);
         // SAFETY: every pointer in `info` outlives the call.
-        let pipelines = unsafe { gpu.device.create_graphics_pipelines(vk::PipelineCache::null(), &[info], None) }
-            .map_err(|(_, e)| e)?;
+        let pipelines = unsafe {
+            gpu.device
+                .create_graphics_pipelines(vk::PipelineCache::null(), &[info], None)
+        }
+        .map_err(|(_, e)| e)?;
         let pipeline = pipelines[0];
         gpu.name(pipeline, name);
         Ok(pipeline)

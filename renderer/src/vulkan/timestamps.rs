@@ -12,14 +12,25 @@ pub struct Timestamps {
 
 impl Timestamps {
     pub fn new(gpu: &Gpu) -> VkResult<Timestamps> {
-        let info = vk::QueryPoolCreateInfo::default().query_type(vk::QueryType::TIMESTAMP).query_count(2);
+        let info = vk::QueryPoolCreateInfo::default()
+            .query_type(vk::QueryType::TIMESTAMP)
+            .query_count(2);
         // SAFETY: valid create info.
         let pool = unsafe { gpu.device.create_query_pool(&info, None) }?;
         gpu.name(pool, "frame timestamps");
         // SAFETY: plain property query.
-        let families = unsafe { gpu.instance.get_physical_device_queue_family_properties(gpu.physical) };
-        let valid_bits = families.get(gpu.queue_family as usize).map_or(0, |f| f.timestamp_valid_bits);
-        let period_ns = if valid_bits > 0 { f64::from(gpu.properties.limits.timestamp_period) } else { 0.0 };
+        let families = unsafe {
+            gpu.instance
+                .get_physical_device_queue_family_properties(gpu.physical)
+        };
+        let valid_bits = families
+            .get(gpu.queue_family as usize)
+            .map_or(0, |f| f.timestamp_valid_bits);
+        let period_ns = if valid_bits > 0 {
+            f64::from(gpu.properties.limits.timestamp_period)
+        } else {
+            0.0
+        };
         Ok(Timestamps { pool, period_ns })
     }
 
@@ -27,13 +38,21 @@ impl Timestamps {
         // SAFETY: cmd is recording; the pool has two queries.
         unsafe {
             gpu.device.cmd_reset_query_pool(cmd, self.pool, 0, 2);
-            gpu.device.cmd_write_timestamp(cmd, vk::PipelineStageFlags::TOP_OF_PIPE, self.pool, 0);
+            gpu.device
+                .cmd_write_timestamp(cmd, vk::PipelineStageFlags::TOP_OF_PIPE, self.pool, 0);
         }
     }
 
     pub fn end(&self, gpu: &Gpu, cmd: vk::CommandBuffer) {
         // SAFETY: as above.
-        unsafe { gpu.device.cmd_write_timestamp(cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, self.pool, 1) };
+        unsafe {
+            gpu.device.cmd_write_timestamp(
+                cmd,
+                vk::PipelineStageFlags::BOTTOM_OF_PIPE,
+                self.pool,
+                1,
+            )
+        };
     }
 
     /// Milliseconds between the two stamps of the finished frame, if the queue can time.
@@ -43,7 +62,15 @@ impl Timestamps {
         }
         let mut ticks = [0u64; 2];
         // SAFETY: the frame's fence was waited on, so both results are available.
-        unsafe { gpu.device.get_query_pool_results(self.pool, 0, &mut ticks, vk::QueryResultFlags::TYPE_64) }.ok()?;
+        unsafe {
+            gpu.device.get_query_pool_results(
+                self.pool,
+                0,
+                &mut ticks,
+                vk::QueryResultFlags::TYPE_64,
+            )
+        }
+        .ok()?;
         Some(ticks[1].saturating_sub(ticks[0]) as f64 * self.period_ns / 1e6)
     }
 
