@@ -5,6 +5,7 @@
 //! target/release/tilebench throughput   # tiletool build end to end, samples/min, peak memory
 //! target/release/tilebench economy      # vertices vs measured error, against Martini/Delatin
 //! target/release/tilebench acmr         # vertex-cache miss ratio of the fan order vs meshopt
+//! target/release/tilebench frames       # vkterrain flights: LOD at tau 1, 2, 4 vs brute force
 //! target/release/tilebench all
 //! ```
 //!
@@ -35,12 +36,14 @@ fn main() -> Result<()> {
         "throughput" => throughput(),
         "economy" => economy(),
         "acmr" => acmr(),
+        "frames" => frames(),
         "all" => {
             throughput()?;
             economy()?;
-            acmr()
+            acmr()?;
+            frames()
         }
-        other => bail!("unknown benchmark {other:?}: throughput, economy, acmr or all"),
+        other => bail!("unknown benchmark {other:?}: throughput, economy, acmr, frames or all"),
     }
 }
 
@@ -362,6 +365,96 @@ fn acmr() -> Result<()> {
         }
     }
     println!("\nWorst ratio at 16 entries: {worst:.3}.\n");
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(())
+}
+
+/// A vkterrain flight's JSON summary.
+fn flight(
+    vkterrain: &Path,
+    set: &Path,
+    path: &str,
+    frames: u32,
+    extra: &[&str],
+) -> Result<serde_json::Value> {
+    let frames = frames.to_string();
+    let mut args = vec![
+        set.to_str().context("utf-8 path")?,
+        "--headless",
+        "--path",
+        path,
+        "--frames",
+        &frames,
+        "--size",
+        "1024x768",
+    ];
+    args.extend(extra);
+    let o = Command::new(vkterrain).args(&args).output()?;
+    if !o.status.success() {
+        bail!(
+            "vkterrain {args:?} failed: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+    }
+    Ok(serde_json::from_slice(&o.stdout)?)
+}
+
+/// LOD against brute force on the same path in the same run, at 1024 x 768.
+fn frames() -> Result<()> {
+    let exe = std::env::current_exe()?;
+    let vkterrain = exe.with_file_name("vkterrain");
+    if !vkterrain.exists() {
+        bail!(
+            "{} not found: cargo build --release -p renderer first",
+            vkterrain.display()
+        );
+    }
+    let dir = std::env::temp_dir().join(format!("tilebench-frames-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)?;
+    let params = BuildParams::default();
+    let puget = dem::read(
+        &[data("puget/ps_height_1k.png")?],
+        &ReadOptions {
+            spacing: Some(160.0),
+            vertical_scale: Some(0.1),
+            ..Default::default()
+        },
+    )?;
+    let n48 = dem::read(&[data("srtm/N48W125.hgt")?], &ReadOptions::default())?;
+    println!("### vkterrain flights, 1024 x 768, 60 frames per path, all in the same run\n");
+    println!("Frame time is wall time per frame (CPU work plus waiting for the GPU; on lavapipe the GPU is the CPU).");
+    println!("CPU share: cull + LOD + stitch + upload + record over frame time.\n");
+    println!("| dataset | path | mode | median ms | p95 ms | triangles/frame | Mtri/s | CPU ms (median) | CPU share | brute / this (median) |");
+    println!("|---|---|---|---:|---:|---:|---:|---:|---:|---:|");
+    for (name, grid) in [("Puget 1K", &puget), ("SRTM1 N48W125", &n48)] {
+        let set = dir.join("f.vkt");
+        build(grid, &params, &set)?;
+        for path in ["flyover", "orbit"] {
+            let brute = flight(&vkterrain, &set, path, 60, &["--brute-force"])?;
+            let brute_ms = brute["frame_ms_median"].as_f64().unwrap_or(f64::NAN);
+            let mut rows = vec![("brute force".to_string(), brute)];
+            for tau in ["1", "2", "4"] {
+                rows.push((
+                    format!("tau {tau}"),
+                    flight(&vkterrain, &set, path, 60, &["--tau", tau])?,
+                ));
+            }
+            for (mode, s) in rows {
+                let f = |k: &str| s[k].as_f64().unwrap_or(f64::NAN);
+                println!(
+                "| {name} | {path} | {mode} | {:.1} | {:.1} | {:.0} | {:.1} | {:.2} | {:.1}% | {:.1}x |",
+                f("frame_ms_median"),
+                f("frame_ms_p95"),
+                f("triangles_per_frame_mean"),
+                f("mtri_per_s"),
+                f("cpu_ms_median"),
+                100.0 * f("cpu_share"),
+                brute_ms / f("frame_ms_median")
+            );
+            }
+        }
+    }
+    println!();
     let _ = std::fs::remove_dir_all(&dir);
     Ok(())
 }

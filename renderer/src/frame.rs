@@ -36,6 +36,17 @@ pub struct Settings {
     pub no_stitch: bool,
 }
 
+/// Where a windowed frame goes: the acquired swapchain image, copied into after rendering.
+#[derive(Clone, Copy, Debug)]
+pub struct Present {
+    pub image: vk::Image,
+    pub extent: vk::Extent2D,
+    /// Signalled when the image is acquired; the copy waits for it.
+    pub acquired: vk::Semaphore,
+    /// Signalled when the copy is done; presentation waits for it.
+    pub done: vk::Semaphore,
+}
+
 /// Per-draw constants, laid out as the vertex shader's push-constant block.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -140,6 +151,7 @@ impl Renderer {
         settings: &Settings,
         target: &mut Target,
         screenshot: bool,
+        present: Option<Present>,
     ) -> VkResult<(FrameRecord, Option<Vec<u8>>)> {
         let extent = target.extent();
         let view = camera.view(extent.width, extent.height);
@@ -390,6 +402,9 @@ impl Renderer {
         if screenshot {
             target.record_readback(gpu, self.cmd);
         }
+        if let Some(p) = &present {
+            target.record_blit(gpu, self.cmd, p.image, p.extent, screenshot);
+        }
         self.timestamps.end(gpu, self.cmd);
         // SAFETY: recording began above.
         unsafe { gpu.device.end_command_buffer(self.cmd)? };
@@ -397,7 +412,14 @@ impl Renderer {
 
         // Submit and wait: headless frames are measured one at a time.
         let cmds = [self.cmd];
-        let submit = vk::SubmitInfo::default().command_buffers(&cmds);
+        let waits: Vec<vk::Semaphore> = present.iter().map(|p| p.acquired).collect();
+        let stages = vec![vk::PipelineStageFlags::TRANSFER; waits.len()];
+        let signals: Vec<vk::Semaphore> = present.iter().map(|p| p.done).collect();
+        let submit = vk::SubmitInfo::default()
+            .command_buffers(&cmds)
+            .wait_semaphores(&waits)
+            .wait_dst_stage_mask(&stages)
+            .signal_semaphores(&signals);
         // SAFETY: the command buffer is complete; the fence is unsignalled.
         unsafe {
             gpu.device.queue_submit(gpu.queue, &[submit], self.fence)?;

@@ -77,8 +77,15 @@ fn run(
         let shot =
             flight.out.is_some() && flight.screenshot_every > 0 && k % flight.screenshot_every == 0;
         let begun = Instant::now();
-        let (mut record, pixels) =
-            renderer.render(gpu, flight.terrain, &camera, &flight.settings, target, shot)?;
+        let (mut record, pixels) = renderer.render(
+            gpu,
+            flight.terrain,
+            &camera,
+            &flight.settings,
+            target,
+            shot,
+            None,
+        )?;
         record.frame = k;
         record.time_s = t;
         record.frame_ms = begun.elapsed().as_secs_f64() * 1000.0;

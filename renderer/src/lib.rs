@@ -18,3 +18,4 @@ pub mod stitch;
 pub mod target;
 pub mod terrain;
 pub mod vulkan;
+pub mod window;

@@ -12,10 +12,11 @@ use anyhow::{bail, Context, Result};
 use clap::Parser;
 use renderer::frame::Settings;
 use renderer::headless::{fly, Flight};
-use renderer::log::{write_csv, Summary};
+use renderer::log::{write_csv, FrameRecord, Summary};
 use renderer::path::CameraPath;
 use renderer::terrain::Terrain;
 use renderer::vulkan::{Gpu, GpuOptions};
+use renderer::window::{self, WindowOptions};
 
 #[derive(Parser)]
 #[command(
@@ -26,15 +27,22 @@ use renderer::vulkan::{Gpu, GpuOptions};
 struct Cli {
     /// Tile set built by `tiletool build`.
     tileset: PathBuf,
-    /// Render offscreen (the only mode of this build).
-    #[arg(long)]
+    /// Render offscreen (the default when there is no display).
+    #[arg(long, conflicts_with = "window")]
     headless: bool,
+    /// Open a window and fly with WASD/QE and the mouse (the default with a display).
+    #[arg(long)]
+    window: bool,
+    /// Window mode, for tests: ask for a new window size at a frame, FRAME=WxH.
+    #[arg(long, hide = true, value_parser = parse_resize)]
+    resize_at: Option<(u64, (u32, u32))>,
     /// Camera path: a CSV keyframe file, or `orbit` / `flyover` generated from the tile set.
     #[arg(long, default_value = "flyover")]
     path: String,
-    /// Frames to render; frame k shows the path at k * duration / frames.
-    #[arg(long, default_value_t = 120)]
-    frames: u64,
+    /// Frames to render; frame k shows the path at k * duration / frames. In a window: close
+    /// after this many frames (default: run until closed).
+    #[arg(long)]
+    frames: Option<u64>,
     #[arg(long, default_value = "1024x768", value_parser = parse_size)]
     size: (u32, u32),
     /// Pixel tolerance of the level of detail.
@@ -91,6 +99,14 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
     Ok((w, h))
 }
 
+fn parse_resize(s: &str) -> Result<(u64, (u32, u32)), String> {
+    let (frame, size) = s.split_once('=').ok_or("expected FRAME=WxH")?;
+    Ok((
+        frame.parse().map_err(|_| "expected FRAME=WxH")?,
+        parse_size(size)?,
+    ))
+}
+
 fn parse_rgb(s: &str) -> Result<[f32; 3], String> {
     let v: Vec<f32> = s
         .split(',')
@@ -114,8 +130,6 @@ fn main() -> ExitCode {
 }
 
 fn run(cli: Cli) -> Result<ExitCode> {
-    // Offscreen is the only mode of this build, so --headless is accepted and implied.
-    let _ = cli.headless;
     let terrain = Terrain::open(&cli.tileset)?;
     let path = match cli.path.as_str() {
         "orbit" => CameraPath::orbit(&terrain),
@@ -130,21 +144,16 @@ fn run(cli: Cli) -> Result<ExitCode> {
             );
         }
     }
-    if cli.frames == 0 {
+    if cli.frames == Some(0) {
         bail!("--frames must be at least 1");
     }
+    let has_display =
+        std::env::var_os("DISPLAY").is_some() || std::env::var_os("WAYLAND_DISPLAY").is_some();
+    let windowed = cli.window || (!cli.headless && has_display);
     if let Some(out) = &cli.out {
         std::fs::create_dir_all(out)
             .with_context(|| format!("{}: cannot create", out.display()))?;
     }
-    if let Some(record) = &cli.record {
-        std::fs::write(record, path.to_csv())
-            .with_context(|| format!("{}: cannot write", record.display()))?;
-    }
-    let gpu = Gpu::new(&GpuOptions {
-        validation: cli.validation,
-        device: cli.device.clone(),
-    })?;
     let settings = Settings {
         tau: cli.tau,
         forced_level: cli.level,
@@ -154,10 +163,35 @@ fn run(cli: Cli) -> Result<ExitCode> {
         sky: cli.sky,
         no_stitch: cli.no_stitch,
     };
+    let gpu_options = GpuOptions {
+        validation: cli.validation,
+        device: cli.device.clone(),
+        display: None,
+    };
+    if windowed {
+        let options = WindowOptions {
+            gpu: gpu_options,
+            size: cli.size,
+            settings,
+            gpu_budget_bytes: cli.gpu_budget_mb << 20,
+            frames: cli.frames,
+            resize_at: cli.resize_at,
+            screenshot_dir: cli.out.clone().unwrap_or_else(|| PathBuf::from(".")),
+            record: cli.record.clone(),
+            start: path.at(path.keys[0].time),
+        };
+        let (records, validation) = window::run(&terrain, options).map_err(anyhow::Error::msg)?;
+        return finish(&cli, &terrain, &records, "window", validation);
+    }
+    if let Some(record) = &cli.record {
+        std::fs::write(record, path.to_csv())
+            .with_context(|| format!("{}: cannot write", record.display()))?;
+    }
+    let gpu = Gpu::new(&gpu_options)?;
     let flight = Flight {
         terrain: &terrain,
         path: &path,
-        frames: cli.frames,
+        frames: cli.frames.unwrap_or(120),
         size: cli.size,
         settings,
         gpu_budget_bytes: cli.gpu_budget_mb << 20,
@@ -166,9 +200,23 @@ fn run(cli: Cli) -> Result<ExitCode> {
     };
     let records = fly(&gpu, &flight)?;
     let validation = gpu.validation_messages();
+    let device = gpu.device_name.clone();
+    drop(gpu);
+    finish(&cli, &terrain, &records, &device, validation)
+}
+
+/// Writes the log and its summary, prints the summary, and turns validation messages into
+/// the exit code.
+fn finish(
+    cli: &Cli,
+    terrain: &Terrain,
+    records: &[FrameRecord],
+    device: &str,
+    validation: u64,
+) -> Result<ExitCode> {
     let summary = Summary::of(
-        &records,
-        &gpu.device_name,
+        records,
+        device,
         cli.size,
         cli.tau,
         cli.brute_force,
@@ -176,14 +224,13 @@ fn run(cli: Cli) -> Result<ExitCode> {
     );
     let json = serde_json::to_string_pretty(&summary)?;
     if let Some(log) = &cli.log {
-        write_csv(log, terrain.levels, &records)
+        write_csv(log, terrain.levels, records)
             .with_context(|| format!("{}: cannot write", log.display()))?;
         let json_path = log.with_extension("json");
         std::fs::write(&json_path, &json)
             .with_context(|| format!("{}: cannot write", json_path.display()))?;
     }
     println!("{json}");
-    drop(gpu);
     if validation > 0 {
         eprintln!("vkterrain: {validation} validation messages");
         return Ok(ExitCode::from(2));

@@ -115,6 +115,116 @@ impl Target {
         }
     }
 
+    /// Records a copy of the rendered image into a swapchain image and leaves that ready to
+    /// present. `after_readback`: the colour image is already in TRANSFER_SRC_OPTIMAL.
+    pub fn record_blit(
+        &self,
+        gpu: &Gpu,
+        cmd: vk::CommandBuffer,
+        dst: vk::Image,
+        dst_extent: vk::Extent2D,
+        after_readback: bool,
+    ) {
+        let range = vk::ImageSubresourceRange::default()
+            .aspect_mask(vk::ImageAspectFlags::COLOR)
+            .level_count(1)
+            .layer_count(1);
+        let barrier = |image, old, new, src, dst_access| {
+            vk::ImageMemoryBarrier::default()
+                .src_access_mask(src)
+                .dst_access_mask(dst_access)
+                .old_layout(old)
+                .new_layout(new)
+                .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                .image(image)
+                .subresource_range(range)
+        };
+        let (src_old, src_access) = if after_readback {
+            (
+                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                vk::AccessFlags::TRANSFER_READ,
+            )
+        } else {
+            (
+                vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+                vk::AccessFlags::COLOR_ATTACHMENT_WRITE,
+            )
+        };
+        let before = [
+            barrier(
+                self.color.raw,
+                src_old,
+                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                src_access,
+                vk::AccessFlags::TRANSFER_READ,
+            ),
+            barrier(
+                dst,
+                vk::ImageLayout::UNDEFINED,
+                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                vk::AccessFlags::empty(),
+                vk::AccessFlags::TRANSFER_WRITE,
+            ),
+        ];
+        let after = [barrier(
+            dst,
+            vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+            vk::ImageLayout::PRESENT_SRC_KHR,
+            vk::AccessFlags::TRANSFER_WRITE,
+            vk::AccessFlags::empty(),
+        )];
+        let layers = vk::ImageSubresourceLayers::default()
+            .aspect_mask(vk::ImageAspectFlags::COLOR)
+            .layer_count(1);
+        let e = self.extent();
+        let corner = |w: u32, h: u32| {
+            [
+                vk::Offset3D::default(),
+                vk::Offset3D {
+                    x: w as i32,
+                    y: h as i32,
+                    z: 1,
+                },
+            ]
+        };
+        let blit = vk::ImageBlit::default()
+            .src_subresource(layers)
+            .src_offsets(corner(e.width, e.height))
+            .dst_subresource(layers)
+            .dst_offsets(corner(dst_extent.width, dst_extent.height));
+        // SAFETY: recording outside rendering; both images are live for the frame.
+        unsafe {
+            gpu.device.cmd_pipeline_barrier(
+                cmd,
+                vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT | vk::PipelineStageFlags::TRANSFER,
+                vk::PipelineStageFlags::TRANSFER,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[],
+                &before,
+            );
+            gpu.device.cmd_blit_image(
+                cmd,
+                self.color.raw,
+                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                dst,
+                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                &[blit],
+                vk::Filter::NEAREST,
+            );
+            gpu.device.cmd_pipeline_barrier(
+                cmd,
+                vk::PipelineStageFlags::TRANSFER,
+                vk::PipelineStageFlags::BOTTOM_OF_PIPE,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[],
+                &after,
+            );
+        }
+    }
+
     /// The last read-back image as RGBA8 rows (after the frame's fence).
     pub fn pixels(&mut self) -> Option<Vec<u8>> {
         self.readback.mapped().map(|m| m.to_vec())

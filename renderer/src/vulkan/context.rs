@@ -18,11 +18,13 @@ pub struct GpuOptions {
     pub validation: bool,
     /// Pick the device whose name contains this (case-insensitive).
     pub device: Option<String>,
+    /// Presenting to windows of this display: enables the surface and swapchain extensions.
+    pub display: Option<raw_window_handle::RawDisplayHandle>,
 }
 
 /// The Vulkan device and everything that lives as long as it.
 pub struct Gpu {
-    _entry: ash::Entry,
+    pub entry: ash::Entry,
     pub instance: ash::Instance,
     messenger: Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>,
     debug_device: Option<ash::ext::debug_utils::Device>,
@@ -99,11 +101,17 @@ impl Gpu {
         } else {
             vec![]
         };
-        let ext_names: Vec<*const i8> = if has_debug_utils {
+        let mut ext_names: Vec<*const i8> = if has_debug_utils {
             vec![ash::ext::debug_utils::NAME.as_ptr()]
         } else {
             vec![]
         };
+        if let Some(display) = options.display {
+            let surface = ash_window::enumerate_required_extensions(display).map_err(|e| {
+                VkError::Unsupported(format!("this display cannot present with Vulkan: {e}"))
+            })?;
+            ext_names.extend_from_slice(surface);
+        }
         let create = vk::InstanceCreateInfo::default()
             .application_info(&app)
             .enabled_layer_names(&layer_names)
@@ -135,6 +143,24 @@ impl Gpu {
         };
 
         let result = Self::open_device(&instance, options);
+        // With a display, the device must offer swapchains.
+        let result = result.and_then(|(pd, family, wire)| {
+            if options.display.is_none() {
+                return Ok((pd, family, wire));
+            }
+            // SAFETY: enumeration on a device of this instance.
+            let exts = unsafe { instance.enumerate_device_extension_properties(pd) }?;
+            if exts.iter().any(|e| {
+                e.extension_name_as_c_str()
+                    .is_ok_and(|n| n == ash::khr::swapchain::NAME)
+            }) {
+                Ok((pd, family, wire))
+            } else {
+                Err(VkError::Unsupported(
+                    "the device cannot present to windows (no VK_KHR_swapchain)".into(),
+                ))
+            }
+        });
         let (physical, queue_family, wireframe_supported) = match result {
             Ok(v) => v,
             Err(e) => {
@@ -163,8 +189,14 @@ impl Gpu {
         let mut v13 = vk::PhysicalDeviceVulkan13Features::default().dynamic_rendering(true);
         let features =
             vk::PhysicalDeviceFeatures::default().fill_mode_non_solid(wireframe_supported);
+        let device_extensions: Vec<*const i8> = if options.display.is_some() {
+            vec![ash::khr::swapchain::NAME.as_ptr()]
+        } else {
+            vec![]
+        };
         let device_info = vk::DeviceCreateInfo::default()
             .queue_create_infos(&queues)
+            .enabled_extension_names(&device_extensions)
             .enabled_features(&features)
             .push_next(&mut v13);
         // SAFETY: the features were checked in open_device; pointers outlive the call.
@@ -182,7 +214,7 @@ impl Gpu {
             allocation_sizes: Default::default(),
         })?;
         let gpu = Gpu {
-            _entry: entry,
+            entry,
             instance,
             messenger,
             debug_device,

@@ -5,6 +5,7 @@ pub mod buffer;
 pub mod context;
 pub mod image;
 pub mod pipeline;
+pub mod swapchain;
 pub mod timestamps;
 
 pub use buffer::Buffer;

@@ -1,0 +1,121 @@
+//! Window mode under Xvfb with validation on: opens, draws frames, resizes, closes cleanly,
+//! writes its log and the path flown.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use tiles::{build_tileset, BuildParams, Grid, TileSetMeta};
+
+struct Xvfb(Child, String);
+
+impl Drop for Xvfb {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// Starts Xvfb on the first free display from :91 and waits for its socket.
+fn xvfb() -> Xvfb {
+    for n in 91..120 {
+        if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists()
+            || Path::new(&format!("/tmp/.X{n}-lock")).exists()
+        {
+            continue;
+        }
+        let display = format!(":{n}");
+        let child = Command::new("Xvfb")
+            .args([&display, "-screen", "0", "1280x1024x24", "-nolisten", "tcp"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap_or_else(|e| {
+                panic!("cannot start Xvfb ({e}): install it (Debian: xvfb), .ci/setup does")
+            });
+        let started = Instant::now();
+        while started.elapsed() < Duration::from_secs(10) {
+            if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists() {
+                return Xvfb(child, display);
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        panic!("Xvfb {display} did not come up");
+    }
+    panic!("no free X display number");
+}
+
+#[test]
+fn window_opens_draws_resizes_and_closes() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let sample = PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../sample/ps_height_1k.png"
+    ));
+    assert!(
+        sample.exists(),
+        "bundled sample missing: {}",
+        sample.display()
+    );
+    let grid = dem::read(
+        &[sample],
+        &dem::ReadOptions {
+            spacing: Some(160.0),
+            vertical_scale: Some(0.1),
+            ..Default::default()
+        },
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let view = Grid {
+        width: grid.width,
+        height: grid.height,
+        heights: &grid.heights,
+        spacing_x: grid.spacing_x,
+        spacing_y: grid.spacing_y,
+    };
+    let set = dir.path().join("set.vkt");
+    build_tileset(
+        &view,
+        &BuildParams::default(),
+        &TileSetMeta::default(),
+        &set,
+        &|| {},
+    )
+    .expect("build");
+
+    let x = xvfb();
+    let (log, record) = (dir.path().join("win.csv"), dir.path().join("flown.csv"));
+    let o = Command::new(env!("CARGO_BIN_EXE_vkterrain"))
+        .args([
+            set.to_str().expect("utf-8"),
+            "--window",
+            "--validation",
+            "--frames",
+            "24",
+            "--size",
+            "640x480",
+        ])
+        .args([
+            "--resize-at",
+            "8=400x300",
+            "--log",
+            log.to_str().expect("utf-8"),
+            "--record",
+            record.to_str().expect("utf-8"),
+        ])
+        .env("DISPLAY", &x.1)
+        .output()
+        .expect("vkterrain runs");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "exit {:?}: {err}", o.status.code());
+    assert!(!err.contains("validation"), "{err}");
+    assert!(
+        err.contains("swapchain 400x300"),
+        "the window was not resized: {err}"
+    );
+    let rows = std::fs::read_to_string(&log).expect("log").lines().count();
+    assert_eq!(rows, 25, "header + 24 frames");
+    assert!(std::fs::read_to_string(&record)
+        .expect("path")
+        .starts_with("time_s,"));
+}
