@@ -47,6 +47,14 @@ pub struct Present {
     pub done: vk::Semaphore,
 }
 
+/// Where a frame goes: the render target, whether to read it back, and the window image to
+/// copy it into.
+pub struct Output<'t> {
+    pub target: &'t mut Target,
+    pub screenshot: bool,
+    pub present: Option<Present>,
+}
+
 /// Per-draw constants, laid out as the vertex shader's push-constant block.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -149,10 +157,13 @@ impl Renderer {
         terrain: &Terrain,
         camera: &Camera,
         settings: &Settings,
-        target: &mut Target,
-        screenshot: bool,
-        present: Option<Present>,
+        output: Output<'_>,
     ) -> VkResult<(FrameRecord, Option<Vec<u8>>)> {
+        let Output {
+            target,
+            screenshot,
+            present,
+        } = output;
         let extent = target.extent();
         let view = camera.view(extent.width, extent.height);
         let mut record = FrameRecord {
@@ -448,7 +459,7 @@ impl Renderer {
         for i in 0..terrain.levels {
             let Some(l) = tile.level(i) else { continue };
             positions.extend_from_slice(bytemuck::cast_slice(l.positions));
-            while indices.len() % 4 != 0 {
+            while !indices.len().is_multiple_of(4) {
                 indices.push(0);
             }
             let index_type = if l.entry.index_width == 2 {

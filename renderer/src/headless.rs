@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use crate::frame::{Renderer, Settings};
+use crate::frame::{Output, Renderer, Settings};
 use crate::log::FrameRecord;
 use crate::path::CameraPath;
 use crate::target::Target;
@@ -82,9 +82,11 @@ fn run(
             flight.terrain,
             &camera,
             &flight.settings,
-            target,
-            shot,
-            None,
+            Output {
+                target,
+                screenshot: shot,
+                present: None,
+            },
         )?;
         record.frame = k;
         record.time_s = t;

@@ -28,7 +28,7 @@ pub struct Stitch {
 /// Along-side coordinate of a packed vertex on side `k` (N/S: x, E/W: y).
 fn along(p: u32, k: usize) -> u32 {
     let (x, y, _) = unpack(p);
-    if k % 2 == 0 {
+    if k.is_multiple_of(2) {
         x
     } else {
         y

@@ -18,7 +18,7 @@ use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
 use crate::camera::Camera;
-use crate::frame::{Present, Renderer, Settings};
+use crate::frame::{Output, Present, Renderer, Settings};
 use crate::headless::write_png;
 use crate::log::FrameRecord;
 use crate::path::{CameraPath, Keyframe};
@@ -298,9 +298,11 @@ impl App<'_> {
             self.terrain,
             &self.camera,
             &self.options.settings,
-            &mut live.target,
-            shot,
-            Some(present),
+            Output {
+                target: &mut live.target,
+                screenshot: shot,
+                present: Some(present),
+            },
         );
         let (mut record, pixels) = match result {
             Ok(r) => r,
@@ -370,15 +372,13 @@ impl ApplicationHandler for App<'_> {
                 self.dragging = state == ElementState::Pressed;
                 self.last_cursor = None;
             }
-            WindowEvent::CursorMoved { position, .. } => {
-                if self.dragging {
-                    if let Some((x, y)) = self.last_cursor {
-                        self.camera.yaw -= (position.x - x) * 0.003;
-                        self.camera.pitch =
-                            (self.camera.pitch - (position.y - y) * 0.003).clamp(-1.5, 1.5);
-                    }
-                    self.last_cursor = Some((position.x, position.y));
+            WindowEvent::CursorMoved { position, .. } if self.dragging => {
+                if let Some((x, y)) = self.last_cursor {
+                    self.camera.yaw -= (position.x - x) * 0.003;
+                    self.camera.pitch =
+                        (self.camera.pitch - (position.y - y) * 0.003).clamp(-1.5, 1.5);
                 }
+                self.last_cursor = Some((position.x, position.y));
             }
             WindowEvent::KeyboardInput { event, .. } => {
                 let PhysicalKey::Code(code) = event.physical_key else {

@@ -25,18 +25,21 @@ fn xvfb() -> Xvfb {
             continue;
         }
         let display = format!(":{n}");
-        let child = Command::new("Xvfb")
-            .args([&display, "-screen", "0", "1280x1024x24", "-nolisten", "tcp"])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap_or_else(|e| {
-                panic!("cannot start Xvfb ({e}): install it (Debian: xvfb), .ci/setup does")
-            });
+        let server = Xvfb(
+            Command::new("Xvfb")
+                .args([&display, "-screen", "0", "1280x1024x24", "-nolisten", "tcp"])
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .spawn()
+                .unwrap_or_else(|e| {
+                    panic!("cannot start Xvfb ({e}): install it (Debian: xvfb), .ci/setup does")
+                }),
+            display.clone(),
+        );
         let started = Instant::now();
         while started.elapsed() < Duration::from_secs(10) {
             if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists() {
-                return Xvfb(child, display);
+                return server;
             }
             std::thread::sleep(Duration::from_millis(50));
         }

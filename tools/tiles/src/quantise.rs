@@ -70,7 +70,7 @@ mod tests {
     fn round_trip_error_is_at_most_half_a_step() {
         let step = lattice_step(4384.0, 4371.0);
         assert!(
-            step >= 4384.0 / 16382.0 && step < 2.0 * 4384.0 / 16382.0,
+            (4384.0 / 16382.0..2.0 * 4384.0 / 16382.0).contains(&step),
             "{step}"
         );
         let q = Quantiser::for_tile(-13.0, step);

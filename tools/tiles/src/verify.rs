@@ -79,46 +79,28 @@ pub fn verify(set: &TileSet, source: Option<&Grid>) -> VerifyReport {
 /// shared height lattice), or stitching could not close the seam exactly.
 fn check_shared_edges(set: &TileSet, tile: &Tile, report: &mut VerifyReport) {
     let (tx, ty) = (tile.header.tx, tile.header.ty);
-    let side = |t: &Tile, on: &dyn Fn(u32, u32) -> Option<u32>| -> Vec<(u32, u32)> {
-        let mut v: Vec<(u32, u32)> = t
-            .vertices()
+    // Heights (as bits) of a tile's vertices on a column (`vertical`) or row, by position along it.
+    let edge = |t: &Tile, vertical: bool, at: u32| -> std::collections::HashMap<u32, u32> {
+        t.vertices()
             .iter()
-            .filter_map(|&(x, y, z)| on(x, y).map(|p| (p, z.to_bits())))
-            .collect();
-        v.sort_unstable();
-        v
+            .filter_map(|&(x, y, z)| {
+                let (on, along) = if vertical { (x, y) } else { (y, x) };
+                (on == at).then_some((along, z.to_bits()))
+            })
+            .collect()
     };
-    let neighbours: [(
-        u32,
-        u32,
-        &dyn Fn(u32, u32) -> Option<u32>,
-        &dyn Fn(u32, u32) -> Option<u32>,
-    ); 2] = [
-        (
-            tx + 1,
-            ty,
-            &|x, y| (x == TILE_CELLS).then_some(y),
-            &|x, y| (x == 0).then_some(y),
-        ),
-        (
-            tx,
-            ty + 1,
-            &|x, y| (y == TILE_CELLS).then_some(x),
-            &|x, y| (y == 0).then_some(x),
-        ),
-    ];
-    for (nx, ny, mine, theirs) in neighbours {
+    // East neighbour (shared column) and south neighbour (shared row).
+    for (nx, ny, vertical) in [(tx + 1, ty, true), (tx, ty + 1, false)] {
         if nx >= set.header().tiles_x || ny >= set.header().tiles_y {
             continue;
         }
         let Ok(other) = set.tile(nx, ny) else {
             continue;
         };
-        let (a, b) = (side(tile, mine), side(&other, theirs));
-        let heights_b: std::collections::HashMap<u32, u32> = b.into_iter().collect();
-        if let Some(&(p, _)) = a
+        let (mine, theirs) = (edge(tile, vertical, TILE_CELLS), edge(&other, vertical, 0));
+        if let Some((p, _)) = mine
             .iter()
-            .find(|(p, z)| heights_b.get(p).is_some_and(|zb| zb != z))
+            .find(|(p, z)| theirs.get(p).is_some_and(|zb| zb != *z))
         {
             report.problems.push(format!(
                 "{}: tiles {tx},{ty} and {nx},{ny} store different heights for their shared point {p} (seam cannot close)",
