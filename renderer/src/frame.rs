@@ -108,6 +108,14 @@ pub struct Renderer {
     frame: u64,
 }
 
+/// A frame recorded once and replayed (see [`Renderer::record_static`]).
+pub struct StaticFrame {
+    cmd: vk::CommandBuffer,
+    stitch: Option<Buffer>,
+    staging: Vec<Buffer>,
+    record: FrameRecord,
+}
+
 /// What was drawn for a tile this frame.
 struct Draw {
     tile: usize,
@@ -159,11 +167,44 @@ impl Renderer {
         settings: &Settings,
         output: Output<'_>,
     ) -> VkResult<(FrameRecord, Option<Vec<u8>>)> {
-        let Output {
-            target,
+        let present = output.present;
+        let screenshot = output.screenshot;
+        let (mut record, staging) = self.record(
+            gpu,
+            terrain,
+            camera,
+            settings,
+            &*output.target,
             screenshot,
             present,
-        } = output;
+        )?;
+        self.submit_and_wait(gpu, self.cmd, present)?;
+        for s in staging {
+            s.destroy(gpu);
+        }
+        record.gpu_ms = self.timestamps.read_ms(gpu).unwrap_or(f64::NAN);
+        let pixels = if screenshot {
+            output.target.pixels()
+        } else {
+            None
+        };
+        self.frame += 1;
+        Ok((record, pixels))
+    }
+
+    /// Records a whole frame into `self.cmd` (culling, levels, stitches, uploads, draws);
+    /// returns its record and the staging buffers to free after it ran.
+    #[allow(clippy::too_many_arguments)]
+    fn record(
+        &mut self,
+        gpu: &Gpu,
+        terrain: &Terrain,
+        camera: &Camera,
+        settings: &Settings,
+        target: &Target,
+        screenshot: bool,
+        present: Option<Present>,
+    ) -> VkResult<(FrameRecord, Vec<Buffer>)> {
         let extent = target.extent();
         let view = camera.view(extent.width, extent.height);
         let mut record = FrameRecord {
@@ -421,8 +462,17 @@ impl Renderer {
         unsafe { gpu.device.end_command_buffer(self.cmd)? };
         record.cpu_record_ms = ms(t);
 
-        // Submit and wait: headless frames are measured one at a time.
-        let cmds = [self.cmd];
+        Ok((record, staging))
+    }
+
+    /// Submits `cmd` and waits for it: frames are measured one at a time.
+    fn submit_and_wait(
+        &self,
+        gpu: &Gpu,
+        cmd: vk::CommandBuffer,
+        present: Option<Present>,
+    ) -> VkResult<()> {
+        let cmds = [cmd];
         let waits: Vec<vk::Semaphore> = present.iter().map(|p| p.acquired).collect();
         let stages = vec![vk::PipelineStageFlags::TRANSFER; waits.len()];
         let signals: Vec<vk::Semaphore> = present.iter().map(|p| p.done).collect();
@@ -437,13 +487,54 @@ impl Renderer {
             gpu.device.wait_for_fences(&[self.fence], true, u64::MAX)?;
             gpu.device.reset_fences(&[self.fence])?;
         }
-        for s in staging {
-            s.destroy(gpu);
-        }
+        Ok(())
+    }
+
+    /// Records a frame into its own command buffer, for replay without any per-frame work
+    /// (the draw-only limit). Tiles should be resident already (fly the path once first).
+    pub fn record_static(
+        &mut self,
+        gpu: &Gpu,
+        terrain: &Terrain,
+        camera: &Camera,
+        settings: &Settings,
+        target: &Target,
+    ) -> VkResult<StaticFrame> {
+        let alloc = vk::CommandBufferAllocateInfo::default()
+            .command_pool(self.pool)
+            .level(vk::CommandBufferLevel::PRIMARY)
+            .command_buffer_count(1);
+        // SAFETY: allocation from our pool; freed in `destroy_static`.
+        let cmd = unsafe { gpu.device.allocate_command_buffers(&alloc)? }[0];
+        let own_cmd = std::mem::replace(&mut self.cmd, cmd);
+        let own_stitch = self.stitch_buffer.take();
+        let result = self.record(gpu, terrain, camera, settings, target, false, None);
+        let stitch = std::mem::replace(&mut self.stitch_buffer, own_stitch);
+        self.cmd = own_cmd;
+        let (record, staging) = result?;
+        Ok(StaticFrame {
+            cmd,
+            stitch,
+            staging,
+            record,
+        })
+    }
+
+    /// Runs a recorded frame; returns its record with the GPU time.
+    pub fn replay(&mut self, gpu: &Gpu, frame: &StaticFrame) -> VkResult<FrameRecord> {
+        self.submit_and_wait(gpu, frame.cmd, None)?;
+        let mut record = frame.record.clone();
         record.gpu_ms = self.timestamps.read_ms(gpu).unwrap_or(f64::NAN);
-        let pixels = if screenshot { target.pixels() } else { None };
-        self.frame += 1;
-        Ok((record, pixels))
+        Ok(record)
+    }
+
+    pub fn destroy_static(&self, gpu: &Gpu, frame: StaticFrame) {
+        gpu.wait_idle();
+        // SAFETY: the device is idle; the buffer came from our pool.
+        unsafe { gpu.device.free_command_buffers(self.pool, &[frame.cmd]) };
+        for b in frame.stitch.into_iter().chain(frame.staging) {
+            b.destroy(gpu);
+        }
     }
 
     /// Creates the tile's GPU buffers and records their upload from a staging buffer.

@@ -79,6 +79,13 @@ struct Cli {
     level_colours: bool,
     #[arg(long)]
     wireframe: bool,
+    /// Benchmark: time only the replay of pre-recorded frames over pre-resident tiles (the
+    /// draw-only limit of the same flight).
+    #[arg(long)]
+    draw_only: bool,
+    /// Benchmark: fly the path once untimed first, so the timed flight starts warm.
+    #[arg(long)]
+    warmup: bool,
     /// Diagnostic: do not draw the stitching triangles (shows the cracks they close).
     #[arg(long)]
     no_stitch: bool,
@@ -197,6 +204,8 @@ fn run(cli: Cli) -> Result<ExitCode> {
         gpu_budget_bytes: cli.gpu_budget_mb << 20,
         out: cli.out.clone(),
         screenshot_every: cli.screenshot_every,
+        draw_only: cli.draw_only,
+        warmup: cli.warmup,
     };
     let records = fly(&gpu, &flight)?;
     let validation = gpu.validation_messages();
