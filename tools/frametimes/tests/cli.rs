@@ -50,7 +50,7 @@ fn summary_matches_hand_computed_figures() {
     close(&v["p95_ms"], 154.31448);
     close(&v["p99_ms"], 177.144176);
     close(&v["max_ms"], 182.8516);
-    close(&v["jank_ms"], 228.277566_666_7);
+    close(&v["jank_ms"], 228.277_566_666_7);
     assert_eq!(v["frames_over_budget"], 5);
     close(&v["duration_s"], 0.3116109);
     // With a 35 ms budget only two frames are over: 5.166 + 147.8516.
