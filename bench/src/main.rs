@@ -426,6 +426,7 @@ fn frames() -> Result<()> {
     println!("CPU share: cull + LOD + stitch + upload + record over frame time.\n");
     println!("| dataset | path | mode | median ms | p95 ms | triangles/frame | Mtri/s | CPU ms (median) | CPU share | brute / this (median) |");
     println!("|---|---|---|---:|---:|---:|---:|---:|---:|---:|");
+    let mut limits = Vec::new();
     for (name, grid) in [("Puget 1K", &puget), ("SRTM1 N48W125", &n48)] {
         let set = dir.join("f.vkt");
         build(grid, &params, &set)?;
@@ -439,6 +440,17 @@ fn frames() -> Result<()> {
                     flight(&vkterrain, &set, path, 60, &["--tau", tau])?,
                 ));
             }
+            // The same tau-1 flight with its tiles already resident, and its draw-only limit:
+            // the same frames pre-recorded and only replayed.
+            let warm = flight(&vkterrain, &set, path, 60, &["--tau", "1", "--warmup"])?;
+            let limit = flight(&vkterrain, &set, path, 60, &["--tau", "1", "--draw-only"])?;
+            let over_limit = warm["frame_ms_median"].as_f64().unwrap_or(f64::NAN)
+                / limit["frame_ms_median"].as_f64().unwrap_or(f64::NAN);
+            rows.push(("tau 1, tiles resident".into(), warm));
+            rows.push(("tau 1, draw-only limit".into(), limit));
+            limits.push(format!(
+                "{name}, {path}: tau-1 frame (tiles resident) / draw-only limit = {over_limit:.2}x"
+            ));
             for (mode, s) in rows {
                 let f = |k: &str| s[k].as_f64().unwrap_or(f64::NAN);
                 println!(
@@ -453,6 +465,10 @@ fn frames() -> Result<()> {
             );
             }
         }
+    }
+    println!();
+    for l in limits {
+        println!("- {l}");
     }
     println!();
     let _ = std::fs::remove_dir_all(&dir);
