@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use crate::camera::Camera;
 use crate::frame::{Output, Renderer, Settings};
 use crate::log::FrameRecord;
 use crate::path::CameraPath;
@@ -77,30 +78,12 @@ fn run(
     if flight.draw_only {
         return draw_only(gpu, flight, renderer, target);
     }
-    let start = flight.path.keys[0].time;
-    let duration = flight.path.duration();
     if flight.warmup {
-        for k in 0..flight.frames {
-            let camera = flight
-                .path
-                .at(start + k as f64 * duration / flight.frames as f64);
-            renderer.render(
-                gpu,
-                flight.terrain,
-                &camera,
-                &flight.settings,
-                Output {
-                    target,
-                    screenshot: false,
-                    present: None,
-                },
-            )?;
-        }
+        warm_up(gpu, flight, renderer, target)?;
     }
     let mut records = Vec::with_capacity(flight.frames as usize);
     for k in 0..flight.frames {
-        let t = k as f64 * duration / flight.frames as f64;
-        let camera = flight.path.at(start + t);
+        let (t, camera) = camera_at(flight, k);
         let shot =
             flight.out.is_some() && flight.screenshot_every > 0 && k % flight.screenshot_every == 0;
         let begun = Instant::now();
@@ -131,33 +114,39 @@ fn run(
     Ok(records)
 }
 
+/// Path time and camera of frame `k`: `k * duration / frames` from the path's start.
+fn camera_at(flight: &Flight, k: u64) -> (f64, Camera) {
+    let t = k as f64 * flight.path.duration() / flight.frames as f64;
+    (t, flight.path.at(flight.path.keys[0].time + t))
+}
+
+/// Flies the path once, untimed, so every tile it needs is resident.
+fn warm_up(
+    gpu: &Gpu,
+    flight: &Flight,
+    renderer: &mut Renderer,
+    target: &mut Target,
+) -> Result<(), FlightError> {
+    for k in 0..flight.frames {
+        let (_, camera) = camera_at(flight, k);
+        let output = Output {
+            target: &mut *target,
+            screenshot: false,
+            present: None,
+        };
+        renderer.render(gpu, flight.terrain, &camera, &flight.settings, output)?;
+    }
+    Ok(())
+}
+
 fn draw_only(
     gpu: &Gpu,
     flight: &Flight,
     renderer: &mut Renderer,
     target: &mut Target,
 ) -> Result<Vec<FrameRecord>, FlightError> {
-    let start = flight.path.keys[0].time;
-    let duration = flight.path.duration();
-    let cameras: Vec<(f64, crate::camera::Camera)> = (0..flight.frames)
-        .map(|k| {
-            let t = k as f64 * duration / flight.frames as f64;
-            (t, flight.path.at(start + t))
-        })
-        .collect();
-    for (_, camera) in &cameras {
-        renderer.render(
-            gpu,
-            flight.terrain,
-            camera,
-            &flight.settings,
-            Output {
-                target,
-                screenshot: false,
-                present: None,
-            },
-        )?;
-    }
+    let cameras: Vec<(f64, Camera)> = (0..flight.frames).map(|k| camera_at(flight, k)).collect();
+    warm_up(gpu, flight, renderer, target)?;
     let mut frames = Vec::with_capacity(cameras.len());
     for (_, camera) in &cameras {
         match renderer.record_static(gpu, flight.terrain, camera, &flight.settings, target) {

@@ -92,11 +92,13 @@ impl FrameRecord {
     }
 
     pub fn cpu_ms(&self) -> f64 {
-        self.cpu_cull_ms
-            + self.cpu_lod_ms
-            + self.cpu_stitch_ms
-            + self.cpu_upload_ms
-            + self.cpu_record_ms
+        self.overhead_ms() + self.cpu_upload_ms
+    }
+
+    /// The per-frame decision and recording work: cull + LOD + stitch + record (uploads,
+    /// which depend on what became visible, are counted apart).
+    pub fn overhead_ms(&self) -> f64 {
+        self.cpu_cull_ms + self.cpu_lod_ms + self.cpu_stitch_ms + self.cpu_record_ms
     }
 }
 
@@ -115,8 +117,10 @@ pub struct Summary {
     pub frame_ms_max: f64,
     pub gpu_ms_median: Option<f64>,
     pub cpu_ms_median: f64,
-    /// CPU work (cull + LOD + stitch + upload + record) as a share of the frame time.
+    /// Per-frame CPU overhead (cull + LOD + stitch + record) as a share of the frame time.
     pub cpu_share: f64,
+    /// CPU time preparing uploads (staging copies, residency) as a share of the frame time.
+    pub upload_share: f64,
     pub triangles_per_frame_mean: f64,
     pub mtri_per_s: f64,
     pub upload_mb: f64,
@@ -169,7 +173,9 @@ impl Summary {
             frame_ms_max: ms.last().copied().unwrap_or(f64::NAN),
             gpu_ms_median: (!gpu.is_empty()).then(|| percentile(&gpu, 50.0)),
             cpu_ms_median: percentile(&cpu, 50.0),
-            cpu_share: records.iter().map(FrameRecord::cpu_ms).sum::<f64>() / total_ms.max(1e-9),
+            cpu_share: records.iter().map(FrameRecord::overhead_ms).sum::<f64>()
+                / total_ms.max(1e-9),
+            upload_share: records.iter().map(|r| r.cpu_upload_ms).sum::<f64>() / total_ms.max(1e-9),
             triangles_per_frame_mean: tris as f64 / records.len().max(1) as f64,
             mtri_per_s: tris as f64 / (total_ms / 1000.0).max(1e-9) / 1e6,
             upload_mb: records.iter().map(|r| r.upload_bytes).sum::<u64>() as f64 / 1e6,
