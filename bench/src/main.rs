@@ -30,7 +30,17 @@ fn data(rel: &str) -> Result<PathBuf> {
     Ok(p)
 }
 
-fn main() -> Result<()> {
+fn main() -> std::process::ExitCode {
+    match run() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("tilebench: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> Result<()> {
     let what = std::env::args().nth(1).unwrap_or_else(|| "all".into());
     match what.as_str() {
         "throughput" => throughput(),
@@ -47,16 +57,21 @@ fn main() -> Result<()> {
     }
 }
 
-/// `tiletool build` as a user runs it, decode to renamed file, three runs per dataset.
-fn throughput() -> Result<()> {
-    let exe = std::env::current_exe()?;
-    let tiletool = exe.with_file_name("tiletool");
-    if !tiletool.exists() {
+/// A binary of the workspace next to this one (built by `cargo build --release -p package`).
+fn sibling(name: &str, package: &str) -> Result<PathBuf> {
+    let path = std::env::current_exe()?.with_file_name(name);
+    if !path.exists() {
         bail!(
-            "{} not found: cargo build --release -p tiletool first",
-            tiletool.display()
+            "{} not found: cargo build --release -p {package} first",
+            path.display()
         );
     }
+    Ok(path)
+}
+
+/// `tiletool build` as a user runs it, decode to renamed file, three runs per dataset.
+fn throughput() -> Result<()> {
+    let tiletool = sibling("tiletool", "tiletool")?;
     let out_dir = std::env::temp_dir().join(format!("tilebench-{}", std::process::id()));
     std::fs::create_dir_all(&out_dir)?;
     println!(
@@ -401,14 +416,7 @@ fn flight(
 
 /// LOD against brute force on the same path in the same run, at 1024 x 768.
 fn frames() -> Result<()> {
-    let exe = std::env::current_exe()?;
-    let vkterrain = exe.with_file_name("vkterrain");
-    if !vkterrain.exists() {
-        bail!(
-            "{} not found: cargo build --release -p renderer first",
-            vkterrain.display()
-        );
-    }
+    let vkterrain = sibling("vkterrain", "renderer")?;
     let dir = std::env::temp_dir().join(format!("tilebench-frames-{}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
     let params = BuildParams::default();

@@ -1,11 +1,13 @@
 //! Window mode under Xvfb with validation on: opens, draws frames, resizes, closes cleanly,
 //! writes its log and the path flown.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use tiles::{build_tileset, BuildParams, Grid, TileSetMeta};
+mod common;
+
+use common::puget;
 
 struct Xvfb(Child, String);
 
@@ -51,40 +53,7 @@ fn xvfb() -> Xvfb {
 #[test]
 fn window_opens_draws_resizes_and_closes() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let sample = PathBuf::from(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../sample/ps_height_1k.png"
-    ));
-    assert!(
-        sample.exists(),
-        "bundled sample missing: {}",
-        sample.display()
-    );
-    let grid = dem::read(
-        &[sample],
-        &dem::ReadOptions {
-            spacing: Some(160.0),
-            vertical_scale: Some(0.1),
-            ..Default::default()
-        },
-    )
-    .unwrap_or_else(|e| panic!("{e}"));
-    let view = Grid {
-        width: grid.width,
-        height: grid.height,
-        heights: &grid.heights,
-        spacing_x: grid.spacing_x,
-        spacing_y: grid.spacing_y,
-    };
-    let set = dir.path().join("set.vkt");
-    build_tileset(
-        &view,
-        &BuildParams::default(),
-        &TileSetMeta::default(),
-        &set,
-        &|| {},
-    )
-    .expect("build");
+    let set = puget(dir.path());
 
     let x = xvfb();
     let (log, record) = (dir.path().join("win.csv"), dir.path().join("flown.csv"));
