@@ -1,0 +1,836 @@
+//! The residency policy: which level each visible tile gets this frame, what to upload, what to
+//! move and what to evict. Plain Rust, no GPU: [`Manager::plan_frame`] takes the frame's
+//! requests (visible tiles front to back with their wanted levels) and returns a [`FramePlan`].
+
+use std::collections::BTreeSet;
+
+use crate::classes::ClassPlan;
+use crate::cost::{align, Layout, TileCost};
+
+pub type TileId = u32;
+
+/// How levels travel.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Scheme {
+    /// The paper's: refining from `l` to `g` sends blocks `l+1..=g` and level `g`'s index array.
+    Progressive,
+    /// Every level change sends blocks `0..=g` again with the index array (no reuse of coarser
+    /// blocks). Accounting only (the simulator's comparison).
+    PerLevel,
+    /// A tile's first use sends all its blocks and index arrays, whatever the budget (the
+    /// renderer's old scheme). Accounting only.
+    WholeTile,
+}
+
+/// How a victim is chosen when no free chunk fits.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Victim {
+    /// The paper's mixture: the oldest chunk of each class large enough is a candidate; the
+    /// one with the best `ln(1 + age) - weight * log2(chunk / need)` goes.
+    Mixture,
+    /// The least recently used chunk of any class large enough.
+    Lru,
+    /// The least recently used chunk of the smallest class that has one.
+    TightestFit,
+    /// The chunk whose tile is used again farthest in the future (needs an oracle; the
+    /// simulator's reference).
+    Belady,
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct Config {
+    /// Bytes of device memory for the pool.
+    pub pool_bytes: u64,
+    /// Bytes uploaded per frame at most (see [`Manager::plan_frame`] for the two exceptions).
+    pub upload_budget: u64,
+    /// Mixture weight: how many e-folds of age one doubling of wasted space is worth.
+    pub weight: f64,
+    /// Growth ratio of the size classes.
+    pub class_ratio: f64,
+    pub scheme: Scheme,
+    pub victim: Victim,
+}
+
+/// The default per-frame upload budget: 4 MiB, ~240 MB/s at 60 frames per second, a small
+/// share of any PCIe link, and a few milliseconds of memcpy on lavapipe.
+pub const DEFAULT_UPLOAD_BUDGET: u64 = 4 << 20;
+
+/// The default mixture weight (measured with `memsim`, see bench/README.md).
+pub const DEFAULT_WEIGHT: f64 = 1.0;
+
+impl Default for Config {
+    fn default() -> Self {
+        Config {
+            pool_bytes: 256 << 20,
+            upload_budget: DEFAULT_UPLOAD_BUDGET,
+            weight: DEFAULT_WEIGHT,
+            class_ratio: 2.0,
+            scheme: Scheme::Progressive,
+            victim: Victim::Mixture,
+        }
+    }
+}
+
+/// One visible tile this frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Request {
+    pub tile: TileId,
+    pub wanted: u32,
+}
+
+/// A part of a tile's data, as the file stores it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Part {
+    Positions(u32),
+    Morph(u32),
+    Indices(u32),
+}
+
+/// Copy `bytes` of `part` of `tile` to pool offset `dst`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Upload {
+    pub tile: TileId,
+    pub part: Part,
+    pub dst: u64,
+    pub bytes: u64,
+    /// The destination may be read by a frame still in flight (an index region rewritten):
+    /// it must be written by a copy ordered after those frames, not by the CPU now.
+    pub in_flight: bool,
+}
+
+/// A copy inside the pool (a tile moving to a larger chunk).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Move {
+    pub tile: TileId,
+    pub src: u64,
+    pub dst: u64,
+    pub bytes: u64,
+}
+
+/// What to draw for one request.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Grant {
+    pub tile: TileId,
+    pub wanted: u32,
+    /// The level drawn; None when the tile has nothing resident (counted as missing).
+    pub level: Option<u32>,
+    /// Pool byte offset of block 0's positions (the draw's `vertexOffset` times 4).
+    pub vertex_offset: u64,
+    /// Pool byte offset of block 0's morph rows (blocks follow in order, each padded to 4).
+    pub morph_offset: u64,
+    /// Pool byte offset of the level's index array.
+    pub index_offset: u64,
+    pub index_width: u32,
+}
+
+/// One frame's counters (the log's columns).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Stats {
+    pub hits: u64,
+    pub misses: u64,
+    pub tiles_coarser: u64,
+    pub tiles_missing: u64,
+    pub upload_bytes_blocks: u64,
+    pub upload_bytes_indices: u64,
+    /// Bytes still needed to bring every visible tile to its wanted level.
+    pub uploads_deferred_bytes: u64,
+    /// Bytes uploaded beyond the budget (presence of new tiles, or one step larger than it).
+    pub upload_overshoot_bytes: u64,
+    pub evictions: u64,
+    pub chunk_moves: u64,
+    pub chunk_move_bytes: u64,
+    pub chunks_free: u64,
+    pub resident_bytes: u64,
+    /// Bytes of tile data held (resident_bytes less the slack of tight fits).
+    pub used_bytes: u64,
+}
+
+#[derive(Clone, Debug, Default)]
+pub struct FramePlan {
+    pub grants: Vec<Grant>,
+    pub uploads: Vec<Upload>,
+    pub moves: Vec<Move>,
+    pub stats: Stats,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Chunk {
+    class: usize,
+    offset: u64,
+    owner: Option<TileId>,
+    /// The last frame that requested the owner (or moved it out): the chunk may be read by
+    /// that frame, so it is not reused before that frame completes.
+    last_used: u64,
+    /// The last frame that drew from it, if any.
+    drawn: Option<u64>,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Resident {
+    chunk: usize,
+    layout: Layout,
+    /// Blocks `0..=b` are in the chunk.
+    blocks: Option<u32>,
+    /// The index array in the chunk.
+    index: Option<u32>,
+    /// WholeTile: every level's index array is there.
+    whole: bool,
+}
+
+/// The chunk pool and who holds what.
+pub struct Manager {
+    config: Config,
+    tiles: Vec<TileCost>,
+    /// Per tile and level: bytes a chunk needs to hold it (the scheme's view).
+    needs: Vec<Vec<u64>>,
+    classes: ClassPlan,
+    chunks: Vec<Chunk>,
+    /// Per class: free chunks nobody may still read, and free chunks waiting for a frame.
+    free: Vec<Vec<usize>>,
+    retiring: Vec<usize>,
+    /// Per class: owned chunks by (last_used, chunk), oldest first.
+    lru: Vec<BTreeSet<(u64, usize)>>,
+    resident: Vec<Option<Resident>>,
+    frame: u64,
+    completed: Option<u64>,
+    /// For Belady: the frame at which a tile is next requested after the current one.
+    oracle: Option<Box<dyn Fn(TileId, u64) -> u64>>,
+}
+
+impl Manager {
+    /// Plans the pool for `tiles` (size classes and counts from their size histogram).
+    pub fn new(tiles: Vec<TileCost>, config: Config) -> Manager {
+        let needs = Self::needs(&tiles, config.scheme);
+        let classes = ClassPlan::new(&needs, config.pool_bytes, config.class_ratio);
+        Self::with_classes(tiles, config, classes)
+    }
+
+    /// Bytes a chunk needs for each tile and level under `scheme`.
+    pub fn needs(tiles: &[TileCost], scheme: Scheme) -> Vec<Vec<u64>> {
+        tiles
+            .iter()
+            .map(|t| {
+                (0..=t.finest())
+                    .map(|l| match scheme {
+                        Scheme::WholeTile => align(t.whole(), 4),
+                        _ => t.need(l),
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// A pool carved as `classes` says.
+    pub fn with_classes(tiles: Vec<TileCost>, config: Config, classes: ClassPlan) -> Manager {
+        let needs = Self::needs(&tiles, config.scheme);
+        let mut chunks = Vec::new();
+        let mut free = vec![Vec::new(); classes.sizes.len()];
+        let mut offset = 0;
+        for (class, (&size, &count)) in classes.sizes.iter().zip(&classes.counts).enumerate() {
+            for _ in 0..count {
+                free[class].push(chunks.len());
+                chunks.push(Chunk {
+                    class,
+                    offset,
+                    owner: None,
+                    last_used: 0,
+                    drawn: None,
+                });
+                offset += size;
+            }
+        }
+        // Hand out low offsets first.
+        for f in &mut free {
+            f.reverse();
+        }
+        let n = tiles.len();
+        Manager {
+            config,
+            tiles,
+            needs,
+            lru: vec![BTreeSet::new(); classes.sizes.len()],
+            classes,
+            chunks,
+            free,
+            retiring: Vec::new(),
+            resident: vec![None; n],
+            frame: 0,
+            completed: None,
+            oracle: None,
+        }
+    }
+
+    /// Bytes of device memory the pool needs (allocate this once, at start).
+    pub fn pool_bytes(&self) -> u64 {
+        self.classes.bytes()
+    }
+
+    pub fn classes(&self) -> &ClassPlan {
+        &self.classes
+    }
+
+    pub fn config(&self) -> &Config {
+        &self.config
+    }
+
+    pub fn tile_cost(&self, tile: TileId) -> &TileCost {
+        &self.tiles[tile as usize]
+    }
+
+    /// Gives Belady's rule its knowledge of the future: `next(tile, frame)` is the first frame
+    /// after `frame` that requests `tile` (u64::MAX if none).
+    pub fn set_oracle(&mut self, next: Box<dyn Fn(TileId, u64) -> u64>) {
+        self.oracle = Some(next);
+    }
+
+    /// The level resident for `tile` (blocks), and the level its index array is for.
+    pub fn resident_levels(&self, tile: TileId) -> Option<(Option<u32>, Option<u32>)> {
+        self.resident[tile as usize].map(|r| (r.blocks, r.index))
+    }
+
+    /// Pool offset and chunk size of the chunk `tile` owns.
+    pub fn chunk_of(&self, tile: TileId) -> Option<(u64, u64)> {
+        self.resident[tile as usize].map(|r| {
+            let c = &self.chunks[r.chunk];
+            (c.offset, self.classes.sizes[c.class])
+        })
+    }
+
+    /// Plans frame `frame` (increasing by one each call). `completed` is the newest frame the
+    /// GPU has finished (every frame up to it is done; later ones may be in flight): no chunk
+    /// those may read is reused, and index regions they may read are marked
+    /// [`Upload::in_flight`]. `requests` are the visible tiles, front to back.
+    ///
+    /// Order of work, all within the upload budget: first every visible tile without data gets
+    /// a chunk (the tightest class for its *wanted* level) and its level 0, which is tiny, so
+    /// no visible tile is missing (these may overshoot the budget); then, front to back, each
+    /// tile is refined toward its wanted level as far as the budget left allows, moving to a
+    /// larger chunk when it outgrows its own. A step larger than the whole budget is taken
+    /// when nothing else was uploaded this frame, so every tile eventually gets there.
+    /// `allow_uploads: false` plans draws of what is resident only (pre-recorded frames).
+    pub fn plan_frame(
+        &mut self,
+        frame: u64,
+        completed: Option<u64>,
+        requests: &[Request],
+        allow_uploads: bool,
+    ) -> FramePlan {
+        self.frame = frame;
+        self.completed = completed;
+        self.retire();
+        let mut plan = FramePlan::default();
+        let mut touched = vec![false; requests.len()];
+        // Protect every requested tile from eviction this frame.
+        for r in requests {
+            if let Some(res) = self.resident[r.tile as usize] {
+                self.touch(res.chunk);
+            }
+        }
+        let mut spent = 0u64;
+        if allow_uploads {
+            // 1. Presence.
+            for (k, r) in requests.iter().enumerate() {
+                if self.resident[r.tile as usize].is_some() {
+                    continue;
+                }
+                let wanted = r.wanted.min(self.tiles[r.tile as usize].finest());
+                let Some(res) = self.admit(r.tile, wanted, &mut plan) else {
+                    continue;
+                };
+                self.resident[r.tile as usize] = Some(res);
+                let before = plan_bytes(&plan);
+                if self.config.scheme == Scheme::WholeTile {
+                    self.upload_whole(r.tile, &mut plan);
+                } else {
+                    self.upload_to(r.tile, 0, &mut plan);
+                }
+                let cost = plan_bytes(&plan) - before;
+                spent += cost;
+                plan.stats.upload_overshoot_bytes +=
+                    spent.saturating_sub(self.config.upload_budget).min(cost);
+                touched[k] = true;
+            }
+            // 2. Refinement, front to back.
+            for (k, r) in requests.iter().enumerate() {
+                let before = plan_bytes(&plan);
+                self.refine(*r, spent, &mut plan);
+                let cost = plan_bytes(&plan) - before;
+                if cost > 0 {
+                    touched[k] = true;
+                    spent += cost;
+                    plan.stats.upload_overshoot_bytes +=
+                        spent.saturating_sub(self.config.upload_budget).min(cost);
+                }
+            }
+        }
+        // 3. Grants.
+        for (k, r) in requests.iter().enumerate() {
+            let wanted = r.wanted.min(self.tiles[r.tile as usize].finest());
+            let grant = self.grant(r.tile, wanted);
+            match grant.level {
+                None => plan.stats.tiles_missing += 1,
+                Some(l) => {
+                    let c = self.resident[r.tile as usize].map(|res| res.chunk);
+                    if let Some(c) = c {
+                        self.chunks[c].drawn = Some(frame);
+                    }
+                    if l < wanted {
+                        plan.stats.tiles_coarser += 1;
+                    }
+                }
+            }
+            if grant.level == Some(wanted) && !touched[k] {
+                plan.stats.hits += 1;
+            } else {
+                plan.stats.misses += 1;
+            }
+            plan.stats.uploads_deferred_bytes += self.missing_bytes(r.tile, wanted);
+            plan.grants.push(grant);
+        }
+        for u in &plan.uploads {
+            match u.part {
+                Part::Indices(_) => plan.stats.upload_bytes_indices += u.bytes,
+                _ => plan.stats.upload_bytes_blocks += u.bytes,
+            }
+        }
+        plan.stats.chunk_move_bytes = plan.moves.iter().map(|m| m.bytes).sum();
+        plan.stats.chunks_free = self.chunks.iter().filter(|c| c.owner.is_none()).count() as u64;
+        for (t, res) in self.resident.iter().enumerate() {
+            if let Some(res) = res {
+                plan.stats.resident_bytes += self.classes.sizes[self.chunks[res.chunk].class];
+                plan.stats.used_bytes += self.held_bytes(t, res);
+            }
+        }
+        plan
+    }
+
+    /// Checks the bookkeeping: every resident tile owns exactly its chunk, each chunk has at
+    /// most one owner, layouts fit their chunks, the drawn index level's blocks are held, and
+    /// the LRU lists hold exactly the owned chunks.
+    pub fn check(&self) -> Result<(), String> {
+        let mut owners = vec![None; self.chunks.len()];
+        for (t, res) in self.resident.iter().enumerate() {
+            let Some(res) = res else { continue };
+            let c = &self.chunks[res.chunk];
+            if c.owner != Some(t as TileId) {
+                return Err(format!(
+                    "tile {t} holds chunk {} owned by {:?}",
+                    res.chunk, c.owner
+                ));
+            }
+            if let Some(other) = owners[res.chunk].replace(t) {
+                return Err(format!("chunk {} held by tiles {other} and {t}", res.chunk));
+            }
+            if !res.whole && res.layout.bytes > self.classes.sizes[c.class] {
+                return Err(format!("tile {t}: layout larger than its chunk"));
+            }
+            if let (Some(i), b) = (res.index, res.blocks) {
+                if b.is_none_or(|b| b < i) || i > res.layout.capacity {
+                    return Err(format!("tile {t}: index level {i} without its blocks"));
+                }
+            }
+        }
+        for (i, c) in self.chunks.iter().enumerate() {
+            if c.owner.is_some() != owners[i].is_some() {
+                return Err(format!("chunk {i} owned by {:?} but not held", c.owner));
+            }
+            if c.owner.is_some() != self.lru[c.class].contains(&(c.last_used, i)) {
+                return Err(format!("chunk {i}: LRU list out of step"));
+            }
+        }
+        let resident: u64 = self
+            .resident
+            .iter()
+            .flatten()
+            .map(|r| self.classes.sizes[self.chunks[r.chunk].class])
+            .sum();
+        if resident > self.pool_bytes() {
+            return Err(format!(
+                "{resident} bytes resident in a pool of {}",
+                self.pool_bytes()
+            ));
+        }
+        Ok(())
+    }
+
+    /// Bytes of tile data a resident tile holds.
+    fn held_bytes(&self, tile: usize, res: &Resident) -> u64 {
+        let t = &self.tiles[tile];
+        if res.whole {
+            return t.whole();
+        }
+        let blocks: u64 = res
+            .blocks
+            .map_or(0, |b| (0..=b).map(|j| t.block_bytes(j)).sum());
+        blocks + res.index.map_or(0, |i| t.levels[i as usize].indices)
+    }
+
+    /// Bytes `tile` still lacks to be drawn at `wanted`.
+    fn missing_bytes(&self, tile: TileId, wanted: u32) -> u64 {
+        let t = &self.tiles[tile as usize];
+        match self.resident[tile as usize] {
+            Some(res) if res.whole => 0,
+            Some(res) => self.step_cost(tile, &res, wanted),
+            None => {
+                (0..=wanted).map(|j| t.block_bytes(j)).sum::<u64>()
+                    + t.levels[wanted as usize].indices
+            }
+        }
+    }
+
+    fn grant(&self, tile: TileId, wanted: u32) -> Grant {
+        let none = Grant {
+            tile,
+            wanted,
+            level: None,
+            vertex_offset: 0,
+            morph_offset: 0,
+            index_offset: 0,
+            index_width: 0,
+        };
+        let Some(res) = self.resident[tile as usize] else {
+            return none;
+        };
+        let level = if res.whole { Some(wanted) } else { res.index };
+        let Some(level) = level else { return none };
+        let chunk = &self.chunks[res.chunk];
+        Grant {
+            tile,
+            wanted,
+            level: Some(level),
+            vertex_offset: chunk.offset,
+            morph_offset: chunk.offset + res.layout.morph,
+            index_offset: chunk.offset + res.layout.index,
+            index_width: self.tiles[tile as usize].levels[level as usize].index_width,
+        }
+    }
+
+    /// Bytes to go from what `res` holds to drawing `level`.
+    fn step_cost(&self, tile: TileId, res: &Resident, level: u32) -> u64 {
+        let t = &self.tiles[tile as usize];
+        if res.index == Some(level) {
+            return 0;
+        }
+        let first_block = match (self.config.scheme, res.blocks) {
+            (Scheme::Progressive, Some(b)) => b + 1,
+            _ => 0,
+        };
+        let blocks: u64 = (first_block..=level).map(|j| t.block_bytes(j)).sum();
+        blocks + t.levels[level as usize].indices
+    }
+
+    fn refine(&mut self, r: Request, spent: u64, plan: &mut FramePlan) {
+        let Some(mut res) = self.resident[r.tile as usize] else {
+            return;
+        };
+        if res.whole {
+            return;
+        }
+        let finest = self.tiles[r.tile as usize].finest();
+        let wanted = r.wanted.min(finest);
+        let Some(current) = res.index else { return };
+        if current == wanted {
+            return;
+        }
+        let left = self.config.upload_budget.saturating_sub(spent);
+        // Levels to consider, best first: the wanted one, then (refining) the ones between.
+        let candidates: Vec<u32> = if wanted < current {
+            vec![wanted]
+        } else {
+            (current + 1..=wanted).rev().collect()
+        };
+        let fits = |m: &Self, res: &Resident, g: u32| m.step_cost(r.tile, res, g) <= left;
+        let mut target = candidates.iter().copied().find(|&g| fits(self, &res, g));
+        if target.is_none() && spent == 0 && wanted > current {
+            // The budget is smaller than one step: take the smallest, alone this frame.
+            target = Some(current + 1);
+        }
+        let Some(mut target) = target else { return };
+        if target > res.layout.capacity {
+            // Outgrown: move to the tightest chunk for the wanted level (or at least this one).
+            let moved = self
+                .relocate(r.tile, &mut res, wanted, target, plan)
+                .or_else(|| self.relocate(r.tile, &mut res, target, target, plan));
+            if moved.is_none() {
+                target = res.layout.capacity;
+                if target == current || !fits(self, &res, target) {
+                    return;
+                }
+            }
+        }
+        self.resident[r.tile as usize] = Some(res);
+        self.upload_to(r.tile, target, plan);
+    }
+
+    /// Moves `tile` into a chunk holding levels up to `level` (at least `min`); records the copy.
+    fn relocate(
+        &mut self,
+        tile: TileId,
+        res: &mut Resident,
+        level: u32,
+        min: u32,
+        plan: &mut FramePlan,
+    ) -> Option<()> {
+        let bytes = self.needs[tile as usize][level as usize];
+        let chunk = self.obtain(bytes, plan)?;
+        let t = &self.tiles[tile as usize];
+        let size = self.classes.sizes[self.chunks[chunk].class];
+        // obtain() gives at least `bytes`, so the chunk holds `level >= min`.
+        let layout = t.layout(t.capacity_in(size).unwrap_or(level).max(min));
+        let (old, new) = (self.chunks[res.chunk].offset, self.chunks[chunk].offset);
+        if let Some(b) = res.blocks {
+            let positions = t.positions_before(b + 1);
+            let morph = t.morph_before(b + 1);
+            plan.moves.push(Move {
+                tile,
+                src: old,
+                dst: new,
+                bytes: positions,
+            });
+            if morph > 0 {
+                plan.moves.push(Move {
+                    tile,
+                    src: old + res.layout.morph,
+                    dst: new + layout.morph,
+                    bytes: morph,
+                });
+            }
+        }
+        plan.stats.chunk_moves += 1;
+        let old_chunk = res.chunk;
+        self.own(chunk, tile);
+        self.release(old_chunk);
+        res.chunk = chunk;
+        res.layout = layout;
+        // The index array is not moved: the refinement that caused the move replaces it.
+        res.index = None;
+        Some(())
+    }
+
+    /// A chunk for a new tile: the tightest class for its wanted level, else any that holds
+    /// level 0.
+    fn admit(&mut self, tile: TileId, wanted: u32, plan: &mut FramePlan) -> Option<Resident> {
+        let needs = &self.needs[tile as usize];
+        let (want, least) = (needs[wanted as usize], needs[0]);
+        let chunk = self
+            .obtain(want, plan)
+            .or_else(|| self.obtain(least, plan))?;
+        self.own(chunk, tile);
+        let t = &self.tiles[tile as usize];
+        let size = self.classes.sizes[self.chunks[chunk].class];
+        let layout = match self.config.scheme {
+            Scheme::WholeTile => t.layout(t.finest()),
+            _ => t.layout(t.capacity_in(size).unwrap_or(0)),
+        };
+        Some(Resident {
+            chunk,
+            layout,
+            blocks: None,
+            index: None,
+            whole: false,
+        })
+    }
+
+    /// Records the uploads that let `tile` draw `level` (its chunk holds it).
+    fn upload_to(&mut self, tile: TileId, level: u32, plan: &mut FramePlan) {
+        let Some(mut res) = self.resident[tile as usize] else {
+            return;
+        };
+        let t = &self.tiles[tile as usize];
+        let base = self.chunks[res.chunk].offset;
+        let first_block = match (self.config.scheme, res.blocks) {
+            (Scheme::Progressive, Some(b)) => b + 1,
+            _ => 0,
+        };
+        for j in first_block..=level {
+            let l = &t.levels[j as usize];
+            plan.uploads.push(Upload {
+                tile,
+                part: Part::Positions(j),
+                dst: base + t.positions_before(j),
+                bytes: l.positions,
+                in_flight: false,
+            });
+            if l.morph > 0 {
+                plan.uploads.push(Upload {
+                    tile,
+                    part: Part::Morph(j),
+                    dst: base + res.layout.morph + t.morph_before(j),
+                    bytes: l.morph,
+                    in_flight: false,
+                });
+            }
+        }
+        let drawn = self.chunks[res.chunk].drawn;
+        plan.uploads.push(Upload {
+            tile,
+            part: Part::Indices(level),
+            dst: base + res.layout.index,
+            bytes: t.levels[level as usize].indices,
+            in_flight: drawn.is_some_and(|d| self.completed.is_none_or(|c| d > c)),
+        });
+        res.blocks = Some(res.blocks.map_or(level, |b| b.max(level)));
+        if self.config.scheme == Scheme::PerLevel {
+            res.blocks = Some(level);
+        }
+        res.index = Some(level);
+        self.resident[tile as usize] = Some(res);
+    }
+
+    fn upload_whole(&mut self, tile: TileId, plan: &mut FramePlan) {
+        let Some(mut res) = self.resident[tile as usize] else {
+            return;
+        };
+        let t = &self.tiles[tile as usize];
+        let base = self.chunks[res.chunk].offset;
+        let mut at = 0;
+        for (j, l) in t.levels.iter().enumerate() {
+            let j = j as u32;
+            for (part, bytes) in [
+                (Part::Positions(j), l.positions),
+                (Part::Morph(j), l.morph),
+                (Part::Indices(j), l.indices),
+            ] {
+                if bytes > 0 {
+                    plan.uploads.push(Upload {
+                        tile,
+                        part,
+                        dst: base + at,
+                        bytes,
+                        in_flight: false,
+                    });
+                    at += bytes;
+                }
+            }
+        }
+        res.blocks = Some(t.finest());
+        res.index = Some(t.finest());
+        res.whole = true;
+        self.resident[tile as usize] = Some(res);
+    }
+
+    /// Frees chunks whose last reader has completed.
+    fn retire(&mut self) {
+        let completed = self.completed;
+        let chunks = &self.chunks;
+        let mut ready = Vec::new();
+        self.retiring.retain(|&c| {
+            let done = completed.is_some_and(|f| chunks[c].last_used <= f);
+            if done {
+                ready.push(c);
+            }
+            !done
+        });
+        for c in ready {
+            self.free[self.chunks[c].class].push(c);
+        }
+    }
+
+    /// Not requested this frame, and every frame that may read it has completed.
+    fn reusable(&self, chunk: usize) -> bool {
+        let used = self.chunks[chunk].last_used;
+        used < self.frame && self.completed.is_some_and(|f| used <= f)
+    }
+
+    fn touch(&mut self, chunk: usize) {
+        let c = self.chunks[chunk];
+        if c.owner.is_some() {
+            self.lru[c.class].remove(&(c.last_used, chunk));
+            self.lru[c.class].insert((self.frame, chunk));
+        }
+        self.chunks[chunk].last_used = self.frame;
+    }
+
+    fn own(&mut self, chunk: usize, tile: TileId) {
+        let c = &mut self.chunks[chunk];
+        c.owner = Some(tile);
+        c.last_used = self.frame;
+        c.drawn = None;
+        self.lru[c.class].insert((self.frame, chunk));
+    }
+
+    /// Gives a chunk up; it is reused once every frame that may read it has completed.
+    fn release(&mut self, chunk: usize) {
+        let c = self.chunks[chunk];
+        if c.owner.is_some() {
+            self.lru[c.class].remove(&(c.last_used, chunk));
+        }
+        self.chunks[chunk].owner = None;
+        if c.drawn.is_none() && c.last_used == self.frame {
+            // Never drawn (taken this frame and given back): nobody reads it.
+            self.free[c.class].push(chunk);
+        } else {
+            self.retiring.push(chunk);
+        }
+    }
+
+    /// A chunk of at least `bytes`: the tightest free class, else a victim.
+    fn obtain(&mut self, bytes: u64, plan: &mut FramePlan) -> Option<usize> {
+        let first = self.classes.class_for(bytes)?;
+        for class in first..self.classes.sizes.len() {
+            if let Some(c) = self.free[class].pop() {
+                return Some(c);
+            }
+        }
+        let victim = self.victim(first, bytes)?;
+        if let Some(owner) = self.chunks[victim].owner {
+            self.resident[owner as usize] = None;
+        }
+        let c = self.chunks[victim];
+        self.lru[c.class].remove(&(c.last_used, victim));
+        self.chunks[victim].owner = None;
+        plan.stats.evictions += 1;
+        Some(victim)
+    }
+
+    fn victim(&self, first: usize, bytes: u64) -> Option<usize> {
+        // The oldest evictable chunk of a class: LRU order; requested (this frame) or possibly
+        // in flight chunks are not evictable and are the newest, so stop at the first of them.
+        let oldest = |class: usize| {
+            self.lru[class]
+                .iter()
+                .take_while(|&&(used, _)| used < self.frame)
+                .find(|&&(_, c)| self.reusable(c))
+                .map(|&(used, c)| (used, c))
+        };
+        let classes = first..self.classes.sizes.len();
+        match self.config.victim {
+            Victim::Lru => classes.filter_map(oldest).min().map(|(_, c)| c),
+            Victim::TightestFit => classes.filter_map(oldest).next().map(|(_, c)| c),
+            Victim::Mixture => {
+                let score = |(used, c): (u64, usize)| {
+                    let age = (self.frame - used) as f64;
+                    let waste = (self.classes.sizes[self.chunks[c].class] as f64
+                        / bytes.max(1) as f64)
+                        .log2();
+                    (1.0 + age).ln() - self.config.weight * waste
+                };
+                classes
+                    .filter_map(oldest)
+                    .max_by(|&a, &b| score(a).total_cmp(&score(b)).then(b.1.cmp(&a.1)))
+                    .map(|(_, c)| c)
+            }
+            Victim::Belady => {
+                let next = self.oracle.as_ref();
+                classes
+                    .flat_map(|class| {
+                        self.lru[class]
+                            .iter()
+                            .take_while(|&&(used, _)| used < self.frame)
+                            .filter(|&&(_, c)| self.reusable(c))
+                            .map(|&(_, c)| c)
+                    })
+                    .max_by_key(|&c| {
+                        let owner = self.chunks[c].owner.unwrap_or(0);
+                        let n = next.map_or(0, |f| f(owner, self.frame));
+                        // Farthest next use; among equals, the smallest chunk.
+                        (n, std::cmp::Reverse(self.chunks[c].class), c)
+                    })
+            }
+        }
+    }
+}
+
+fn plan_bytes(plan: &FramePlan) -> u64 {
+    plan.uploads.iter().map(|u| u.bytes).sum()
+}

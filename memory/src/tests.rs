@@ -1,0 +1,340 @@
+//! The policy's rules, one test each, and its safety properties on random traces.
+
+use proptest::prelude::*;
+
+use crate::cost::tests::tile;
+use crate::*;
+
+fn req(tile: TileId, wanted: u32) -> Request {
+    Request { tile, wanted }
+}
+
+fn config(pool: u64, upload: u64) -> Config {
+    Config {
+        pool_bytes: pool,
+        upload_budget: upload,
+        ..Config::default()
+    }
+}
+
+#[test]
+fn progressive_refinement_sends_only_new_blocks_and_one_index_array() {
+    let t = tile(6, 50);
+    let mut m = Manager::new(vec![t.clone()], config(64 << 20, 1 << 30));
+    let p = m.plan_frame(0, None, &[req(0, 2)], true);
+    assert_eq!(p.grants[0].level, Some(2));
+    // Presence (level 0) then the step to 2: blocks 0..=2, index arrays 0 and 2.
+    let blocks: u64 = (0..=2).map(|j| t.block_bytes(j)).sum();
+    assert_eq!(p.stats.upload_bytes_blocks, blocks);
+    assert_eq!(
+        p.stats.upload_bytes_indices,
+        t.levels[0].indices + t.levels[2].indices
+    );
+    let p = m.plan_frame(1, Some(0), &[req(0, 4)], true);
+    assert_eq!(p.grants[0].level, Some(4));
+    assert_eq!(
+        p.stats.upload_bytes_blocks,
+        t.block_bytes(3) + t.block_bytes(4)
+    );
+    assert_eq!(p.stats.upload_bytes_indices, t.levels[4].indices);
+    // Back to a coarser level: its index array only.
+    let p = m.plan_frame(2, Some(1), &[req(0, 1)], true);
+    assert_eq!(
+        (p.grants[0].level, p.stats.upload_bytes_blocks),
+        (Some(1), 0)
+    );
+    assert_eq!(p.stats.upload_bytes_indices, t.levels[1].indices);
+    m.check().unwrap();
+}
+
+#[test]
+fn a_tile_takes_the_tightest_class_for_its_wanted_level_and_moves_when_it_outgrows_it() {
+    let t = tile(9, 200);
+    let mut m = Manager::new(vec![t.clone()], config(64 << 20, 1 << 30));
+    m.plan_frame(0, None, &[req(0, 1)], true);
+    let (_, size) = m.chunk_of(0).unwrap();
+    assert_eq!(
+        size,
+        m.classes().sizes[m.classes().class_for(t.need(1)).unwrap()]
+    );
+    assert!(size < t.need(8));
+    let p = m.plan_frame(1, Some(0), &[req(0, 8)], true);
+    assert_eq!(p.grants[0].level, Some(8));
+    assert_eq!(p.stats.chunk_moves, 1);
+    // The held blocks moved inside the pool (positions and morph rows of blocks 0..=1).
+    let held = t.positions_before(2) + t.morph_before(2);
+    assert_eq!(p.stats.chunk_move_bytes, held);
+    // ... and were not sent again.
+    let new: u64 = (2..=8).map(|j| t.block_bytes(j)).sum();
+    assert_eq!(p.stats.upload_bytes_blocks, new);
+    assert!(m.chunk_of(0).unwrap().1 >= t.need(8));
+    m.check().unwrap();
+}
+
+#[test]
+fn every_visible_tile_gets_level_0_before_any_tile_is_refined() {
+    let tiles: Vec<TileCost> = (0..8).map(|_| tile(6, 100)).collect();
+    // Budget for roughly one refinement step a frame.
+    let budget = tiles[0].block_bytes(3) + tiles[0].levels[3].indices;
+    let mut m = Manager::new(tiles.clone(), config(64 << 20, budget));
+    let requests: Vec<Request> = (0..8).map(|t| req(t, 5)).collect();
+    let p = m.plan_frame(0, None, &requests, true);
+    assert!(p.grants.iter().all(|g| g.level.is_some()));
+    assert_eq!(p.stats.tiles_missing, 0);
+    assert!(p.stats.tiles_coarser >= 7);
+    assert!(p.stats.uploads_deferred_bytes > 0);
+    // Refinement goes front to back: the nearest tile is the finest.
+    let levels: Vec<u32> = p.grants.iter().map(|g| g.level.unwrap()).collect();
+    assert!(levels.windows(2).all(|w| w[0] >= w[1]), "{levels:?}");
+    // Flying on, every tile arrives, within the budget on each frame after the first.
+    let mut frame = 1;
+    loop {
+        let p = m.plan_frame(frame, Some(frame - 1), &requests, true);
+        let sent = p.stats.upload_bytes_blocks + p.stats.upload_bytes_indices;
+        assert!(sent <= budget.max(p.stats.upload_overshoot_bytes + budget));
+        if p.stats.tiles_coarser == 0 {
+            assert_eq!(p.stats.uploads_deferred_bytes, 0);
+            break;
+        }
+        frame += 1;
+        assert!(frame < 100, "never converged");
+    }
+    m.check().unwrap();
+}
+
+#[test]
+fn a_step_larger_than_the_budget_is_taken_alone() {
+    let t = tile(5, 400);
+    let mut m = Manager::new(vec![t.clone()], config(64 << 20, 16));
+    let p = m.plan_frame(0, None, &[req(0, 4)], true);
+    assert_eq!(
+        p.grants[0].level,
+        Some(0),
+        "presence only in the first frame"
+    );
+    for f in 1..=4 {
+        let p = m.plan_frame(f, Some(f - 1), &[req(0, 4)], true);
+        assert_eq!(p.grants[0].level, Some(f as u32), "one level a frame");
+    }
+}
+
+#[test]
+fn tiles_drawn_by_frames_in_flight_are_not_evicted() {
+    let t = tile(3, 100);
+    // A pool of exactly one chunk: the second tile needs the first one's.
+    let mut c = config(0, 1 << 30);
+    c.pool_bytes = Manager::new(vec![t.clone()], c).classes().sizes[0];
+    let mut m = Manager::new(vec![t.clone(), t.clone()], c);
+    assert_eq!(m.pool_bytes(), m.classes().sizes[0]);
+    m.plan_frame(0, None, &[req(0, 0)], true);
+    // Frame 0 still in flight: tile 1 must wait.
+    let p = m.plan_frame(1, None, &[req(1, 0)], true);
+    assert_eq!((p.grants[0].level, p.stats.evictions), (None, 0));
+    assert_eq!(p.stats.tiles_missing, 1);
+    // Frame 1 requested tile 0? No, but frame 0 drew it: still protected while 0 runs.
+    let p = m.plan_frame(2, Some(0), &[req(1, 0)], true);
+    assert_eq!((p.grants[0].level, p.stats.evictions), (Some(0), 1));
+    assert!(m.resident_levels(0).is_none());
+    m.check().unwrap();
+}
+
+#[test]
+fn the_mixture_weighs_age_against_waste() {
+    // Two old chunks: a tight one used recently, a loose one used long ago.
+    let small = tile(2, 50);
+    let big = tile(9, 300);
+    let run = |weight: f64| {
+        let mut c = config(0, 1 << 30);
+        c.weight = weight;
+        let tiles = vec![big.clone(), small.clone(), small.clone()];
+        // Exactly one chunk of each class the test uses.
+        let mut classes = ClassPlan::new(&Manager::needs(&tiles, c.scheme), 1 << 40, 2.0);
+        classes.counts.iter_mut().for_each(|n| *n = 0);
+        let (a, b) = (
+            classes.class_for(small.need(1)).unwrap(),
+            classes.class_for(big.need(8)).unwrap(),
+        );
+        (classes.counts[a], classes.counts[b]) = (1, 1);
+        let mut m = Manager::with_classes(tiles, c, classes);
+        m.plan_frame(0, None, &[req(0, 8)], true); // the big chunk, used at frame 0
+        m.plan_frame(1, Some(0), &[req(1, 1)], true); // the small chunk
+        for f in 2..50 {
+            m.plan_frame(f, Some(f - 1), &[req(1, 1)], true); // small one stays young
+        }
+        // Tile 2 needs a small chunk: evict the young tight one or the old big one?
+        m.plan_frame(50, Some(49), &[req(2, 1)], true);
+        (
+            m.resident_levels(0).is_some(),
+            m.resident_levels(1).is_some(),
+        )
+    };
+    // Pure LRU: the old big chunk goes, although it wastes most of it.
+    assert_eq!(run(0.0), (false, true));
+    // Heavily weighted toward tight fits: the young small chunk goes.
+    assert_eq!(run(10.0), (true, false));
+}
+
+#[test]
+fn belady_evicts_the_tile_used_farthest_in_the_future() {
+    let t = tile(2, 100);
+    let mut c = config(0, 1 << 30);
+    c.victim = Victim::Belady;
+    c.pool_bytes = 2 * Manager::new(vec![t.clone()], c).classes().sizes[0];
+    let mut m = Manager::new(vec![t.clone(), t.clone(), t.clone()], c);
+    // Trace: 0, 1, then 2 (evicts), then 0 again soon, 1 never.
+    let mut trace = trace::Trace::default();
+    for tiles in [vec![0], vec![1], vec![2], vec![0]] {
+        trace
+            .frames
+            .push(tiles.into_iter().map(|t| req(t, 0)).collect());
+    }
+    m.set_oracle(Box::new(trace.next_use()));
+    for (f, frame) in trace.frames.iter().enumerate() {
+        let f = f as u64;
+        m.plan_frame(f, f.checked_sub(1), frame, true);
+        if f == 2 {
+            assert!(m.resident_levels(0).is_some(), "tile 0 is needed next");
+            assert!(m.resident_levels(1).is_none());
+        }
+    }
+}
+
+#[test]
+fn the_comparison_schemes_account_as_described() {
+    let t = tile(5, 100);
+    let run = |scheme| {
+        let mut c = config(64 << 20, 1 << 30);
+        c.scheme = scheme;
+        let mut m = Manager::new(vec![t.clone()], c);
+        let mut sent = 0;
+        for (f, level) in [1u32, 3, 4].into_iter().enumerate() {
+            let f = f as u64;
+            let p = m.plan_frame(f, f.checked_sub(1), &[req(0, level)], true);
+            assert_eq!(p.grants[0].level, Some(level));
+            sent += p.stats.upload_bytes_blocks + p.stats.upload_bytes_indices;
+        }
+        sent
+    };
+    let blocks = |a: u32, b: u32| (a..=b).map(|j| t.block_bytes(j)).sum::<u64>();
+    let idx = |l: usize| t.levels[l].indices;
+    assert_eq!(run(Scheme::WholeTile), t.whole());
+    assert_eq!(
+        run(Scheme::Progressive),
+        blocks(0, 4) + idx(0) + idx(1) + idx(3) + idx(4)
+    );
+    assert_eq!(
+        run(Scheme::PerLevel),
+        blocks(0, 0)
+            + blocks(0, 1)
+            + blocks(0, 3)
+            + blocks(0, 4)
+            + idx(0)
+            + idx(1)
+            + idx(3)
+            + idx(4)
+    );
+}
+
+#[test]
+fn plans_without_uploads_draw_only_what_is_resident() {
+    let t = tile(4, 100);
+    let mut m = Manager::new(vec![t.clone(), t], config(64 << 20, 1 << 30));
+    m.plan_frame(0, None, &[req(0, 2)], true);
+    let p = m.plan_frame(1, Some(0), &[req(0, 3), req(1, 1)], false);
+    assert!(p.uploads.is_empty() && p.moves.is_empty());
+    assert_eq!(p.grants[0].level, Some(2));
+    assert_eq!(p.grants[1].level, None);
+}
+
+/// Byte ranges a grant's draw reads: positions and morph rows of blocks `0..=level`, and the
+/// index array.
+fn reads(m: &Manager, g: &Grant) -> Vec<(u64, u64)> {
+    let Some(l) = g.level else { return vec![] };
+    let t = m.tile_cost(g.tile);
+    vec![
+        (g.vertex_offset, g.vertex_offset + t.positions_before(l + 1)),
+        (g.morph_offset, g.morph_offset + t.morph_before(l + 1)),
+        (
+            g.index_offset,
+            g.index_offset + t.levels[l as usize].indices,
+        ),
+    ]
+}
+
+fn overlaps(a: (u64, u64), b: (u64, u64)) -> bool {
+    a.0 < b.1 && b.0 < a.1 && a.0 < a.1 && b.0 < b.1
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(200))]
+
+    /// On random flights with random budgets, weights and frames in flight: the bookkeeping
+    /// holds, resident bytes stay within the pool, every drawn tile is drawn at a level whose
+    /// data was sent, and nothing a frame in flight may read is written by the CPU or reused.
+    #[test]
+    fn random_traces_keep_the_invariants(
+        scales in proptest::collection::vec(20u64..400, 2..14),
+        frames in proptest::collection::vec(
+            proptest::collection::vec((0u32..14, 0u32..7), 0..10), 1..50),
+        pool_kib in 64u64..4096,
+        upload in 0u64..400_000,
+        in_flight in 1u64..4,
+        weight in 0.0f64..4.0,
+        victim in 0usize..3,
+    ) {
+        let tiles: Vec<TileCost> = scales.iter().map(|&s| tile(7, s)).collect();
+        let n = tiles.len() as u32;
+        let mut c = config(pool_kib << 10, upload);
+        c.weight = weight;
+        c.victim = [Victim::Mixture, Victim::Lru, Victim::TightestFit][victim];
+        let mut m = Manager::new(tiles.clone(), c);
+        prop_assert!(m.pool_bytes() <= pool_kib << 10);
+        // What each frame read, by frame.
+        let mut read: Vec<Vec<(u64, u64)>> = Vec::new();
+        // Data each tile has received, per level: (blocks, index level).
+        for (f, frame) in frames.iter().enumerate() {
+            let f = f as u64;
+            let completed = f.checked_sub(in_flight);
+            let mut seen = std::collections::HashSet::new();
+            let requests: Vec<Request> = frame
+                .iter()
+                .filter(|(t, _)| seen.insert(t % n))
+                .map(|&(t, l)| req(t % n, l))
+                .collect();
+            let p = m.plan_frame(f, completed, &requests, true);
+            m.check().map_err(TestCaseError::fail)?;
+            prop_assert!(p.stats.resident_bytes <= m.pool_bytes());
+            prop_assert_eq!(p.grants.len(), requests.len());
+            // Writes by the CPU now (uploads not flagged) and in-pool copies must not touch
+            // what frames in flight read.
+            let flying = completed.map_or(0, |c| c + 1) as usize..read.len();
+            for u in &p.uploads {
+                let w = (u.dst, u.dst + u.bytes);
+                for r in read[flying.clone()].iter().flatten() {
+                    prop_assert!(
+                        u.in_flight || !overlaps(w, *r),
+                        "frame {f}: upload {u:?} overwrites {r:?} read by a frame in flight"
+                    );
+                }
+            }
+            for mv in &p.moves {
+                let w = (mv.dst, mv.dst + mv.bytes);
+                for r in read[flying.clone()].iter().flatten() {
+                    prop_assert!(!overlaps(w, *r), "frame {f}: move {mv:?} over {r:?}");
+                }
+            }
+            // Every drawn level is fully held by its tile.
+            for g in &p.grants {
+                if let Some(l) = g.level {
+                    let (blocks, index) = m.resident_levels(g.tile).unwrap();
+                    prop_assert!(blocks.is_some_and(|b| b >= l));
+                    prop_assert_eq!(index, Some(l));
+                }
+            }
+            // Budget: beyond it only by the recorded overshoot.
+            let sent = p.stats.upload_bytes_blocks + p.stats.upload_bytes_indices;
+            prop_assert!(sent <= upload + p.stats.upload_overshoot_bytes);
+            read.push(p.grants.iter().flat_map(|g| reads(&m, g)).collect());
+        }
+    }
+}
