@@ -5,10 +5,12 @@
 //! every (tile, level) pair votes for the tightest class that holds the tile up to that level
 //! (so each level is assumed equally likely to be wanted, which is what a flight over the whole
 //! set averages to). When the budget holds one chunk per vote, that is the pool: no request can
-//! ever find the pool full. Otherwise the budget is apportioned by the D'Hondt rule: chunks are
-//! handed out one at a time to the class with the largest `votes / (chunks + 1)` among those
-//! still fitting in what is left, so counts stay proportional to the histogram as the budget
-//! grows, and a small budget goes to the classes most tiles need rather than being rounded away.
+//! ever find the pool full. Otherwise every tile first gets one chunk of the class that holds
+//! its level 0 (while that takes at most half the budget), so any set of visible tiles can be
+//! drawn at least coarsely; the rest is apportioned by the D'Hondt rule: chunks are handed out
+//! one at a time to the class with the largest `votes / (chunks + 1)` among those still
+//! fitting in what is left, so counts stay proportional to the histogram as the budget grows,
+//! and a small budget goes to the classes most tiles need rather than being rounded away.
 
 use crate::cost::align;
 
@@ -48,7 +50,19 @@ impl ClassPlan {
         let counts = if budget >= everything {
             votes.iter().map(|&v| v as u32).collect()
         } else {
-            dhondt(&sizes, &votes, budget)
+            let mut counts = vec![0u32; sizes.len()];
+            let mut reserved = 0;
+            for t in needs {
+                let Some(c) = t.first().and_then(|&n| class_for(&sizes, n)) else {
+                    continue;
+                };
+                if reserved + sizes[c] > budget / 2 {
+                    break;
+                }
+                counts[c] += 1;
+                reserved += sizes[c];
+            }
+            dhondt(&sizes, &votes, counts, budget - reserved)
         };
         ClassPlan {
             sizes,
@@ -76,8 +90,7 @@ fn class_for(sizes: &[u64], bytes: u64) -> Option<usize> {
     sizes.iter().position(|&s| s >= bytes)
 }
 
-fn dhondt(sizes: &[u64], votes: &[u64], budget: u64) -> Vec<u32> {
-    let mut counts = vec![0u32; sizes.len()];
+fn dhondt(sizes: &[u64], votes: &[u64], mut counts: Vec<u32>, budget: u64) -> Vec<u32> {
     let mut left = budget;
     loop {
         let best = (0..sizes.len())
@@ -136,6 +149,12 @@ mod tests {
             // D'Hondt fills the budget down to less than the smallest class.
             assert!(budget - small.bytes() < MIN_CLASS);
             assert!(small.counts[0] > 0);
+            // Every tile can hold its level 0 at once.
+            let presence: u32 = (0..small.sizes.len())
+                .filter(|&c| small.sizes[c] >= tiles.iter().map(|t| t.need(0)).max().unwrap())
+                .map(|c| small.counts[c])
+                .sum();
+            assert!(presence >= 5, "{small:?}");
         }
     }
 }

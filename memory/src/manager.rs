@@ -273,6 +273,10 @@ impl Manager {
         &self.config
     }
 
+    pub fn tile_count(&self) -> usize {
+        self.tiles.len()
+    }
+
     pub fn tile_cost(&self, tile: TileId) -> &TileCost {
         &self.tiles[tile as usize]
     }

@@ -1,24 +1,34 @@
-//! One frame, step by step (DESIGN.md, "The frame"): cull, choose levels, stitch, make tiles
-//! resident, record one indexed fan draw per tile plus the stitches, submit, and time it all.
+//! The frame loop's mechanism (DESIGN.md, "The frame"): [`crate::plan`] decides what a frame
+//! draws and uploads; this module writes the uploads (into the pool, or the staging ring),
+//! records the transfers, the terrain pass (one indexed fan draw per tile straight from the
+//! pool, then the stitches), the read-back and the window blit, and submits.
+//!
+//! Frames in flight: each of `frames_in_flight` slots owns a command buffer, a fence,
+//! timestamp queries, a stitch buffer, a staging slot, a render target and the semaphore a
+//! window image is acquired with. Starting a frame waits only for its slot's previous frame;
+//! the frame just submitted is never waited for. Results (GPU times, screenshots) come back as
+//! [`Finished`] frames when their slot's fence has signalled. Every GPU allocation happens in
+//! [`Renderer::new`] (and on a window resize): the log's `gpu_allocations` proves it.
 
-use std::collections::HashMap;
 use std::time::Instant;
 
 use ash::vk;
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
+use memory::{Config, Manager, Scheme, Victim};
 
 use crate::camera::Camera;
 use crate::log::FrameRecord;
-use crate::residency::{Residency, WholeTileLru};
-use crate::stitch::{stitch_side, Stitch};
+use crate::plan::{self, BorderMismatch, LevelRule, Plan};
+use crate::stitch::Stitch;
 use crate::target::{Target, COLOR_FORMAT, DEPTH_FORMAT};
 use crate::terrain::Terrain;
 use crate::vulkan::buffer::BufferDesc;
 use crate::vulkan::pipeline::TerrainPipeline;
+use crate::vulkan::pool::{self, Staging, TilePool};
+use crate::vulkan::sync::{self, Commands};
 use crate::vulkan::timestamps::Timestamps;
 use crate::vulkan::{Buffer, Gpu, VkError, VkResult};
-use crate::{cull, lod};
 
 /// How to draw.
 #[derive(Clone, Debug)]
@@ -36,23 +46,80 @@ pub struct Settings {
     pub no_stitch: bool,
 }
 
+impl Settings {
+    pub fn rule(&self) -> LevelRule {
+        if self.brute_force {
+            LevelRule::Finest
+        } else if let Some(l) = self.forced_level {
+            LevelRule::Forced(l)
+        } else {
+            LevelRule::Tau(self.tau)
+        }
+    }
+}
+
+/// GPU memory and transfer settings.
+#[derive(Clone, Copy, Debug)]
+pub struct MemoryOptions {
+    /// Device memory for tile data (the pool is at most this).
+    pub gpu_budget_bytes: u64,
+    /// Tile data sent per frame at most (see `memory::Manager::plan_frame` for the exceptions).
+    pub upload_budget: u64,
+    /// The eviction mixture's weight.
+    pub weight: f64,
+    pub frames_in_flight: usize,
+    /// Send every upload through the staging ring, even where the pool is host-visible.
+    pub force_staging: bool,
+}
+
+impl Default for MemoryOptions {
+    fn default() -> Self {
+        MemoryOptions {
+            gpu_budget_bytes: 1 << 30,
+            upload_budget: memory::DEFAULT_UPLOAD_BUDGET,
+            weight: memory::DEFAULT_WEIGHT,
+            frames_in_flight: 2,
+            force_staging: false,
+        }
+    }
+}
+
 /// Where a windowed frame goes: the acquired swapchain image, copied into after rendering.
 #[derive(Clone, Copy, Debug)]
 pub struct Present {
     pub image: vk::Image,
     pub extent: vk::Extent2D,
-    /// Signalled when the image is acquired; the copy waits for it.
+    /// Signalled when the image is acquired (the slot's, from [`Renderer::begin_frame`]).
     pub acquired: vk::Semaphore,
     /// Signalled when the copy is done; presentation waits for it.
     pub done: vk::Semaphore,
 }
 
-/// Where a frame goes: the render target, whether to read it back, and the window image to
-/// copy it into.
-pub struct Output<'t> {
-    pub target: &'t mut Target,
+/// One frame to render.
+pub struct FrameInput<'a> {
+    pub camera: &'a Camera,
+    /// Path or wall-clock time, and the frame's number in the log.
+    pub time_s: f64,
+    pub label: u64,
     pub screenshot: bool,
     pub present: Option<Present>,
+}
+
+/// A frame the GPU has finished: its complete record, and its pixels if asked for.
+pub struct Finished {
+    pub record: FrameRecord,
+    pub pixels: Option<Vec<u8>>,
+    pub extent: (u32, u32),
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum FrameError {
+    #[error(transparent)]
+    Gpu(#[from] VkError),
+    #[error(transparent)]
+    TileSet(#[from] BorderMismatch),
+    #[error("{0}")]
+    Internal(String),
 }
 
 /// Per-draw constants, laid out as the vertex shader's push-constant block.
@@ -88,575 +155,802 @@ const LEVEL_COLOURS: [[f32; 3]; 10] = [
     [0.60, 0.05, 0.40],
 ];
 
-/// A tile's data on the GPU: all vertex blocks, and every level's index array.
-struct GpuTile {
-    vertices: Buffer,
-    indices: Buffer,
-    /// Per level: byte offset in `indices`, index count, index type.
-    levels: Vec<(u64, u32, vk::IndexType)>,
+/// A frame submitted from a slot and not yet collected.
+struct Pending {
+    record: FrameRecord,
+    screenshot: bool,
+    started: Instant,
+    submitted: Instant,
+    /// When the next frame started (the end of this frame's CPU interval).
+    ended: Option<Instant>,
+}
+
+struct Slot {
+    cmd: vk::CommandBuffer,
+    fence: vk::Fence,
+    acquired: vk::Semaphore,
+    timestamps: Timestamps,
+    stitch: Buffer,
+    staging: Staging,
+    target: Target,
+    pending: Option<Pending>,
+}
+
+impl Slot {
+    fn new(gpu: &Gpu, commands: &Commands, i: usize, sizes: SlotSizes) -> VkResult<Slot> {
+        let usage = vk::BufferUsageFlags::VERTEX_BUFFER | vk::BufferUsageFlags::INDEX_BUFFER;
+        Ok(Slot {
+            cmd: commands.allocate(gpu, &format!("frame slot {i} commands"))?,
+            fence: sync::fence(gpu, false, &format!("frame slot {i} fence"))?,
+            acquired: sync::semaphore(gpu, &format!("frame slot {i} image acquired"))?,
+            timestamps: Timestamps::new(gpu, &format!("frame slot {i} timestamps"))?,
+            stitch: Buffer::new(
+                gpu,
+                BufferDesc::upload(sizes.stitch, usage),
+                &format!("frame slot {i} stitch geometry"),
+            )?,
+            staging: Staging::new(gpu, sizes.staging, &format!("frame slot {i} staging"))?,
+            target: Target::new(gpu, sizes.extent.0, sizes.extent.1)?,
+            pending: None,
+        })
+    }
+
+    fn destroy(self, gpu: &Gpu) {
+        sync::destroy_fence(gpu, self.fence);
+        sync::destroy_semaphore(gpu, self.acquired);
+        self.timestamps.destroy(gpu);
+        self.stitch.destroy(gpu);
+        self.staging.destroy(gpu);
+        self.target.destroy(gpu);
+    }
+}
+
+#[derive(Clone, Copy)]
+struct SlotSizes {
+    stitch: u64,
+    staging: u64,
+    extent: (u32, u32),
 }
 
 pub struct Renderer {
     pipeline: TerrainPipeline,
-    pool: vk::CommandPool,
-    cmd: vk::CommandBuffer,
-    fence: vk::Fence,
-    timestamps: Timestamps,
-    tiles: HashMap<usize, GpuTile>,
-    residency: Box<dyn Residency>,
-    stitch_buffer: Option<Buffer>,
+    commands: Commands,
+    slots: Vec<Slot>,
+    pool: TilePool,
+    manager: Manager,
+    options: MemoryOptions,
+    /// The next frame's number (the manager's clock).
     frame: u64,
+    /// The slot of the next frame is free and its semaphore unsignalled; the frame's interval
+    /// started then (before waiting for the slot).
+    slot_ready: Option<Instant>,
+    /// `vkterrain --trace`: the requests of every frame so far.
+    trace: Option<String>,
+    /// The GPU end stamp of the last frame collected (ticks).
+    last_end: Option<u64>,
 }
 
 /// A frame recorded once and replayed (see [`Renderer::record_static`]).
 pub struct StaticFrame {
     cmd: vk::CommandBuffer,
     stitch: Option<Buffer>,
-    staging: Vec<Buffer>,
     record: FrameRecord,
 }
 
-/// What was drawn for a tile this frame.
-struct Draw {
-    tile: usize,
-    level: u32,
-}
-
 impl Renderer {
-    pub fn new(gpu: &Gpu, gpu_budget_bytes: u64) -> VkResult<Renderer> {
-        let pipeline = TerrainPipeline::new(gpu, COLOR_FORMAT, DEPTH_FORMAT)?;
-        let pool_info = vk::CommandPoolCreateInfo::default()
-            .queue_family_index(gpu.queue_family)
-            .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER);
-        // SAFETY: valid create infos on a live device; each object is destroyed in `destroy`.
-        let (pool, cmd, fence) = unsafe {
-            let pool = gpu.device.create_command_pool(&pool_info, None)?;
-            let alloc = vk::CommandBufferAllocateInfo::default()
-                .command_pool(pool)
-                .level(vk::CommandBufferLevel::PRIMARY)
-                .command_buffer_count(1);
-            let cmd = gpu.device.allocate_command_buffers(&alloc)?[0];
-            let fence = gpu
-                .device
-                .create_fence(&vk::FenceCreateInfo::default(), None)?;
-            (pool, cmd, fence)
+    /// Plans the pool for `terrain` and allocates everything the loop will use.
+    pub fn new(
+        gpu: &Gpu,
+        terrain: &Terrain,
+        extent: (u32, u32),
+        options: MemoryOptions,
+    ) -> VkResult<Renderer> {
+        let config = Config {
+            pool_bytes: options.gpu_budget_bytes,
+            upload_budget: options.upload_budget,
+            weight: options.weight,
+            class_ratio: 2.0,
+            scheme: Scheme::Progressive,
+            victim: Victim::Mixture,
         };
-        gpu.name(pool, "frame command pool");
-        gpu.name(cmd, "frame commands");
-        gpu.name(fence, "frame fence");
-        let timestamps = Timestamps::new(gpu)?;
-        Ok(Renderer {
-            pipeline,
-            pool,
-            cmd,
-            fence,
-            timestamps,
-            tiles: HashMap::new(),
-            residency: Box::new(WholeTileLru::new(gpu_budget_bytes)),
-            stitch_buffer: None,
-            frame: 0,
+        let manager = Manager::new(terrain.costs(), config);
+        let sizes = SlotSizes {
+            stitch: stitch_bound(terrain),
+            staging: staging_bound(&manager, options.upload_budget),
+            extent,
+        };
+        let pool = TilePool::new(gpu, manager.pool_bytes(), options.force_staging)?;
+        let commands = match Commands::new(gpu, "frame commands") {
+            Ok(c) => c,
+            Err(e) => {
+                pool.destroy(gpu);
+                return Err(e);
+            }
+        };
+        let pipeline = TerrainPipeline::new(gpu, COLOR_FORMAT, DEPTH_FORMAT);
+        let mut slots = Vec::new();
+        let mut failure = pipeline.as_ref().err().map(|e| e.to_string());
+        for i in 0..options.frames_in_flight.max(1) {
+            if failure.is_some() {
+                break;
+            }
+            match Slot::new(gpu, &commands, i, sizes) {
+                Ok(s) => slots.push(s),
+                Err(e) => failure = Some(e.to_string()),
+            }
+        }
+        match (pipeline, failure) {
+            (Ok(pipeline), None) => Ok(Renderer {
+                pipeline,
+                commands,
+                slots,
+                pool,
+                manager,
+                options,
+                frame: 0,
+                slot_ready: None,
+                trace: None,
+                last_end: None,
+            }),
+            (pipeline, failure) => {
+                gpu.wait_idle();
+                for s in slots {
+                    s.destroy(gpu);
+                }
+                if let Ok(p) = pipeline {
+                    p.destroy(gpu);
+                }
+                commands.destroy(gpu);
+                pool.destroy(gpu);
+                Err(VkError::Unsupported(failure.unwrap_or_default()))
+            }
+        }
+    }
+
+    pub fn manager(&self) -> &Manager {
+        &self.manager
+    }
+
+    pub fn pool(&self) -> &TilePool {
+        &self.pool
+    }
+
+    pub fn options(&self) -> &MemoryOptions {
+        &self.options
+    }
+
+    /// Starts collecting a trace of every frame's requests (see `memory::trace`).
+    pub fn enable_trace(&mut self) {
+        self.trace = Some(memory::trace::HEADER.to_string());
+    }
+
+    pub fn take_trace(&mut self) -> Option<String> {
+        self.trace.take()
+    }
+
+    /// The extent of the render targets.
+    pub fn extent(&self) -> (u32, u32) {
+        let e = self.slots[0].target.extent();
+        (e.width, e.height)
+    }
+
+    /// Makes the next frame's slot free (waiting for the frame that last used it, and
+    /// collecting any older frames already done); returns the semaphore a window image must be
+    /// acquired with, and the frames finished meanwhile.
+    pub fn begin_frame(&mut self, gpu: &Gpu) -> VkResult<(vk::Semaphore, Vec<Finished>)> {
+        let n = self.slots.len() as u64;
+        let slot = (self.frame % n) as usize;
+        if self.slot_ready.is_some() {
+            return Ok((self.slots[slot].acquired, Vec::new()));
+        }
+        let now = Instant::now();
+        if let Some(prev) = self.frame.checked_sub(1) {
+            if let Some(p) = self.slots[(prev % n) as usize].pending.as_mut() {
+                p.ended.get_or_insert(now);
+            }
+        }
+        // Oldest first: the slot's own frame (frame - n) must finish; later ones only if done.
+        let mut finished = Vec::new();
+        for f in self.frame.saturating_sub(n)..self.frame {
+            let s = (f % n) as usize;
+            if self.slots[s].pending.is_none() {
+                continue;
+            }
+            if s != slot && !sync::is_signalled(gpu, self.slots[s].fence)? {
+                break;
+            }
+            finished.push(self.collect(gpu, s)?);
+        }
+        self.slot_ready = Some(now);
+        Ok((self.slots[slot].acquired, finished))
+    }
+
+    /// The newest frame after which every frame has finished.
+    fn completed(&self) -> Option<u64> {
+        let n = self.slots.len() as u64;
+        let oldest_pending = (self.frame.saturating_sub(n)..self.frame)
+            .find(|f| self.slots[(f % n) as usize].pending.is_some());
+        match oldest_pending {
+            Some(f) => f.checked_sub(1),
+            None => self.frame.checked_sub(1),
+        }
+    }
+
+    /// Waits for the slot's frame and completes its record.
+    fn collect(&mut self, gpu: &Gpu, s: usize) -> VkResult<Finished> {
+        let slot = &mut self.slots[s];
+        let Some(p) = slot.pending.take() else {
+            return Err(VkError::Unsupported("no frame pending".into()));
+        };
+        sync::wait_and_reset(gpu, slot.fence)?;
+        let mut record = p.record;
+        // frame_ms: the interval between this frame's and the previous frame's completion on
+        // the GPU (the cadence a display sees, whatever runs ahead); the first frame costs its
+        // CPU time to submission plus its GPU time. Without timestamps: the CPU interval.
+        match slot.timestamps.read_ticks(gpu) {
+            Some(t) => {
+                record.gpu_ms = slot.timestamps.ms_between(t[0], t[3]);
+                record.gpu_draw_ms = slot.timestamps.ms_between(t[1], t[2]);
+                record.frame_ms = match self.last_end {
+                    Some(prev) => slot.timestamps.ms_between(prev, t[3]),
+                    None => (p.submitted - p.started).as_secs_f64() * 1000.0 + record.gpu_ms,
+                };
+                self.last_end = Some(t[3]);
+            }
+            None => {
+                (record.gpu_ms, record.gpu_draw_ms) = (f64::NAN, f64::NAN);
+                let end = p.ended.unwrap_or_else(Instant::now);
+                record.frame_ms = (end - p.started).as_secs_f64() * 1000.0;
+            }
+        }
+        let pixels = if p.screenshot {
+            slot.target.pixels()
+        } else {
+            None
+        };
+        let e = slot.target.extent();
+        Ok(Finished {
+            record,
+            pixels,
+            extent: (e.width, e.height),
         })
     }
 
-    /// Renders one frame into `target`; with `screenshot`, returns its RGBA8 pixels.
+    /// Waits for every frame in flight; returns them, oldest first.
+    pub fn finish_all(&mut self, gpu: &Gpu) -> VkResult<Vec<Finished>> {
+        let n = self.slots.len() as u64;
+        let mut finished = Vec::new();
+        for f in self.frame.saturating_sub(n)..self.frame {
+            let s = (f % n) as usize;
+            if self.slots[s].pending.is_some() {
+                finished.push(self.collect(gpu, s)?);
+            }
+        }
+        Ok(finished)
+    }
+
+    /// New render targets for a new window size (after every frame in flight finished).
+    pub fn resize(&mut self, gpu: &Gpu, extent: (u32, u32)) -> VkResult<Vec<Finished>> {
+        let finished = self.finish_all(gpu)?;
+        gpu.wait_idle();
+        for slot in &mut self.slots {
+            let target = Target::new(gpu, extent.0, extent.1)?;
+            std::mem::replace(&mut slot.target, target).destroy(gpu);
+        }
+        Ok(finished)
+    }
+
+    /// Plans, records and submits one frame; returns the frames that finished meanwhile.
     pub fn render(
         &mut self,
         gpu: &Gpu,
         terrain: &Terrain,
-        camera: &Camera,
         settings: &Settings,
-        output: Output<'_>,
-    ) -> VkResult<(FrameRecord, Option<Vec<u8>>)> {
-        let present = output.present;
-        let screenshot = output.screenshot;
-        let (mut record, staging) = self.record(
-            gpu,
+        input: FrameInput<'_>,
+    ) -> Result<Vec<Finished>, FrameError> {
+        let allocations = gpu.allocations();
+        let (_, finished) = self.begin_frame(gpu)?;
+        let started = self.slot_ready.unwrap_or_else(Instant::now);
+        let completed = self.completed();
+        let extent = self.extent();
+        let plan = plan::plan(
             terrain,
-            camera,
-            settings,
-            &*output.target,
-            screenshot,
-            present,
+            &mut self.manager,
+            input.camera,
+            extent,
+            settings.rule(),
+            self.frame,
+            completed,
+            true,
         )?;
-        self.submit_and_wait(gpu, self.cmd, present)?;
-        for s in staging {
-            s.destroy(gpu);
-        }
-        record.gpu_ms = self.timestamps.read_ms(gpu).unwrap_or(f64::NAN);
-        let pixels = if screenshot {
-            output.target.pixels()
-        } else {
-            None
+        self.write_trace(&plan);
+        let s = (self.frame % self.slots.len() as u64) as usize;
+
+        let t = Instant::now();
+        self.slots[s].staging.reset();
+        let (moves, staged) = self.write_uploads(terrain, &plan, s)?;
+        let cpu_upload_ms = ms(t);
+
+        let t = Instant::now();
+        let slot = &mut self.slots[s];
+        let stitch_ranges = write_stitches(&mut slot.stitch, &plan.stitches)?;
+        let cmd = slot.cmd;
+        sync::begin(gpu, cmd, true)?;
+        slot.timestamps.begin(gpu, cmd);
+        pool::record_transfers(gpu, cmd, &self.pool, &slot.staging, &moves, &staged);
+        slot.timestamps.pass_begin(gpu, cmd);
+        let pass = Pass {
+            gpu,
+            cmd,
+            pipeline: &self.pipeline,
+            target: &slot.target,
+            pool: self.pool.buffer.raw,
+            stitch: slot.stitch.raw,
+            terrain,
+            camera: input.camera,
+            settings,
+            plan: &plan,
+            stitch_ranges: &stitch_ranges,
         };
+        let counts = pass.record();
+        slot.timestamps.pass_end(gpu, cmd);
+        if input.screenshot {
+            slot.target.record_readback(gpu, cmd);
+        }
+        if let Some(p) = &input.present {
+            slot.target
+                .record_blit(gpu, cmd, p.image, p.extent, input.screenshot);
+        }
+        slot.timestamps.end(gpu, cmd);
+        sync::end(gpu, cmd)?;
+        let cpu_record_ms = ms(t);
+
+        sync::submit(
+            gpu,
+            cmd,
+            slot.fence,
+            input.present.map(|p| p.acquired),
+            input.present.map(|p| p.done),
+        )?;
+        let mut record = frame_record(&plan, counts, terrain.levels);
+        record.frame = input.label;
+        record.time_s = input.time_s;
+        record.cpu_upload_ms = cpu_upload_ms;
+        record.cpu_record_ms = cpu_record_ms;
+        record.staged_bytes = slot.staging.used();
+        record.gpu_allocations = gpu.allocations() - allocations;
+        slot.pending = Some(Pending {
+            record,
+            screenshot: input.screenshot,
+            started,
+            submitted: Instant::now(),
+            ended: None,
+        });
         self.frame += 1;
-        Ok((record, pixels))
+        self.slot_ready = None;
+        Ok(finished)
     }
 
-    /// Records a whole frame into `self.cmd` (culling, levels, stitches, uploads, draws);
-    /// returns its record and the staging buffers to free after it ran.
-    #[allow(clippy::too_many_arguments)]
-    fn record(
+    fn write_trace(&mut self, plan: &Plan) {
+        let Some(trace) = self.trace.as_mut() else {
+            return;
+        };
+        let rows: Vec<(memory::Request, u64)> = plan
+            .requests
+            .iter()
+            .map(|r| {
+                let t = self.manager.tile_cost(r.tile);
+                let bytes = (0..=r.wanted).map(|j| t.block_bytes(j)).sum::<u64>()
+                    + t.levels[r.wanted as usize].indices;
+                (*r, bytes)
+            })
+            .collect();
+        memory::trace::write_frame(trace, self.frame, &rows);
+    }
+
+    /// Writes the plan's uploads: straight into the pool where that is safe, else into the
+    /// slot's staging memory; returns the moves and staged copies to record.
+    fn write_uploads(
         &mut self,
-        gpu: &Gpu,
         terrain: &Terrain,
-        camera: &Camera,
-        settings: &Settings,
-        target: &Target,
-        screenshot: bool,
-        present: Option<Present>,
-    ) -> VkResult<(FrameRecord, Vec<Buffer>)> {
-        let extent = target.extent();
-        let view = camera.view(extent.width, extent.height);
-        let mut record = FrameRecord {
-            frame: self.frame,
-            tiles_per_level: vec![0; terrain.levels as usize],
-            ..Default::default()
-        };
-
-        // 2. Cull, front to back.
-        let t = Instant::now();
-        let planes = view.frustum();
-        let mut visible: Vec<(f64, usize)> = terrain
-            .tiles
+        plan: &Plan,
+        s: usize,
+    ) -> Result<(Vec<vk::BufferCopy>, Vec<vk::BufferCopy>), FrameError> {
+        let moves = plan
+            .moves
             .iter()
-            .enumerate()
-            .filter(|(_, tile)| cull::visible(&planes, camera.position, tile))
-            .map(|(i, tile)| {
-                (
-                    camera
-                        .position
-                        .clamp(tile.min, tile.max)
-                        .distance_squared(camera.position),
-                    i,
-                )
+            .map(|m| {
+                vk::BufferCopy::default()
+                    .src_offset(m.src)
+                    .dst_offset(m.dst)
+                    .size(m.bytes)
             })
             .collect();
-        visible.sort_by(|a, b| a.0.total_cmp(&b.0));
-        record.cpu_cull_ms = ms(t);
-        record.tiles_visible = visible.len() as u64;
-
-        // 3. Levels.
-        let t = Instant::now();
-        let finest = terrain.levels - 1;
-        let draws: Vec<Draw> = visible
-            .iter()
-            .map(|&(_, i)| {
-                let tile = &terrain.tiles[i];
-                let level = if settings.brute_force {
-                    finest
-                } else if let Some(l) = settings.forced_level {
-                    l.min(finest)
-                } else {
-                    lod::level_for(
-                        tile,
-                        lod::tolerable_error(&view, camera.position, tile, settings.tau),
-                    )
-                };
-                Draw { tile: i, level }
-            })
-            .collect();
-        record.cpu_lod_ms = ms(t);
-
-        // 5. Stitches between visible neighbours (each pair once: east and south sides).
-        let t = Instant::now();
-        let level_of: HashMap<usize, u32> = draws.iter().map(|d| (d.tile, d.level)).collect();
-        let mut stitches: Vec<(usize, Stitch)> = Vec::new();
-        for d in &draws {
-            let a = &terrain.tiles[d.tile];
-            let mut s = Stitch::default();
-            for (k, (dx, dy)) in [(1usize, (1i64, 0i64)), (2, (0, 1))] {
-                let (nx, ny) = (i64::from(a.tx) + dx, i64::from(a.ty) + dy);
-                let Some(j) = u32::try_from(nx)
-                    .ok()
-                    .zip(u32::try_from(ny).ok())
-                    .and_then(|(x, y)| terrain.tile_index(x, y))
-                else {
-                    continue;
-                };
-                if let Some(&lb) = level_of.get(&j) {
-                    if !stitch_side(&mut s, a, d.level, &terrain.tiles[j], lb, k) {
-                        return Err(VkError::Unsupported(format!(
-                            "tiles {},{} and {},{} do not share their border (corrupted tile set?)",
-                            a.tx, a.ty, terrain.tiles[j].tx, terrain.tiles[j].ty
-                        )));
-                    }
-                }
+        let mut staged = Vec::new();
+        for u in &plan.uploads {
+            let bytes = terrain.part(u.tile as usize, u.part).ok_or_else(|| {
+                FrameError::Internal(format!("tile {} has no {:?}", u.tile, u.part))
+            })?;
+            if bytes.is_empty() {
+                continue;
             }
-            if s.triangles > 0 {
-                stitches.push((d.tile, s));
+            if !u.in_flight && self.pool.write(u.dst, bytes) {
+                continue;
             }
+            let at = self.slots[s].staging.push(bytes).ok_or_else(|| {
+                FrameError::Internal(format!(
+                    "staging ring full ({} bytes) uploading tile {}",
+                    self.slots[s].staging.used(),
+                    u.tile
+                ))
+            })?;
+            staged.push(
+                vk::BufferCopy::default()
+                    .src_offset(at)
+                    .dst_offset(u.dst)
+                    .size(bytes.len() as u64),
+            );
         }
-        record.stitch_triangles = stitches.iter().map(|(_, s)| u64::from(s.triangles)).sum();
-        record.cpu_stitch_ms = ms(t);
-
-        // 4. Residency and uploads (recorded into this frame's command buffer).
-        let t = Instant::now();
-        // SAFETY: the previous frame's fence was waited on, so the buffer is idle.
-        unsafe {
-            gpu.device
-                .reset_command_buffer(self.cmd, vk::CommandBufferResetFlags::empty())?;
-            gpu.device.begin_command_buffer(
-                self.cmd,
-                &vk::CommandBufferBeginInfo::default()
-                    .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
-            )?;
-        }
-        self.timestamps.begin(gpu, self.cmd);
-        let in_use: std::collections::HashSet<usize> = draws.iter().map(|d| d.tile).collect();
-        let mut staging: Vec<Buffer> = Vec::new();
-        for d in &draws {
-            let info = &terrain.tiles[d.tile];
-            let evicted = self
-                .residency
-                .admit(d.tile, info.bytes, self.frame, &|t| in_use.contains(&t));
-            for e in evicted {
-                if let Some(old) = self.tiles.remove(&e) {
-                    old.vertices.destroy(gpu);
-                    old.indices.destroy(gpu);
-                    record.evictions += 1;
-                }
-            }
-            if !self.tiles.contains_key(&d.tile) {
-                let (tile, stage) = self.upload(gpu, terrain, d.tile)?;
-                record.upload_bytes += stage.size;
-                staging.push(stage);
-                self.tiles.insert(d.tile, tile);
-            }
-        }
-        if !staging.is_empty() {
-            let barrier = vk::MemoryBarrier::default()
-                .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                .dst_access_mask(
-                    vk::AccessFlags::VERTEX_ATTRIBUTE_READ | vk::AccessFlags::INDEX_READ,
-                );
-            // SAFETY: recording; the copies above write the buffers the draws below read.
-            unsafe {
-                gpu.device.cmd_pipeline_barrier(
-                    self.cmd,
-                    vk::PipelineStageFlags::TRANSFER,
-                    vk::PipelineStageFlags::VERTEX_INPUT,
-                    vk::DependencyFlags::empty(),
-                    &[barrier],
-                    &[],
-                    &[],
-                );
-            }
-        }
-        record.resident_bytes = self.residency.resident_bytes();
-        let stitch_ranges = self.write_stitches(gpu, &stitches)?;
-        record.cpu_upload_ms = ms(t);
-
-        // 6. Record the draws.
-        let t = Instant::now();
-        self.begin_rendering(gpu, target, settings.sky);
-        let pipeline = if settings.wireframe {
-            self.pipeline.wireframe.unwrap_or(self.pipeline.fill)
-        } else {
-            self.pipeline.fill
-        };
-        let (sx, sy) = terrain.spacing;
-        let cells = f64::from(tiles::mesh::TILE_CELLS);
-        let cam_tile = (
-            (camera.position.x / (cells * sx)).floor(),
-            (-camera.position.y / (cells * sy)).floor(),
-        );
-        let cam_rel = DVec3::new(
-            camera.position.x - cam_tile.0 * cells * sx,
-            camera.position.y + cam_tile.1 * cells * sy,
-            camera.position.z,
-        );
-        let constants = |tile: usize, level: u32| {
-            let info = &terrain.tiles[tile];
-            let colour = LEVEL_COLOURS[(level as usize).min(LEVEL_COLOURS.len() - 1)];
-            DrawConstants {
-                view_proj: view.view_proj.to_cols_array(),
-                camera: [
-                    cam_rel.x as f32,
-                    cam_rel.y as f32,
-                    cam_rel.z as f32,
-                    sx as f32,
-                ],
-                tile_offset: [
-                    ((f64::from(info.tx) - cam_tile.0) * cells) as i32,
-                    ((f64::from(info.ty) - cam_tile.1) * cells) as i32,
-                ],
-                spacing_y: sy as f32,
-                height_step: terrain.height_step,
-                height_base: info.header.height_base,
-                level,
-                pad: [0; 2],
-                tint: [
-                    colour[0],
-                    colour[1],
-                    colour[2],
-                    if settings.level_colours { 0.65 } else { 0.0 },
-                ],
-            }
-        };
-        // SAFETY: recording inside dynamic rendering; every bound buffer lives until the fence.
-        unsafe {
-            gpu.device
-                .cmd_bind_pipeline(self.cmd, vk::PipelineBindPoint::GRAPHICS, pipeline);
-            let stages = vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT;
-            for d in &draws {
-                let Some(g) = self.tiles.get(&d.tile) else {
-                    continue;
-                };
-                let (offset, count, index_type) = g.levels[d.level as usize];
-                let c = constants(d.tile, d.level);
-                gpu.device.cmd_push_constants(
-                    self.cmd,
-                    self.pipeline.layout,
-                    stages,
-                    0,
-                    bytemuck::bytes_of(&c),
-                );
-                gpu.device
-                    .cmd_bind_vertex_buffers(self.cmd, 0, &[g.vertices.raw], &[0]);
-                gpu.device
-                    .cmd_bind_index_buffer(self.cmd, g.indices.raw, offset, index_type);
-                gpu.device.cmd_draw_indexed(self.cmd, count, 1, 0, 0, 0);
-                let entry = &terrain.tiles[d.tile].levels[d.level as usize];
-                record.triangles += u64::from(entry.triangle_count);
-                record.vertices += u64::from(entry.vertex_count());
-                record.tiles_drawn += 1;
-                record.tiles_per_level[d.level as usize] += 1;
-            }
-            if let Some(buffer) = self.stitch_buffer.as_ref().filter(|_| !settings.no_stitch) {
-                for ((tile, _), &(vertex_offset, index_offset, count)) in
-                    stitches.iter().zip(&stitch_ranges)
-                {
-                    let c = constants(*tile, level_of[tile]);
-                    gpu.device.cmd_push_constants(
-                        self.cmd,
-                        self.pipeline.layout,
-                        stages,
-                        0,
-                        bytemuck::bytes_of(&c),
-                    );
-                    gpu.device.cmd_bind_vertex_buffers(
-                        self.cmd,
-                        0,
-                        &[buffer.raw],
-                        &[vertex_offset],
-                    );
-                    gpu.device.cmd_bind_index_buffer(
-                        self.cmd,
-                        buffer.raw,
-                        index_offset,
-                        vk::IndexType::UINT32,
-                    );
-                    gpu.device.cmd_draw_indexed(self.cmd, count, 1, 0, 0, 0);
-                }
-            }
-            gpu.device.cmd_end_rendering(self.cmd);
-        }
-        if screenshot {
-            target.record_readback(gpu, self.cmd);
-        }
-        if let Some(p) = &present {
-            target.record_blit(gpu, self.cmd, p.image, p.extent, screenshot);
-        }
-        self.timestamps.end(gpu, self.cmd);
-        // SAFETY: recording began above.
-        unsafe { gpu.device.end_command_buffer(self.cmd)? };
-        record.cpu_record_ms = ms(t);
-
-        Ok((record, staging))
+        Ok((moves, staged))
     }
 
-    /// Submits `cmd` and waits for it: frames are measured one at a time.
-    fn submit_and_wait(
-        &self,
-        gpu: &Gpu,
-        cmd: vk::CommandBuffer,
-        present: Option<Present>,
-    ) -> VkResult<()> {
-        let cmds = [cmd];
-        let waits: Vec<vk::Semaphore> = present.iter().map(|p| p.acquired).collect();
-        let stages = vec![vk::PipelineStageFlags::TRANSFER; waits.len()];
-        let signals: Vec<vk::Semaphore> = present.iter().map(|p| p.done).collect();
-        let submit = vk::SubmitInfo::default()
-            .command_buffers(&cmds)
-            .wait_semaphores(&waits)
-            .wait_dst_stage_mask(&stages)
-            .signal_semaphores(&signals);
-        // SAFETY: the command buffer is complete; the fence is unsignalled.
-        unsafe {
-            gpu.device.queue_submit(gpu.queue, &[submit], self.fence)?;
-            gpu.device.wait_for_fences(&[self.fence], true, u64::MAX)?;
-            gpu.device.reset_fences(&[self.fence])?;
-        }
-        Ok(())
-    }
-
-    /// Records a frame into its own command buffer, for replay without any per-frame work
-    /// (the draw-only limit). Tiles should be resident already (fly the path once first).
+    /// Records a frame into its own command buffer over what is resident now, for replay
+    /// without any per-frame work (the draw-only limit). Nothing is uploaded or evicted, so
+    /// frames recorded earlier stay valid; tiles not resident are drawn coarser or not at all
+    /// (fly the path once first).
     pub fn record_static(
         &mut self,
         gpu: &Gpu,
         terrain: &Terrain,
         camera: &Camera,
         settings: &Settings,
-        target: &Target,
-    ) -> VkResult<StaticFrame> {
-        let alloc = vk::CommandBufferAllocateInfo::default()
-            .command_pool(self.pool)
-            .level(vk::CommandBufferLevel::PRIMARY)
-            .command_buffer_count(1);
-        // SAFETY: allocation from our pool; freed in `destroy_static`.
-        let cmd = unsafe { gpu.device.allocate_command_buffers(&alloc)? }[0];
-        let own_cmd = std::mem::replace(&mut self.cmd, cmd);
-        let own_stitch = self.stitch_buffer.take();
-        let result = self.record(gpu, terrain, camera, settings, target, false, None);
-        let stitch = std::mem::replace(&mut self.stitch_buffer, own_stitch);
-        self.cmd = own_cmd;
-        let (record, staging) = result?;
-        Ok(StaticFrame {
+    ) -> Result<StaticFrame, FrameError> {
+        self.finish_all(gpu)?;
+        let extent = self.extent();
+        let plan = plan::plan(
+            terrain,
+            &mut self.manager,
+            camera,
+            extent,
+            settings.rule(),
+            self.frame,
+            self.frame.checked_sub(1),
+            false,
+        )?;
+        self.frame += 1;
+        let bytes: u64 = plan
+            .stitches
+            .iter()
+            .map(|(_, s)| 4 * (s.vertices.len() + s.indices.len()) as u64)
+            .sum();
+        let usage = vk::BufferUsageFlags::VERTEX_BUFFER | vk::BufferUsageFlags::INDEX_BUFFER;
+        let mut stitch = Buffer::new(gpu, BufferDesc::upload(bytes, usage), "static stitches")?;
+        let cmd = match self.commands.allocate(gpu, "static frame") {
+            Ok(c) => c,
+            Err(e) => {
+                stitch.destroy(gpu);
+                return Err(e.into());
+            }
+        };
+        let frame = StaticFrame {
             cmd,
-            stitch,
-            staging,
-            record,
-        })
+            stitch: None,
+            record: FrameRecord::default(),
+        };
+        let result = (|| {
+            let ranges = write_stitches(&mut stitch, &plan.stitches)?;
+            let slot = &self.slots[0];
+            sync::begin(gpu, cmd, false)?;
+            slot.timestamps.begin(gpu, cmd);
+            slot.timestamps.pass_begin(gpu, cmd);
+            let counts = Pass {
+                gpu,
+                cmd,
+                pipeline: &self.pipeline,
+                target: &slot.target,
+                pool: self.pool.buffer.raw,
+                stitch: stitch.raw,
+                terrain,
+                camera,
+                settings,
+                plan: &plan,
+                stitch_ranges: &ranges,
+            }
+            .record();
+            slot.timestamps.pass_end(gpu, cmd);
+            slot.timestamps.end(gpu, cmd);
+            sync::end(gpu, cmd)?;
+            Ok::<_, FrameError>(counts)
+        })();
+        let mut frame = StaticFrame {
+            stitch: Some(stitch),
+            ..frame
+        };
+        match result {
+            Ok(counts) => {
+                frame.record = frame_record(&plan, counts, terrain.levels);
+                Ok(frame)
+            }
+            Err(e) => {
+                self.destroy_static(gpu, frame);
+                Err(e)
+            }
+        }
     }
 
-    /// Runs a recorded frame; returns its record with the GPU time.
+    /// Runs a recorded frame and waits for it; returns its record with the GPU times.
     pub fn replay(&mut self, gpu: &Gpu, frame: &StaticFrame) -> VkResult<FrameRecord> {
-        self.submit_and_wait(gpu, frame.cmd, None)?;
+        let slot = &self.slots[0];
+        sync::submit(gpu, frame.cmd, slot.fence, None, None)?;
+        sync::wait_and_reset(gpu, slot.fence)?;
         let mut record = frame.record.clone();
-        record.gpu_ms = self.timestamps.read_ms(gpu).unwrap_or(f64::NAN);
+        (record.gpu_ms, record.gpu_draw_ms) =
+            slot.timestamps.read_ms(gpu).unwrap_or((f64::NAN, f64::NAN));
         Ok(record)
     }
 
     pub fn destroy_static(&self, gpu: &Gpu, frame: StaticFrame) {
         gpu.wait_idle();
-        // SAFETY: the device is idle; the buffer came from our pool.
-        unsafe { gpu.device.free_command_buffers(self.pool, &[frame.cmd]) };
-        for b in frame.stitch.into_iter().chain(frame.staging) {
+        self.commands.free(gpu, frame.cmd);
+        if let Some(b) = frame.stitch {
             b.destroy(gpu);
         }
     }
 
-    /// Creates the tile's GPU buffers and records their upload from a staging buffer.
-    fn upload(&self, gpu: &Gpu, terrain: &Terrain, index: usize) -> VkResult<(GpuTile, Buffer)> {
-        let info = &terrain.tiles[index];
-        let tile = terrain
-            .set
-            .tile(info.tx, info.ty)
-            .map_err(|e| VkError::Unsupported(e.to_string()))?;
-        let mut positions: Vec<u8> = Vec::new();
-        let mut indices: Vec<u8> = Vec::new();
-        let mut levels = Vec::new();
-        for i in 0..terrain.levels {
-            let Some(l) = tile.level(i) else { continue };
-            positions.extend_from_slice(bytemuck::cast_slice(l.positions));
-            while !indices.len().is_multiple_of(4) {
-                indices.push(0);
-            }
-            let index_type = if l.entry.index_width == 2 {
-                vk::IndexType::UINT16
-            } else {
-                vk::IndexType::UINT32
-            };
-            levels.push((indices.len() as u64, l.entry.index_count, index_type));
-            indices.extend_from_slice(l.indices.bytes());
+    pub fn destroy(self, gpu: &Gpu) {
+        gpu.wait_idle();
+        for s in self.slots {
+            s.destroy(gpu);
         }
-        let name = format!("tile {},{}", info.tx, info.ty);
-        let vertices = Buffer::new(
-            gpu,
-            BufferDesc::gpu_only(positions.len() as u64, vk::BufferUsageFlags::VERTEX_BUFFER),
-            &format!("{name} vertex blocks"),
-        )?;
-        let index_buffer = Buffer::new(
-            gpu,
-            BufferDesc::gpu_only(indices.len() as u64, vk::BufferUsageFlags::INDEX_BUFFER),
-            &format!("{name} index arrays"),
-        )?;
-        let mut staging = Buffer::new(
-            gpu,
-            BufferDesc::upload(
-                (positions.len() + indices.len()) as u64,
-                vk::BufferUsageFlags::TRANSFER_SRC,
-            ),
-            &format!("{name} staging"),
-        )?;
-        if !(staging.write(0, &positions) && staging.write(positions.len(), &indices)) {
-            return Err(VkError::Unsupported(
-                "staging memory is not host-visible".into(),
-            ));
-        }
-        // SAFETY: recording outside rendering; sizes match the buffers.
-        unsafe {
-            gpu.device.cmd_copy_buffer(
-                self.cmd,
-                staging.raw,
-                vertices.raw,
-                &[vk::BufferCopy::default().size(positions.len() as u64)],
-            );
-            gpu.device.cmd_copy_buffer(
-                self.cmd,
-                staging.raw,
-                index_buffer.raw,
-                &[vk::BufferCopy::default()
-                    .src_offset(positions.len() as u64)
-                    .size(indices.len() as u64)],
-            );
-        }
-        Ok((
-            GpuTile {
-                vertices,
-                indices: index_buffer,
-                levels,
-            },
-            staging,
-        ))
+        self.pool.destroy(gpu);
+        self.pipeline.destroy(gpu);
+        self.commands.destroy(gpu);
     }
+}
 
-    /// Writes this frame's stitches into the host-visible stitch buffer; returns per stitch
-    /// (vertex byte offset, index byte offset, index count).
-    fn write_stitches(
-        &mut self,
-        gpu: &Gpu,
-        stitches: &[(usize, Stitch)],
-    ) -> VkResult<Vec<(u64, u64, u32)>> {
-        let bytes: usize = stitches
+/// Bytes of stitch geometry a frame can need at most: every pair of neighbouring tiles, each
+/// side at its longest border (vertices of both sides, and a 4-index fan per triangle).
+fn stitch_bound(terrain: &Terrain) -> u64 {
+    let longest = |t: usize, side: usize| {
+        terrain.tiles[t]
+            .borders
             .iter()
-            .map(|(_, s)| 4 * (s.vertices.len() + s.indices.len()))
-            .sum();
-        if bytes == 0 {
-            return Ok(Vec::new());
-        }
-        if self
-            .stitch_buffer
-            .as_ref()
-            .is_none_or(|b| (b.size as usize) < bytes)
-        {
-            if let Some(old) = self.stitch_buffer.take() {
-                old.destroy(gpu);
+            .map(|b| b[side].len() as u64)
+            .max()
+            .unwrap_or(0)
+    };
+    let mut bytes = 0;
+    for (i, a) in terrain.tiles.iter().enumerate() {
+        for (side, (dx, dy)) in [(1usize, (1u32, 0u32)), (2, (0, 1))] {
+            if let Some(j) = terrain.tile_index(a.tx + dx, a.ty + dy) {
+                let v = longest(i, side) + longest(j, (side + 2) % 4);
+                bytes += 4 * v + 16 * v.saturating_sub(2);
             }
-            let size = (bytes as u64).next_power_of_two().max(1 << 16);
-            let usage = vk::BufferUsageFlags::VERTEX_BUFFER | vk::BufferUsageFlags::INDEX_BUFFER;
-            self.stitch_buffer = Some(Buffer::new(
-                gpu,
-                BufferDesc::upload(size, usage),
-                "stitch geometry",
-            )?);
         }
-        let buffer = self.stitch_buffer.as_mut().expect("created above");
-        let mut ranges = Vec::with_capacity(stitches.len());
-        let mut at = 0usize;
-        for (_, s) in stitches {
-            let v = at;
-            buffer.write(v, bytemuck::cast_slice(&s.vertices));
-            let i = v + 4 * s.vertices.len();
-            buffer.write(i, bytemuck::cast_slice(&s.indices));
-            at = i + 4 * s.indices.len();
-            ranges.push((v as u64, i as u64, s.indices.len() as u32));
+    }
+    bytes.max(4)
+}
+
+/// Bytes a frame can send at most: the budget, every tile's level 0 (presence may overshoot
+/// the budget), and the largest single step (taken alone when larger than the budget).
+fn staging_bound(manager: &Manager, upload_budget: u64) -> u64 {
+    let n = manager.tile_count();
+    let costs = (0..n).map(|t| manager.tile_cost(t as u32));
+    let presence: u64 = costs
+        .clone()
+        .map(|c| c.block_bytes(0) + c.levels[0].indices)
+        .sum();
+    let step = costs.map(|c| c.need(c.finest())).max().unwrap_or(0);
+    upload_budget + presence + step + 4 * (n as u64 + 1) * 8
+}
+
+/// Writes this frame's stitches into `buffer`; returns per stitch (vertex byte offset, index
+/// byte offset, index count).
+fn write_stitches(
+    buffer: &mut Buffer,
+    stitches: &[(usize, Stitch)],
+) -> Result<Vec<(u64, u64, u32)>, FrameError> {
+    let mut ranges = Vec::with_capacity(stitches.len());
+    let mut at = 0usize;
+    for (_, s) in stitches {
+        let v = at;
+        let i = v + 4 * s.vertices.len();
+        let end = i + 4 * s.indices.len();
+        if !(buffer.write(v, bytemuck::cast_slice(&s.vertices))
+            && buffer.write(i, bytemuck::cast_slice(&s.indices)))
+        {
+            return Err(FrameError::Internal(format!(
+                "stitch geometry ({end} bytes) does not fit its buffer ({} bytes)",
+                buffer.size
+            )));
         }
-        Ok(ranges)
+        at = end;
+        ranges.push((v as u64, i as u64, s.indices.len() as u32));
+    }
+    Ok(ranges)
+}
+
+/// What the terrain pass drew.
+#[derive(Clone, Copy, Default)]
+struct DrawCounts {
+    triangles: u64,
+    vertices: u64,
+    stitch_triangles: u64,
+}
+
+/// The frame's record from its plan (times and GPU results are added later).
+fn frame_record(plan: &Plan, counts: DrawCounts, levels: u32) -> FrameRecord {
+    let st = &plan.stats;
+    let mut tiles_per_level = vec![0; levels as usize];
+    for d in &plan.draws {
+        tiles_per_level[d.level as usize] += 1;
+    }
+    FrameRecord {
+        cpu_cull_ms: plan.cpu_cull_ms,
+        cpu_lod_ms: plan.cpu_lod_ms,
+        cpu_stitch_ms: plan.cpu_stitch_ms,
+        cpu_residency_ms: plan.cpu_residency_ms,
+        gpu_ms: f64::NAN,
+        gpu_draw_ms: f64::NAN,
+        tiles_visible: plan.tiles_visible,
+        tiles_drawn: plan.draws.len() as u64,
+        triangles: counts.triangles,
+        vertices: counts.vertices,
+        stitch_triangles: counts.stitch_triangles,
+        upload_bytes: st.upload_bytes_blocks + st.upload_bytes_indices,
+        resident_bytes: st.resident_bytes,
+        evictions: st.evictions,
+        upload_bytes_blocks: st.upload_bytes_blocks,
+        upload_bytes_indices: st.upload_bytes_indices,
+        uploads_deferred_bytes: st.uploads_deferred_bytes,
+        upload_overshoot_bytes: st.upload_overshoot_bytes,
+        tiles_coarser: st.tiles_coarser,
+        tiles_missing: st.tiles_missing,
+        chunks_free: st.chunks_free,
+        chunk_moves: st.chunk_moves,
+        chunk_move_bytes: st.chunk_move_bytes,
+        hits: st.hits,
+        misses: st.misses,
+        used_bytes: st.used_bytes,
+        tiles_per_level,
+        ..Default::default()
+    }
+}
+
+/// The terrain pass of one frame: clear, one indexed fan draw per tile from the pool, then
+/// the stitches from the slot's stitch buffer.
+struct Pass<'a> {
+    gpu: &'a Gpu,
+    cmd: vk::CommandBuffer,
+    pipeline: &'a TerrainPipeline,
+    target: &'a Target,
+    pool: vk::Buffer,
+    stitch: vk::Buffer,
+    terrain: &'a Terrain,
+    camera: &'a Camera,
+    settings: &'a Settings,
+    plan: &'a Plan,
+    stitch_ranges: &'a [(u64, u64, u32)],
+}
+
+impl Pass<'_> {
+    fn record(&self) -> DrawCounts {
+        let (gpu, cmd) = (self.gpu, self.cmd);
+        self.begin_rendering();
+        let pipeline = if self.settings.wireframe {
+            self.pipeline.wireframe.unwrap_or(self.pipeline.fill)
+        } else {
+            self.pipeline.fill
+        };
+        let mut counts = DrawCounts::default();
+        // SAFETY: recording inside dynamic rendering; the pool and stitch buffer outlive the
+        // frame, and every range drawn was written before (the manager's grants).
+        unsafe {
+            gpu.device
+                .cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, pipeline);
+            // One vertex buffer for every tile: draws address their chunk by vertexOffset.
+            gpu.device
+                .cmd_bind_vertex_buffers(cmd, 0, &[self.pool], &[0]);
+            let mut bound: Option<u32> = None;
+            for d in &self.plan.draws {
+                if bound != Some(d.index_width) {
+                    gpu.device
+                        .cmd_bind_index_buffer(cmd, self.pool, 0, index_type(d.index_width));
+                    bound = Some(d.index_width);
+                }
+                self.push(d.tile, d.level);
+                gpu.device.cmd_draw_indexed(
+                    cmd,
+                    d.index_count,
+                    1,
+                    (d.index_offset / u64::from(d.index_width)) as u32,
+                    (d.vertex_offset / 4) as i32,
+                    0,
+                );
+                let entry = &self.terrain.tiles[d.tile].levels[d.level as usize];
+                counts.triangles += u64::from(entry.triangle_count);
+                counts.vertices += u64::from(entry.vertex_count());
+            }
+            if !self.settings.no_stitch && !self.plan.stitches.is_empty() {
+                gpu.device
+                    .cmd_bind_vertex_buffers(cmd, 0, &[self.stitch], &[0]);
+                gpu.device
+                    .cmd_bind_index_buffer(cmd, self.stitch, 0, vk::IndexType::UINT32);
+                for ((draw, s), &(v, i, count)) in self.plan.stitches.iter().zip(self.stitch_ranges)
+                {
+                    let d = &self.plan.draws[*draw];
+                    self.push(d.tile, d.level);
+                    gpu.device
+                        .cmd_draw_indexed(cmd, count, 1, (i / 4) as u32, (v / 4) as i32, 0);
+                    counts.stitch_triangles += u64::from(s.triangles);
+                }
+            }
+            gpu.device.cmd_end_rendering(cmd);
+        }
+        counts
     }
 
-    fn begin_rendering(&self, gpu: &Gpu, target: &Target, sky: [f32; 3]) {
+    fn push(&self, tile: usize, level: u32) {
+        let c = self.constants(tile, level);
+        let stages = vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT;
+        // SAFETY: recording; the block matches the pipeline layout's push-constant range.
+        unsafe {
+            self.gpu.device.cmd_push_constants(
+                self.cmd,
+                self.pipeline.layout,
+                stages,
+                0,
+                bytemuck::bytes_of(&c),
+            );
+        }
+    }
+
+    /// Positions are expressed relative to the tile the camera is over, from integers, so a
+    /// grid point shared by two tiles lands on the same f32 in both (see the vertex shader).
+    fn constants(&self, tile: usize, level: u32) -> DrawConstants {
+        let (sx, sy) = self.terrain.spacing;
+        let cells = f64::from(tiles::mesh::TILE_CELLS);
+        let p = self.camera.position;
+        let cam_tile = ((p.x / (cells * sx)).floor(), (-p.y / (cells * sy)).floor());
+        let cam_rel = DVec3::new(
+            p.x - cam_tile.0 * cells * sx,
+            p.y + cam_tile.1 * cells * sy,
+            p.z,
+        );
+        let info = &self.terrain.tiles[tile];
+        let colour = LEVEL_COLOURS[(level as usize).min(LEVEL_COLOURS.len() - 1)];
+        DrawConstants {
+            view_proj: self.plan.view.view_proj.to_cols_array(),
+            camera: [
+                cam_rel.x as f32,
+                cam_rel.y as f32,
+                cam_rel.z as f32,
+                sx as f32,
+            ],
+            tile_offset: [
+                ((f64::from(info.tx) - cam_tile.0) * cells) as i32,
+                ((f64::from(info.ty) - cam_tile.1) * cells) as i32,
+            ],
+            spacing_y: sy as f32,
+            height_step: self.terrain.height_step,
+            height_base: info.header.height_base,
+            level,
+            pad: [0; 2],
+            tint: [
+                colour[0],
+                colour[1],
+                colour[2],
+                if self.settings.level_colours {
+                    0.65
+                } else {
+                    0.0
+                },
+            ],
+        }
+    }
+
+    fn begin_rendering(&self) {
+        let (gpu, cmd, target, sky) = (self.gpu, self.cmd, self.target, self.settings.sky);
         let colour_range = vk::ImageSubresourceRange::default()
             .aspect_mask(vk::ImageAspectFlags::COLOR)
             .level_count(1)
@@ -665,6 +959,7 @@ impl Renderer {
             .aspect_mask(vk::ImageAspectFlags::DEPTH)
             .level_count(1)
             .layer_count(1);
+        // The slot's target was last used by its previous frame, whose fence was waited on.
         let barriers = [
             vk::ImageMemoryBarrier::default()
                 .dst_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
@@ -674,13 +969,15 @@ impl Renderer {
                 .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
                 .image(target.color.raw)
                 .subresource_range(colour_range),
+            // DEPTH_STENCIL_ATTACHMENT_OPTIMAL: the depth-only layouts need the
+            // separateDepthStencilLayouts feature, which is not enabled.
             vk::ImageMemoryBarrier::default()
                 .dst_access_mask(
                     vk::AccessFlags::DEPTH_STENCIL_ATTACHMENT_WRITE
                         | vk::AccessFlags::DEPTH_STENCIL_ATTACHMENT_READ,
                 )
                 .old_layout(vk::ImageLayout::UNDEFINED)
-                .new_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
+                .new_layout(vk::ImageLayout::DEPTH_STENCIL_ATTACHMENT_OPTIMAL)
                 .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
                 .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
                 .image(target.depth.raw)
@@ -700,7 +997,7 @@ impl Renderer {
         // Reversed Z: clear to 0 (infinitely far).
         let depth = vk::RenderingAttachmentInfo::default()
             .image_view(target.depth.view)
-            .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
+            .image_layout(vk::ImageLayout::DEPTH_STENCIL_ATTACHMENT_OPTIMAL)
             .load_op(vk::AttachmentLoadOp::CLEAR)
             .store_op(vk::AttachmentStoreOp::DONT_CARE)
             .clear_value(vk::ClearValue {
@@ -726,11 +1023,12 @@ impl Renderer {
             min_depth: 0.0,
             max_depth: 1.0,
         };
-        // SAFETY: recording; the images are the target's and transition from UNDEFINED (their
-        // previous contents are not needed).
+        // SAFETY: recording; the images are the slot's and transition from UNDEFINED (their
+        // previous contents are not needed). The colour image's previous reads (read-back,
+        // blit) were by this slot's earlier frame, finished before this one was recorded.
         unsafe {
             gpu.device.cmd_pipeline_barrier(
-                self.cmd,
+                cmd,
                 vk::PipelineStageFlags::TOP_OF_PIPE,
                 vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT
                     | vk::PipelineStageFlags::EARLY_FRAGMENT_TESTS
@@ -740,28 +1038,18 @@ impl Renderer {
                 &[],
                 &barriers,
             );
-            gpu.device.cmd_begin_rendering(self.cmd, &info);
-            gpu.device.cmd_set_viewport(self.cmd, 0, &[viewport]);
-            gpu.device.cmd_set_scissor(self.cmd, 0, &[area]);
+            gpu.device.cmd_begin_rendering(cmd, &info);
+            gpu.device.cmd_set_viewport(cmd, 0, &[viewport]);
+            gpu.device.cmd_set_scissor(cmd, 0, &[area]);
         }
     }
+}
 
-    pub fn destroy(self, gpu: &Gpu) {
-        gpu.wait_idle();
-        for (_, t) in self.tiles {
-            t.vertices.destroy(gpu);
-            t.indices.destroy(gpu);
-        }
-        if let Some(b) = self.stitch_buffer {
-            b.destroy(gpu);
-        }
-        self.timestamps.destroy(gpu);
-        self.pipeline.destroy(gpu);
-        // SAFETY: the device is idle; these are ours.
-        unsafe {
-            gpu.device.destroy_fence(self.fence, None);
-            gpu.device.destroy_command_pool(self.pool, None);
-        }
+fn index_type(width: u32) -> vk::IndexType {
+    if width == 2 {
+        vk::IndexType::UINT16
+    } else {
+        vk::IndexType::UINT32
     }
 }
 

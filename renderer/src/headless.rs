@@ -5,10 +5,9 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::camera::Camera;
-use crate::frame::{Output, Renderer, Settings};
+use crate::frame::{Finished, FrameError, FrameInput, MemoryOptions, Renderer, Settings};
 use crate::log::FrameRecord;
 use crate::path::CameraPath;
-use crate::target::Target;
 use crate::terrain::Terrain;
 use crate::vulkan::{Gpu, VkError};
 
@@ -18,13 +17,16 @@ pub struct Flight<'a> {
     pub frames: u64,
     pub size: (u32, u32),
     pub settings: Settings,
-    pub gpu_budget_bytes: u64,
+    pub memory: MemoryOptions,
+    /// Keep every frame's requests (`vkterrain --trace`).
+    pub trace: bool,
     /// Folder for screenshots, and how often (every k-th frame; 0 = never).
     pub out: Option<PathBuf>,
     pub screenshot_every: u64,
-    /// Measure the draw-only limit: fly once to make every tile resident, record every
-    /// frame's commands up front, then time only their replay (no culling, LOD, stitching,
-    /// uploads or recording in the timed loop).
+    /// Measure the draw-only limit: fly once to make tiles resident, record every frame's
+    /// commands up front over what is resident (no uploads, no evictions), then time only
+    /// their replay, one at a time (no culling, LOD, stitching, uploads or recording in the
+    /// timed loop).
     pub draw_only: bool,
     /// Fly the path once untimed first, so the timed flight starts with its tiles resident.
     pub warmup: bool,
@@ -34,6 +36,8 @@ pub struct Flight<'a> {
 pub enum FlightError {
     #[error(transparent)]
     Gpu(#[from] VkError),
+    #[error(transparent)]
+    Frame(#[from] FrameError),
     #[error("{}: {error}", path.display())]
     Write { path: PathBuf, error: String },
 }
@@ -53,65 +57,80 @@ pub fn write_png(path: &Path, width: u32, height: u32, rgba: Vec<u8>) -> Result<
     std::fs::rename(&tmp, path).map_err(|e| err(e.to_string()))
 }
 
+/// What a flight produced.
+pub struct FlightResult {
+    pub records: Vec<FrameRecord>,
+    /// The requests of every frame (with `Flight::trace`).
+    pub trace: Option<String>,
+    pub pool_bytes: u64,
+    /// Uploads went through the staging ring.
+    pub staging: bool,
+}
+
 /// Flies the path and returns one record per frame.
-pub fn fly(gpu: &Gpu, flight: &Flight) -> Result<Vec<FrameRecord>, FlightError> {
-    let mut renderer = Renderer::new(gpu, flight.gpu_budget_bytes)?;
-    let mut target = match Target::new(gpu, flight.size.0, flight.size.1) {
-        Ok(t) => t,
-        Err(e) => {
-            renderer.destroy(gpu);
-            return Err(e.into());
-        }
-    };
-    let result = run(gpu, flight, &mut renderer, &mut target);
-    target.destroy(gpu);
+pub fn fly(gpu: &Gpu, flight: &Flight) -> Result<FlightResult, FlightError> {
+    let mut renderer = Renderer::new(gpu, flight.terrain, flight.size, flight.memory)?;
+    if flight.trace {
+        renderer.enable_trace();
+    }
+    let result = run(gpu, flight, &mut renderer);
+    let trace = renderer.take_trace();
+    let pool_bytes = renderer.manager().pool_bytes();
+    let staging = !renderer.pool().direct();
     renderer.destroy(gpu);
-    result
+    Ok(FlightResult {
+        records: result?,
+        trace,
+        pool_bytes,
+        staging,
+    })
 }
 
 fn run(
     gpu: &Gpu,
     flight: &Flight,
     renderer: &mut Renderer,
-    target: &mut Target,
 ) -> Result<Vec<FrameRecord>, FlightError> {
     if flight.draw_only {
-        return draw_only(gpu, flight, renderer, target);
+        return draw_only(gpu, flight, renderer);
     }
     if flight.warmup {
-        warm_up(gpu, flight, renderer, target)?;
+        warm_up(gpu, flight, renderer)?;
     }
     let mut records = Vec::with_capacity(flight.frames as usize);
     for k in 0..flight.frames {
         let (t, camera) = camera_at(flight, k);
         let shot =
             flight.out.is_some() && flight.screenshot_every > 0 && k % flight.screenshot_every == 0;
-        let begun = Instant::now();
-        let (mut record, pixels) = renderer.render(
-            gpu,
-            flight.terrain,
-            &camera,
-            &flight.settings,
-            Output {
-                target,
-                screenshot: shot,
-                present: None,
-            },
-        )?;
-        record.frame = k;
-        record.time_s = t;
-        record.frame_ms = begun.elapsed().as_secs_f64() * 1000.0;
-        if let (Some(dir), Some(pixels)) = (&flight.out, pixels) {
-            write_png(
-                &dir.join(format!("frame_{k:06}.png")),
-                flight.size.0,
-                flight.size.1,
-                pixels,
-            )?;
-        }
-        records.push(record);
+        let input = FrameInput {
+            camera: &camera,
+            time_s: t,
+            label: k,
+            screenshot: shot,
+            present: None,
+        };
+        let finished = renderer.render(gpu, flight.terrain, &flight.settings, input)?;
+        keep(flight, finished, &mut records)?;
     }
+    let finished = renderer.finish_all(gpu)?;
+    keep(flight, finished, &mut records)?;
     Ok(records)
+}
+
+/// Keeps finished frames' records and writes their screenshots.
+fn keep(
+    flight: &Flight,
+    finished: Vec<Finished>,
+    records: &mut Vec<FrameRecord>,
+) -> Result<(), FlightError> {
+    for f in finished {
+        if let (Some(dir), Some(pixels)) = (&flight.out, f.pixels) {
+            let file = dir.join(format!("frame_{:06}.png", f.record.frame));
+            write_png(&file, f.extent.0, f.extent.1, pixels)?;
+        }
+        records.push(f.record);
+    }
+    Ok(())
 }
 
 /// Path time and camera of frame `k`: `k * duration / frames` from the path's start.
@@ -121,21 +140,19 @@ fn camera_at(flight: &Flight, k: u64) -> (f64, Camera) {
 }
 
 /// Flies the path once, untimed, so every tile it needs is resident.
-fn warm_up(
-    gpu: &Gpu,
-    flight: &Flight,
-    renderer: &mut Renderer,
-    target: &mut Target,
-) -> Result<(), FlightError> {
+fn warm_up(gpu: &Gpu, flight: &Flight, renderer: &mut Renderer) -> Result<(), FlightError> {
     for k in 0..flight.frames {
-        let (_, camera) = camera_at(flight, k);
-        let output = Output {
-            target: &mut *target,
+        let (t, camera) = camera_at(flight, k);
+        let input = FrameInput {
+            camera: &camera,
+            time_s: t,
+            label: k,
             screenshot: false,
             present: None,
         };
-        renderer.render(gpu, flight.terrain, &camera, &flight.settings, output)?;
+        renderer.render(gpu, flight.terrain, &flight.settings, input)?;
     }
+    renderer.finish_all(gpu)?;
     Ok(())
 }
 
@@ -143,13 +160,12 @@ fn draw_only(
     gpu: &Gpu,
     flight: &Flight,
     renderer: &mut Renderer,
-    target: &mut Target,
 ) -> Result<Vec<FrameRecord>, FlightError> {
     let cameras: Vec<(f64, Camera)> = (0..flight.frames).map(|k| camera_at(flight, k)).collect();
-    warm_up(gpu, flight, renderer, target)?;
+    warm_up(gpu, flight, renderer)?;
     let mut frames = Vec::with_capacity(cameras.len());
     for (_, camera) in &cameras {
-        match renderer.record_static(gpu, flight.terrain, camera, &flight.settings, target) {
+        match renderer.record_static(gpu, flight.terrain, camera, &flight.settings) {
             Ok(f) => frames.push(f),
             Err(e) => {
                 for f in frames {
@@ -173,10 +189,10 @@ fn draw_only(
                     record.cpu_cull_ms,
                     record.cpu_lod_ms,
                     record.cpu_stitch_ms,
+                    record.cpu_residency_ms,
                     record.cpu_upload_ms,
                     record.cpu_record_ms,
-                ) = (0.0, 0.0, 0.0, 0.0, 0.0);
-                record.upload_bytes = 0;
+                ) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
                 records.push(record);
             }
             Err(e) => {

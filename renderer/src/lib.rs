@@ -1,10 +1,11 @@
 //! The `vkterrain` renderer: a Vulkan (ash) frame loop over a `.vkt` tile set, with frustum
 //! culling, screen-space-error LOD from the projection's Jacobian, crack-free stitching
-//! between tiles, whole-tile residency within a GPU budget, and a frame-timing log.
+//! between tiles, progressive residency in a fixed GPU pool (the `memory` crate), frames in
+//! flight, and a frame-timing log.
 //!
-//! Terrain logic ([`cull`], [`lod`], [`stitch`], [`residency`], [`path`]) is plain Rust that
+//! Terrain logic ([`cull`], [`lod`], [`stitch`], [`plan`], [`path`]) is plain Rust that
 //! tests drive without a GPU; [`vulkan`] is the thin layer that owns every Vulkan object, and
-//! [`frame`] turns one frame's decisions into commands.
+//! [`frame`] turns one frame's plan into commands.
 
 pub mod camera;
 pub mod cull;
@@ -13,7 +14,7 @@ pub mod headless;
 pub mod lod;
 pub mod log;
 pub mod path;
-pub mod residency;
+pub mod plan;
 pub mod stitch;
 pub mod target;
 pub mod terrain;

@@ -3,11 +3,16 @@
 //! Columns (later versions add columns, never rename; see the README):
 //! `frame, time_s, frame_ms, cpu_cull_ms, cpu_lod_ms, cpu_stitch_ms, cpu_upload_ms,
 //! cpu_record_ms, gpu_ms, tiles_visible, tiles_drawn, triangles, vertices, stitch_triangles,
-//! upload_bytes, resident_bytes, evictions, tiles_level_0 .. tiles_level_{n-1}`.
+//! upload_bytes, resident_bytes, evictions`, then the memory manager's
+//! `gpu_allocations, upload_bytes_blocks, upload_bytes_indices, uploads_deferred_bytes,
+//! upload_overshoot_bytes, staged_bytes, tiles_coarser, tiles_missing, chunks_free,
+//! chunk_moves, chunk_move_bytes, hits, misses, used_bytes, cpu_residency_ms, gpu_draw_ms`,
+//! and last `tiles_level_0 .. tiles_level_{n-1}`.
 
 use std::io::Write;
 use std::path::Path;
 
+use frametimes::stats::percentile;
 use serde::Serialize;
 
 #[derive(Clone, Debug, Default)]
@@ -18,22 +23,52 @@ pub struct FrameRecord {
     pub cpu_cull_ms: f64,
     pub cpu_lod_ms: f64,
     pub cpu_stitch_ms: f64,
+    /// Writing this frame's uploads (into the pool or the staging ring).
     pub cpu_upload_ms: f64,
     pub cpu_record_ms: f64,
-    /// NaN when the queue has no timestamps.
+    /// The memory manager's decisions.
+    pub cpu_residency_ms: f64,
+    /// The whole command buffer: transfers, terrain pass, read-back, blit. NaN when the queue
+    /// has no timestamps.
     pub gpu_ms: f64,
+    /// The terrain pass alone (tile and stitch draws).
+    pub gpu_draw_ms: f64,
     pub tiles_visible: u64,
     pub tiles_drawn: u64,
     pub triangles: u64,
     pub vertices: u64,
     pub stitch_triangles: u64,
+    /// Tile data sent this frame (blocks + index arrays).
     pub upload_bytes: u64,
+    /// Bytes of chunks owned by tiles.
     pub resident_bytes: u64,
     pub evictions: u64,
+    /// GPU memory allocations made during the frame (0 after the first: the pool is fixed).
+    pub gpu_allocations: u64,
+    pub upload_bytes_blocks: u64,
+    pub upload_bytes_indices: u64,
+    /// Bytes still needed to draw every visible tile at its wanted level.
+    pub uploads_deferred_bytes: u64,
+    /// Bytes sent beyond the upload budget (new tiles' level 0, or one step larger than it).
+    pub upload_overshoot_bytes: u64,
+    /// Bytes that went through the staging ring (the rest was written in place).
+    pub staged_bytes: u64,
+    /// Visible tiles drawn below the level they wanted.
+    pub tiles_coarser: u64,
+    /// Visible tiles with nothing resident (not drawn).
+    pub tiles_missing: u64,
+    pub chunks_free: u64,
+    pub chunk_moves: u64,
+    pub chunk_move_bytes: u64,
+    /// Visible tiles drawn at their wanted level with no upload.
+    pub hits: u64,
+    pub misses: u64,
+    /// Bytes of tile data in the owned chunks.
+    pub used_bytes: u64,
     pub tiles_per_level: Vec<u64>,
 }
 
-pub const BASE_COLUMNS: [&str; 17] = [
+pub const BASE_COLUMNS: [&str; 33] = [
     "frame",
     "time_s",
     "frame_ms",
@@ -51,6 +86,22 @@ pub const BASE_COLUMNS: [&str; 17] = [
     "upload_bytes",
     "resident_bytes",
     "evictions",
+    "gpu_allocations",
+    "upload_bytes_blocks",
+    "upload_bytes_indices",
+    "uploads_deferred_bytes",
+    "upload_overshoot_bytes",
+    "staged_bytes",
+    "tiles_coarser",
+    "tiles_missing",
+    "chunks_free",
+    "chunk_moves",
+    "chunk_move_bytes",
+    "hits",
+    "misses",
+    "used_bytes",
+    "cpu_residency_ms",
+    "gpu_draw_ms",
 ];
 
 pub fn header(levels: u32) -> String {
@@ -59,47 +110,92 @@ pub fn header(levels: u32) -> String {
     cols.join(",")
 }
 
+/// A time in ms with four decimals, empty when unknown.
+fn ms_cell(v: f64) -> String {
+    if v.is_nan() {
+        String::new()
+    } else {
+        format!("{v:.4}")
+    }
+}
+
 impl FrameRecord {
     pub fn csv_row(&self) -> String {
-        let gpu = if self.gpu_ms.is_nan() {
-            String::new()
-        } else {
-            format!("{:.4}", self.gpu_ms)
-        };
-        let mut row = format!(
-            "{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{gpu},{},{},{},{},{},{},{},{}",
-            self.frame,
-            self.time_s,
-            self.frame_ms,
-            self.cpu_cull_ms,
-            self.cpu_lod_ms,
-            self.cpu_stitch_ms,
-            self.cpu_upload_ms,
-            self.cpu_record_ms,
-            self.tiles_visible,
-            self.tiles_drawn,
-            self.triangles,
-            self.vertices,
-            self.stitch_triangles,
-            self.upload_bytes,
-            self.resident_bytes,
-            self.evictions
+        let mut cells: Vec<String> = vec![self.frame.to_string()];
+        cells.extend(
+            [
+                self.time_s,
+                self.frame_ms,
+                self.cpu_cull_ms,
+                self.cpu_lod_ms,
+                self.cpu_stitch_ms,
+                self.cpu_upload_ms,
+                self.cpu_record_ms,
+                self.gpu_ms,
+            ]
+            .map(ms_cell),
         );
-        for n in &self.tiles_per_level {
-            row += &format!(",{n}");
-        }
-        row
+        cells.extend(
+            [
+                self.tiles_visible,
+                self.tiles_drawn,
+                self.triangles,
+                self.vertices,
+                self.stitch_triangles,
+                self.upload_bytes,
+                self.resident_bytes,
+                self.evictions,
+                self.gpu_allocations,
+                self.upload_bytes_blocks,
+                self.upload_bytes_indices,
+                self.uploads_deferred_bytes,
+                self.upload_overshoot_bytes,
+                self.staged_bytes,
+                self.tiles_coarser,
+                self.tiles_missing,
+                self.chunks_free,
+                self.chunk_moves,
+                self.chunk_move_bytes,
+                self.hits,
+                self.misses,
+                self.used_bytes,
+            ]
+            .map(|n| n.to_string()),
+        );
+        cells.push(ms_cell(self.cpu_residency_ms));
+        cells.push(ms_cell(self.gpu_draw_ms));
+        cells.extend(self.tiles_per_level.iter().map(|n| n.to_string()));
+        cells.join(",")
     }
 
     pub fn cpu_ms(&self) -> f64 {
         self.overhead_ms() + self.cpu_upload_ms
     }
 
-    /// The per-frame decision and recording work: cull + LOD + stitch + record (uploads,
-    /// which depend on what became visible, are counted apart).
+    /// The per-frame decision and recording work: cull + LOD + residency + stitch + record
+    /// (writing uploads, which depends on what became visible, is counted apart).
     pub fn overhead_ms(&self) -> f64 {
-        self.cpu_cull_ms + self.cpu_lod_ms + self.cpu_stitch_ms + self.cpu_record_ms
+        self.cpu_cull_ms
+            + self.cpu_lod_ms
+            + self.cpu_residency_ms
+            + self.cpu_stitch_ms
+            + self.cpu_record_ms
     }
+}
+
+/// What a run was: the device and the settings that shape its numbers.
+#[derive(Clone, Debug, Default)]
+pub struct RunInfo {
+    pub device: String,
+    pub size: (u32, u32),
+    pub tau: f64,
+    pub brute_force: bool,
+    pub validation_messages: u64,
+    pub pool_bytes: u64,
+    pub upload_budget: u64,
+    pub frames_in_flight: usize,
+    /// Uploads went through the staging ring (not written in place).
+    pub staging: bool,
 }
 
 #[derive(Serialize, Debug)]
@@ -115,71 +211,104 @@ pub struct Summary {
     pub frame_ms_p95: f64,
     pub frame_ms_p99: f64,
     pub frame_ms_max: f64,
+    /// The first frame against the median: what a cold start costs.
+    pub first_frame_ratio: f64,
     pub gpu_ms_median: Option<f64>,
+    pub gpu_draw_ms_median: Option<f64>,
     pub cpu_ms_median: f64,
-    /// Per-frame CPU overhead (cull + LOD + stitch + record) as a share of the frame time.
+    /// Per-frame CPU overhead (cull + LOD + residency + stitch + record) as a share of the
+    /// frame time.
     pub cpu_share: f64,
-    /// CPU time preparing uploads (staging copies, residency) as a share of the frame time.
+    /// CPU time writing uploads as a share of the frame time.
     pub upload_share: f64,
     pub triangles_per_frame_mean: f64,
     pub mtri_per_s: f64,
     pub upload_mb: f64,
+    pub upload_mb_blocks: f64,
+    pub upload_mb_indices: f64,
+    pub staged_mb: f64,
+    pub upload_bytes_p99: f64,
+    pub upload_overshoot_mb: f64,
+    pub pool_mb: f64,
+    pub upload_budget_mb: f64,
+    pub frames_in_flight: usize,
+    pub staging: bool,
+    /// GPU allocations after the first frame (the pool is allocated once: 0).
+    pub gpu_allocations_after_first_frame: u64,
+    pub hits: u64,
+    pub misses: u64,
+    pub evictions: u64,
+    pub chunk_moves: u64,
+    /// Tile-frames drawn below the wanted level.
+    pub tiles_coarser: u64,
+    /// Tile-frames with a visible tile not drawn.
+    pub tiles_missing: u64,
     pub validation_messages: u64,
 }
 
-fn percentile(sorted: &[f64], p: f64) -> f64 {
-    if sorted.is_empty() {
-        return f64::NAN;
-    }
-    let rank = (p / 100.0 * (sorted.len() - 1) as f64).round() as usize;
-    sorted[rank.min(sorted.len() - 1)]
+fn sorted(values: impl Iterator<Item = f64>) -> Vec<f64> {
+    let mut v: Vec<f64> = values.filter(|x| !x.is_nan()).collect();
+    v.sort_by(f64::total_cmp);
+    v
 }
 
 impl Summary {
-    pub fn of(
-        records: &[FrameRecord],
-        device: &str,
-        size: (u32, u32),
-        tau: f64,
-        brute_force: bool,
-        validation: u64,
-    ) -> Summary {
-        let mut ms: Vec<f64> = records.iter().map(|r| r.frame_ms).collect();
-        ms.sort_by(f64::total_cmp);
-        let mut gpu: Vec<f64> = records
-            .iter()
-            .map(|r| r.gpu_ms)
-            .filter(|g| !g.is_nan())
-            .collect();
-        gpu.sort_by(f64::total_cmp);
-        let mut cpu: Vec<f64> = records.iter().map(FrameRecord::cpu_ms).collect();
-        cpu.sort_by(f64::total_cmp);
+    pub fn of(records: &[FrameRecord], run: &RunInfo) -> Summary {
+        let ms = sorted(records.iter().map(|r| r.frame_ms));
+        let gpu = sorted(records.iter().map(|r| r.gpu_ms));
+        let draw = sorted(records.iter().map(|r| r.gpu_draw_ms));
+        let cpu = sorted(records.iter().map(FrameRecord::cpu_ms));
+        let uploads = sorted(records.iter().map(|r| r.upload_bytes as f64));
         let total_ms: f64 = ms.iter().sum();
         let tris: u64 = records
             .iter()
             .map(|r| r.triangles + r.stitch_triangles)
             .sum();
+        let sum = |f: fn(&FrameRecord) -> u64| records.iter().map(f).sum::<u64>();
+        let median = percentile(&ms, 50.0);
         Summary {
             frames: records.len(),
-            device: device.to_string(),
-            width: size.0,
-            height: size.1,
-            tau,
-            brute_force,
+            device: run.device.clone(),
+            width: run.size.0,
+            height: run.size.1,
+            tau: run.tau,
+            brute_force: run.brute_force,
             frame_ms_mean: total_ms / records.len().max(1) as f64,
-            frame_ms_median: percentile(&ms, 50.0),
+            frame_ms_median: median,
             frame_ms_p95: percentile(&ms, 95.0),
             frame_ms_p99: percentile(&ms, 99.0),
             frame_ms_max: ms.last().copied().unwrap_or(f64::NAN),
+            first_frame_ratio: records.first().map_or(f64::NAN, |r| r.frame_ms / median),
             gpu_ms_median: (!gpu.is_empty()).then(|| percentile(&gpu, 50.0)),
+            gpu_draw_ms_median: (!draw.is_empty()).then(|| percentile(&draw, 50.0)),
             cpu_ms_median: percentile(&cpu, 50.0),
             cpu_share: records.iter().map(FrameRecord::overhead_ms).sum::<f64>()
                 / total_ms.max(1e-9),
             upload_share: records.iter().map(|r| r.cpu_upload_ms).sum::<f64>() / total_ms.max(1e-9),
             triangles_per_frame_mean: tris as f64 / records.len().max(1) as f64,
             mtri_per_s: tris as f64 / (total_ms / 1000.0).max(1e-9) / 1e6,
-            upload_mb: records.iter().map(|r| r.upload_bytes).sum::<u64>() as f64 / 1e6,
-            validation_messages: validation,
+            upload_mb: sum(|r| r.upload_bytes) as f64 / 1e6,
+            upload_mb_blocks: sum(|r| r.upload_bytes_blocks) as f64 / 1e6,
+            upload_mb_indices: sum(|r| r.upload_bytes_indices) as f64 / 1e6,
+            staged_mb: sum(|r| r.staged_bytes) as f64 / 1e6,
+            upload_bytes_p99: percentile(&uploads, 99.0),
+            upload_overshoot_mb: sum(|r| r.upload_overshoot_bytes) as f64 / 1e6,
+            pool_mb: run.pool_bytes as f64 / 1e6,
+            upload_budget_mb: run.upload_budget as f64 / 1e6,
+            frames_in_flight: run.frames_in_flight,
+            staging: run.staging,
+            gpu_allocations_after_first_frame: records
+                .iter()
+                .skip(1)
+                .map(|r| r.gpu_allocations)
+                .sum(),
+            hits: sum(|r| r.hits),
+            misses: sum(|r| r.misses),
+            evictions: sum(|r| r.evictions),
+            chunk_moves: sum(|r| r.chunk_moves),
+            tiles_coarser: sum(|r| r.tiles_coarser),
+            tiles_missing: sum(|r| r.tiles_missing),
+            validation_messages: run.validation_messages,
         }
     }
 }
@@ -203,7 +332,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn rows_match_the_header_and_percentiles_are_exact_on_ranks() {
+    fn rows_match_the_header_and_percentiles_interpolate() {
         let r = FrameRecord {
             tiles_per_level: vec![1, 2, 3],
             gpu_ms: f64::NAN,
@@ -217,9 +346,10 @@ mod tests {
                 ..Default::default()
             })
             .collect();
-        let s = Summary::of(&records, "test", (1, 1), 1.0, false, 0);
-        assert_eq!(s.frame_ms_median, 51.0);
-        assert_eq!(s.frame_ms_p95, 95.0);
+        let s = Summary::of(&records, &RunInfo::default());
+        // The same interpolating definition as `frametimes`.
+        assert_eq!(s.frame_ms_median, 50.5);
+        assert!((s.frame_ms_p95 - 95.05).abs() < 1e-9);
         assert_eq!(s.frame_ms_max, 100.0);
         assert!(s.gpu_ms_median.is_none());
     }

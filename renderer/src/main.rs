@@ -10,9 +10,9 @@ use std::process::ExitCode;
 
 use anyhow::{bail, Context, Result};
 use clap::Parser;
-use renderer::frame::Settings;
-use renderer::headless::{fly, Flight};
-use renderer::log::{write_csv, FrameRecord, Summary};
+use renderer::frame::{MemoryOptions, Settings};
+use renderer::headless::{fly, Flight, FlightResult};
+use renderer::log::{write_csv, RunInfo, Summary};
 use renderer::path::CameraPath;
 use renderer::terrain::Terrain;
 use renderer::vulkan::{Gpu, GpuOptions};
@@ -43,6 +43,7 @@ struct Cli {
     /// after this many frames (default: run until closed).
     #[arg(long)]
     frames: Option<u64>,
+    /// Image size in pixels, WxH (the window's initial size in window mode).
     #[arg(long, default_value = "1024x768", value_parser = parse_size)]
     size: (u32, u32),
     /// Pixel tolerance of the level of detail.
@@ -60,14 +61,31 @@ struct Cli {
     /// Folder for screenshots (frame_000010.png).
     #[arg(long)]
     out: Option<PathBuf>,
-    #[arg(long, default_value_t = 0)]
+    /// Save every K-th frame as a PNG into --out (0: none).
+    #[arg(long, default_value_t = 0, value_name = "K")]
     screenshot_every: u64,
-    /// Clear colour, 0..1 each.
+    /// Sky (clear) colour: R,G,B as 0..1 floats or 0..255 integers, or #rrggbb.
     #[arg(long, default_value = "0.55,0.70,0.90", value_parser = parse_rgb)]
     sky: [f32; 3],
-    /// GPU memory for tile data, MB.
+    /// GPU memory for tile data, MB: one pool allocated at start (smaller when the tile set
+    /// needs less); tiles that do not fit are drawn coarser.
     #[arg(long, default_value_t = 1024)]
     gpu_budget_mb: u64,
+    /// Tile data uploaded per frame at most, MB (new tiles' coarsest level may exceed it).
+    #[arg(long, default_value_t = (memory::DEFAULT_UPLOAD_BUDGET as f64) / (1 << 20) as f64)]
+    upload_budget_mb: f64,
+    /// Frames the CPU may run ahead of the GPU.
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=4))]
+    frames_in_flight: u32,
+    /// Send every upload through the staging ring, even where GPU memory is host-visible.
+    #[arg(long)]
+    force_staging: bool,
+    /// Eviction: how much one doubling of wasted chunk space weighs against age (0: pure LRU).
+    #[arg(long, default_value_t = memory::DEFAULT_WEIGHT)]
+    evict_weight: f64,
+    /// Write every frame's visible tiles and wanted levels here (for `memsim`).
+    #[arg(long, value_name = "FILE")]
+    trace: Option<PathBuf>,
     /// Enable the Khronos validation layer; any message makes the exit code 2.
     #[arg(long)]
     validation: bool,
@@ -77,6 +95,7 @@ struct Cli {
     /// Colour tiles by their level.
     #[arg(long)]
     level_colours: bool,
+    /// Draw triangle edges only (where the device supports it).
     #[arg(long)]
     wireframe: bool,
     /// Benchmark: time only the replay of pre-recorded frames over pre-resident tiles (the
@@ -114,16 +133,42 @@ fn parse_resize(s: &str) -> Result<(u64, (u32, u32)), String> {
     ))
 }
 
+/// `R,G,B` as 0..1 floats or 0..255 integers (any component above 1 means integers), or
+/// `#rrggbb`.
 fn parse_rgb(s: &str) -> Result<[f32; 3], String> {
-    let v: Vec<f32> = s
-        .split(',')
-        .map(|t| t.trim().parse::<f32>())
-        .collect::<Result<_, _>>()
-        .map_err(|_| "expected R,G,B")?;
-    match v[..] {
-        [r, g, b] if v.iter().all(|c| (0.0..=1.0).contains(c)) => Ok([r, g, b]),
-        _ => Err("expected R,G,B with each in 0..1".into()),
+    let s = s.trim();
+    if let Some(hex) = s.strip_prefix('#') {
+        let byte = |i: usize| {
+            hex.get(i..i + 2)
+                .and_then(|h| u8::from_str_radix(h, 16).ok())
+                .map(|b| f32::from(b) / 255.0)
+        };
+        return match (hex.len(), byte(0), byte(2), byte(4)) {
+            (6, Some(r), Some(g), Some(b)) => Ok([r, g, b]),
+            _ => Err("expected #rrggbb".into()),
+        };
     }
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    let v: Vec<f32> = parts
+        .iter()
+        .map(|t| t.parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| "expected R,G,B or #rrggbb")?;
+    let [r, g, b] = v[..] else {
+        return Err("expected R,G,B or #rrggbb".into());
+    };
+    let integers = parts.iter().all(|t| !t.contains('.'));
+    if v.iter().any(|c| !c.is_finite() || *c < 0.0) {
+        return Err("colour components must not be negative".into());
+    }
+    // All within 0..1: fractions (so `1,0,1` is magenta); otherwise 0..255 integers.
+    if v.iter().all(|&c| c <= 1.0) {
+        return Ok([r, g, b]);
+    }
+    if integers && v.iter().all(|&c| c <= 255.0) {
+        return Ok([r / 255.0, g / 255.0, b / 255.0]);
+    }
+    Err("expected R,G,B with each in 0..1 (or 0..255 integers)".into())
 }
 
 fn main() -> ExitCode {
@@ -170,6 +215,19 @@ fn run(cli: Cli) -> Result<ExitCode> {
         sky: cli.sky,
         no_stitch: cli.no_stitch,
     };
+    if !(cli.upload_budget_mb.is_finite() && cli.upload_budget_mb > 0.0) {
+        bail!("--upload-budget-mb must be a positive number of megabytes");
+    }
+    if !(cli.evict_weight.is_finite() && cli.evict_weight >= 0.0) {
+        bail!("--evict-weight must be zero or positive");
+    }
+    let memory = MemoryOptions {
+        gpu_budget_bytes: cli.gpu_budget_mb.saturating_mul(1 << 20),
+        upload_budget: (cli.upload_budget_mb * f64::from(1 << 20)) as u64,
+        weight: cli.evict_weight,
+        frames_in_flight: cli.frames_in_flight as usize,
+        force_staging: cli.force_staging,
+    };
     let gpu_options = GpuOptions {
         validation: cli.validation,
         device: cli.device.clone(),
@@ -180,15 +238,17 @@ fn run(cli: Cli) -> Result<ExitCode> {
             gpu: gpu_options,
             size: cli.size,
             settings,
-            gpu_budget_bytes: cli.gpu_budget_mb << 20,
+            memory,
+            trace: cli.trace.is_some(),
             frames: cli.frames,
             resize_at: cli.resize_at,
             screenshot_dir: cli.out.clone().unwrap_or_else(|| PathBuf::from(".")),
             record: cli.record.clone(),
             start: path.at(path.keys[0].time),
         };
-        let (records, validation) = window::run(&terrain, options).map_err(anyhow::Error::msg)?;
-        return finish(&cli, &terrain, &records, "window", validation);
+        let (result, device, validation) =
+            window::run(&terrain, options).map_err(anyhow::Error::msg)?;
+        return finish(&cli, &terrain, &result, &memory, &device, validation);
     }
     if let Some(record) = &cli.record {
         std::fs::write(record, path.to_csv())
@@ -201,43 +261,52 @@ fn run(cli: Cli) -> Result<ExitCode> {
         frames: cli.frames.unwrap_or(120),
         size: cli.size,
         settings,
-        gpu_budget_bytes: cli.gpu_budget_mb << 20,
+        memory,
+        trace: cli.trace.is_some(),
         out: cli.out.clone(),
         screenshot_every: cli.screenshot_every,
         draw_only: cli.draw_only,
         warmup: cli.warmup,
     };
-    let records = fly(&gpu, &flight)?;
+    let result = fly(&gpu, &flight)?;
     let validation = gpu.validation_messages();
     let device = gpu.device_name.clone();
     drop(gpu);
-    finish(&cli, &terrain, &records, &device, validation)
+    finish(&cli, &terrain, &result, &memory, &device, validation)
 }
 
-/// Writes the log and its summary, prints the summary, and turns validation messages into
-/// the exit code.
+/// Writes the log, its summary and the trace, prints the summary, and turns validation
+/// messages into the exit code.
 fn finish(
     cli: &Cli,
     terrain: &Terrain,
-    records: &[FrameRecord],
+    result: &FlightResult,
+    memory: &MemoryOptions,
     device: &str,
     validation: u64,
 ) -> Result<ExitCode> {
-    let summary = Summary::of(
-        records,
-        device,
-        cli.size,
-        cli.tau,
-        cli.brute_force,
-        validation,
-    );
+    let run = RunInfo {
+        device: device.to_string(),
+        size: cli.size,
+        tau: cli.tau,
+        brute_force: cli.brute_force,
+        validation_messages: validation,
+        pool_bytes: result.pool_bytes,
+        upload_budget: memory.upload_budget,
+        frames_in_flight: memory.frames_in_flight,
+        staging: result.staging,
+    };
+    let records = &result.records;
+    let summary = Summary::of(records, &run);
     let json = serde_json::to_string_pretty(&summary)?;
     if let Some(log) = &cli.log {
         write_csv(log, terrain.levels, records)
             .with_context(|| format!("{}: cannot write", log.display()))?;
         let json_path = log.with_extension("json");
-        std::fs::write(&json_path, &json)
-            .with_context(|| format!("{}: cannot write", json_path.display()))?;
+        write_atomically(&json_path, json.as_bytes())?;
+    }
+    if let (Some(path), Some(trace)) = (&cli.trace, &result.trace) {
+        write_atomically(path, trace.as_bytes())?;
     }
     println!("{json}");
     if validation > 0 {
@@ -245,4 +314,12 @@ fn finish(
         return Ok(ExitCode::from(2));
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// Writes through a temporary file renamed into place, so no half-written file looks valid.
+fn write_atomically(path: &std::path::Path, bytes: &[u8]) -> Result<()> {
+    let tmp = path.with_extension("tmp");
+    std::fs::write(&tmp, bytes)
+        .and_then(|()| std::fs::rename(&tmp, path))
+        .with_context(|| format!("{}: cannot write", path.display()))
 }

@@ -21,8 +21,6 @@ pub struct TileInfo {
     pub max: DVec3,
     /// Per level, per side (N, E, S, W): the packed border vertices in order along the side.
     pub borders: Vec<[Vec<u32>; 4]>,
-    /// Bytes of all blocks and index arrays: what a whole-tile upload moves.
-    pub bytes: u64,
     heights: [f32; HEIGHT_CELLS * HEIGHT_CELLS],
 }
 
@@ -66,11 +64,9 @@ impl Terrain {
                     f64::from(z_max),
                 );
                 let mut packed: Vec<u32> = Vec::with_capacity(th.vertex_count as usize);
-                let mut bytes = 0u64;
                 for i in 0..h.levels {
                     if let Some(l) = tile.level(i) {
                         packed.extend_from_slice(l.positions);
-                        bytes += (l.positions.len() * 4 + l.indices.bytes().len()) as u64;
                     }
                 }
                 let borders = (0..h.levels)
@@ -96,7 +92,6 @@ impl Terrain {
                     min,
                     max,
                     borders,
-                    bytes,
                     heights,
                 });
             }
@@ -110,6 +105,51 @@ impl Terrain {
             spacing: (sx, sy),
             height_step: h.height_step,
         })
+    }
+
+    /// What each tile costs in GPU memory, level by level (the memory manager's view).
+    pub fn costs(&self) -> Vec<memory::TileCost> {
+        self.tiles
+            .iter()
+            .map(|t| memory::TileCost {
+                levels: t
+                    .levels
+                    .iter()
+                    .enumerate()
+                    .map(|(i, l)| memory::LevelCost {
+                        positions: 4 * u64::from(l.block_len),
+                        morph: i as u64 * u64::from(l.block_len),
+                        indices: u64::from(l.index_count) * u64::from(l.index_width),
+                        index_width: l.index_width,
+                    })
+                    .collect(),
+            })
+            .collect()
+    }
+
+    /// The stored bytes of one part of a tile (validated when the tile set was opened).
+    pub fn part(&self, tile: usize, part: memory::Part) -> Option<&[u8]> {
+        let info = self.tiles.get(tile)?;
+        let blob = self.set.blob(info.tx, info.ty)?;
+        let (offset, len) = match part {
+            memory::Part::Positions(j) => {
+                let l = info.levels.get(j as usize)?;
+                (l.positions_offset, 4 * u64::from(l.block_len))
+            }
+            memory::Part::Morph(j) => {
+                let l = info.levels.get(j as usize)?;
+                (l.morph_offset, u64::from(j) * u64::from(l.block_len))
+            }
+            memory::Part::Indices(j) => {
+                let l = info.levels.get(j as usize)?;
+                (
+                    l.index_offset,
+                    u64::from(l.index_count) * u64::from(l.index_width),
+                )
+            }
+        };
+        let start = offset as usize;
+        blob.get(start..start.checked_add(usize::try_from(len).ok()?)?)
     }
 
     pub fn tile_index(&self, tx: u32, ty: u32) -> Option<usize> {

@@ -7,7 +7,6 @@ use std::collections::HashSet;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use ash::vk;
 use glam::DVec3;
 use raw_window_handle::{HasDisplayHandle, HasWindowHandle};
 use winit::application::ApplicationHandler;
@@ -18,11 +17,10 @@ use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
 use crate::camera::Camera;
-use crate::frame::{Output, Present, Renderer, Settings};
-use crate::headless::write_png;
+use crate::frame::{Finished, FrameInput, MemoryOptions, Present, Renderer, Settings};
+use crate::headless::{write_png, FlightResult};
 use crate::log::FrameRecord;
 use crate::path::{CameraPath, Keyframe};
-use crate::target::Target;
 use crate::terrain::Terrain;
 use crate::vulkan::swapchain::Swapchain;
 use crate::vulkan::{Gpu, GpuOptions, VkError};
@@ -31,7 +29,9 @@ pub struct WindowOptions {
     pub gpu: GpuOptions,
     pub size: (u32, u32),
     pub settings: Settings,
-    pub gpu_budget_bytes: u64,
+    pub memory: MemoryOptions,
+    /// Keep every frame's requests (`--trace`).
+    pub trace: bool,
     /// Close after this many frames (for scripted runs and tests).
     pub frames: Option<u64>,
     /// Ask the window for a new size at a frame (for tests of resizing).
@@ -45,9 +45,6 @@ pub struct WindowOptions {
 struct Live {
     window: Window,
     swapchain: Swapchain,
-    target: Target,
-    acquired: vk::Semaphore,
-    done: vk::Semaphore,
 }
 
 struct App<'a> {
@@ -68,13 +65,17 @@ struct App<'a> {
     screenshot: bool,
     resize_pending: bool,
     error: Option<String>,
+    trace: Option<String>,
+    pool_bytes: u64,
+    staging: bool,
 }
 
-/// Runs the window until it closes; returns the frame records.
+/// Runs the window until it closes; returns the flight, the device's name and the number of
+/// validation messages.
 pub fn run(
     terrain: &Terrain,
     mut options: WindowOptions,
-) -> Result<(Vec<FrameRecord>, u64), String> {
+) -> Result<(FlightResult, String, u64), String> {
     let event_loop =
         EventLoop::new().map_err(|e| format!("cannot open a window (is there a display?): {e}"))?;
     event_loop.set_control_flow(ControlFlow::Poll);
@@ -84,13 +85,12 @@ pub fn run(
         .as_raw();
     options.gpu.display = Some(display);
     let gpu = Gpu::new(&options.gpu).map_err(|e| e.to_string())?;
-    let renderer = Renderer::new(&gpu, options.gpu_budget_bytes).map_err(|e| e.to_string())?;
     let camera = options.start;
     let mut app = App {
         gpu,
         terrain,
         options,
-        renderer: Some(renderer),
+        renderer: None,
         live: None,
         camera,
         keys: HashSet::new(),
@@ -104,6 +104,9 @@ pub fn run(
         screenshot: false,
         resize_pending: false,
         error: None,
+        trace: None,
+        pool_bytes: 0,
+        staging: false,
     };
     let result = event_loop.run_app(&mut app);
     app.shutdown();
@@ -136,24 +139,48 @@ pub fn run(
         std::fs::write(record, path.to_csv()).map_err(|e| format!("{}: {e}", record.display()))?;
     }
     let validation = app.gpu.validation_messages();
-    Ok((std::mem::take(&mut app.records), validation))
+    let result = FlightResult {
+        records: std::mem::take(&mut app.records),
+        trace: app.trace.take(),
+        pool_bytes: app.pool_bytes,
+        staging: app.staging,
+    };
+    Ok((result, app.gpu.device_name.clone(), validation))
 }
 
 impl App<'_> {
     fn shutdown(&mut self) {
+        if let Some(mut r) = self.renderer.take() {
+            match r.finish_all(&self.gpu) {
+                Ok(finished) => self.keep(finished),
+                Err(e) => self.error = self.error.take().or(Some(e.to_string())),
+            }
+            self.trace = r.take_trace();
+            self.pool_bytes = r.manager().pool_bytes();
+            self.staging = !r.pool().direct();
+            r.destroy(&self.gpu);
+        }
         self.gpu.wait_idle();
         if let Some(live) = self.live.take() {
-            live.target.destroy(&self.gpu);
             live.swapchain.destroy(&self.gpu);
-            // SAFETY: the device is idle.
-            unsafe {
-                self.gpu.device.destroy_semaphore(live.acquired, None);
-                self.gpu.device.destroy_semaphore(live.done, None);
-            }
             drop(live.window);
         }
-        if let Some(r) = self.renderer.take() {
-            r.destroy(&self.gpu);
+    }
+
+    /// Keeps finished frames' records and saves their screenshots.
+    fn keep(&mut self, finished: Vec<Finished>) {
+        for f in finished {
+            if let Some(pixels) = f.pixels {
+                let file = self
+                    .options
+                    .screenshot_dir
+                    .join(format!("vkterrain_{:06}.png", f.record.frame));
+                match write_png(&file, f.extent.0, f.extent.1, pixels) {
+                    Ok(()) => eprintln!("vkterrain: screenshot {}", file.display()),
+                    Err(e) => eprintln!("vkterrain: {e}"),
+                }
+            }
+            self.records.push(f.record);
         }
     }
 
@@ -181,31 +208,18 @@ impl App<'_> {
         )
         .map_err(|e| e.to_string())?;
         let extent = swapchain.extent;
-        let target = Target::new(&self.gpu, extent.width.max(1), extent.height.max(1))
-            .map_err(|e| e.to_string())?;
-        let info = vk::SemaphoreCreateInfo::default();
-        // SAFETY: plain semaphore creation; destroyed in shutdown.
-        let (acquired, done) = unsafe {
-            (
-                self.gpu
-                    .device
-                    .create_semaphore(&info, None)
-                    .map_err(|e| e.to_string())?,
-                self.gpu
-                    .device
-                    .create_semaphore(&info, None)
-                    .map_err(|e| e.to_string())?,
-            )
-        };
-        self.gpu.name(acquired, "image acquired");
-        self.gpu.name(done, "frame done");
-        self.live = Some(Live {
-            window,
-            swapchain,
-            target,
-            acquired,
-            done,
-        });
+        self.live = Some(Live { window, swapchain });
+        let mut renderer = Renderer::new(
+            &self.gpu,
+            self.terrain,
+            (extent.width.max(1), extent.height.max(1)),
+            self.options.memory,
+        )
+        .map_err(|e| e.to_string())?;
+        if self.options.trace {
+            renderer.enable_trace();
+        }
+        self.renderer = Some(renderer);
         Ok(())
     }
 
@@ -221,8 +235,10 @@ impl App<'_> {
             .recreate(&self.gpu, (size.width, size.height))?;
         let extent = live.swapchain.extent;
         eprintln!("vkterrain: swapchain {}x{}", extent.width, extent.height);
-        let target = Target::new(&self.gpu, extent.width, extent.height)?;
-        std::mem::replace(&mut live.target, target).destroy(&self.gpu);
+        if let Some(r) = self.renderer.as_mut() {
+            let finished = r.resize(&self.gpu, (extent.width, extent.height))?;
+            self.keep(finished);
+        }
         Ok(true)
     }
 
@@ -272,7 +288,19 @@ impl App<'_> {
         if size.width == 0 || size.height == 0 {
             return; // minimised
         }
-        let index = match live.swapchain.acquire(live.acquired) {
+        let Some(renderer) = self.renderer.as_mut() else {
+            return;
+        };
+        // Wait only for this frame's slot; frames that finished meanwhile come back here.
+        let (acquired, finished) = match renderer.begin_frame(&self.gpu) {
+            Ok(r) => r,
+            Err(e) => return self.fail(event_loop, e),
+        };
+        self.keep(finished);
+        let Some(live) = self.live.as_mut() else {
+            return;
+        };
+        let index = match live.swapchain.acquire(acquired) {
             Ok(Some((i, suboptimal))) => {
                 self.resize_pending |= suboptimal;
                 i
@@ -286,58 +314,41 @@ impl App<'_> {
         let present = Present {
             image: live.swapchain.images[index as usize],
             extent: live.swapchain.extent,
-            acquired: live.acquired,
-            done: live.done,
+            acquired,
+            done: live.swapchain.rendered[index as usize],
         };
         let shot = std::mem::take(&mut self.screenshot);
         let Some(renderer) = self.renderer.as_mut() else {
             return;
         };
-        let result = renderer.render(
-            &self.gpu,
-            self.terrain,
-            &self.camera,
-            &self.options.settings,
-            Output {
-                target: &mut live.target,
-                screenshot: shot,
-                present: Some(present),
-            },
-        );
-        let (mut record, pixels) = match result {
-            Ok(r) => r,
+        let time_s = self.started.elapsed().as_secs_f64();
+        let input = FrameInput {
+            camera: &self.camera,
+            time_s,
+            label: self.frames,
+            screenshot: shot,
+            present: Some(present),
+        };
+        let finished = match renderer.render(&self.gpu, self.terrain, &self.options.settings, input)
+        {
+            Ok(f) => f,
             Err(e) => return self.fail(event_loop, e),
         };
-        match live.swapchain.present(&self.gpu, index, live.done) {
+        self.keep(finished);
+        let Some(live) = self.live.as_mut() else {
+            return;
+        };
+        match live.swapchain.present(&self.gpu, index, present.done) {
             Ok(true) => {}
             Ok(false) => self.resize_pending = true,
             Err(e) => return self.fail(event_loop, e),
         }
-        record.frame = self.frames;
-        record.time_s = self.started.elapsed().as_secs_f64();
-        record.frame_ms = now.elapsed().as_secs_f64() * 1000.0;
-        if let Some(pixels) = pixels {
-            let e = live.target.extent();
-            let file = self
-                .options
-                .screenshot_dir
-                .join(format!("vkterrain_{:06}.png", self.frames));
-            match write_png(&file, e.width, e.height, pixels) {
-                Ok(()) => eprintln!("vkterrain: screenshot {}", file.display()),
-                Err(e) => eprintln!("vkterrain: {e}"),
-            }
-        }
-        if self
-            .path
-            .last()
-            .is_none_or(|k| record.time_s - k.time >= 0.5)
-        {
+        if self.path.last().is_none_or(|k| time_s - k.time >= 0.5) {
             self.path.push(Keyframe {
-                time: record.time_s,
+                time: time_s,
                 camera: self.camera,
             });
         }
-        self.records.push(record);
         self.frames += 1;
         if let Some((at, (w, h))) = self.options.resize_at {
             if self.frames == at {

@@ -85,6 +85,7 @@ impl Buffer {
             return Err(e.into());
         }
         gpu.name(raw, name);
+        gpu.count_allocation();
         Ok(Buffer {
             raw,
             size: desc.size,
@@ -99,6 +100,14 @@ impl Buffer {
             .as_mut()?
             .mapped_slice_mut()
             .map(|s| &mut s[..size])
+    }
+
+    /// Host writes need no flush (HOST_COHERENT memory).
+    pub fn is_coherent(&self) -> bool {
+        self.allocation.as_ref().is_some_and(|a| {
+            a.memory_properties()
+                .contains(vk::MemoryPropertyFlags::HOST_COHERENT)
+        })
     }
 
     pub fn write(&mut self, offset: usize, bytes: &[u8]) -> bool {

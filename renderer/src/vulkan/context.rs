@@ -40,6 +40,11 @@ pub struct Gpu {
     /// Raw pointer handed to the debug callback; reclaimed on drop.
     callback_counter: *const AtomicU64,
     pub wireframe_supported: bool,
+    /// Every device-local memory type is also host-visible and coherent (lavapipe, most
+    /// integrated GPUs): the CPU can write tile data where the GPU reads it.
+    unified_memory: bool,
+    /// GPU memory allocations made so far (buffers and images).
+    allocations: AtomicU64,
 }
 
 unsafe extern "system" fn debug_callback(
@@ -90,6 +95,12 @@ impl Gpu {
             e.extension_name_as_c_str()
                 .is_ok_and(|n| n == ash::ext::debug_utils::NAME)
         });
+        if options.validation && !has_debug_utils {
+            // Without the messenger no message could be counted: a silent pass would lie.
+            return Err(VkError::Unsupported(
+                "--validation: VK_EXT_debug_utils is missing, so validation messages cannot be counted".into(),
+            ));
+        }
 
         let app_name = c"vkterrain";
         let app = vk::ApplicationInfo::default()
@@ -213,6 +224,21 @@ impl Gpu {
             buffer_device_address: false,
             allocation_sizes: Default::default(),
         })?;
+        // SAFETY: plain property query on this instance's device.
+        let memory = unsafe { instance.get_physical_device_memory_properties(physical) };
+        let unified_memory = {
+            let types = &memory.memory_types[..memory.memory_type_count as usize];
+            let host =
+                vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT;
+            let local: Vec<_> = types
+                .iter()
+                .filter(|t| {
+                    t.property_flags
+                        .contains(vk::MemoryPropertyFlags::DEVICE_LOCAL)
+                })
+                .collect();
+            !local.is_empty() && local.iter().all(|t| t.property_flags.contains(host))
+        };
         let gpu = Gpu {
             entry,
             instance,
@@ -228,6 +254,8 @@ impl Gpu {
             validation_messages,
             callback_counter,
             wireframe_supported,
+            unified_memory,
+            allocations: AtomicU64::new(0),
         };
         gpu.name(gpu.queue, "graphics queue");
         Ok(gpu)
@@ -296,6 +324,20 @@ impl Gpu {
     /// Validation warnings and errors so far (0 without `--validation`).
     pub fn validation_messages(&self) -> u64 {
         self.validation_messages.load(Ordering::Relaxed)
+    }
+
+    pub fn unified_memory(&self) -> bool {
+        self.unified_memory
+    }
+
+    /// Counts one GPU memory allocation (the log's `gpu_allocations`).
+    pub fn count_allocation(&self) {
+        self.allocations.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// GPU memory allocations so far.
+    pub fn allocations(&self) -> u64 {
+        self.allocations.load(Ordering::Relaxed)
     }
 
     pub fn allocator(&self) -> MutexGuard<'_, Allocator> {

@@ -74,6 +74,7 @@ impl Image {
         let view = unsafe { gpu.device.create_image_view(&view_info, None) }?;
         gpu.name(raw, name);
         gpu.name(view, name);
+        gpu.count_allocation();
         Ok(Image {
             raw,
             view,

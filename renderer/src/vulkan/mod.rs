@@ -5,7 +5,9 @@ pub mod buffer;
 pub mod context;
 pub mod image;
 pub mod pipeline;
+pub mod pool;
 pub mod swapchain;
+pub mod sync;
 pub mod timestamps;
 
 pub use buffer::Buffer;

@@ -3,7 +3,7 @@
 use ash::vk;
 use raw_window_handle::{RawDisplayHandle, RawWindowHandle};
 
-use super::{Gpu, VkError, VkResult};
+use super::{sync, Gpu, VkError, VkResult};
 
 pub struct Swapchain {
     surface_loader: ash::khr::surface::Instance,
@@ -11,6 +11,10 @@ pub struct Swapchain {
     pub surface: vk::SurfaceKHR,
     pub swapchain: vk::SwapchainKHR,
     pub images: Vec<vk::Image>,
+    /// One per image, signalled when a frame's copy into the image is done; presentation
+    /// waits on it. Per image, not per frame: the spec allows reusing a semaphore only after
+    /// the presentation that waited on it, which is known when its image is acquired again.
+    pub rendered: Vec<vk::Semaphore>,
     pub extent: vk::Extent2D,
     pub format: vk::Format,
 }
@@ -49,6 +53,7 @@ impl Swapchain {
             surface,
             swapchain: vk::SwapchainKHR::null(),
             images: Vec::new(),
+            rendered: Vec::new(),
             extent: vk::Extent2D {
                 width: size.0,
                 height: size.1,
@@ -131,6 +136,16 @@ impl Swapchain {
         self.extent = extent;
         self.format = format.format;
         gpu.name(swapchain, "window swapchain");
+        // The device is idle: the old semaphores have no pending operations.
+        for s in self.rendered.drain(..) {
+            sync::destroy_semaphore(gpu, s);
+        }
+        for i in 0..self.images.len() {
+            self.rendered.push(sync::semaphore(
+                gpu,
+                &format!("swapchain image {i} rendered"),
+            )?);
+        }
         Ok(())
     }
 
@@ -167,6 +182,9 @@ impl Swapchain {
 
     pub fn destroy(self, gpu: &Gpu) {
         gpu.wait_idle();
+        for s in self.rendered {
+            sync::destroy_semaphore(gpu, s);
+        }
         // SAFETY: the device is idle; the surface outlives its swapchain until here.
         unsafe {
             self.loader.destroy_swapchain(self.swapchain, None);

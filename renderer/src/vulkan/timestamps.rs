@@ -1,8 +1,11 @@
-//! GPU frame time from timestamp queries: two per frame, read after the frame's fence.
+//! GPU times from timestamp queries, four per frame (start, terrain pass start and end, end),
+//! read after the frame's fence.
 
 use ash::vk;
 
 use super::{Gpu, VkResult};
+
+const QUERIES: u32 = 4;
 
 pub struct Timestamps {
     pool: vk::QueryPool,
@@ -11,13 +14,13 @@ pub struct Timestamps {
 }
 
 impl Timestamps {
-    pub fn new(gpu: &Gpu) -> VkResult<Timestamps> {
+    pub fn new(gpu: &Gpu, name: &str) -> VkResult<Timestamps> {
         let info = vk::QueryPoolCreateInfo::default()
             .query_type(vk::QueryType::TIMESTAMP)
-            .query_count(2);
+            .query_count(QUERIES);
         // SAFETY: valid create info.
         let pool = unsafe { gpu.device.create_query_pool(&info, None) }?;
-        gpu.name(pool, "frame timestamps");
+        gpu.name(pool, name);
         // SAFETY: plain property query.
         let families = unsafe {
             gpu.instance
@@ -34,34 +37,41 @@ impl Timestamps {
         Ok(Timestamps { pool, period_ns })
     }
 
+    /// The frame's first stamp (resets the pool first).
     pub fn begin(&self, gpu: &Gpu, cmd: vk::CommandBuffer) {
-        // SAFETY: cmd is recording; the pool has two queries.
+        // SAFETY: cmd is recording outside rendering; the pool has QUERIES queries.
         unsafe {
-            gpu.device.cmd_reset_query_pool(cmd, self.pool, 0, 2);
-            gpu.device
-                .cmd_write_timestamp(cmd, vk::PipelineStageFlags::TOP_OF_PIPE, self.pool, 0);
+            gpu.device.cmd_reset_query_pool(cmd, self.pool, 0, QUERIES);
         }
+        self.stamp(gpu, cmd, vk::PipelineStageFlags::TOP_OF_PIPE, 0);
+    }
+
+    /// Before the terrain pass.
+    pub fn pass_begin(&self, gpu: &Gpu, cmd: vk::CommandBuffer) {
+        self.stamp(gpu, cmd, vk::PipelineStageFlags::TOP_OF_PIPE, 1);
+    }
+
+    /// After the terrain pass.
+    pub fn pass_end(&self, gpu: &Gpu, cmd: vk::CommandBuffer) {
+        self.stamp(gpu, cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, 2);
     }
 
     pub fn end(&self, gpu: &Gpu, cmd: vk::CommandBuffer) {
-        // SAFETY: as above.
-        unsafe {
-            gpu.device.cmd_write_timestamp(
-                cmd,
-                vk::PipelineStageFlags::BOTTOM_OF_PIPE,
-                self.pool,
-                1,
-            )
-        };
+        self.stamp(gpu, cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, 3);
     }
 
-    /// Milliseconds between the two stamps of the finished frame, if the queue can time.
-    pub fn read_ms(&self, gpu: &Gpu) -> Option<f64> {
+    fn stamp(&self, gpu: &Gpu, cmd: vk::CommandBuffer, stage: vk::PipelineStageFlags, q: u32) {
+        // SAFETY: cmd is recording; q < QUERIES and was reset by `begin`.
+        unsafe { gpu.device.cmd_write_timestamp(cmd, stage, self.pool, q) };
+    }
+
+    /// The finished frame's four stamps in ticks, if the queue can time.
+    pub fn read_ticks(&self, gpu: &Gpu) -> Option<[u64; QUERIES as usize]> {
         if self.period_ns == 0.0 {
             return None;
         }
-        let mut ticks = [0u64; 2];
-        // SAFETY: the frame's fence was waited on, so both results are available.
+        let mut ticks = [0u64; QUERIES as usize];
+        // SAFETY: the frame's fence was waited on, so every result is available.
         unsafe {
             gpu.device.get_query_pool_results(
                 self.pool,
@@ -71,7 +81,18 @@ impl Timestamps {
             )
         }
         .ok()?;
-        Some(ticks[1].saturating_sub(ticks[0]) as f64 * self.period_ns / 1e6)
+        Some(ticks)
+    }
+
+    /// Milliseconds between two tick counts of this queue.
+    pub fn ms_between(&self, from: u64, to: u64) -> f64 {
+        to.saturating_sub(from) as f64 * self.period_ns / 1e6
+    }
+
+    /// (whole frame, terrain pass) in milliseconds of the finished frame, if the queue can time.
+    pub fn read_ms(&self, gpu: &Gpu) -> Option<(f64, f64)> {
+        let t = self.read_ticks(gpu)?;
+        Some((self.ms_between(t[0], t[3]), self.ms_between(t[1], t[2])))
     }
 
     pub fn destroy(self, gpu: &Gpu) {

@@ -466,6 +466,14 @@ impl TileSet {
             .then(|| self.entry(ty as usize * self.header.tiles_x as usize + tx as usize))
     }
 
+    /// Tile `(tx, ty)`'s stored bytes, not re-checked: for readers that validated the tile once
+    /// with [`tile`](Self::tile) and then fetch parts of it often (the renderer's uploads).
+    pub fn blob(&self, tx: u32, ty: u32) -> Option<&[u8]> {
+        let e = self.dir_entry(tx, ty)?;
+        self.map
+            .get(e.offset as usize..e.offset.checked_add(e.len)? as usize)
+    }
+
     /// Tile `(tx, ty)`, checksum and structure validated.
     pub fn tile(&self, tx: u32, ty: u32) -> Result<Tile<'_>, FormatError> {
         let invalid = |what: String| FormatError::Invalid {

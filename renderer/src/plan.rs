@@ -1,0 +1,202 @@
+//! The frame plan (DESIGN.md, "The frame", steps 2-5), in plain Rust: cull tiles against the
+//! frustum and sort them front to back, choose the level each one wants, let the memory
+//! manager grant levels and schedule uploads within the budget, and stitch neighbours at the
+//! levels *granted* (a tile whose wanted level is not resident yet is drawn, and stitched, at
+//! the level it has). The recorder in [`crate::frame`] turns the plan into commands.
+
+use std::collections::HashMap;
+use std::time::Instant;
+
+use glam::DVec3;
+use memory::{Manager, Request, Stats};
+
+use crate::camera::{Camera, View};
+use crate::stitch::{stitch_side, Stitch};
+use crate::terrain::Terrain;
+use crate::{cull, lod};
+
+/// How levels are chosen.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LevelRule {
+    /// The coarsest level whose measured error projects to at most `tau` pixels.
+    Tau(f64),
+    /// Every visible tile at this level (clamped to the finest).
+    Forced(u32),
+    /// Every visible tile at its finest level (the baseline).
+    Finest,
+}
+
+/// One tile to draw, where its data sits in the pool.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Draw {
+    pub tile: usize,
+    pub wanted: u32,
+    pub level: u32,
+    /// Pool byte offsets of block 0's positions and of the level's index array.
+    pub vertex_offset: u64,
+    pub index_offset: u64,
+    /// 2 or 4 bytes.
+    pub index_width: u32,
+    pub index_count: u32,
+}
+
+/// Everything one frame does, decided before any command is recorded.
+pub struct Plan {
+    pub view: View,
+    /// Front to back.
+    pub draws: Vec<Draw>,
+    /// Stitch geometry, each in the frame of the draw it indexes.
+    pub stitches: Vec<(usize, Stitch)>,
+    pub uploads: Vec<memory::Upload>,
+    pub moves: Vec<memory::Move>,
+    /// Visible tiles front to back with the level each wanted (a trace's rows).
+    pub requests: Vec<Request>,
+    pub stats: Stats,
+    pub tiles_visible: u64,
+    pub cpu_cull_ms: f64,
+    pub cpu_lod_ms: f64,
+    pub cpu_residency_ms: f64,
+    pub cpu_stitch_ms: f64,
+}
+
+/// A tile set whose neighbouring tiles do not share their border.
+#[derive(Debug, thiserror::Error)]
+#[error("tiles {a:?} and {b:?} do not share their border (corrupted tile set?)")]
+pub struct BorderMismatch {
+    pub a: (u32, u32),
+    pub b: (u32, u32),
+}
+
+/// Plans frame `frame`; `completed` is the newest frame the GPU has finished.
+#[allow(clippy::too_many_arguments)]
+pub fn plan(
+    terrain: &Terrain,
+    manager: &mut Manager,
+    camera: &Camera,
+    extent: (u32, u32),
+    rule: LevelRule,
+    frame: u64,
+    completed: Option<u64>,
+    allow_uploads: bool,
+) -> Result<Plan, BorderMismatch> {
+    let view = camera.view(extent.0, extent.1);
+
+    let t = Instant::now();
+    let visible = visible_tiles(terrain, &view, camera.position);
+    let cpu_cull_ms = ms(t);
+
+    let t = Instant::now();
+    let requests: Vec<Request> = visible
+        .iter()
+        .map(|&i| Request {
+            tile: i as u32,
+            wanted: wanted_level(terrain, i, &view, camera.position, rule),
+        })
+        .collect();
+    let cpu_lod_ms = ms(t);
+
+    let t = Instant::now();
+    let residency = manager.plan_frame(frame, completed, &requests, allow_uploads);
+    let draws: Vec<Draw> = residency
+        .grants
+        .iter()
+        .filter_map(|g| {
+            let level = g.level?;
+            Some(Draw {
+                tile: g.tile as usize,
+                wanted: g.wanted,
+                level,
+                vertex_offset: g.vertex_offset,
+                index_offset: g.index_offset,
+                index_width: g.index_width,
+                index_count: terrain.tiles[g.tile as usize].levels[level as usize].index_count,
+            })
+        })
+        .collect();
+    let cpu_residency_ms = ms(t);
+
+    let t = Instant::now();
+    let stitches = stitch_granted(terrain, &draws)?;
+    let cpu_stitch_ms = ms(t);
+
+    Ok(Plan {
+        view,
+        draws,
+        stitches,
+        uploads: residency.uploads,
+        moves: residency.moves,
+        requests,
+        stats: residency.stats,
+        tiles_visible: visible.len() as u64,
+        cpu_cull_ms,
+        cpu_lod_ms,
+        cpu_residency_ms,
+        cpu_stitch_ms,
+    })
+}
+
+/// Tiles whose box touches the frustum, nearest first (by the box point closest to the camera).
+pub fn visible_tiles(terrain: &Terrain, view: &View, camera: DVec3) -> Vec<usize> {
+    let planes = view.frustum();
+    let mut visible: Vec<(f64, usize)> = terrain
+        .tiles
+        .iter()
+        .enumerate()
+        .filter(|(_, tile)| cull::visible(&planes, camera, tile))
+        .map(|(i, tile)| {
+            let d = camera.clamp(tile.min, tile.max).distance_squared(camera);
+            (d, i)
+        })
+        .collect();
+    visible.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    visible.into_iter().map(|(_, i)| i).collect()
+}
+
+fn wanted_level(terrain: &Terrain, i: usize, view: &View, camera: DVec3, rule: LevelRule) -> u32 {
+    let finest = terrain.levels - 1;
+    let tile = &terrain.tiles[i];
+    match rule {
+        LevelRule::Finest => finest,
+        LevelRule::Forced(l) => l.min(finest),
+        LevelRule::Tau(tau) => {
+            lod::level_for(tile, lod::tolerable_error(view, camera, tile, tau)).min(finest)
+        }
+    }
+}
+
+/// Stitches between drawn neighbours at their granted levels, each pair once (from the tile
+/// west or north of the seam).
+pub fn stitch_granted(
+    terrain: &Terrain,
+    draws: &[Draw],
+) -> Result<Vec<(usize, Stitch)>, BorderMismatch> {
+    let level_of: HashMap<usize, u32> = draws.iter().map(|d| (d.tile, d.level)).collect();
+    let mut stitches = Vec::new();
+    for (k, d) in draws.iter().enumerate() {
+        let a = &terrain.tiles[d.tile];
+        let mut s = Stitch::default();
+        for (side, (dx, dy)) in [(1usize, (1u32, 0u32)), (2, (0, 1))] {
+            let Some(j) = terrain.tile_index(a.tx + dx, a.ty + dy) else {
+                continue;
+            };
+            let Some(&level_b) = level_of.get(&j) else {
+                continue;
+            };
+            let b = &terrain.tiles[j];
+            if !stitch_side(&mut s, a, d.level, b, level_b, side) {
+                return Err(BorderMismatch {
+                    a: (a.tx, a.ty),
+                    b: (b.tx, b.ty),
+                });
+            }
+        }
+        if s.triangles > 0 {
+            stitches.push((k, s));
+        }
+    }
+    Ok(stitches)
+}
+
+fn ms(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1000.0
+}

@@ -1,0 +1,216 @@
+//! The tile pool: one buffer of device memory, allocated at start, that holds every chunk the
+//! memory manager hands out; the staging ring that feeds it when the CPU cannot (or must not)
+//! write it directly; and the barriers that order it all against the frames in flight.
+//!
+//! Two transfer paths. Where device memory is host-visible and coherent (unified memory:
+//! lavapipe, integrated GPUs) the CPU writes tile data straight into the pool, but only into
+//! ranges no frame in flight reads (the manager guarantees that for new blocks and fresh
+//! chunks and flags the rest). Everything else, all uploads on a discrete GPU, or all of them
+//! with `--force-staging`, goes through the ring and a copy recorded at the start of the frame,
+//! after a barrier that waits for earlier frames' reads of the pool.
+
+use ash::vk;
+use gpu_allocator::MemoryLocation;
+
+use super::buffer::BufferDesc;
+use super::sync::{self, Commands};
+use super::{Buffer, Gpu, VkResult};
+
+/// What the pool is bound as.
+const POOL_USAGE: vk::BufferUsageFlags = vk::BufferUsageFlags::from_raw(
+    vk::BufferUsageFlags::VERTEX_BUFFER.as_raw()
+        | vk::BufferUsageFlags::INDEX_BUFFER.as_raw()
+        | vk::BufferUsageFlags::TRANSFER_SRC.as_raw()
+        | vk::BufferUsageFlags::TRANSFER_DST.as_raw(),
+);
+
+pub struct TilePool {
+    pub buffer: Buffer,
+    direct: bool,
+}
+
+impl TilePool {
+    /// Allocates `bytes` of device memory, host-mapped when the device has unified memory and
+    /// `force_staging` is off.
+    pub fn new(gpu: &Gpu, bytes: u64, force_staging: bool) -> VkResult<TilePool> {
+        let unified = gpu.unified_memory() && !force_staging;
+        let desc = BufferDesc {
+            size: bytes.max(4),
+            usage: POOL_USAGE,
+            location: if unified {
+                MemoryLocation::CpuToGpu
+            } else {
+                MemoryLocation::GpuOnly
+            },
+        };
+        let mut buffer = Buffer::new(gpu, desc, "tile pool")?;
+        let direct = unified && buffer.is_coherent() && buffer.mapped().is_some();
+        Ok(TilePool { buffer, direct })
+    }
+
+    /// Whether the CPU writes tile data straight into the pool.
+    pub fn direct(&self) -> bool {
+        self.direct
+    }
+
+    /// Writes into the pool from the CPU (direct path only).
+    pub fn write(&mut self, offset: u64, bytes: &[u8]) -> bool {
+        self.direct && self.buffer.write(offset as usize, bytes)
+    }
+
+    /// Reads a range back through a GPU copy (for tests and diagnostics; waits for the device).
+    pub fn read(&self, gpu: &Gpu, offset: u64, len: u64) -> VkResult<Vec<u8>> {
+        gpu.wait_idle();
+        let mut readback = Buffer::new(gpu, BufferDesc::readback(len.max(4)), "pool read-back")?;
+        let commands = Commands::new(gpu, "pool read-back commands")?;
+        let result = (|| {
+            let cmd = commands.allocate(gpu, "pool read-back")?;
+            sync::begin(gpu, cmd, true)?;
+            let region = vk::BufferCopy::default()
+                .src_offset(offset)
+                .size(len.max(1));
+            // SAFETY: recording; both buffers are live and the range lies in the pool.
+            unsafe {
+                gpu.device
+                    .cmd_copy_buffer(cmd, self.buffer.raw, readback.raw, &[region]);
+            }
+            host_read_barrier(gpu, cmd);
+            sync::end(gpu, cmd)?;
+            let fence = sync::fence(gpu, false, "pool read-back")?;
+            let done = sync::submit(gpu, cmd, fence, None, None)
+                .and_then(|()| sync::wait_and_reset(gpu, fence));
+            sync::destroy_fence(gpu, fence);
+            done?;
+            Ok(readback
+                .mapped()
+                .map(|m| m[..len as usize].to_vec())
+                .unwrap_or_default())
+        })();
+        commands.destroy(gpu);
+        readback.destroy(gpu);
+        result
+    }
+
+    pub fn destroy(self, gpu: &Gpu) {
+        self.buffer.destroy(gpu);
+    }
+}
+
+/// A frame slot's share of the staging ring: host-visible, filled from the start each time the
+/// slot is reused (after its fence), so no frame in flight reads what is written.
+pub struct Staging {
+    buffer: Buffer,
+    used: u64,
+}
+
+impl Staging {
+    pub fn new(gpu: &Gpu, bytes: u64, name: &str) -> VkResult<Staging> {
+        let buffer = Buffer::new(
+            gpu,
+            BufferDesc::upload(bytes.max(4), vk::BufferUsageFlags::TRANSFER_SRC),
+            name,
+        )?;
+        Ok(Staging { buffer, used: 0 })
+    }
+
+    pub fn reset(&mut self) {
+        self.used = 0;
+    }
+
+    /// Copies `bytes` in; returns their offset, or None when the slot is full.
+    pub fn push(&mut self, bytes: &[u8]) -> Option<u64> {
+        let at = self.used.next_multiple_of(4);
+        let end = at + bytes.len() as u64;
+        if end > self.buffer.size || !self.buffer.write(at as usize, bytes) {
+            return None;
+        }
+        self.used = end;
+        Some(at)
+    }
+
+    pub fn used(&self) -> u64 {
+        self.used
+    }
+
+    pub fn destroy(self, gpu: &Gpu) {
+        self.buffer.destroy(gpu);
+    }
+}
+
+/// Records this frame's pool transfers: in-pool moves, then copies from the staging slot, with
+/// a barrier before them (earlier frames' reads and writes of the pool come first) and after
+/// them (the draws read what they wrote).
+pub fn record_transfers(
+    gpu: &Gpu,
+    cmd: vk::CommandBuffer,
+    pool: &TilePool,
+    staging: &Staging,
+    moves: &[vk::BufferCopy],
+    staged: &[vk::BufferCopy],
+) {
+    if moves.is_empty() && staged.is_empty() {
+        return;
+    }
+    let before = vk::MemoryBarrier::default()
+        .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+        .dst_access_mask(vk::AccessFlags::TRANSFER_READ | vk::AccessFlags::TRANSFER_WRITE);
+    let after = vk::MemoryBarrier::default()
+        .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+        .dst_access_mask(
+            vk::AccessFlags::INDEX_READ
+                | vk::AccessFlags::VERTEX_ATTRIBUTE_READ
+                | vk::AccessFlags::SHADER_READ,
+        );
+    // SAFETY: recording outside rendering; regions lie in the pool and the staging slot (the
+    // manager never overlaps a move's source and destination).
+    unsafe {
+        // Write-after-read against earlier frames' draws (vertex input, vertex shader) needs
+        // only the execution dependency; earlier transfers' writes are made visible.
+        gpu.device.cmd_pipeline_barrier(
+            cmd,
+            vk::PipelineStageFlags::VERTEX_INPUT
+                | vk::PipelineStageFlags::VERTEX_SHADER
+                | vk::PipelineStageFlags::TRANSFER,
+            vk::PipelineStageFlags::TRANSFER,
+            vk::DependencyFlags::empty(),
+            &[before],
+            &[],
+            &[],
+        );
+        if !moves.is_empty() {
+            gpu.device
+                .cmd_copy_buffer(cmd, pool.buffer.raw, pool.buffer.raw, moves);
+        }
+        if !staged.is_empty() {
+            gpu.device
+                .cmd_copy_buffer(cmd, staging.buffer.raw, pool.buffer.raw, staged);
+        }
+        gpu.device.cmd_pipeline_barrier(
+            cmd,
+            vk::PipelineStageFlags::TRANSFER,
+            vk::PipelineStageFlags::VERTEX_INPUT | vk::PipelineStageFlags::VERTEX_SHADER,
+            vk::DependencyFlags::empty(),
+            &[after],
+            &[],
+            &[],
+        );
+    }
+}
+
+fn host_read_barrier(gpu: &Gpu, cmd: vk::CommandBuffer) {
+    let barrier = vk::MemoryBarrier::default()
+        .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+        .dst_access_mask(vk::AccessFlags::HOST_READ);
+    // SAFETY: recording outside rendering.
+    unsafe {
+        gpu.device.cmd_pipeline_barrier(
+            cmd,
+            vk::PipelineStageFlags::TRANSFER,
+            vk::PipelineStageFlags::HOST,
+            vk::DependencyFlags::empty(),
+            &[barrier],
+            &[],
+            &[],
+        );
+    }
+}

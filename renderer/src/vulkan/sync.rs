@@ -1,0 +1,142 @@
+//! Command pools and buffers, fences and semaphores: created, used and destroyed here.
+
+use ash::vk;
+
+use super::{Gpu, VkResult};
+
+/// A command pool (resettable buffers) and the buffers allocated from it.
+pub struct Commands {
+    pool: vk::CommandPool,
+}
+
+impl Commands {
+    pub fn new(gpu: &Gpu, name: &str) -> VkResult<Commands> {
+        let info = vk::CommandPoolCreateInfo::default()
+            .queue_family_index(gpu.queue_family)
+            .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER);
+        // SAFETY: valid create info on a live device; destroyed in `destroy`.
+        let pool = unsafe { gpu.device.create_command_pool(&info, None) }?;
+        gpu.name(pool, name);
+        Ok(Commands { pool })
+    }
+
+    pub fn allocate(&self, gpu: &Gpu, name: &str) -> VkResult<vk::CommandBuffer> {
+        let info = vk::CommandBufferAllocateInfo::default()
+            .command_pool(self.pool)
+            .level(vk::CommandBufferLevel::PRIMARY)
+            .command_buffer_count(1);
+        // SAFETY: allocation from our pool; freed with it or by `free`.
+        let cmd = unsafe { gpu.device.allocate_command_buffers(&info) }?[0];
+        gpu.name(cmd, name);
+        Ok(cmd)
+    }
+
+    /// Frees a buffer the GPU no longer uses.
+    pub fn free(&self, gpu: &Gpu, cmd: vk::CommandBuffer) {
+        // SAFETY: the caller waited for the buffer's last submission.
+        unsafe { gpu.device.free_command_buffers(self.pool, &[cmd]) };
+    }
+
+    /// The device must be idle (or every buffer of the pool finished).
+    pub fn destroy(self, gpu: &Gpu) {
+        // SAFETY: as documented; destroying the pool frees its buffers.
+        unsafe { gpu.device.destroy_command_pool(self.pool, None) };
+    }
+}
+
+/// Resets `cmd` and begins recording.
+pub fn begin(gpu: &Gpu, cmd: vk::CommandBuffer, one_time: bool) -> VkResult<()> {
+    let flags = if one_time {
+        vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT
+    } else {
+        vk::CommandBufferUsageFlags::empty()
+    };
+    // SAFETY: the caller waited for the buffer's last submission (its slot's fence).
+    unsafe {
+        gpu.device
+            .reset_command_buffer(cmd, vk::CommandBufferResetFlags::empty())?;
+        gpu.device
+            .begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default().flags(flags))?;
+    }
+    Ok(())
+}
+
+pub fn end(gpu: &Gpu, cmd: vk::CommandBuffer) -> VkResult<()> {
+    // SAFETY: recording began with `begin`.
+    unsafe { gpu.device.end_command_buffer(cmd) }?;
+    Ok(())
+}
+
+/// Submits `cmd`, signalling `fence` when done; waits on `wait` (at the transfer stage, where
+/// a frame first touches the swapchain image) and signals `signal`.
+pub fn submit(
+    gpu: &Gpu,
+    cmd: vk::CommandBuffer,
+    fence: vk::Fence,
+    wait: Option<vk::Semaphore>,
+    signal: Option<vk::Semaphore>,
+) -> VkResult<()> {
+    let cmds = [cmd];
+    let waits: Vec<vk::Semaphore> = wait.into_iter().collect();
+    let stages = vec![vk::PipelineStageFlags::TRANSFER; waits.len()];
+    let signals: Vec<vk::Semaphore> = signal.into_iter().collect();
+    let info = vk::SubmitInfo::default()
+        .command_buffers(&cmds)
+        .wait_semaphores(&waits)
+        .wait_dst_stage_mask(&stages)
+        .signal_semaphores(&signals);
+    // SAFETY: the command buffer is complete; the fence is unsignalled (reset by the caller).
+    unsafe { gpu.device.queue_submit(gpu.queue, &[info], fence) }?;
+    Ok(())
+}
+
+pub fn fence(gpu: &Gpu, signalled: bool, name: &str) -> VkResult<vk::Fence> {
+    let flags = if signalled {
+        vk::FenceCreateFlags::SIGNALED
+    } else {
+        vk::FenceCreateFlags::empty()
+    };
+    // SAFETY: plain creation; destroyed by `destroy_fence`.
+    let f = unsafe {
+        gpu.device
+            .create_fence(&vk::FenceCreateInfo::default().flags(flags), None)
+    }?;
+    gpu.name(f, name);
+    Ok(f)
+}
+
+/// Waits for `fence` and resets it.
+pub fn wait_and_reset(gpu: &Gpu, fence: vk::Fence) -> VkResult<()> {
+    // SAFETY: the fence belongs to this device.
+    unsafe {
+        gpu.device.wait_for_fences(&[fence], true, u64::MAX)?;
+        gpu.device.reset_fences(&[fence])?;
+    }
+    Ok(())
+}
+
+/// Whether `fence` is signalled, without waiting.
+pub fn is_signalled(gpu: &Gpu, fence: vk::Fence) -> VkResult<bool> {
+    // SAFETY: the fence belongs to this device.
+    Ok(unsafe { gpu.device.get_fence_status(fence) }?)
+}
+
+pub fn destroy_fence(gpu: &Gpu, fence: vk::Fence) {
+    // SAFETY: the caller guarantees no pending submission signals it.
+    unsafe { gpu.device.destroy_fence(fence, None) };
+}
+
+pub fn semaphore(gpu: &Gpu, name: &str) -> VkResult<vk::Semaphore> {
+    // SAFETY: plain creation; destroyed by `destroy_semaphore`.
+    let s = unsafe {
+        gpu.device
+            .create_semaphore(&vk::SemaphoreCreateInfo::default(), None)
+    }?;
+    gpu.name(s, name);
+    Ok(s)
+}
+
+pub fn destroy_semaphore(gpu: &Gpu, semaphore: vk::Semaphore) {
+    // SAFETY: the caller guarantees no pending operation uses it (device idle).
+    unsafe { gpu.device.destroy_semaphore(semaphore, None) };
+}
