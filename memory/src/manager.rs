@@ -292,6 +292,11 @@ impl Manager {
         self.resident[tile as usize].map(|r| (r.blocks, r.index))
     }
 
+    /// Pool offset of `tile`'s chunk and the layout of its data there.
+    pub fn layout_of(&self, tile: TileId) -> Option<(u64, Layout)> {
+        self.resident[tile as usize].map(|r| (self.chunks[r.chunk].offset, r.layout))
+    }
+
     /// Pool offset and chunk size of the chunk `tile` owns.
     pub fn chunk_of(&self, tile: TileId) -> Option<(u64, u64)> {
         self.resident[tile as usize].map(|r| {

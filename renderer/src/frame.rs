@@ -517,7 +517,7 @@ impl Renderer {
         record.time_s = input.time_s;
         record.cpu_upload_ms = cpu_upload_ms;
         record.cpu_record_ms = cpu_record_ms;
-        record.staged_bytes = slot.staging.used();
+        record.staged_bytes = slot.staging.sent();
         record.gpu_allocations = gpu.allocations() - allocations;
         slot.pending = Some(Pending {
             record,
@@ -740,8 +740,11 @@ fn staging_bound(manager: &Manager, upload_budget: u64) -> u64 {
         .clone()
         .map(|c| c.block_bytes(0) + c.levels[0].indices)
         .sum();
-    let step = costs.map(|c| c.need(c.finest())).max().unwrap_or(0);
-    upload_budget + presence + step + 4 * (n as u64 + 1) * 8
+    let step = costs.clone().map(|c| c.need(c.finest())).max().unwrap_or(0);
+    // No frame sends more than the whole tile set (an unlimited budget is capped there).
+    let everything: u64 = costs.map(|c| c.whole()).sum();
+    let padding = 4 * 8 * (n as u64 + 1);
+    upload_budget.min(everything) + presence + step + padding
 }
 
 /// Writes this frame's stitches into `buffer`; returns per stitch (vertex byte offset, index

@@ -230,7 +230,8 @@ pub struct Summary {
     pub upload_bytes_p99: f64,
     pub upload_overshoot_mb: f64,
     pub pool_mb: f64,
-    pub upload_budget_mb: f64,
+    /// None: unlimited (the baselines).
+    pub upload_budget_mb: Option<f64>,
     pub frames_in_flight: usize,
     pub staging: bool,
     /// GPU allocations after the first frame (the pool is allocated once: 0).
@@ -294,7 +295,8 @@ impl Summary {
             upload_bytes_p99: percentile(&uploads, 99.0),
             upload_overshoot_mb: sum(|r| r.upload_overshoot_bytes) as f64 / 1e6,
             pool_mb: run.pool_bytes as f64 / 1e6,
-            upload_budget_mb: run.upload_budget as f64 / 1e6,
+            upload_budget_mb: (run.upload_budget != u64::MAX)
+                .then(|| run.upload_budget as f64 / 1e6),
             frames_in_flight: run.frames_in_flight,
             staging: run.staging,
             gpu_allocations_after_first_frame: records

@@ -72,8 +72,9 @@ struct Cli {
     #[arg(long, default_value_t = 1024)]
     gpu_budget_mb: u64,
     /// Tile data uploaded per frame at most, MB (new tiles' coarsest level may exceed it).
-    #[arg(long, default_value_t = (memory::DEFAULT_UPLOAD_BUDGET as f64) / (1 << 20) as f64)]
-    upload_budget_mb: f64,
+    /// Default 4; unlimited with --brute-force and --level, which are baselines.
+    #[arg(long)]
+    upload_budget_mb: Option<f64>,
     /// Frames the CPU may run ahead of the GPU.
     #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=4))]
     frames_in_flight: u32,
@@ -215,15 +216,19 @@ fn run(cli: Cli) -> Result<ExitCode> {
         sky: cli.sky,
         no_stitch: cli.no_stitch,
     };
-    if !(cli.upload_budget_mb.is_finite() && cli.upload_budget_mb > 0.0) {
-        bail!("--upload-budget-mb must be a positive number of megabytes");
-    }
+    let upload_budget = match cli.upload_budget_mb {
+        Some(mb) if mb.is_finite() && mb > 0.0 => (mb * f64::from(1 << 20)) as u64,
+        Some(_) => bail!("--upload-budget-mb must be a positive number of megabytes"),
+        // A baseline draws what it says: nothing deferred.
+        None if cli.brute_force || cli.level.is_some() => u64::MAX,
+        None => memory::DEFAULT_UPLOAD_BUDGET,
+    };
     if !(cli.evict_weight.is_finite() && cli.evict_weight >= 0.0) {
         bail!("--evict-weight must be zero or positive");
     }
     let memory = MemoryOptions {
         gpu_budget_bytes: cli.gpu_budget_mb.saturating_mul(1 << 20),
-        upload_budget: (cli.upload_budget_mb * f64::from(1 << 20)) as u64,
+        upload_budget,
         weight: cli.evict_weight,
         frames_in_flight: cli.frames_in_flight as usize,
         force_staging: cli.force_staging,

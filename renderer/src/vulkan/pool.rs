@@ -101,6 +101,8 @@ impl TilePool {
 pub struct Staging {
     buffer: Buffer,
     used: u64,
+    /// Payload bytes pushed (`used` less alignment padding).
+    sent: u64,
 }
 
 impl Staging {
@@ -110,11 +112,15 @@ impl Staging {
             BufferDesc::upload(bytes.max(4), vk::BufferUsageFlags::TRANSFER_SRC),
             name,
         )?;
-        Ok(Staging { buffer, used: 0 })
+        Ok(Staging {
+            buffer,
+            used: 0,
+            sent: 0,
+        })
     }
 
     pub fn reset(&mut self) {
-        self.used = 0;
+        (self.used, self.sent) = (0, 0);
     }
 
     /// Copies `bytes` in; returns their offset, or None when the slot is full.
@@ -125,11 +131,17 @@ impl Staging {
             return None;
         }
         self.used = end;
+        self.sent += bytes.len() as u64;
         Some(at)
     }
 
     pub fn used(&self) -> u64 {
         self.used
+    }
+
+    /// Payload bytes pushed since the last reset.
+    pub fn sent(&self) -> u64 {
+        self.sent
     }
 
     pub fn destroy(self, gpu: &Gpu) {

@@ -28,7 +28,12 @@ pub fn sample() -> PathBuf {
 
 /// Builds a tile set in `dir` from a DEM.
 pub fn tileset(dir: &Path, input: &Path, opts: dem::ReadOptions) -> PathBuf {
-    let grid = dem::read(&[input.to_path_buf()], &opts).unwrap_or_else(|e| panic!("{e}"));
+    tileset_of(dir, &[input.to_path_buf()], opts)
+}
+
+/// Builds a tile set in `dir` from DEM files read together (an SRTM mosaic).
+pub fn tileset_of(dir: &Path, inputs: &[PathBuf], opts: dem::ReadOptions) -> PathBuf {
+    let grid = dem::read(inputs, &opts).unwrap_or_else(|e| panic!("{e}"));
     let view = Grid {
         width: grid.width,
         height: grid.height,

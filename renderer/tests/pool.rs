@@ -1,0 +1,160 @@
+//! The tile pool on lavapipe with the validation layer on: after flights that refine tiles
+//! progressively within a small pool and a small upload budget (so chunks move and tiles are
+//! evicted), every resident tile's blocks, morph rows and index array read back from GPU
+//! memory byte for byte as the file stores them, through both transfer paths.
+
+use memory::Part;
+use renderer::camera::Camera;
+use renderer::frame::{FrameInput, MemoryOptions, Renderer, Settings};
+use renderer::log::FrameRecord;
+use renderer::path::CameraPath;
+use renderer::terrain::Terrain;
+use renderer::vulkan::{Gpu, GpuOptions};
+
+mod common;
+
+fn settings(forced_level: Option<u32>) -> Settings {
+    Settings {
+        tau: 1.0,
+        forced_level,
+        brute_force: false,
+        level_colours: false,
+        wireframe: false,
+        sky: [0.5, 0.6, 0.9],
+        no_stitch: false,
+    }
+}
+
+/// Compares every resident tile's data in the pool with the file; returns how many tiles and
+/// bytes were compared. `shift` reads each tile's data one chunk-offset off (a negative
+/// control: then nothing may match).
+fn check_pool(gpu: &Gpu, renderer: &Renderer, terrain: &Terrain) -> (usize, u64, usize) {
+    let m = renderer.manager();
+    let pool = renderer
+        .pool()
+        .read(gpu, 0, m.pool_bytes())
+        .expect("pool read-back");
+    assert_eq!(pool.len() as u64, m.pool_bytes());
+    let (mut tiles, mut bytes, mut wrong_if_swapped) = (0, 0, 0);
+    let resident: Vec<usize> = (0..terrain.tiles.len())
+        .filter(|&t| m.layout_of(t as u32).is_some())
+        .collect();
+    for (k, &t) in resident.iter().enumerate() {
+        let (offset, layout) = m.layout_of(t as u32).expect("resident");
+        let (blocks, index) = m.resident_levels(t as u32).expect("resident");
+        let cost = m.tile_cost(t as u32);
+        let mut expect = |at: u64, part: Part| {
+            let want = terrain.part(t, part).expect("part");
+            let got = &pool[at as usize..at as usize + want.len()];
+            assert!(
+                got == want,
+                "tile {t} {part:?} at {at}: pool differs from the file"
+            );
+            bytes += want.len() as u64;
+        };
+        for j in 0..=blocks.expect("blocks") {
+            expect(offset + cost.positions_before(j), Part::Positions(j));
+            expect(offset + layout.morph + cost.morph_before(j), Part::Morph(j));
+        }
+        let level = index.expect("index array");
+        expect(offset + layout.index, Part::Indices(level));
+        tiles += 1;
+        // Negative control: another resident tile's chunk does not hold this tile's data.
+        if let Some(&other) = resident.get((k + 1) % resident.len()).filter(|&&o| o != t) {
+            let (o, _) = m.layout_of(other as u32).expect("resident");
+            let want = terrain.part(t, Part::Positions(0)).expect("part");
+            wrong_if_swapped += usize::from(&pool[o as usize..o as usize + want.len()] != want);
+        }
+    }
+    (tiles, bytes, wrong_if_swapped)
+}
+
+fn fly(force_staging: bool) {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = common::puget(dir.path());
+    let terrain = Terrain::open(&set).expect("tile set");
+    let gpu = Gpu::new(&GpuOptions {
+        validation: true,
+        ..Default::default()
+    })
+    .expect("Vulkan device");
+    let memory = MemoryOptions {
+        gpu_budget_bytes: 3 << 20,
+        upload_budget: 256 << 10,
+        frames_in_flight: 2,
+        force_staging,
+        ..Default::default()
+    };
+    let mut renderer = Renderer::new(&gpu, &terrain, (128, 96), memory).expect("renderer");
+    assert_eq!(
+        renderer.pool().direct(),
+        !force_staging && gpu.unified_memory()
+    );
+    let path = CameraPath::flyover(&terrain);
+    let mut records: Vec<FrameRecord> = Vec::new();
+    // Coarse first (tiles take small chunks), then tau 1 (they refine, outgrow and move).
+    for k in 0..40u64 {
+        let t = path.keys[0].time + path.duration() * k as f64 / 40.0;
+        let camera: Camera = path.at(t);
+        let input = FrameInput {
+            camera: &camera,
+            time_s: t,
+            label: k,
+            screenshot: false,
+            present: None,
+        };
+        let s = settings((k < 10).then_some(1));
+        let done = renderer.render(&gpu, &terrain, &s, input).expect("frame");
+        records.extend(done.into_iter().map(|f| f.record));
+    }
+    records.extend(
+        renderer
+            .finish_all(&gpu)
+            .expect("finish")
+            .into_iter()
+            .map(|f| f.record),
+    );
+    assert_eq!(records.len(), 40);
+    assert!(records.windows(2).all(|w| w[0].frame + 1 == w[1].frame));
+    let sum = |f: fn(&FrameRecord) -> u64| records.iter().map(f).sum::<u64>();
+    assert!(
+        sum(|r| r.chunk_moves) > 0,
+        "no chunk moved: the test misses moves"
+    );
+    assert!(sum(|r| r.tiles_coarser) > 0, "the budget never bit");
+    assert_eq!(sum(|r| r.tiles_missing), 0);
+    assert_eq!(sum(|r| r.gpu_allocations), 0, "allocations after start");
+    let (uploaded, staged) = (sum(|r| r.upload_bytes), sum(|r| r.staged_bytes));
+    if force_staging {
+        assert_eq!(
+            staged, uploaded,
+            "forced staging sends everything through the ring"
+        );
+    } else if gpu.unified_memory() {
+        assert!(
+            staged < uploaded / 2,
+            "direct path staged {staged} of {uploaded}"
+        );
+    }
+    let (tiles, bytes, control) = check_pool(&gpu, &renderer, &terrain);
+    assert!(
+        tiles >= 4 && bytes > 100_000,
+        "{tiles} tiles, {bytes} bytes checked"
+    );
+    assert!(
+        control * 2 >= tiles,
+        "other chunks hold the same data: check is blind"
+    );
+    renderer.destroy(&gpu);
+    assert_eq!(gpu.validation_messages(), 0);
+}
+
+#[test]
+fn direct_writes_read_back_from_the_pool() {
+    fly(false);
+}
+
+#[test]
+fn staged_copies_and_chunk_moves_read_back_from_the_pool() {
+    fly(true);
+}
