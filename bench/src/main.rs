@@ -6,12 +6,15 @@
 //! target/release/tilebench economy      # vertices vs measured error, against Martini/Delatin
 //! target/release/tilebench acmr         # vertex-cache miss ratio of the fan order vs meshopt
 //! target/release/tilebench frames       # vkterrain flights: LOD at tau 1, 2, 4 vs brute force
+//! target/release/tilebench memory       # residency: traces replayed against Belady, cold
+//!                                       # start, upload budget, manager CPU, frames in flight
 //! target/release/tilebench all
 //! ```
 //!
 //! Each prints Markdown tables. Ratios are measured side by side in one run.
 
 mod martini;
+mod memory_bench;
 
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
@@ -47,13 +50,17 @@ fn run() -> Result<()> {
         "economy" => economy(),
         "acmr" => acmr(),
         "frames" => frames(),
+        "memory" => memory_bench::memory(),
         "all" => {
             throughput()?;
             economy()?;
             acmr()?;
-            frames()
+            frames()?;
+            memory_bench::memory()
         }
-        other => bail!("unknown benchmark {other:?}: throughput, economy, acmr, frames or all"),
+        other => {
+            bail!("unknown benchmark {other:?}: throughput, economy, acmr, frames, memory or all")
+        }
     }
 }
 

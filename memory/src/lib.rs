@@ -35,13 +35,14 @@
 pub mod classes;
 pub mod cost;
 pub mod manager;
+pub mod sim;
 pub mod trace;
 
 pub use classes::ClassPlan;
 pub use cost::{Layout, LevelCost, TileCost};
 pub use manager::{
     Config, FramePlan, Grant, Manager, Move, Part, Request, Scheme, Stats, TileId, Upload, Victim,
-    DEFAULT_UPLOAD_BUDGET, DEFAULT_WEIGHT,
+    DEFAULT_DOWNGRADE_SLACK, DEFAULT_UPLOAD_BUDGET, DEFAULT_WEIGHT,
 };
 
 #[cfg(test)]

@@ -49,11 +49,17 @@ pub struct Config {
     pub class_ratio: f64,
     pub scheme: Scheme,
     pub victim: Victim,
+    /// How many levels finer than wanted a tile may stay drawn before its index array is
+    /// replaced by the coarser one. Finer is always within tau; replacing costs an upload.
+    pub downgrade_slack: u32,
 }
 
 /// The default per-frame upload budget: 4 MiB, ~240 MB/s at 60 frames per second, a small
 /// share of any PCIe link, and a few milliseconds of memcpy on lavapipe.
 pub const DEFAULT_UPLOAD_BUDGET: u64 = 4 << 20;
+
+/// The default downgrade slack (measured with `memsim`, see bench/README.md).
+pub const DEFAULT_DOWNGRADE_SLACK: u32 = 0;
 
 /// The default mixture weight (measured with `memsim`, see bench/README.md).
 pub const DEFAULT_WEIGHT: f64 = 1.0;
@@ -67,6 +73,7 @@ impl Default for Config {
             class_ratio: 2.0,
             scheme: Scheme::Progressive,
             victim: Victim::Mixture,
+            downgrade_slack: DEFAULT_DOWNGRADE_SLACK,
         }
     }
 }
@@ -538,7 +545,9 @@ impl Manager {
         let finest = self.tiles[r.tile as usize].finest();
         let wanted = r.wanted.min(finest);
         let Some(current) = res.index else { return };
-        if current == wanted {
+        if current == wanted
+            || (wanted < current && current - wanted <= self.config.downgrade_slack)
+        {
             return;
         }
         let left = self.config.upload_budget.saturating_sub(spent);

@@ -1,28 +1,53 @@
 //! Residency traces: what each frame of a flight asked of the manager, to replay offline.
 //!
-//! Format (CSV, written by `vkterrain --trace FILE`, read by `memsim`):
+//! Format (written by `vkterrain --trace FILE`, read by `memsim`): a first line, then two CSV
+//! tables, each after its header line.
 //!
 //! ```text
 //! # vkterrain trace v1
+//! tile,level,positions,morph,indices,index_width
+//! 0,0,1160,0,1708,2
+//! ...
 //! frame,tile,wanted,bytes
 //! 0,5,3,48812
 //! ```
 //!
-//! One row per visible tile per frame, in the frame's front-to-back order. `tile` is the tile's
-//! index in the tile set (row-major), `wanted` the level LOD chose, `bytes` what drawing that
-//! level costs from scratch (blocks `0..=wanted` with their morph rows, and the index array).
-//! A frame with no visible tile has no row.
+//! The first table is what every level of every tile costs (bytes of the level's block
+//! positions and morph rows, of its index array, and the index width), so a trace replays
+//! without the tile set. The second has one row per visible tile per frame, in the frame's
+//! front-to-back order: `tile` is the tile's index in the tile set (row-major), `wanted` the
+//! level LOD chose, `bytes` what drawing that level costs from scratch (blocks `0..=wanted`
+//! with their morph rows, and the index array). A frame with no visible tile has no row.
 
 use std::collections::HashMap;
 use std::fmt::Write as _;
 
+use crate::cost::{LevelCost, TileCost};
 use crate::manager::{Request, TileId};
 
-pub const HEADER: &str = "# vkterrain trace v1\nframe,tile,wanted,bytes\n";
+const FIRST: &str = "# vkterrain trace v1";
+const COSTS: &str = "tile,level,positions,morph,indices,index_width";
+const FRAMES: &str = "frame,tile,wanted,bytes";
 
-/// A flight's requests, frame by frame.
+/// The start of a trace: the first line and the cost table, up to the frames' header.
+pub fn header(costs: &[TileCost]) -> String {
+    let mut out = format!("{FIRST}\n{COSTS}\n");
+    for (t, c) in costs.iter().enumerate() {
+        for (l, lc) in c.levels.iter().enumerate() {
+            let _ = writeln!(
+                out,
+                "{t},{l},{},{},{},{}",
+                lc.positions, lc.morph, lc.indices, lc.index_width
+            );
+        }
+    }
+    out + FRAMES + "\n"
+}
+
+/// A flight's requests, frame by frame, and what its tiles cost.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct Trace {
+    pub costs: Vec<TileCost>,
     pub frames: Vec<Vec<Request>>,
 }
 
@@ -38,32 +63,69 @@ impl Trace {
     pub fn parse(text: &str) -> Result<Trace, String> {
         let mut lines = text.lines().enumerate();
         match lines.next() {
-            Some((_, l)) if l.trim() == "# vkterrain trace v1" => {}
+            Some((_, l)) if l.trim() == FIRST => {}
             _ => {
-                return Err(
-                    "not a vkterrain trace (first line must be `# vkterrain trace v1`)".into(),
-                )
+                return Err(format!(
+                    "not a vkterrain trace (first line must be `{FIRST}`)"
+                ))
             }
         }
         match lines.next() {
-            Some((_, l)) if l.trim() == "frame,tile,wanted,bytes" => {}
-            _ => return Err("line 2: expected the header `frame,tile,wanted,bytes`".into()),
+            Some((_, l)) if l.trim() == COSTS => {}
+            _ => return Err(format!("line 2: expected the header `{COSTS}`")),
         }
-        let mut frames: Vec<Vec<Request>> = Vec::new();
-        for (n, line) in lines {
-            if line.trim().is_empty() {
-                continue;
-            }
-            let bad = || format!("line {}: expected frame,tile,wanted,bytes", n + 1);
-            let f: Vec<u64> = line
+        let numbers = |n: usize, line: &str, want: &str| -> Result<Vec<u64>, String> {
+            let v: Vec<u64> = line
                 .split(',')
                 .map(|s| s.trim().parse::<u64>())
                 .collect::<Result<_, _>>()
-                .map_err(|_| bad())?;
-            let [frame, tile, wanted, _bytes] = f[..] else {
-                return Err(bad());
+                .map_err(|_| format!("line {}: expected {want}", n + 1))?;
+            if v.len() == want.split(',').count() {
+                Ok(v)
+            } else {
+                Err(format!("line {}: expected {want}", n + 1))
+            }
+        };
+        let mut costs: Vec<TileCost> = Vec::new();
+        let mut in_frames = false;
+        let mut frames: Vec<Vec<Request>> = Vec::new();
+        for (n, line) in lines {
+            let line = line.trim();
+            if line.is_empty() {
+                continue;
+            }
+            if !in_frames {
+                if line == FRAMES {
+                    in_frames = true;
+                    continue;
+                }
+                let v = numbers(n, line, COSTS)?;
+                let (t, l) = (v[0] as usize, v[1] as usize);
+                if t > costs.len() || (t == costs.len()) != (l == 0) || t + 1 < costs.len() {
+                    return Err(format!(
+                        "line {}: costs must list tiles and levels in order",
+                        n + 1
+                    ));
+                }
+                if t == costs.len() {
+                    costs.push(TileCost::default());
+                }
+                if costs[t].levels.len() != l || !matches!(v[5], 2 | 4) {
+                    return Err(format!("line {}: bad level or index width", n + 1));
+                }
+                costs[t].levels.push(LevelCost {
+                    positions: v[2],
+                    morph: v[3],
+                    indices: v[4],
+                    index_width: v[5] as u32,
+                });
+                continue;
+            }
+            let v = numbers(n, line, FRAMES)?;
+            let [frame, tile, wanted, _bytes] = v[..] else {
+                unreachable!("numbers() checked the count")
             };
-            let frame = usize::try_from(frame).map_err(|_| bad())?;
+            let frame = usize::try_from(frame).map_err(|_| format!("line {}: bad frame", n + 1))?;
             if frame + 1 < frames.len() {
                 return Err(format!("line {}: frames must not go back", n + 1));
             }
@@ -73,13 +135,23 @@ impl Trace {
                     n + 1
                 ));
             }
+            let tile = tile as usize;
+            if tile >= costs.len() || wanted as usize >= costs[tile].levels.len() {
+                return Err(format!(
+                    "line {}: tile {tile} level {wanted} not in the costs",
+                    n + 1
+                ));
+            }
             frames.resize_with(frames.len().max(frame + 1), Vec::new);
             frames[frame].push(Request {
-                tile: u32::try_from(tile).map_err(|_| bad())?,
-                wanted: u32::try_from(wanted).map_err(|_| bad())?,
+                tile: tile as u32,
+                wanted: wanted as u32,
             });
         }
-        Ok(Trace { frames })
+        if !in_frames {
+            return Err(format!("no `{FRAMES}` header: the trace is truncated"));
+        }
+        Ok(Trace { costs, frames })
     }
 
     /// For Belady's rule: `next(tile, frame)` is the first frame after `frame` requesting
@@ -106,9 +178,23 @@ impl Trace {
 mod tests {
     use super::*;
 
+    fn costs() -> Vec<TileCost> {
+        let level = |i: u64| LevelCost {
+            positions: 40 * (i + 1),
+            morph: 10 * i,
+            indices: 100 * (i + 1),
+            index_width: 2,
+        };
+        (0..6)
+            .map(|_| TileCost {
+                levels: (0..5).map(level).collect(),
+            })
+            .collect()
+    }
+
     #[test]
     fn round_trip_and_next_use() {
-        let mut text = HEADER.to_string();
+        let mut text = header(&costs());
         let r = |tile, wanted| Request { tile, wanted };
         write_frame(&mut text, 0, &[(r(5, 3), 100), (r(2, 0), 10)]);
         write_frame(&mut text, 2, &[(r(5, 4), 200)]);
@@ -121,9 +207,17 @@ mod tests {
         assert_eq!(next(5, 0), 2);
         assert_eq!(next(2, 0), u64::MAX);
         assert!(Trace::parse("frame,tile\n").is_err());
-        let mut back = HEADER.to_string();
+        let lines = 2 + 6 * 5 + 1;
+        let mut back = header(&costs());
         write_frame(&mut back, 3, &[(r(1, 1), 1)]);
         write_frame(&mut back, 1, &[(r(1, 1), 1)]);
-        assert!(Trace::parse(&back).unwrap_err().contains("line 4"));
+        let e = Trace::parse(&back).unwrap_err();
+        assert!(e.contains(&format!("line {}", lines + 2)), "{e}");
+        let mut unknown = header(&costs());
+        write_frame(&mut unknown, 0, &[(r(9, 1), 1)]);
+        assert!(Trace::parse(&unknown)
+            .unwrap_err()
+            .contains("not in the costs"));
+        assert!(Trace::parse(&header(&costs())[..40]).is_err(), "truncated");
     }
 }

@@ -70,6 +70,8 @@ pub struct MemoryOptions {
     pub frames_in_flight: usize,
     /// Send every upload through the staging ring, even where the pool is host-visible.
     pub force_staging: bool,
+    /// Levels finer than wanted a tile may stay drawn rather than re-sending an index array.
+    pub downgrade_slack: u32,
 }
 
 impl Default for MemoryOptions {
@@ -80,6 +82,7 @@ impl Default for MemoryOptions {
             weight: memory::DEFAULT_WEIGHT,
             frames_in_flight: 2,
             force_staging: false,
+            downgrade_slack: memory::DEFAULT_DOWNGRADE_SLACK,
         }
     }
 }
@@ -252,6 +255,7 @@ impl Renderer {
             class_ratio: 2.0,
             scheme: Scheme::Progressive,
             victim: Victim::Mixture,
+            downgrade_slack: options.downgrade_slack,
         };
         let manager = Manager::new(terrain.costs(), config);
         let sizes = SlotSizes {
@@ -321,7 +325,7 @@ impl Renderer {
 
     /// Starts collecting a trace of every frame's requests (see `memory::trace`).
     pub fn enable_trace(&mut self) {
-        self.trace = Some(memory::trace::HEADER.to_string());
+        self.trace = Some(memory::trace::header(&terrain_costs(&self.manager)));
     }
 
     pub fn take_trace(&mut self) -> Option<String> {
@@ -706,6 +710,12 @@ impl Renderer {
         self.pipeline.destroy(gpu);
         self.commands.destroy(gpu);
     }
+}
+
+fn terrain_costs(manager: &Manager) -> Vec<memory::TileCost> {
+    (0..manager.tile_count())
+        .map(|t| manager.tile_cost(t as u32).clone())
+        .collect()
 }
 
 /// Bytes of stitch geometry a frame can need at most: every pair of neighbouring tiles, each

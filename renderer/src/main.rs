@@ -84,6 +84,10 @@ struct Cli {
     /// Eviction: how much one doubling of wasted chunk space weighs against age (0: pure LRU).
     #[arg(long, default_value_t = memory::DEFAULT_WEIGHT)]
     evict_weight: f64,
+    /// Levels finer than LOD wants a tile may stay drawn (within tau) rather than re-sending
+    /// a coarser index array.
+    #[arg(long, default_value_t = memory::DEFAULT_DOWNGRADE_SLACK)]
+    downgrade_slack: u32,
     /// Write every frame's visible tiles and wanted levels here (for `memsim`).
     #[arg(long, value_name = "FILE")]
     trace: Option<PathBuf>,
@@ -232,6 +236,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
         weight: cli.evict_weight,
         frames_in_flight: cli.frames_in_flight as usize,
         force_staging: cli.force_staging,
+        downgrade_slack: cli.downgrade_slack,
     };
     let gpu_options = GpuOptions {
         validation: cli.validation,

@@ -1,0 +1,257 @@
+//! `tilebench memory`: the memory manager on real flights. Traces recorded by `vkterrain
+//! --trace` are replayed through every policy (bytes by transfer scheme, misses and bytes
+//! against Belady's rule); the cold start and the upload budget are read from real flights'
+//! logs; the manager's CPU time is timed on a synthetic frame of 1000 visible tiles.
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use bench::residency::{bytes_by_scheme, policy_table, tile_set_figures};
+use dem::ReadOptions;
+use memory::sim::tile_set_bytes;
+use memory::trace::Trace;
+use memory::{Config, Manager, Request, TileCost};
+use tiles::BuildParams;
+
+use crate::{build, data, flight, sibling};
+
+const FRAMES: u32 = 120;
+
+pub fn memory() -> Result<()> {
+    let vkterrain = sibling("vkterrain", "renderer")?;
+    let dir = std::env::temp_dir().join(format!("tilebench-memory-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)?;
+    let params = BuildParams::default();
+    let sets = [
+        (
+            "Puget 1K",
+            "puget.vkt",
+            dem::read(
+                &[data("puget/ps_height_1k.png")?],
+                &ReadOptions {
+                    spacing: Some(160.0),
+                    vertical_scale: Some(0.1),
+                    ..Default::default()
+                },
+            )?,
+        ),
+        (
+            "SRTM1 N48W125",
+            "n48.vkt",
+            dem::read(&[data("srtm/N48W125.hgt")?], &ReadOptions::default())?,
+        ),
+        (
+            "Puget 4K (8-bit)",
+            "p4k.vkt",
+            dem::read(
+                &[data("puget/ps_height_4k_8bit.jpg")?],
+                &ReadOptions {
+                    spacing: Some(40.0),
+                    vertical_scale: Some(25.7),
+                    ..Default::default()
+                },
+            )?,
+        ),
+    ];
+    let mut traces: Vec<(String, Trace)> = Vec::new();
+    for (name, file, grid) in &sets {
+        let set = dir.join(file);
+        build(grid, &params, &set)?;
+        for path in ["orbit", "flyover"] {
+            let trace = dir.join(format!("{file}.{path}.trace"));
+            let t = trace.to_str().context("utf-8 path")?;
+            flight(
+                &vkterrain,
+                &set,
+                path,
+                FRAMES,
+                &["--tau", "1", "--trace", t],
+            )?;
+            let text = std::fs::read_to_string(&trace)?;
+            let parsed = Trace::parse(&text).map_err(anyhow::Error::msg)?;
+            traces.push((format!("{name} {path}"), parsed));
+        }
+    }
+
+    println!(
+        "### Bytes over real flights ({FRAMES} frames, 1024 x 768, tau 1), room for everything\n"
+    );
+    println!("Traces from `vkterrain --trace`, replayed with a pool and an upload budget large enough that nothing is evicted or deferred: what each transfer scheme sends.\n");
+    println!("| flight | tile set MB | finest: refine / scratch MB | whole tiles MB | per level from scratch MB | progressive MB | progressive / whole | progressive / per level | indices in progressive |");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    for (name, t) in &traces {
+        let (refine, scratch, whole_set) = tile_set_figures(t);
+        let [w, p, g] = bytes_by_scheme(t);
+        let mb = |b: u64| b as f64 / 1e6;
+        println!(
+            "| {name} | {:.1} | {:.1} / {:.1} | {:.1} | {:.1} | {:.1} | {:.2} | {:.2} | {:.0}% |",
+            mb(whole_set),
+            mb(refine),
+            mb(scratch),
+            mb(w.bytes()),
+            mb(p.bytes()),
+            mb(g.bytes()),
+            g.bytes() as f64 / w.bytes().max(1) as f64,
+            g.bytes() as f64 / p.bytes().max(1) as f64,
+            100.0 * g.bytes_indices as f64 / g.bytes().max(1) as f64
+        );
+    }
+
+    println!("\n### Against Belady's rule (pool of 25% and 50% of the tile set, default upload budget)\n");
+    println!(
+        "| flight | pool | pool MB | mixture (default) misses / Belady | mixture bytes / Belady |"
+    );
+    println!("|---|---:|---:|---:|---:|");
+    let mut tables = Vec::new();
+    for (name, t) in &traces {
+        for share in [0.25, 0.5] {
+            let pool = (tile_set_bytes(t) as f64 * share) as u64;
+            let (table, (misses, bytes)) = policy_table(t, pool, memory::DEFAULT_UPLOAD_BUDGET);
+            println!(
+                "| {name} | {:.0}% | {:.1} | {misses:.2}x | {bytes:.2}x |",
+                share * 100.0,
+                pool as f64 / 1e6
+            );
+            tables.push((format!("{name}, pool {:.0}%", share * 100.0), table));
+        }
+    }
+    println!();
+    for (title, table) in tables {
+        println!("**{title}**\n\n{table}");
+    }
+
+    cold_start(&vkterrain, &dir.join("puget.vkt"), &dir)?;
+    frames_in_flight(&vkterrain, &dir.join("puget.vkt"))?;
+    if let Some((_, t)) = traces.iter().find(|(n, _)| n.starts_with("Puget 4K")) {
+        manager_time(&t.costs)?;
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(())
+}
+
+/// The cold demo flight: first frames against the median, and the upload bytes per frame.
+fn cold_start(vkterrain: &Path, set: &Path, dir: &Path) -> Result<()> {
+    println!(
+        "### Cold start: the demo flight (Puget 1K flyover, {FRAMES} frames, 1024 x 768, tau 1)\n"
+    );
+    println!("| upload budget | frame 0 / median | frames 0-2 worst / median | median ms | p99 upload bytes | max upload bytes | frames with deferred tiles |");
+    println!("|---|---:|---:|---:|---:|---:|---:|");
+    for (label, extra) in [
+        ("4 MiB (default)", vec![]),
+        ("1 MiB", vec!["--upload-budget-mb", "1"]),
+        (
+            "unlimited (like the old whole-tile uploads)",
+            vec!["--upload-budget-mb", "100000"],
+        ),
+    ] {
+        let log = dir.join("cold.csv");
+        let mut args = vec!["--tau", "1", "--log", log.to_str().context("utf-8")?];
+        args.extend(extra);
+        let s = flight(vkterrain, set, "flyover", FRAMES, &args)?;
+        let csv = std::fs::read_to_string(&log)?;
+        let col = |name: &str| -> Vec<f64> {
+            let header: Vec<&str> = csv.lines().next().unwrap_or("").split(',').collect();
+            let i = header.iter().position(|c| *c == name).unwrap_or(0);
+            csv.lines()
+                .skip(1)
+                .map(|l| {
+                    l.split(',')
+                        .nth(i)
+                        .and_then(|v| v.parse().ok())
+                        .unwrap_or(f64::NAN)
+                })
+                .collect()
+        };
+        let ms = col("frame_ms");
+        let median = s["frame_ms_median"].as_f64().unwrap_or(f64::NAN);
+        let first3 = ms.iter().take(3).copied().fold(0.0, f64::max);
+        let up = col("upload_bytes");
+        let deferred = col("uploads_deferred_bytes")
+            .iter()
+            .filter(|&&b| b > 0.0)
+            .count();
+        println!(
+            "| {label} | {:.2}x | {:.2}x | {median:.1} | {:.0} | {:.0} | {deferred} |",
+            ms[0] / median,
+            first3 / median,
+            s["upload_bytes_p99"].as_f64().unwrap_or(f64::NAN),
+            up.iter().copied().fold(0.0, f64::max),
+        );
+    }
+    println!();
+    Ok(())
+}
+
+/// Median frame with one and two frames in flight, alternating runs.
+fn frames_in_flight(vkterrain: &Path, set: &Path) -> Result<()> {
+    println!("### Frames in flight (Puget 1K, {FRAMES} frames, 1024 x 768, tau 1; two rounds, alternating)\n");
+    println!("| path | 1 in flight: median ms | 2 in flight: median ms | 1 / 2 |");
+    println!("|---|---:|---:|---:|");
+    for path in ["flyover", "orbit"] {
+        let mut med = [Vec::new(), Vec::new()];
+        for _round in 0..2 {
+            for (k, n) in ["1", "2"].into_iter().enumerate() {
+                let s = flight(vkterrain, set, path, FRAMES, &["--frames-in-flight", n])?;
+                med[k].push(s["frame_ms_median"].as_f64().unwrap_or(f64::NAN));
+            }
+        }
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+        let (one, two) = (mean(&med[0]), mean(&med[1]));
+        println!("| {path} | {one:.1} | {two:.1} | {:.2} |", one / two);
+    }
+    println!();
+    Ok(())
+}
+
+/// The manager's CPU time per frame with 1000 visible tiles: a 1280-tile set (the 4K set's
+/// tiles, five times over), a window of 1000 tiles sliding by 8 a frame, wanted levels in a
+/// random walk, a pool of a quarter of the set.
+fn manager_time(costs: &[TileCost]) -> Result<()> {
+    let tiles: Vec<TileCost> = costs.iter().cycle().take(1280).cloned().collect();
+    let total: u64 = tiles.iter().map(|c| c.whole()).sum();
+    let config = Config {
+        pool_bytes: total / 4,
+        ..Config::default()
+    };
+    let mut m = Manager::new(tiles.clone(), config);
+    let mut wanted: Vec<u32> = (0..tiles.len()).map(|t| (t % 9) as u32).collect();
+    let mut rng = 0x2545_f491_4f6c_dd1du64;
+    let mut times = Vec::new();
+    let mut evictions = 0;
+    for f in 0..400u64 {
+        let requests: Vec<Request> = (0..1000)
+            .map(|k| {
+                let t = ((f * 8 + k) % tiles.len() as u64) as usize;
+                rng ^= rng << 13;
+                rng ^= rng >> 7;
+                rng ^= rng << 17;
+                let step = (rng % 3) as i64 - 1;
+                let finest = tiles[t].finest() as i64;
+                wanted[t] = (i64::from(wanted[t]) + step).clamp(0, finest) as u32;
+                Request {
+                    tile: t as u32,
+                    wanted: wanted[t],
+                }
+            })
+            .collect();
+        let start = Instant::now();
+        let plan = m.plan_frame(f, f.checked_sub(2), &requests, true);
+        times.push(start.elapsed().as_secs_f64() * 1000.0);
+        evictions += plan.stats.evictions;
+    }
+    times.sort_by(f64::total_cmp);
+    let p = |q: f64| frametimes::stats::percentile(&times, q);
+    println!(
+        "### Manager CPU time per frame (1000 visible tiles, 1280 tiles, pool 25%, 400 frames)\n"
+    );
+    println!("| median ms | p95 ms | max ms | evictions |");
+    println!("|---:|---:|---:|---:|");
+    println!(
+        "| {:.3} | {:.3} | {:.3} | {evictions} |\n",
+        p(50.0),
+        p(95.0),
+        times.last().copied().unwrap_or(f64::NAN)
+    );
+    Ok(())
+}

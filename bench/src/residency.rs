@@ -1,0 +1,125 @@
+//! Residency policies replayed on recorded traces (`memsim`, and `tilebench memory`).
+
+use memory::sim::{replay, tile_set_bytes, Outcome};
+use memory::trace::Trace;
+use memory::{Config, Scheme, Victim};
+
+/// The policies compared: the manager over a sweep of its weight, its two pure ingredients,
+/// the two naive schemes, and Belady's rule as the reference.
+pub fn policies(pool: u64, upload_budget: u64) -> Vec<(String, Config)> {
+    let base = Config {
+        pool_bytes: pool,
+        upload_budget,
+        ..Config::default()
+    };
+    let mut out = Vec::new();
+    for w in [0.0, 0.5, 1.0, 2.0, 4.0] {
+        out.push((
+            format!("mixture, weight {w}"),
+            Config {
+                weight: w,
+                victim: Victim::Mixture,
+                ..base
+            },
+        ));
+    }
+    out.push((
+        "pure LRU".into(),
+        Config {
+            victim: Victim::Lru,
+            ..base
+        },
+    ));
+    out.push((
+        "pure tightest fit".into(),
+        Config {
+            victim: Victim::TightestFit,
+            ..base
+        },
+    ));
+    out.push((
+        "whole tiles (old scheme), LRU".into(),
+        Config {
+            victim: Victim::Lru,
+            scheme: Scheme::WholeTile,
+            ..base
+        },
+    ));
+    out.push((
+        "per level from scratch".into(),
+        Config {
+            scheme: Scheme::PerLevel,
+            ..base
+        },
+    ));
+    out.push((
+        "Belady (knows the future)".into(),
+        Config {
+            victim: Victim::Belady,
+            ..base
+        },
+    ));
+    out
+}
+
+/// A markdown table of every policy on `trace` with a pool of `pool` bytes; ratios against
+/// Belady's rule. Returns the table and the default mixture's (misses, bytes) over Belady's.
+pub fn policy_table(trace: &Trace, pool: u64, upload_budget: u64) -> (String, (f64, f64)) {
+    let runs: Vec<(String, Outcome)> = policies(pool, upload_budget)
+        .into_iter()
+        .map(|(name, c)| (name, replay(trace, c, 2)))
+        .collect();
+    let belady = runs.last().map(|r| r.1).unwrap_or_default();
+    let mut t = String::from(
+        "| policy | hits | misses | misses / Belady | coarser tile-frames | MB uploaded | MB / Belady | of which indices | evictions | chunk moves |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+    );
+    let ratio = |a: u64, b: u64| a as f64 / (b as f64).max(1.0);
+    let mut default = (f64::NAN, f64::NAN);
+    for (name, o) in &runs {
+        let (rm, rb) = (
+            ratio(o.misses, belady.misses),
+            ratio(o.bytes(), belady.bytes()),
+        );
+        if name == &format!("mixture, weight {}", memory::DEFAULT_WEIGHT) {
+            default = (rm, rb);
+        }
+        t += &format!(
+            "| {name} | {} | {} | {rm:.2}x | {} | {:.1} | {rb:.2}x | {:.0}% | {} | {} |\n",
+            o.hits,
+            o.misses,
+            o.coarser,
+            o.bytes() as f64 / 1e6,
+            100.0 * o.bytes_indices as f64 / (o.bytes() as f64).max(1.0),
+            o.evictions,
+            o.moves,
+        );
+    }
+    (t, default)
+}
+
+/// Bytes moved over the flight by the three transfer schemes with room for everything.
+pub fn bytes_by_scheme(trace: &Trace) -> [Outcome; 3] {
+    [Scheme::WholeTile, Scheme::PerLevel, Scheme::Progressive].map(|scheme| {
+        let c = Config {
+            pool_bytes: u64::MAX / 4,
+            upload_budget: u64::MAX / 4,
+            scheme,
+            victim: Victim::Lru,
+            ..Config::default()
+        };
+        replay(trace, c, 2)
+    })
+}
+
+/// The tile set's own figures: refining every tile from its second-finest level to the finest
+/// (one block and one index array), sending the finest from scratch, and the whole set.
+pub fn tile_set_figures(trace: &Trace) -> (u64, u64, u64) {
+    let (mut refine, mut scratch) = (0, 0);
+    for c in &trace.costs {
+        let f = c.finest();
+        let last = &c.levels[f as usize];
+        refine += c.block_bytes(f) + last.indices;
+        scratch += (0..=f).map(|j| c.block_bytes(j)).sum::<u64>() + last.indices;
+    }
+    (refine, scratch, tile_set_bytes(trace))
+}

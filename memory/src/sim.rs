@@ -1,0 +1,138 @@
+//! Replays a trace through a policy, offline: how the manager (or one of its comparison
+//! schemes, or Belady's rule knowing the future) would have served a recorded flight.
+
+use crate::manager::{Config, Manager, Victim};
+use crate::trace::Trace;
+
+/// Totals over a replayed flight.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Outcome {
+    pub frames: u64,
+    /// Visible tiles summed over frames.
+    pub tile_frames: u64,
+    pub hits: u64,
+    pub misses: u64,
+    /// Tile-frames drawn below the wanted level.
+    pub coarser: u64,
+    /// Tile-frames not drawn at all.
+    pub missing: u64,
+    pub bytes_blocks: u64,
+    pub bytes_indices: u64,
+    pub evictions: u64,
+    pub moves: u64,
+    pub move_bytes: u64,
+    pub overshoot: u64,
+    /// The largest upload of one frame.
+    pub max_frame_bytes: u64,
+    pub pool_bytes: u64,
+}
+
+impl Outcome {
+    pub fn bytes(&self) -> u64 {
+        self.bytes_blocks + self.bytes_indices
+    }
+}
+
+/// Replays `trace` with `config`, frames finishing `frames_in_flight` frames after they start.
+pub fn replay(trace: &Trace, config: Config, frames_in_flight: u64) -> Outcome {
+    let mut m = Manager::new(trace.costs.clone(), config);
+    if config.victim == Victim::Belady {
+        m.set_oracle(Box::new(trace.next_use()));
+    }
+    let mut o = Outcome {
+        pool_bytes: m.pool_bytes(),
+        ..Default::default()
+    };
+    for (f, requests) in trace.frames.iter().enumerate() {
+        let f = f as u64;
+        let p = m.plan_frame(f, f.checked_sub(frames_in_flight.max(1)), requests, true);
+        let s = p.stats;
+        o.frames += 1;
+        o.tile_frames += requests.len() as u64;
+        o.hits += s.hits;
+        o.misses += s.misses;
+        o.coarser += s.tiles_coarser;
+        o.missing += s.tiles_missing;
+        o.bytes_blocks += s.upload_bytes_blocks;
+        o.bytes_indices += s.upload_bytes_indices;
+        o.evictions += s.evictions;
+        o.moves += s.chunk_moves;
+        o.move_bytes += s.chunk_move_bytes;
+        o.overshoot += s.upload_overshoot_bytes;
+        o.max_frame_bytes = o
+            .max_frame_bytes
+            .max(s.upload_bytes_blocks + s.upload_bytes_indices);
+    }
+    o
+}
+
+/// Bytes of the whole tile set (every block and index array of every tile).
+pub fn tile_set_bytes(trace: &Trace) -> u64 {
+    trace.costs.iter().map(|c| c.whole()).sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cost::tests::tile;
+    use crate::manager::{Request, Scheme};
+
+    /// A flight over 12 tiles that keeps coming back: the future matters.
+    fn flight() -> Trace {
+        let costs = (0..12).map(|i| tile(6, 60 + 20 * i)).collect();
+        let frames = (0..120u32)
+            .map(|f| {
+                (0..5)
+                    .map(|k| Request {
+                        tile: (f / 7 + k * 3 + (f % 5)) % 12,
+                        wanted: (f + k) % 6,
+                    })
+                    .fold(Vec::new(), |mut v: Vec<Request>, r| {
+                        if !v.iter().any(|x| x.tile == r.tile) {
+                            v.push(r);
+                        }
+                        v
+                    })
+            })
+            .collect();
+        Trace { costs, frames }
+    }
+
+    #[test]
+    fn belady_misses_no_more_than_lru_and_progressive_sends_least() {
+        let t = flight();
+        let budget = tile_set_bytes(&t) / 4;
+        let run = |victim, scheme| {
+            let c = Config {
+                pool_bytes: budget,
+                upload_budget: 1 << 40,
+                victim,
+                scheme,
+                ..Config::default()
+            };
+            replay(&t, c, 2)
+        };
+        let lru = run(Victim::Lru, Scheme::Progressive);
+        let belady = run(Victim::Belady, Scheme::Progressive);
+        assert!(lru.evictions > 0, "{lru:?}");
+        assert!(belady.evictions <= lru.evictions, "{belady:?} vs {lru:?}");
+        assert_eq!(lru.tile_frames, lru.hits + lru.misses);
+        let unlimited = |scheme| {
+            let c = Config {
+                pool_bytes: 1 << 40,
+                upload_budget: 1 << 40,
+                scheme,
+                ..Config::default()
+            };
+            replay(&t, c, 2).bytes()
+        };
+        let (prog, per, whole) = (
+            unlimited(Scheme::Progressive),
+            unlimited(Scheme::PerLevel),
+            unlimited(Scheme::WholeTile),
+        );
+        assert!(prog < per && per > 0 && whole > 0, "{prog} {per} {whole}");
+        // With room for everything, whole tiles are sent once each: the tile set.
+        assert_eq!(whole, tile_set_bytes(&t));
+    }
+}
