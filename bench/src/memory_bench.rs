@@ -4,14 +4,13 @@
 //! logs; the manager's CPU time is timed on a synthetic frame of 1000 visible tiles.
 
 use std::path::Path;
-use std::time::Instant;
 
 use anyhow::{Context, Result};
-use bench::residency::{bytes_by_scheme, policy_table, tile_set_figures};
+use bench::residency::{bytes_by_scheme, policy_table, tile_set_figures, time_manager};
 use dem::ReadOptions;
 use memory::sim::tile_set_bytes;
 use memory::trace::Trace;
-use memory::{Config, Manager, Request, TileCost};
+use memory::TileCost;
 use tiles::BuildParams;
 
 use crate::{build, data, flight, sibling};
@@ -208,45 +207,13 @@ fn frames_in_flight(vkterrain: &Path, set: &Path) -> Result<()> {
 /// tiles, five times over), a window of 1000 tiles sliding by 8 a frame, wanted levels in a
 /// random walk, a pool of a quarter of the set.
 fn manager_time(costs: &[TileCost]) -> Result<()> {
-    let tiles: Vec<TileCost> = costs.iter().cycle().take(1280).cloned().collect();
-    let total: u64 = tiles.iter().map(|c| c.whole()).sum();
-    let config = Config {
-        pool_bytes: total / 4,
-        ..Config::default()
-    };
-    let mut m = Manager::new(tiles.clone(), config);
-    let mut wanted: Vec<u32> = (0..tiles.len()).map(|t| (t % 9) as u32).collect();
-    let mut rng = 0x2545_f491_4f6c_dd1du64;
-    let mut times = Vec::new();
-    let mut evictions = 0;
-    for f in 0..400u64 {
-        let requests: Vec<Request> = (0..1000)
-            .map(|k| {
-                let t = ((f * 8 + k) % tiles.len() as u64) as usize;
-                rng ^= rng << 13;
-                rng ^= rng >> 7;
-                rng ^= rng << 17;
-                let step = (rng % 3) as i64 - 1;
-                let finest = tiles[t].finest() as i64;
-                wanted[t] = (i64::from(wanted[t]) + step).clamp(0, finest) as u32;
-                Request {
-                    tile: t as u32,
-                    wanted: wanted[t],
-                }
-            })
-            .collect();
-        let start = Instant::now();
-        let plan = m.plan_frame(f, f.checked_sub(2), &requests, true);
-        times.push(start.elapsed().as_secs_f64() * 1000.0);
-        evictions += plan.stats.evictions;
-    }
-    times.sort_by(f64::total_cmp);
-    let p = |q: f64| frametimes::stats::percentile(&times, q);
+    let (frames, times, evictions) = time_manager(costs);
     println!(
-        "### Manager CPU time per frame (1000 visible tiles, 1280 tiles, pool 25%, 400 frames)\n"
+        "### Manager CPU time per frame (1000 visible tiles, 1280 tiles, pool 25%, {frames} frames)\n"
     );
     println!("| median ms | p95 ms | max ms | evictions |");
     println!("|---:|---:|---:|---:|");
+    let p = |q: f64| frametimes::stats::percentile(&times, q);
     println!(
         "| {:.3} | {:.3} | {:.3} | {evictions} |\n",
         p(50.0),

@@ -2,12 +2,16 @@
 //!
 //! ```text
 //! memsim TRACE.csv [--pool-share 0.25 | --pool-mb MB] [--upload-budget-mb 4]
+//! memsim TRACE.csv --time-manager
 //! ```
+//!
+//! `--time-manager` times the manager instead, on a synthetic flight of 1000 visible tiles
+//! built from the trace's tile costs (see `memory::sim::synthetic`).
 
 use std::process::ExitCode;
 
 use anyhow::{bail, Context, Result};
-use bench::residency::{bytes_by_scheme, policy_table, tile_set_figures};
+use bench::residency::{bytes_by_scheme, policy_table, tile_set_figures, time_manager};
 use memory::sim::tile_set_bytes;
 use memory::trace::Trace;
 
@@ -24,7 +28,7 @@ fn main() -> ExitCode {
 fn run() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some(path) = args.first().filter(|a| !a.starts_with('-')) else {
-        bail!("usage: memsim TRACE.csv [--pool-share F | --pool-mb MB] [--upload-budget-mb MB]");
+        bail!("usage: memsim TRACE.csv [--pool-share F | --pool-mb MB] [--upload-budget-mb MB] | --time-manager");
     };
     let flag = |name: &str| -> Result<Option<f64>> {
         match args.iter().position(|a| a == name) {
@@ -41,6 +45,17 @@ fn run() -> Result<()> {
     };
     let text = std::fs::read_to_string(path).with_context(|| format!("{path}: cannot read"))?;
     let trace = Trace::parse(&text).map_err(|e| anyhow::anyhow!("{path}: {e}"))?;
+    if args.iter().any(|a| a == "--time-manager") {
+        let (frames, times, evictions) = time_manager(&trace.costs);
+        let p = |q: f64| frametimes::stats::percentile(&times, q);
+        println!(
+            "manager: {frames} frames of 1000 visible tiles: median {:.3} ms, p95 {:.3} ms, max {:.3} ms, {evictions} evictions",
+            p(50.0),
+            p(95.0),
+            times.last().copied().unwrap_or(f64::NAN)
+        );
+        return Ok(());
+    }
     let total = tile_set_bytes(&trace);
     let pool = match (flag("--pool-mb")?, flag("--pool-share")?) {
         (Some(mb), _) => (mb * 1e6) as u64,

@@ -1,8 +1,10 @@
 //! Residency policies replayed on recorded traces (`memsim`, and `tilebench memory`).
 
+use std::time::Instant;
+
 use memory::sim::{replay, tile_set_bytes, Outcome};
 use memory::trace::Trace;
-use memory::{Config, Scheme, Victim};
+use memory::{Config, Manager, Scheme, TileCost, Victim};
 
 /// The policies compared: the manager over a sweep of its weight, its two pure ingredients,
 /// the two naive schemes, and Belady's rule as the reference.
@@ -122,4 +124,28 @@ pub fn tile_set_figures(trace: &Trace) -> (u64, u64, u64) {
         scratch += (0..=f).map(|j| c.block_bytes(j)).sum::<u64>() + last.indices;
     }
     (refine, scratch, tile_set_bytes(trace))
+}
+
+/// Times the manager's `plan_frame` on [`memory::sim::synthetic`]: 1280 tiles (`costs`
+/// repeated), 1000 visible, 400 frames, a pool of a quarter of the set, two frames in flight.
+/// Returns the frame count, the sorted times (ms) and the evictions.
+pub fn time_manager(costs: &[TileCost]) -> (usize, Vec<f64>, u64) {
+    let trace = memory::sim::synthetic(costs, 1280, 1000, 400);
+    let total: u64 = trace.costs.iter().map(|c| c.whole()).sum();
+    let config = Config {
+        pool_bytes: total / 4,
+        ..Config::default()
+    };
+    let mut m = Manager::new(trace.costs.clone(), config);
+    let mut times = Vec::with_capacity(trace.frames.len());
+    let mut evictions = 0;
+    for (f, requests) in trace.frames.iter().enumerate() {
+        let f = f as u64;
+        let start = Instant::now();
+        let plan = m.plan_frame(f, f.checked_sub(2), requests, true);
+        times.push(start.elapsed().as_secs_f64() * 1000.0);
+        evictions += plan.stats.evictions;
+    }
+    times.sort_by(f64::total_cmp);
+    (trace.frames.len(), times, evictions)
 }

@@ -34,6 +34,7 @@
 
 pub mod classes;
 pub mod cost;
+mod lru;
 pub mod manager;
 pub mod sim;
 pub mod trace;

@@ -2,10 +2,9 @@
 //! move and what to evict. Plain Rust, no GPU: [`Manager::plan_frame`] takes the frame's
 //! requests (visible tiles front to back with their wanted levels) and returns a [`FramePlan`].
 
-use std::collections::BTreeSet;
-
 use crate::classes::ClassPlan;
 use crate::cost::{align, Layout, TileCost};
+use crate::lru::LruLists;
 
 pub type TileId = u32;
 
@@ -195,8 +194,8 @@ pub struct Manager {
     /// Per class: free chunks nobody may still read, and free chunks waiting for a frame.
     free: Vec<Vec<usize>>,
     retiring: Vec<usize>,
-    /// Per class: owned chunks by (last_used, chunk), oldest first.
-    lru: Vec<BTreeSet<(u64, usize)>>,
+    /// Per class: owned chunks, least recently used first.
+    lru: LruLists,
     resident: Vec<Option<Resident>>,
     frame: u64,
     completed: Option<u64>,
@@ -255,7 +254,7 @@ impl Manager {
             config,
             tiles,
             needs,
-            lru: vec![BTreeSet::new(); classes.sizes.len()],
+            lru: LruLists::new(classes.sizes.len(), chunks.len()),
             classes,
             chunks,
             free,
@@ -354,13 +353,13 @@ impl Manager {
                     continue;
                 };
                 self.resident[r.tile as usize] = Some(res);
-                let before = plan_bytes(&plan);
+                let before = plan.uploads.len();
                 if self.config.scheme == Scheme::WholeTile {
                     self.upload_whole(r.tile, &mut plan);
                 } else {
                     self.upload_to(r.tile, 0, &mut plan);
                 }
-                let cost = plan_bytes(&plan) - before;
+                let cost = bytes_since(&plan, before);
                 spent += cost;
                 plan.stats.upload_overshoot_bytes +=
                     spent.saturating_sub(self.config.upload_budget).min(cost);
@@ -368,9 +367,9 @@ impl Manager {
             }
             // 2. Refinement, front to back.
             for (k, r) in requests.iter().enumerate() {
-                let before = plan_bytes(&plan);
+                let before = plan.uploads.len();
                 self.refine(*r, spent, &mut plan);
-                let cost = plan_bytes(&plan) - before;
+                let cost = bytes_since(&plan, before);
                 if cost > 0 {
                     touched[k] = true;
                     spent += cost;
@@ -450,8 +449,21 @@ impl Manager {
             if c.owner.is_some() != owners[i].is_some() {
                 return Err(format!("chunk {i} owned by {:?} but not held", c.owner));
             }
-            if c.owner.is_some() != self.lru[c.class].contains(&(c.last_used, i)) {
+            let listed = self.lru.list_of(i);
+            if (c.owner.is_some() && listed != Some(c.class))
+                || (c.owner.is_none() && listed.is_some())
+            {
                 return Err(format!("chunk {i}: LRU list out of step"));
+            }
+        }
+        for class in 0..self.classes.sizes.len() {
+            let used: Vec<u64> = self
+                .lru
+                .iter(class)
+                .map(|c| self.chunks[c].last_used)
+                .collect();
+            if used.windows(2).any(|w| w[0] > w[1]) {
+                return Err(format!("class {class}: LRU list not in order of last use"));
             }
         }
         let resident: u64 = self
@@ -744,17 +756,16 @@ impl Manager {
         }
     }
 
-    /// Not requested this frame, and every frame that may read it has completed.
-    fn reusable(&self, chunk: usize) -> bool {
-        let used = self.chunks[chunk].last_used;
+    /// A chunk last used in frame `used` may be evicted: it is not requested this frame, and
+    /// every frame that may read it has completed.
+    fn evictable(&self, used: u64) -> bool {
         used < self.frame && self.completed.is_some_and(|f| used <= f)
     }
 
     fn touch(&mut self, chunk: usize) {
         let c = self.chunks[chunk];
         if c.owner.is_some() {
-            self.lru[c.class].remove(&(c.last_used, chunk));
-            self.lru[c.class].insert((self.frame, chunk));
+            self.lru.touch(c.class, chunk);
         }
         self.chunks[chunk].last_used = self.frame;
     }
@@ -764,15 +775,13 @@ impl Manager {
         c.owner = Some(tile);
         c.last_used = self.frame;
         c.drawn = None;
-        self.lru[c.class].insert((self.frame, chunk));
+        self.lru.push_back(c.class, chunk);
     }
 
     /// Gives a chunk up; it is reused once every frame that may read it has completed.
     fn release(&mut self, chunk: usize) {
         let c = self.chunks[chunk];
-        if c.owner.is_some() {
-            self.lru[c.class].remove(&(c.last_used, chunk));
-        }
+        self.lru.remove(chunk);
         self.chunks[chunk].owner = None;
         if c.drawn.is_none() && c.last_used == self.frame {
             // Never drawn (taken this frame and given back): nobody reads it.
@@ -794,22 +803,22 @@ impl Manager {
         if let Some(owner) = self.chunks[victim].owner {
             self.resident[owner as usize] = None;
         }
-        let c = self.chunks[victim];
-        self.lru[c.class].remove(&(c.last_used, victim));
+        self.lru.remove(victim);
         self.chunks[victim].owner = None;
         plan.stats.evictions += 1;
         Some(victim)
     }
 
     fn victim(&self, first: usize, bytes: u64) -> Option<usize> {
-        // The oldest evictable chunk of a class: LRU order; requested (this frame) or possibly
-        // in flight chunks are not evictable and are the newest, so stop at the first of them.
+        // The oldest evictable chunk of a class: LRU order. Whether a chunk is evictable
+        // depends only on its last use (not this frame, and no frame in flight), so the
+        // evictable chunks are a prefix of the order: the oldest is the first, or none is.
+        let evictable = |used: u64| self.evictable(used);
         let oldest = |class: usize| {
-            self.lru[class]
-                .iter()
-                .take_while(|&&(used, _)| used < self.frame)
-                .find(|&&(_, c)| self.reusable(c))
-                .map(|&(used, c)| (used, c))
+            self.lru
+                .oldest(class)
+                .map(|c| (self.chunks[c].last_used, c))
+                .filter(|&(used, _)| evictable(used))
         };
         let classes = first..self.classes.sizes.len();
         match self.config.victim {
@@ -832,11 +841,9 @@ impl Manager {
                 let next = self.oracle.as_ref();
                 classes
                     .flat_map(|class| {
-                        self.lru[class]
-                            .iter()
-                            .take_while(|&&(used, _)| used < self.frame)
-                            .filter(|&&(_, c)| self.reusable(c))
-                            .map(|&(_, c)| c)
+                        self.lru
+                            .iter(class)
+                            .take_while(|&c| evictable(self.chunks[c].last_used))
                     })
                     .max_by_key(|&c| {
                         let owner = self.chunks[c].owner.unwrap_or(0);
@@ -849,6 +856,7 @@ impl Manager {
     }
 }
 
-fn plan_bytes(plan: &FramePlan) -> u64 {
-    plan.uploads.iter().map(|u| u.bytes).sum()
+/// Bytes of the uploads planned after the first `before`.
+fn bytes_since(plan: &FramePlan, before: usize) -> u64 {
+    plan.uploads[before..].iter().map(|u| u.bytes).sum()
 }

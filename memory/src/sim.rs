@@ -1,7 +1,8 @@
 //! Replays a trace through a policy, offline: how the manager (or one of its comparison
 //! schemes, or Belady's rule knowing the future) would have served a recorded flight.
 
-use crate::manager::{Config, Manager, Victim};
+use crate::cost::TileCost;
+use crate::manager::{Config, Manager, Request, Victim};
 use crate::trace::Trace;
 
 /// Totals over a replayed flight.
@@ -66,6 +67,35 @@ pub fn replay(trace: &Trace, config: Config, frames_in_flight: u64) -> Outcome {
     o
 }
 
+/// A synthetic flight for timing the manager: `tiles` tiles (the costs of `costs` repeated),
+/// a window of `visible` of them sliding by 8 tiles a frame, each wanted level in a random
+/// walk (steps of -1, 0, +1; a fixed seed).
+pub fn synthetic(costs: &[TileCost], tiles: usize, visible: usize, frames: usize) -> Trace {
+    let costs: Vec<TileCost> = costs.iter().cycle().take(tiles).cloned().collect();
+    let mut wanted: Vec<u32> = (0..tiles).map(|t| (t % 9) as u32).collect();
+    let mut rng = 0x2545_f491_4f6c_dd1du64;
+    let frames = (0..frames)
+        .map(|f| {
+            (0..visible)
+                .map(|k| {
+                    let t = (f * 8 + k) % tiles;
+                    rng ^= rng << 13;
+                    rng ^= rng >> 7;
+                    rng ^= rng << 17;
+                    let step = (rng % 3) as i64 - 1;
+                    let finest = i64::from(costs[t].finest());
+                    wanted[t] = (i64::from(wanted[t]) + step).clamp(0, finest) as u32;
+                    Request {
+                        tile: t as u32,
+                        wanted: wanted[t],
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    Trace { costs, frames }
+}
+
 /// Bytes of the whole tile set (every block and index array of every tile).
 pub fn tile_set_bytes(trace: &Trace) -> u64 {
     trace.costs.iter().map(|c| c.whole()).sum()
@@ -75,7 +105,7 @@ pub fn tile_set_bytes(trace: &Trace) -> u64 {
 mod tests {
     use super::*;
     use crate::cost::tests::tile;
-    use crate::manager::{Request, Scheme};
+    use crate::manager::Scheme;
 
     /// A flight over 12 tiles that keeps coming back: the future matters.
     fn flight() -> Trace {

@@ -30,6 +30,9 @@ pub struct Flight<'a> {
     pub draw_only: bool,
     /// Fly the path once untimed first, so the timed flight starts with its tiles resident.
     pub warmup: bool,
+    /// After the warm-up, empty the pool: the timed flight streams its tiles from cold while
+    /// the driver is warm (separates the streaming cold start from the driver's first use).
+    pub forget_after_warmup: bool,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -94,8 +97,11 @@ fn run(
     if flight.draw_only {
         return draw_only(gpu, flight, renderer);
     }
-    if flight.warmup {
+    if flight.warmup || flight.forget_after_warmup {
         warm_up(gpu, flight, renderer)?;
+    }
+    if flight.forget_after_warmup {
+        renderer.forget_tiles(gpu)?;
     }
     let mut records = Vec::with_capacity(flight.frames as usize);
     for k in 0..flight.frames {

@@ -110,6 +110,11 @@ struct Cli {
     /// Benchmark: fly the path once untimed first, so the timed flight starts warm.
     #[arg(long)]
     warmup: bool,
+    /// Benchmark: fly the path once untimed, then empty the GPU pool, so the timed flight
+    /// streams every tile from cold with the driver warm (a software rasteriser such as
+    /// lavapipe grows its working memory over the first frames it draws).
+    #[arg(long, conflicts_with = "warmup")]
+    warmup_driver: bool,
     /// Diagnostic: do not draw the stitching triangles (shows the cracks they close).
     #[arg(long)]
     no_stitch: bool,
@@ -277,6 +282,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
         screenshot_every: cli.screenshot_every,
         draw_only: cli.draw_only,
         warmup: cli.warmup,
+        forget_after_warmup: cli.warmup_driver,
     };
     let result = fly(&gpu, &flight)?;
     let validation = gpu.validation_messages();
