@@ -11,7 +11,9 @@
 use std::process::ExitCode;
 
 use anyhow::{bail, Context, Result};
-use bench::residency::{bytes_by_scheme, policy_table, tile_set_figures, time_manager};
+use bench::residency::{
+    bytes_by_scheme, policy_runs, policy_table, tile_set_figures, time_manager,
+};
 use memory::sim::tile_set_bytes;
 use memory::trace::Trace;
 
@@ -87,7 +89,7 @@ fn run() -> Result<()> {
         pool as f64 / 1e6,
         upload as f64 / 1e6
     );
-    print!("{}", policy_table(&trace, pool, upload).0);
+    print!("{}", policy_table(&policy_runs(&trace, pool, upload)));
     println!("\nDowngrade slack (room for everything): a tile may stay drawn up to N levels finer than wanted rather than re-sending an index array\n");
     for slack in [0, 1, 2, 9] {
         let c = memory::Config {

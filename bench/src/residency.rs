@@ -64,39 +64,53 @@ pub fn policies(pool: u64, upload_budget: u64) -> Vec<(String, Config)> {
     out
 }
 
-/// A markdown table of every policy on `trace` with a pool of `pool` bytes; ratios against
-/// Belady's rule. Returns the table and the default mixture's (misses, bytes) over Belady's.
-pub fn policy_table(trace: &Trace, pool: u64, upload_budget: u64) -> (String, (f64, f64)) {
-    let runs: Vec<(String, Outcome)> = policies(pool, upload_budget)
+/// Every policy replayed on `trace` with a pool of `pool` bytes, Belady's rule last.
+pub fn policy_runs(trace: &Trace, pool: u64, upload_budget: u64) -> Vec<(String, Outcome)> {
+    policies(pool, upload_budget)
         .into_iter()
         .map(|(name, c)| (name, replay(trace, c, 2)))
-        .collect();
-    let belady = runs.last().map(|r| r.1).unwrap_or_default();
-    let mut t = String::from(
-        "| policy | hits | misses | misses / Belady | coarser tile-frames | MB uploaded | MB / Belady | of which indices | evictions | chunk moves |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
-    );
+        .collect()
+}
+
+/// The name of the manager's default policy in [`policies`].
+pub fn default_policy() -> String {
+    format!("mixture, weight {}", memory::DEFAULT_WEIGHT)
+}
+
+/// `name`'s (misses, bytes) over Belady's (the last run).
+pub fn against_belady(runs: &[(String, Outcome)], name: &str) -> (f64, f64) {
     let ratio = |a: u64, b: u64| a as f64 / (b as f64).max(1.0);
-    let mut default = (f64::NAN, f64::NAN);
-    for (name, o) in &runs {
-        let (rm, rb) = (
-            ratio(o.misses, belady.misses),
-            ratio(o.bytes(), belady.bytes()),
-        );
-        if name == &format!("mixture, weight {}", memory::DEFAULT_WEIGHT) {
-            default = (rm, rb);
-        }
+    let belady = runs.last().map(|r| r.1).unwrap_or_default();
+    runs.iter()
+        .find(|(n, _)| n == name)
+        .map_or((f64::NAN, f64::NAN), |(_, o)| {
+            (
+                ratio(o.misses, belady.misses),
+                ratio(o.bytes(), belady.bytes()),
+            )
+        })
+}
+
+/// A markdown table of the runs, with ratios against Belady's rule.
+pub fn policy_table(runs: &[(String, Outcome)]) -> String {
+    let mut t = String::from(
+        "| policy | hits | misses | misses / Belady | coarser tile-frames | missing tile-frames | MB uploaded | MB / Belady | of which indices | evictions | chunk moves |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+    );
+    for (name, o) in runs {
+        let (rm, rb) = against_belady(runs, name);
         t += &format!(
-            "| {name} | {} | {} | {rm:.2}x | {} | {:.1} | {rb:.2}x | {:.0}% | {} | {} |\n",
+            "| {name} | {} | {} | {rm:.2}x | {} | {} | {:.1} | {rb:.2}x | {:.0}% | {} | {} |\n",
             o.hits,
             o.misses,
             o.coarser,
+            o.missing,
             o.bytes() as f64 / 1e6,
             100.0 * o.bytes_indices as f64 / (o.bytes() as f64).max(1.0),
             o.evictions,
             o.moves,
         );
     }
-    (t, default)
+    t
 }
 
 /// Bytes moved over the flight by the three transfer schemes with room for everything.

@@ -18,7 +18,7 @@ use crate::terrain::TileInfo;
 pub const RESTART: u32 = u32::MAX;
 
 /// Stitch geometry for one tile: packed vertices in the tile's frame and fan indices.
-#[derive(Default, Debug, Clone)]
+#[derive(Default, Debug, Clone, PartialEq)]
 pub struct Stitch {
     pub vertices: Vec<u32>,
     pub indices: Vec<u32>,
