@@ -437,8 +437,8 @@ fn frames() -> Result<()> {
     )?;
     let n48 = dem::read(&[data("srtm/N48W125.hgt")?], &ReadOptions::default())?;
     println!("### vkterrain flights, 1024 x 768, 60 frames per path, all in the same run\n");
-    println!("Frame time is wall time per frame (CPU work plus waiting for the GPU; on lavapipe the GPU is the CPU).");
-    println!("CPU share: cull + LOD + stitch + record over frame time (upload preparation apart, in the next column).\n");
+    println!("Frame time is the interval between frames' completions on the GPU (timestamps), two frames in flight; on lavapipe the GPU is the CPU.");
+    println!("CPU share: cull + LOD + residency + stitch + record over frame time (writing uploads apart, in the next column).\n");
     println!("| dataset | path | mode | median ms | p95 ms | triangles/frame | Mtri/s | CPU ms (median) | CPU share | upload share | brute / this (median) |");
     println!("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|");
     let mut limits = Vec::new();

@@ -80,14 +80,24 @@ pub fn memory() -> Result<()> {
         "### Bytes over real flights ({FRAMES} frames, 1024 x 768, tau 1), room for everything\n"
     );
     println!("Traces from `vkterrain --trace`, replayed with a pool and an upload budget large enough that nothing is evicted or deferred: what each transfer scheme sends.\n");
-    println!("| flight | tile set MB | finest: refine / scratch MB | whole tiles MB | per level from scratch MB | progressive MB | progressive / whole | progressive / per level | indices in progressive |");
-    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    println!("| flight | tile set MB | finest: refine / scratch MB | whole tiles MB | per level from scratch MB | progressive MB | progressive / whole | progressive / per level | indices in progressive | of which coarser arrays | progressive, slack 1 / whole |");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for (name, t) in &traces {
         let (refine, scratch, whole_set) = tile_set_figures(t);
         let [w, p, g] = bytes_by_scheme(t);
+        let slack = memory::sim::replay(
+            t,
+            memory::Config {
+                pool_bytes: u64::MAX / 4,
+                upload_budget: u64::MAX / 4,
+                downgrade_slack: 1,
+                ..memory::Config::default()
+            },
+            2,
+        );
         let mb = |b: u64| b as f64 / 1e6;
         println!(
-            "| {name} | {:.1} | {:.1} / {:.1} | {:.1} | {:.1} | {:.1} | {:.2} | {:.2} | {:.0}% |",
+            "| {name} | {:.1} | {:.1} / {:.1} | {:.1} | {:.1} | {:.1} | {:.2} | {:.2} | {:.0}% | {:.0}% | {:.2} |",
             mb(whole_set),
             mb(refine),
             mb(scratch),
@@ -96,7 +106,9 @@ pub fn memory() -> Result<()> {
             mb(g.bytes()),
             g.bytes() as f64 / w.bytes().max(1) as f64,
             g.bytes() as f64 / p.bytes().max(1) as f64,
-            100.0 * g.bytes_indices as f64 / g.bytes().max(1) as f64
+            100.0 * g.bytes_indices as f64 / g.bytes().max(1) as f64,
+            100.0 * g.bytes_coarser as f64 / g.bytes().max(1) as f64,
+            slack.bytes() as f64 / w.bytes().max(1) as f64,
         );
     }
 

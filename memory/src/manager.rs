@@ -138,6 +138,10 @@ pub struct Stats {
     pub tiles_missing: u64,
     pub upload_bytes_blocks: u64,
     pub upload_bytes_indices: u64,
+    /// Of `upload_bytes_indices`: index arrays sent to draw a tile coarser than it was drawn
+    /// (its blocks are resident; a coarser level needs only its index array). This is what
+    /// `Config::downgrade_slack` trades for triangles.
+    pub upload_bytes_coarser: u64,
     /// Bytes still needed to bring every visible tile to its wanted level.
     pub uploads_deferred_bytes: u64,
     /// Bytes uploaded beyond the budget (presence of new tiles, or one step larger than it).
@@ -690,6 +694,9 @@ impl Manager {
                     in_flight: false,
                 });
             }
+        }
+        if res.index.is_some_and(|previous| level < previous) {
+            plan.stats.upload_bytes_coarser += t.levels[level as usize].indices;
         }
         let drawn = self.chunks[res.chunk].drawn;
         plan.uploads.push(Upload {

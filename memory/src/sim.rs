@@ -19,6 +19,8 @@ pub struct Outcome {
     pub missing: u64,
     pub bytes_blocks: u64,
     pub bytes_indices: u64,
+    /// Of `bytes_indices`: coarser index arrays for tiles whose wanted level dropped.
+    pub bytes_coarser: u64,
     pub evictions: u64,
     pub moves: u64,
     pub move_bytes: u64,
@@ -56,6 +58,7 @@ pub fn replay(trace: &Trace, config: Config, frames_in_flight: u64) -> Outcome {
         o.missing += s.tiles_missing;
         o.bytes_blocks += s.upload_bytes_blocks;
         o.bytes_indices += s.upload_bytes_indices;
+        o.bytes_coarser += s.upload_bytes_coarser;
         o.evictions += s.evictions;
         o.moves += s.chunk_moves;
         o.move_bytes += s.chunk_move_bytes;

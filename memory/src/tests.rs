@@ -37,6 +37,10 @@ fn progressive_refinement_sends_only_new_blocks_and_one_index_array() {
         t.block_bytes(3) + t.block_bytes(4)
     );
     assert_eq!(p.stats.upload_bytes_indices, t.levels[4].indices);
+    assert_eq!(
+        p.stats.upload_bytes_coarser, 0,
+        "refining is not coarsening"
+    );
     // Back to a coarser level: its index array only.
     let p = m.plan_frame(2, Some(1), &[req(0, 1)], true);
     assert_eq!(
@@ -44,6 +48,7 @@ fn progressive_refinement_sends_only_new_blocks_and_one_index_array() {
         (Some(1), 0)
     );
     assert_eq!(p.stats.upload_bytes_indices, t.levels[1].indices);
+    assert_eq!(p.stats.upload_bytes_coarser, t.levels[1].indices);
     m.check().unwrap();
 }
 

@@ -827,6 +827,7 @@ fn frame_record(plan: &Plan, counts: DrawCounts, levels: u32) -> FrameRecord {
         evictions: st.evictions,
         upload_bytes_blocks: st.upload_bytes_blocks,
         upload_bytes_indices: st.upload_bytes_indices,
+        upload_bytes_coarser: st.upload_bytes_coarser,
         uploads_deferred_bytes: st.uploads_deferred_bytes,
         upload_overshoot_bytes: st.upload_overshoot_bytes,
         tiles_coarser: st.tiles_coarser,

@@ -6,7 +6,8 @@
 //! upload_bytes, resident_bytes, evictions`, then the memory manager's
 //! `gpu_allocations, upload_bytes_blocks, upload_bytes_indices, uploads_deferred_bytes,
 //! upload_overshoot_bytes, staged_bytes, tiles_coarser, tiles_missing, chunks_free,
-//! chunk_moves, chunk_move_bytes, hits, misses, used_bytes, cpu_residency_ms, gpu_draw_ms`,
+//! chunk_moves, chunk_move_bytes, hits, misses, used_bytes, cpu_residency_ms, gpu_draw_ms,
+//! upload_bytes_coarser`,
 //! and last `tiles_level_0 .. tiles_level_{n-1}`.
 
 use std::io::Write;
@@ -47,6 +48,8 @@ pub struct FrameRecord {
     pub gpu_allocations: u64,
     pub upload_bytes_blocks: u64,
     pub upload_bytes_indices: u64,
+    /// Of `upload_bytes_indices`: coarser index arrays for tiles whose wanted level dropped.
+    pub upload_bytes_coarser: u64,
     /// Bytes still needed to draw every visible tile at its wanted level.
     pub uploads_deferred_bytes: u64,
     /// Bytes sent beyond the upload budget (new tiles' level 0, or one step larger than it).
@@ -68,7 +71,7 @@ pub struct FrameRecord {
     pub tiles_per_level: Vec<u64>,
 }
 
-pub const BASE_COLUMNS: [&str; 33] = [
+pub const BASE_COLUMNS: [&str; 34] = [
     "frame",
     "time_s",
     "frame_ms",
@@ -102,6 +105,7 @@ pub const BASE_COLUMNS: [&str; 33] = [
     "used_bytes",
     "cpu_residency_ms",
     "gpu_draw_ms",
+    "upload_bytes_coarser",
 ];
 
 pub fn header(levels: u32) -> String {
@@ -164,6 +168,7 @@ impl FrameRecord {
         );
         cells.push(ms_cell(self.cpu_residency_ms));
         cells.push(ms_cell(self.gpu_draw_ms));
+        cells.push(self.upload_bytes_coarser.to_string());
         cells.extend(self.tiles_per_level.iter().map(|n| n.to_string()));
         cells.join(",")
     }
@@ -226,6 +231,7 @@ pub struct Summary {
     pub upload_mb: f64,
     pub upload_mb_blocks: f64,
     pub upload_mb_indices: f64,
+    pub upload_mb_coarser: f64,
     pub staged_mb: f64,
     pub upload_bytes_p99: f64,
     pub upload_overshoot_mb: f64,
@@ -291,6 +297,7 @@ impl Summary {
             upload_mb: sum(|r| r.upload_bytes) as f64 / 1e6,
             upload_mb_blocks: sum(|r| r.upload_bytes_blocks) as f64 / 1e6,
             upload_mb_indices: sum(|r| r.upload_bytes_indices) as f64 / 1e6,
+            upload_mb_coarser: sum(|r| r.upload_bytes_coarser) as f64 / 1e6,
             staged_mb: sum(|r| r.staged_bytes) as f64 / 1e6,
             upload_bytes_p99: percentile(&uploads, 99.0),
             upload_overshoot_mb: sum(|r| r.upload_overshoot_bytes) as f64 / 1e6,
