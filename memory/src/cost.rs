@@ -104,6 +104,24 @@ impl TileCost {
         (0..=self.finest()).rev().find(|&l| self.need(l) <= bytes)
     }
 
+    /// The layout of a chunk holding the whole tile (the whole-tile scheme): every block as in
+    /// [`Self::layout`], then every level's index array in turn, each starting 4-aligned.
+    pub fn whole_layout(&self) -> Layout {
+        let l = self.layout(self.finest());
+        Layout {
+            bytes: l.index + self.whole_index_before(self.finest() + 1),
+            ..l
+        }
+    }
+
+    /// In a whole-tile chunk: where level `j`'s index array starts, from the index region.
+    pub fn whole_index_before(&self, j: u32) -> u64 {
+        self.levels[..j as usize]
+            .iter()
+            .map(|l| align(l.indices, 4))
+            .sum()
+    }
+
     /// Everything the tile stores: all blocks and all index arrays (a whole-tile upload).
     pub fn whole(&self) -> u64 {
         self.levels

@@ -3,7 +3,7 @@
 //! requests (visible tiles front to back with their wanted levels) and returns a [`FramePlan`].
 
 use crate::classes::ClassPlan;
-use crate::cost::{align, Layout, TileCost};
+use crate::cost::{Layout, TileCost};
 use crate::lru::LruLists;
 
 pub type TileId = u32;
@@ -222,7 +222,7 @@ impl Manager {
             .map(|t| {
                 (0..=t.finest())
                     .map(|l| match scheme {
-                        Scheme::WholeTile => align(t.whole(), 4),
+                        Scheme::WholeTile => t.whole_layout().bytes,
                         _ => t.need(l),
                     })
                     .collect()
@@ -440,7 +440,7 @@ impl Manager {
             if let Some(other) = owners[res.chunk].replace(t) {
                 return Err(format!("chunk {} held by tiles {other} and {t}", res.chunk));
             }
-            if !res.whole && res.layout.bytes > self.classes.sizes[c.class] {
+            if res.layout.bytes > self.classes.sizes[c.class] {
                 return Err(format!("tile {t}: layout larger than its chunk"));
             }
             if let (Some(i), b) = (res.index, res.blocks) {
@@ -526,13 +526,20 @@ impl Manager {
         let level = if res.whole { Some(wanted) } else { res.index };
         let Some(level) = level else { return none };
         let chunk = &self.chunks[res.chunk];
+        let t = &self.tiles[tile as usize];
+        // A whole tile holds every index array, one after another.
+        let index_before = if res.whole {
+            t.whole_index_before(level)
+        } else {
+            0
+        };
         Grant {
             tile,
             wanted,
             level: Some(level),
             vertex_offset: chunk.offset,
             morph_offset: chunk.offset + res.layout.morph,
-            index_offset: chunk.offset + res.layout.index,
+            index_offset: chunk.offset + res.layout.index + index_before,
             index_width: self.tiles[tile as usize].levels[level as usize].index_width,
         }
     }
@@ -653,7 +660,7 @@ impl Manager {
         let t = &self.tiles[tile as usize];
         let size = self.classes.sizes[self.chunks[chunk].class];
         let layout = match self.config.scheme {
-            Scheme::WholeTile => t.layout(t.finest()),
+            Scheme::WholeTile => t.whole_layout(),
             _ => t.layout(t.capacity_in(size).unwrap_or(0)),
         };
         Some(Resident {
@@ -720,23 +727,26 @@ impl Manager {
         };
         let t = &self.tiles[tile as usize];
         let base = self.chunks[res.chunk].offset;
-        let mut at = 0;
+        let layout = res.layout;
         for (j, l) in t.levels.iter().enumerate() {
             let j = j as u32;
-            for (part, bytes) in [
-                (Part::Positions(j), l.positions),
-                (Part::Morph(j), l.morph),
-                (Part::Indices(j), l.indices),
+            for (part, bytes, dst) in [
+                (Part::Positions(j), l.positions, t.positions_before(j)),
+                (Part::Morph(j), l.morph, layout.morph + t.morph_before(j)),
+                (
+                    Part::Indices(j),
+                    l.indices,
+                    layout.index + t.whole_index_before(j),
+                ),
             ] {
                 if bytes > 0 {
                     plan.uploads.push(Upload {
                         tile,
                         part,
-                        dst: base + at,
+                        dst: base + dst,
                         bytes,
                         in_flight: false,
                     });
-                    at += bytes;
                 }
             }
         }

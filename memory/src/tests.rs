@@ -204,6 +204,51 @@ fn belady_evicts_the_tile_used_farthest_in_the_future() {
     }
 }
 
+/// A whole tile is drawable at every level: the grant of each level points at the index array
+/// the upload wrote for it (4-aligned), and every block's positions follow block 0's.
+#[test]
+fn whole_tiles_address_every_level_where_it_was_written() {
+    let t = tile(6, 37);
+    let mut c = config(64 << 20, 1 << 30);
+    c.scheme = Scheme::WholeTile;
+    let mut m = Manager::new(vec![t.clone()], c);
+    let first = m.plan_frame(0, None, &[req(0, 0)], true);
+    let dst = |part: Part| {
+        first
+            .uploads
+            .iter()
+            .find(|u| u.part == part)
+            .map(|u| u.dst)
+            .unwrap_or_else(|| panic!("{part:?} not uploaded"))
+    };
+    let g0 = first.grants[0];
+    for j in 0..=t.finest() {
+        assert_eq!(
+            dst(Part::Positions(j)),
+            g0.vertex_offset + t.positions_before(j)
+        );
+    }
+    // Nothing overlaps: the uploads, sorted, are disjoint and inside the chunk.
+    let mut spans: Vec<(u64, u64)> = first
+        .uploads
+        .iter()
+        .map(|u| (u.dst, u.dst + u.bytes))
+        .collect();
+    spans.sort();
+    assert!(spans.windows(2).all(|w| w[0].1 <= w[1].0), "{spans:?}");
+    let (start, size) = m.chunk_of(0).expect("resident");
+    assert!(spans[0].0 >= start && spans.last().unwrap().1 <= start + size);
+    for (f, level) in (1..=t.finest()).rev().chain(0..3).enumerate() {
+        let f = f as u64 + 1;
+        let p = m.plan_frame(f, Some(f - 1), &[req(0, level)], true);
+        let g = p.grants[0];
+        assert_eq!((g.level, p.uploads.len()), (Some(level), 0));
+        assert_eq!(g.index_offset, dst(Part::Indices(level)));
+        assert_eq!(g.index_offset % 4, 0);
+    }
+    m.check().unwrap();
+}
+
 #[test]
 fn the_comparison_schemes_account_as_described() {
     let t = tile(5, 100);

@@ -72,6 +72,8 @@ pub struct MemoryOptions {
     pub force_staging: bool,
     /// Levels finer than wanted a tile may stay drawn rather than re-sending an index array.
     pub downgrade_slack: u32,
+    /// How levels travel (progressive; the others are for comparison and the draw-only limit).
+    pub scheme: Scheme,
 }
 
 impl Default for MemoryOptions {
@@ -83,6 +85,7 @@ impl Default for MemoryOptions {
             frames_in_flight: 2,
             force_staging: false,
             downgrade_slack: memory::DEFAULT_DOWNGRADE_SLACK,
+            scheme: Scheme::Progressive,
         }
     }
 }
@@ -253,7 +256,7 @@ impl Renderer {
             upload_budget: options.upload_budget,
             weight: options.weight,
             class_ratio: 2.0,
-            scheme: Scheme::Progressive,
+            scheme: options.scheme,
             victim: Victim::Mixture,
             downgrade_slack: options.downgrade_slack,
         };

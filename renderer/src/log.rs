@@ -201,6 +201,8 @@ pub struct RunInfo {
     pub frames_in_flight: usize,
     /// Uploads went through the staging ring (not written in place).
     pub staging: bool,
+    /// How levels travel: "progressive", "per-level" or "whole-tile".
+    pub upload_scheme: &'static str,
 }
 
 #[derive(Serialize, Debug)]
@@ -240,6 +242,7 @@ pub struct Summary {
     pub upload_budget_mb: Option<f64>,
     pub frames_in_flight: usize,
     pub staging: bool,
+    pub upload_scheme: &'static str,
     /// GPU allocations after the first frame (the pool is allocated once: 0).
     pub gpu_allocations_after_first_frame: u64,
     pub hits: u64,
@@ -306,6 +309,7 @@ impl Summary {
                 .then(|| run.upload_budget as f64 / 1e6),
             frames_in_flight: run.frames_in_flight,
             staging: run.staging,
+            upload_scheme: run.upload_scheme,
             gpu_allocations_after_first_frame: records
                 .iter()
                 .skip(1)

@@ -88,6 +88,11 @@ struct Cli {
     /// a coarser index array.
     #[arg(long, default_value_t = memory::DEFAULT_DOWNGRADE_SLACK)]
     downgrade_slack: u32,
+    /// How tile levels travel: progressive (new blocks and one index array per refinement),
+    /// per-level (each level from scratch) or whole-tile (every level at once, the old scheme).
+    /// --draw-only uses whole-tile, so that every pre-recorded frame finds its levels.
+    #[arg(long, value_enum, default_value_t = UploadScheme::Progressive)]
+    upload_scheme: UploadScheme,
     /// Write every frame's visible tiles and wanted levels here (for `memsim`).
     #[arg(long, value_name = "FILE")]
     trace: Option<PathBuf>,
@@ -181,6 +186,23 @@ fn parse_rgb(s: &str) -> Result<[f32; 3], String> {
     Err("expected R,G,B with each in 0..1 (or 0..255 integers)".into())
 }
 
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum UploadScheme {
+    Progressive,
+    PerLevel,
+    WholeTile,
+}
+
+impl From<UploadScheme> for memory::Scheme {
+    fn from(s: UploadScheme) -> memory::Scheme {
+        match s {
+            UploadScheme::Progressive => memory::Scheme::Progressive,
+            UploadScheme::PerLevel => memory::Scheme::PerLevel,
+            UploadScheme::WholeTile => memory::Scheme::WholeTile,
+        }
+    }
+}
+
 fn main() -> ExitCode {
     match run(Cli::parse()) {
         Ok(code) => code,
@@ -242,6 +264,11 @@ fn run(cli: Cli) -> Result<ExitCode> {
         frames_in_flight: cli.frames_in_flight as usize,
         force_staging: cli.force_staging,
         downgrade_slack: cli.downgrade_slack,
+        scheme: if cli.draw_only {
+            memory::Scheme::WholeTile
+        } else {
+            cli.upload_scheme.into()
+        },
     };
     let gpu_options = GpuOptions {
         validation: cli.validation,
@@ -311,6 +338,11 @@ fn finish(
         upload_budget: memory.upload_budget,
         frames_in_flight: memory.frames_in_flight,
         staging: result.staging,
+        upload_scheme: match memory.scheme {
+            memory::Scheme::Progressive => "progressive",
+            memory::Scheme::PerLevel => "per-level",
+            memory::Scheme::WholeTile => "whole-tile",
+        },
     };
     let records = &result.records;
     let summary = Summary::of(records, &run);

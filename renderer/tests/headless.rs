@@ -358,3 +358,69 @@ fn broken_tile_sets_give_one_clear_line() {
         assert_eq!(err.trim_end().lines().count(), 1, "{err}");
     }
 }
+
+/// How levels travel must not change what is drawn: the progressive, per-level and whole-tile
+/// schemes render the same pixels, frame for frame (with room for everything), and the
+/// draw-only limit (pre-recorded frames over whole tiles) draws the same triangles.
+#[test]
+fn upload_schemes_draw_the_same_frames() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = puget(dir.path());
+    let mut runs = Vec::new();
+    for scheme in ["progressive", "per-level", "whole-tile"] {
+        let out = dir.path().join(scheme);
+        let shots = flight(
+            &set,
+            &out,
+            "flyover",
+            8,
+            &["--upload-scheme", scheme, "--upload-budget-mb", "1000"],
+        );
+        let csv = std::fs::read_to_string(out.join("frames.csv")).expect("log");
+        runs.push((scheme, shots, triangles(&csv)));
+    }
+    let (_, shots, tris) = &runs[0];
+    for (scheme, other, other_tris) in &runs[1..] {
+        assert_eq!(tris, other_tris, "{scheme}: triangles per frame");
+        for (k, (a, b)) in shots.iter().zip(other).enumerate() {
+            assert!(a == b, "{scheme}: frame {k} differs from progressive");
+        }
+    }
+    let log = dir.path().join("draw_only.csv");
+    let o = vkterrain(&[
+        s(&set),
+        "--headless",
+        "--validation",
+        "--path",
+        "flyover",
+        "--frames",
+        "8",
+        "--size",
+        "256x192",
+        "--draw-only",
+        "--log",
+        s(&log),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let csv = std::fs::read_to_string(&log).expect("log");
+    assert_eq!(&triangles(&csv), tris, "draw-only triangles per frame");
+}
+
+/// The `triangles` column of a frame log.
+fn triangles(csv: &str) -> Vec<u64> {
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+    let col = header
+        .iter()
+        .position(|c| *c == "triangles")
+        .expect("triangles column");
+    lines
+        .map(|l| {
+            l.split(',')
+                .nth(col)
+                .expect("cell")
+                .parse()
+                .expect("number")
+        })
+        .collect()
+}
