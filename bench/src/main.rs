@@ -439,8 +439,8 @@ fn frames() -> Result<()> {
     println!("### vkterrain flights, 1024 x 768, 60 frames per path, all in the same run\n");
     println!("Frame time is the interval between frames' completions on the GPU (timestamps), two frames in flight; on lavapipe the GPU is the CPU.");
     println!("CPU share: cull + LOD + residency + stitch + record over frame time (writing uploads apart, in the next column).\n");
-    println!("| dataset | path | mode | median ms | p95 ms | triangles/frame | Mtri/s | CPU ms (median) | CPU share | upload share | brute / this (median) |");
-    println!("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    println!("| dataset | path | mode | median ms | p95 ms | triangles/frame | Mtri/s | CPU ms (median) | CPU share | upload share | MB uploaded | brute / this (median) |");
+    println!("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     let mut limits = Vec::new();
     for (name, grid) in [("Puget 1K", &puget), ("SRTM1 N48W125", &n48)] {
         let set = dir.join("f.vkt");
@@ -455,6 +455,17 @@ fn frames() -> Result<()> {
                     flight(&vkterrain, &set, path, 60, &["--tau", tau])?,
                 ));
             }
+            // The same tau-1 flight sending whole tiles (the scheme before the pool).
+            rows.push((
+                "tau 1, whole-tile uploads".into(),
+                flight(
+                    &vkterrain,
+                    &set,
+                    path,
+                    60,
+                    &["--tau", "1", "--upload-scheme", "whole-tile"],
+                )?,
+            ));
             // The same tau-1 flight with its tiles already resident, and its draw-only limit:
             // the same frames pre-recorded and only replayed.
             let warm = flight(&vkterrain, &set, path, 60, &["--tau", "1", "--warmup"])?;
@@ -469,7 +480,7 @@ fn frames() -> Result<()> {
             for (mode, s) in rows {
                 let f = |k: &str| s[k].as_f64().unwrap_or(f64::NAN);
                 println!(
-                "| {name} | {path} | {mode} | {:.1} | {:.1} | {:.0} | {:.1} | {:.2} | {:.1}% | {:.1}% | {:.1}x |",
+                "| {name} | {path} | {mode} | {:.1} | {:.1} | {:.0} | {:.1} | {:.2} | {:.1}% | {:.1}% | {:.1} | {:.1}x |",
                 f("frame_ms_median"),
                 f("frame_ms_p95"),
                 f("triangles_per_frame_mean"),
@@ -477,6 +488,7 @@ fn frames() -> Result<()> {
                 f("cpu_ms_median"),
                 100.0 * f("cpu_share"),
                 100.0 * f("upload_share"),
+                f("upload_mb"),
                 brute_ms / f("frame_ms_median")
             );
             }
