@@ -201,10 +201,7 @@ fn cold_start(vkterrain: &Path, set: &Path, dir: &Path) -> Result<()> {
     let configs = [
         ("4 MiB (default)", vec![]),
         ("1 MiB", vec!["--upload-budget-mb", "1"]),
-        (
-            "unlimited (like the old whole-tile uploads)",
-            vec!["--upload-budget-mb", "100000"],
-        ),
+        ("unlimited", vec!["--upload-budget-mb", "100000"]),
         (
             "4 MiB, driver warmed first (`--warmup-driver`)",
             vec!["--warmup-driver"],
