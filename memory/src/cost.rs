@@ -1,19 +1,7 @@
 //! What a tile costs in GPU memory and on the bus, level by level, and where each part sits
 //! inside a chunk.
 //!
-//! A chunk sized for capacity level `c` is laid out as
-//!
-//! ```text
-//! | positions: block 0 | block 1 | ... | block c | morph: block 1 | ... | block c | index array |
-//! ^ chunk offset (256-aligned)          ^ P(c)                              ^ align4(P(c) + M(c))
-//! ```
-//!
-//! Positions of blocks `0..=c` are contiguous and in block order, so the index array of any
-//! level `l <= c` addresses them with one `vertexOffset` (the chunk offset / 4). Block `j`'s
-//! morph offsets (`j` rows of `block_len` bytes, one per coarser level, as in the file) follow
-//! the positions, each block padded to 4 bytes. One index array is resident at a time, the one
-//! of the level drawn; its region is as large as the largest index array of levels `0..=c`.
-//! Refining in place appends blocks and rewrites the index region; nothing else moves.
+//! The layout is described in the crate's header.
 
 /// Bytes of one level of one tile, as the file stores them.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

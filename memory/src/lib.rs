@@ -6,10 +6,30 @@
 //! The crate decides; it does not touch the GPU. Each frame the renderer passes the visible
 //! tiles (front to back, with the level LOD wants for each) to [`Manager::plan_frame`] and gets
 //! back the level to draw for each, where its data sits in the pool, the uploads and in-pool
-//! moves to record, and the frame's counters. A tile's chunk holds its blocks `0..=L`
-//! (positions and morph rows) and the index array of the level drawn; the layout is in
-//! [`cost`]. Chunks a frame still in flight may read are never reused before that frame
-//! completes (the caller says which frames have).
+//! moves to record, and the frame's counters. Chunks a frame still in flight may read are
+//! never reused before that frame completes (the caller says which frames have).
+//!
+//! # Chunk layout
+//!
+//! A chunk sized for capacity level `c` is laid out as
+//!
+//! ```text
+//! | positions: block 0 | block 1 | ... | block c | morph: block 1 | ... | block c | index array |
+//! ^ chunk offset (256-aligned)          ^ P(c)                              ^ align4(P(c) + M(c))
+//! ```
+//!
+//! Positions of blocks `0..=c` are contiguous and in block order, so the index array of any
+//! level `l <= c` addresses them with one `vertexOffset` (the chunk offset / 4). Block `j`'s
+//! morph offsets (`j` rows of `block_len` bytes, one per coarser level, as in the file) follow
+//! the positions, each block padded to 4 bytes. One index array is resident at a time, the one
+//! of the level drawn; its region is as large as the largest index array of levels `0..=c`.
+//! Refining in place appends blocks and rewrites the index region; nothing else moves.
+//! A tile refined past its chunk's capacity moves to a larger chunk: its blocks are copied
+//! inside device memory and the new level's blocks and index array are uploaded.
+//!
+//! The whole-tile scheme (the comparison baseline, and `vkterrain --draw-only`) lays the
+//! blocks out the same way for the finest level and then every level's index array in turn,
+//! each starting 4-aligned, so any level can be drawn.
 //!
 //! ```
 //! use memory::{Config, LevelCost, Manager, Request, TileCost};
