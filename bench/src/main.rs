@@ -455,6 +455,17 @@ fn frames() -> Result<()> {
                     flight(&vkterrain, &set, path, 60, &["--tau", tau])?,
                 ));
             }
+            // The same tau-1 flight with levels from the old sampled Jacobian (not a bound).
+            rows.push((
+                "tau 1, sampled bound (old rule)".into(),
+                flight(
+                    &vkterrain,
+                    &set,
+                    path,
+                    60,
+                    &["--tau", "1", "--lod-bound", "sampled"],
+                )?,
+            ));
             // The same tau-1 flight sending whole tiles (the scheme before the pool).
             rows.push((
                 "tau 1, whole-tile uploads".into(),

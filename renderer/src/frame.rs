@@ -44,6 +44,8 @@ pub struct Settings {
     pub sky: [f32; 3],
     /// Diagnostic: leave the seams open, to see (and test) what stitching closes.
     pub no_stitch: bool,
+    /// How the level for tau is chosen (the guaranteed bound, or the old sampling).
+    pub bound: crate::lod::Bound,
 }
 
 impl Settings {
@@ -53,7 +55,7 @@ impl Settings {
         } else if let Some(l) = self.forced_level {
             LevelRule::Forced(l)
         } else {
-            LevelRule::Tau(self.tau)
+            LevelRule::Tau(self.tau, self.bound)
         }
     }
 }
@@ -234,6 +236,8 @@ pub struct Renderer {
     trace: Option<String>,
     /// The GPU end stamp of the last frame collected (ticks).
     last_end: Option<u64>,
+    /// `vkterrain --measure-error`: the meter and every how many frames it runs.
+    meter: Option<(crate::measure::ErrorMeter, u64)>,
 }
 
 /// A frame recorded once and replayed (see [`Renderer::record_static`]).
@@ -298,6 +302,7 @@ impl Renderer {
                 slot_ready: None,
                 trace: None,
                 last_end: None,
+                meter: None,
             }),
             (pipeline, failure) => {
                 gpu.wait_idle();
@@ -329,6 +334,12 @@ impl Renderer {
     /// Starts collecting a trace of every frame's requests (see `memory::trace`).
     pub fn enable_trace(&mut self) {
         self.trace = Some(memory::trace::header(&terrain_costs(&self.manager)));
+    }
+
+    /// Measures every `every`-th frame's error in pixels against the source (see
+    /// [`crate::measure`]); the log's `max_error_px`.
+    pub fn measure_error(&mut self, meter: crate::measure::ErrorMeter, every: u64) {
+        self.meter = Some((meter, every.max(1)));
     }
 
     pub fn take_trace(&mut self) -> Option<String> {
@@ -532,6 +543,13 @@ impl Renderer {
             input.present.map(|p| p.done),
         )?;
         let mut record = frame_record(&plan, counts, terrain.levels);
+        if let Some((meter, every)) = &mut self.meter {
+            if input.label.is_multiple_of(*every) {
+                let draws: Vec<(usize, u32)> =
+                    plan.draws.iter().map(|d| (d.tile, d.level)).collect();
+                record.max_error_px = meter.frame(terrain, input.camera, extent, &draws);
+            }
+        }
         record.frame = input.label;
         record.time_s = input.time_s;
         record.cpu_upload_ms = cpu_upload_ms;
@@ -842,6 +860,7 @@ fn frame_record(plan: &Plan, counts: DrawCounts, levels: u32) -> FrameRecord {
         misses: st.misses,
         used_bytes: st.used_bytes,
         tiles_per_level,
+        max_error_px: f64::NAN,
         ..Default::default()
     }
 }

@@ -70,11 +70,19 @@ pub struct FlightResult {
     pub staging: bool,
 }
 
-/// Flies the path and returns one record per frame.
-pub fn fly(gpu: &Gpu, flight: &Flight) -> Result<FlightResult, FlightError> {
+/// Flies the path and returns one record per frame; with `meter`, every k-th frame's error
+/// against the source is measured (`max_error_px`).
+pub fn fly(
+    gpu: &Gpu,
+    flight: &Flight,
+    meter: Option<(crate::measure::ErrorMeter, u64)>,
+) -> Result<FlightResult, FlightError> {
     let mut renderer = Renderer::new(gpu, flight.terrain, flight.size, flight.memory)?;
     if flight.trace {
         renderer.enable_trace();
+    }
+    if let Some((meter, every)) = meter {
+        renderer.measure_error(meter, every);
     }
     let result = run(gpu, flight, &mut renderer);
     let trace = renderer.take_trace();

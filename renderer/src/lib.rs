@@ -13,6 +13,7 @@ pub mod frame;
 pub mod headless;
 pub mod lod;
 pub mod log;
+pub mod measure;
 pub mod path;
 pub mod plan;
 pub mod stitch;

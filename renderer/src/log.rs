@@ -7,7 +7,7 @@
 //! `gpu_allocations, upload_bytes_blocks, upload_bytes_indices, uploads_deferred_bytes,
 //! upload_overshoot_bytes, staged_bytes, tiles_coarser, tiles_missing, chunks_free,
 //! chunk_moves, chunk_move_bytes, hits, misses, used_bytes, cpu_residency_ms, gpu_draw_ms,
-//! upload_bytes_coarser`,
+//! upload_bytes_coarser, max_error_px`,
 //! and last `tiles_level_0 .. tiles_level_{n-1}`.
 
 use std::io::Write;
@@ -50,6 +50,9 @@ pub struct FrameRecord {
     pub upload_bytes_indices: u64,
     /// Of `upload_bytes_indices`: coarser index arrays for tiles whose wanted level dropped.
     pub upload_bytes_coarser: u64,
+    /// With `--measure-error`: the largest screen distance, pixels, between the drawn surface
+    /// and a source sample (NaN when not measured this frame).
+    pub max_error_px: f64,
     /// Bytes still needed to draw every visible tile at its wanted level.
     pub uploads_deferred_bytes: u64,
     /// Bytes sent beyond the upload budget (new tiles' level 0, or one step larger than it).
@@ -71,7 +74,7 @@ pub struct FrameRecord {
     pub tiles_per_level: Vec<u64>,
 }
 
-pub const BASE_COLUMNS: [&str; 34] = [
+pub const BASE_COLUMNS: [&str; 35] = [
     "frame",
     "time_s",
     "frame_ms",
@@ -106,6 +109,7 @@ pub const BASE_COLUMNS: [&str; 34] = [
     "cpu_residency_ms",
     "gpu_draw_ms",
     "upload_bytes_coarser",
+    "max_error_px",
 ];
 
 pub fn header(levels: u32) -> String {
@@ -169,6 +173,7 @@ impl FrameRecord {
         cells.push(ms_cell(self.cpu_residency_ms));
         cells.push(ms_cell(self.gpu_draw_ms));
         cells.push(self.upload_bytes_coarser.to_string());
+        cells.push(ms_cell(self.max_error_px));
         cells.extend(self.tiles_per_level.iter().map(|n| n.to_string()));
         cells.join(",")
     }
@@ -234,6 +239,10 @@ pub struct Summary {
     pub upload_mb_blocks: f64,
     pub upload_mb_indices: f64,
     pub upload_mb_coarser: f64,
+    /// With `--measure-error`: the largest `max_error_px` of the flight, and how many frames
+    /// were measured.
+    pub max_error_px: Option<f64>,
+    pub frames_measured: usize,
     pub staged_mb: f64,
     pub upload_bytes_p99: f64,
     pub upload_overshoot_mb: f64,
@@ -301,6 +310,12 @@ impl Summary {
             upload_mb_blocks: sum(|r| r.upload_bytes_blocks) as f64 / 1e6,
             upload_mb_indices: sum(|r| r.upload_bytes_indices) as f64 / 1e6,
             upload_mb_coarser: sum(|r| r.upload_bytes_coarser) as f64 / 1e6,
+            max_error_px: records
+                .iter()
+                .map(|r| r.max_error_px)
+                .filter(|e| !e.is_nan())
+                .reduce(f64::max),
+            frames_measured: records.iter().filter(|r| !r.max_error_px.is_nan()).count(),
             staged_mb: sum(|r| r.staged_bytes) as f64 / 1e6,
             upload_bytes_p99: percentile(&uploads, 99.0),
             upload_overshoot_mb: sum(|r| r.upload_overshoot_bytes) as f64 / 1e6,

@@ -13,6 +13,7 @@ use clap::Parser;
 use renderer::frame::{MemoryOptions, Settings};
 use renderer::headless::{fly, Flight, FlightResult};
 use renderer::log::{write_csv, RunInfo, Summary};
+use renderer::measure::ErrorMeter;
 use renderer::path::CameraPath;
 use renderer::terrain::Terrain;
 use renderer::vulkan::{Gpu, GpuOptions};
@@ -88,11 +89,30 @@ struct Cli {
     /// a coarser index array.
     #[arg(long, default_value_t = memory::DEFAULT_DOWNGRADE_SLACK)]
     downgrade_slack: u32,
+    /// How a tile's level is chosen for --tau: from a bound on the projection's vertical
+    /// Jacobian proved to cover every on-screen point of the tile (guaranteed), or from the
+    /// Jacobian sampled at the box's corners and nearest point (sampled; can exceed tau).
+    #[arg(long, value_enum, default_value_t = LodBound::Guaranteed)]
+    lod_bound: LodBound,
     /// How tile levels travel: progressive (new blocks and one index array per refinement),
     /// per-level (each level from scratch) or whole-tile (every level at once, the old scheme).
     /// --draw-only uses whole-tile, so that every pre-recorded frame finds its levels.
     #[arg(long, value_enum, default_value_t = UploadScheme::Progressive)]
     upload_scheme: UploadScheme,
+    /// Measure each frame's screen-space error against this DEM (the one the tile set was
+    /// built from; with --source-spacing / --source-vertical-scale as given to tiletool):
+    /// log column max_error_px. Slow (every sample of the drawn tiles, on the CPU); headless.
+    #[arg(long, value_name = "DEM", num_args = 1..)]
+    measure_error: Vec<PathBuf>,
+    /// Metres between the source's samples, for formats that do not say.
+    #[arg(long, value_name = "M")]
+    source_spacing: Option<f64>,
+    /// Metres per unit of the source's stored values (grey images).
+    #[arg(long, value_name = "S")]
+    source_vertical_scale: Option<f64>,
+    /// Measure every K-th frame only.
+    #[arg(long, default_value_t = 1, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
+    measure_every: u64,
     /// Write every frame's visible tiles and wanted levels here (for `memsim`).
     #[arg(long, value_name = "FILE")]
     trace: Option<PathBuf>,
@@ -186,6 +206,31 @@ fn parse_rgb(s: &str) -> Result<[f32; 3], String> {
     Err("expected R,G,B with each in 0..1 (or 0..255 integers)".into())
 }
 
+/// Reads the source DEM for --measure-error and cuts it into the tile set's tiles.
+fn error_meter(cli: &Cli, terrain: &Terrain, sources: &[PathBuf]) -> Result<ErrorMeter> {
+    let name = sources[0].display();
+    let options = dem::ReadOptions {
+        spacing: cli.source_spacing,
+        vertical_scale: cli.source_vertical_scale,
+        ..Default::default()
+    };
+    let grid = dem::read(sources, &options).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let view = tiles::Grid {
+        width: grid.width,
+        height: grid.height,
+        heights: &grid.heights,
+        spacing_x: grid.spacing_x,
+        spacing_y: grid.spacing_y,
+    };
+    ErrorMeter::new(terrain, &view).map_err(|e| anyhow::anyhow!("{name}: {e}"))
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum LodBound {
+    Guaranteed,
+    Sampled,
+}
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 enum UploadScheme {
     Progressive,
@@ -246,7 +291,14 @@ fn run(cli: Cli) -> Result<ExitCode> {
         wireframe: cli.wireframe,
         sky: cli.sky,
         no_stitch: cli.no_stitch,
+        bound: match cli.lod_bound {
+            LodBound::Guaranteed => renderer::lod::Bound::Guaranteed,
+            LodBound::Sampled => renderer::lod::Bound::Sampled,
+        },
     };
+    if !(cli.tau.is_finite() && cli.tau > 0.0) {
+        bail!("--tau must be a positive number of pixels");
+    }
     let upload_budget = match cli.upload_budget_mb {
         Some(mb) if mb.is_finite() && mb > 0.0 => (mb * f64::from(1 << 20)) as u64,
         Some(_) => bail!("--upload-budget-mb must be a positive number of megabytes"),
@@ -275,6 +327,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
         device: cli.device.clone(),
         display: None,
     };
+    if windowed && !cli.measure_error.is_empty() {
+        bail!("--measure-error runs headless (add --headless)");
+    }
     if windowed {
         let options = WindowOptions {
             gpu: gpu_options,
@@ -311,7 +366,11 @@ fn run(cli: Cli) -> Result<ExitCode> {
         warmup: cli.warmup,
         forget_after_warmup: cli.warmup_driver,
     };
-    let result = fly(&gpu, &flight)?;
+    let meter = match cli.measure_error.as_slice() {
+        [] => None,
+        sources => Some((error_meter(&cli, &terrain, sources)?, cli.measure_every)),
+    };
+    let result = fly(&gpu, &flight, meter)?;
     let validation = gpu.validation_messages();
     let device = gpu.device_name.clone();
     drop(gpu);

@@ -18,8 +18,8 @@ use crate::{cull, lod};
 /// How levels are chosen.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum LevelRule {
-    /// The coarsest level whose measured error projects to at most `tau` pixels.
-    Tau(f64),
+    /// The coarsest level whose measured error projects to at most `tau` pixels, by `Bound`.
+    Tau(f64, lod::Bound),
     /// Every visible tile at this level (clamped to the finest).
     Forced(u32),
     /// Every visible tile at its finest level (the baseline).
@@ -158,8 +158,8 @@ fn wanted_level(terrain: &Terrain, i: usize, view: &View, camera: DVec3, rule: L
     match rule {
         LevelRule::Finest => finest,
         LevelRule::Forced(l) => l.min(finest),
-        LevelRule::Tau(tau) => {
-            lod::level_for(tile, lod::tolerable_error(view, camera, tile, tau)).min(finest)
+        LevelRule::Tau(tau, bound) => {
+            lod::level_for(tile, lod::tolerable_error(view, camera, tile, tau, bound)).min(finest)
         }
     }
 }

@@ -117,7 +117,7 @@ fn tight_budget_draws_what_is_resident_and_stitches_granted_levels() {
             &mut manager,
             &camera,
             EXTENT,
-            LevelRule::Tau(1.0),
+            LevelRule::Tau(1.0, renderer::lod::Bound::Guaranteed),
             f,
             f.checked_sub(2),
             true,

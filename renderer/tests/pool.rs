@@ -22,6 +22,7 @@ fn settings(forced_level: Option<u32>) -> Settings {
         wireframe: false,
         sky: [0.5, 0.6, 0.9],
         no_stitch: false,
+        bound: Default::default(),
     }
 }
 

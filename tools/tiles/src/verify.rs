@@ -495,7 +495,7 @@ fn triangle_error(t: [(u32, u32, f32); 3], source: &[f32], max_x: u32, max_y: u3
 
 /// Visits the lattice points of a triangle (edges included, clipped to `max_x`, `max_y`) with
 /// the height interpolated there: a bounding-box scan with f64 barycentric weights.
-fn raster_barycentric(
+pub fn raster_barycentric(
     t: [(u32, u32, f32); 3],
     max_x: u32,
     max_y: u32,
