@@ -155,6 +155,21 @@ pub fn tolerable_error(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, ru
     }
 }
 
+/// The level a tile is drawn at for `tau`: the coarsest whose measured error projects to at
+/// most `tau` pixels under `rule`. The guaranteed rule tries the whole box first (one bound)
+/// and splits it only when that could choose a coarser level than the finest-needed one, i.e.
+/// unless it already allows level 0.
+pub fn level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: Bound) -> u32 {
+    if rule == Bound::Guaranteed {
+        let (lo, hi) = tile_box(tile);
+        let s = bound(view, lo - camera, hi - camera);
+        if s.is_finite() && s > 0.0 && level_for(tile, tau / s) == 0 {
+            return 0;
+        }
+    }
+    level_for(tile, tolerable_error(view, camera, tile, tau, rule))
+}
+
 /// The coarsest level whose measured error is within `r` metres (the finest if none is).
 pub fn level_for(tile: &TileInfo, r: f64) -> u32 {
     tile.levels

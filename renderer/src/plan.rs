@@ -158,9 +158,7 @@ fn wanted_level(terrain: &Terrain, i: usize, view: &View, camera: DVec3, rule: L
     match rule {
         LevelRule::Finest => finest,
         LevelRule::Forced(l) => l.min(finest),
-        LevelRule::Tau(tau, bound) => {
-            lod::level_for(tile, lod::tolerable_error(view, camera, tile, tau, bound)).min(finest)
-        }
+        LevelRule::Tau(tau, bound) => lod::level(view, camera, tile, tau, bound).min(finest),
     }
 }
 
