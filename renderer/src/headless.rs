@@ -111,7 +111,7 @@ fn run(
     if flight.forget_after_warmup {
         renderer.forget_tiles(gpu)?;
     }
-    let mut records = Vec::with_capacity(flight.frames as usize);
+    let mut records = Vec::with_capacity(flight.frames.min(1 << 16) as usize);
     for k in 0..flight.frames {
         let (t, camera) = camera_at(flight, k);
         let shot =

@@ -41,8 +41,8 @@ struct Cli {
     #[arg(long, default_value = "flyover")]
     path: String,
     /// Frames to render; frame k shows the path at k * duration / frames. In a window: close
-    /// after this many frames (default: run until closed).
-    #[arg(long)]
+    /// after this many frames (default: run until closed). At most 10 million.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=10_000_000))]
     frames: Option<u64>,
     /// Image size in pixels, WxH (the window's initial size in window mode).
     #[arg(long, default_value = "1024x768", value_parser = parse_size)]
@@ -310,7 +310,11 @@ fn run(cli: Cli) -> Result<ExitCode> {
         bail!("--evict-weight must be zero or positive");
     }
     let memory = MemoryOptions {
-        gpu_budget_bytes: cli.gpu_budget_mb.saturating_mul(1 << 20),
+        gpu_budget_bytes: cli
+            .gpu_budget_mb
+            .checked_mul(1 << 20)
+            .filter(|&b| b > 0)
+            .context("--gpu-budget-mb must be between 1 and 2^44")?,
         upload_budget,
         weight: cli.evict_weight,
         frames_in_flight: cli.frames_in_flight as usize,

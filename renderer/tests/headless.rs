@@ -506,3 +506,38 @@ fn measured_error_stays_within_tau() {
     let errors = measured(&srtm, &[&hgt], &[], "flyover", &["--tau", "1"]);
     assert!(errors.iter().all(|&e| e <= 1.0), "SRTM flyover: {errors:?}");
 }
+
+/// Nonsense numbers and files that are not tile sets get one line and a non-zero exit, before
+/// any GPU work: no panic, no hang, no wrapped budget.
+#[test]
+fn bad_flags_and_non_files_give_one_clear_line() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = puget(dir.path());
+    for (flags, want) in [
+        (&["--tau", "nan"][..], "--tau"),
+        (&["--tau", "0"][..], "--tau"),
+        (&["--tau=-1"][..], "--tau"),
+        (
+            &["--gpu-budget-mb", "17592186044416"][..],
+            "--gpu-budget-mb",
+        ),
+        (&["--frames", "18446744073709551615"][..], "--frames"),
+    ] {
+        let mut args = vec![s(&set), "--headless"];
+        args.extend(flags);
+        let o = vkterrain(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{flags:?} accepted");
+        assert!(
+            !err.contains("panicked") && err.contains(want),
+            "{flags:?}: {err}"
+        );
+    }
+    let fifo = dir.path().join("pipe.vkt");
+    let made = Command::new("mkfifo").arg(&fifo).status().expect("mkfifo");
+    assert!(made.success());
+    let o = vkterrain(&[s(&fifo), "--headless", "--frames", "1"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("not a regular file"), "{err}");
+}

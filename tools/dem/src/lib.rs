@@ -83,6 +83,22 @@ enum Kind {
 
 impl Kind {
     fn of(path: &Path) -> Result<Kind, DemError> {
+        // Only regular files: reading a FIFO could block forever, a device never ends.
+        match std::fs::metadata(path) {
+            Ok(m) if !m.is_file() => {
+                return Err(DemError::Malformed {
+                    file: label(path),
+                    problem: "not a regular file".into(),
+                })
+            }
+            Ok(_) => {}
+            Err(source) => {
+                return Err(DemError::Io {
+                    file: label(path),
+                    source,
+                })
+            }
+        }
         let ext = path
             .extension()
             .and_then(|e| e.to_str())

@@ -46,11 +46,31 @@ impl FrameLog {
     }
 }
 
+/// Logs larger than this are refused (about 3 million frames of vkterrain's columns).
+pub const MAX_LOG_BYTES: u64 = 1 << 30;
+
 pub fn read(path: &Path) -> Result<FrameLog, LogError> {
-    let bytes = std::fs::read(path).map_err(|error| LogError::Io {
+    let io = |error| LogError::Io {
         path: path.to_path_buf(),
         error,
-    })?;
+    };
+    let not_a_log = |why: String| LogError::NotALog {
+        path: path.to_path_buf(),
+        why,
+    };
+    // Only regular files of a sane size: /dev/zero or a FIFO would never end.
+    let meta = std::fs::metadata(path).map_err(io)?;
+    if !meta.is_file() {
+        return Err(not_a_log("not a regular file".into()));
+    }
+    if meta.len() > MAX_LOG_BYTES {
+        return Err(not_a_log(format!(
+            "{} bytes, more than the {} a log may have",
+            meta.len(),
+            MAX_LOG_BYTES
+        )));
+    }
+    let bytes = std::fs::read(path).map_err(io)?;
     let text = String::from_utf8_lossy(&bytes);
     parse(path, &text)
 }
@@ -93,7 +113,9 @@ pub fn parse(path: &Path, text: &str) -> Result<FrameLog, LogError> {
             })
             .collect();
         let complete = cells.len() == header.len()
-            && values.as_ref().is_some_and(|v| v[frame_ms_at].is_finite())
+            && values
+                .as_ref()
+                .is_some_and(|v| v[frame_ms_at].is_finite() && v[frame_ms_at] >= 0.0)
             && (i + 1 < rows.len() || ends_cleanly);
         match values {
             Some(v) if complete => {

@@ -325,6 +325,14 @@ impl std::fmt::Debug for TileSet {
 impl TileSet {
     /// Maps `path` and validates its header and directory (not yet the tiles).
     pub fn open(path: &Path) -> Result<TileSet, FormatError> {
+        // Only regular files: opening a FIFO would block forever, a device is no tile set.
+        let meta = std::fs::metadata(path).map_err(io_err(path))?;
+        if !meta.is_file() {
+            return Err(FormatError::Invalid {
+                path: path.to_path_buf(),
+                what: "not a regular file".into(),
+            });
+        }
         let file = File::open(path).map_err(io_err(path))?;
         // SAFETY: the map is read-only; a tile set that another process truncates while mapped
         // could fault, which is the documented memmap2 caveat every mmap reader accepts.
@@ -445,10 +453,22 @@ impl TileSet {
         self.map.len() as u64
     }
 
+    /// The source description stored at build time, safe to print: control characters
+    /// (terminal escape sequences included) are shown escaped, as `\u{1b}`.
     pub fn description(&self) -> String {
         let d = &self.header.description;
         let end = d.iter().position(|&b| b == 0).unwrap_or(d.len());
-        String::from_utf8_lossy(&d[..end]).into_owned()
+        String::from_utf8_lossy(&d[..end])
+            .chars()
+            .flat_map(|c| {
+                let escaped: Vec<char> = if c.is_control() {
+                    c.escape_unicode().collect()
+                } else {
+                    vec![c]
+                };
+                escaped
+            })
+            .collect()
     }
 
     /// `e_i` in metres.
@@ -662,6 +682,20 @@ impl<'a> Tile<'a> {
                 return Err(err(format!("index width {}", e.index_width)));
             }
             let level = tile.level_unchecked(i as u32).map_err(err)?;
+            // Decoded positions inside the tile's mesh extent (readers index by them).
+            let (mx, my) = (header.mesh_max_x, header.mesh_max_y);
+            if let Some((k, (x, y, _))) = level
+                .positions
+                .iter()
+                .map(|&p| crate::pack::unpack(p))
+                .enumerate()
+                .find(|&(_, (x, y, _))| x > mx || y > my)
+            {
+                return Err(err(format!(
+                    "vertex {} at ({x}, {y}) outside the mesh extent {mx}x{my}",
+                    e.block_start as usize + k
+                )));
+            }
             let out_of_range = level.indices.iter().flatten().find(|&v| v >= start);
             if let Some(v) = out_of_range {
                 return Err(err(format!(

@@ -49,6 +49,9 @@ enum Command {
         /// No progress bar or summary.
         #[arg(long)]
         quiet: bool,
+        /// Replace the output even if it exists and is not a tile set.
+        #[arg(long)]
+        force: bool,
     },
     /// Print a tile set's grid, levels and measured errors.
     Info {
@@ -143,12 +146,15 @@ fn main() -> ExitCode {
             levels,
             base_error,
             quiet,
-        } => build(
-            &input,
-            &output,
-            tiles::BuildParams { levels, base_error },
-            quiet,
-        ),
+            force,
+        } => check_output(&output, &input.inputs, force).and_then(|()| {
+            build(
+                &input,
+                &output,
+                tiles::BuildParams { levels, base_error },
+                quiet,
+            )
+        }),
         Command::Info { file, json } => info::run(&file, json),
         Command::Verify { file, source, read } => verify(&file, &source, &read),
         Command::Export {
@@ -169,6 +175,45 @@ fn main() -> ExitCode {
 
 fn read_dem(inputs: &[PathBuf], read: &ReadArgs) -> Result<dem::HeightGrid> {
     Ok(dem::read(inputs, &read.options())?)
+}
+
+/// Refuses an output that would destroy data: one of the inputs, anything but a regular file
+/// (a FIFO or device would be replaced by the rename), or an existing file that is not a tile
+/// set (unless `force`).
+fn check_output(output: &Path, inputs: &[PathBuf], force: bool) -> Result<()> {
+    use std::os::unix::fs::MetadataExt;
+    let Ok(meta) = std::fs::symlink_metadata(output) else {
+        return Ok(()); // nothing there yet
+    };
+    let target = std::fs::metadata(output).unwrap_or(meta);
+    let name = output.display();
+    if target.is_dir() {
+        bail!("{name}: is a folder, not an output file");
+    }
+    if !target.is_file() {
+        bail!("{name}: not a regular file; refusing to replace it");
+    }
+    for input in inputs {
+        if let Ok(m) = std::fs::metadata(input) {
+            if (m.dev(), m.ino()) == (target.dev(), target.ino()) {
+                bail!(
+                    "{name}: is the input {}; choose another output",
+                    input.display()
+                );
+            }
+        }
+    }
+    if !force {
+        let mut magic = [0u8; 8];
+        let is_tile_set = std::fs::File::open(output)
+            .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut magic))
+            .is_ok()
+            && magic == tiles::format::MAGIC;
+        if !is_tile_set {
+            bail!("{name}: exists and is not a tile set; add --force to replace it");
+        }
+    }
+    Ok(())
 }
 
 fn build(

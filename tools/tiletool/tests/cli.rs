@@ -411,3 +411,142 @@ fn corrupted_tile_sets_are_rejected() {
     }
     assert!(!dir.path().join("x.obj").exists());
 }
+
+/// Recomputes every tile's checksum and the header's, so only semantic checks can catch a
+/// corruption (as a hostile user would).
+fn reseal(bytes: &mut [u8]) {
+    use tiles::format::{DirEntry, FileHeader};
+    let header: FileHeader = bytemuck::pod_read_unaligned(&bytes[..size_of::<FileHeader>()]);
+    let n = (header.tiles_x * header.tiles_y) as usize;
+    let dir_at = header.directory_offset as usize;
+    let entry_len = size_of::<DirEntry>();
+    for k in 0..n {
+        let at = dir_at + k * entry_len;
+        let mut e: DirEntry = bytemuck::pod_read_unaligned(&bytes[at..at + entry_len]);
+        e.crc = crc32fast::hash(&bytes[e.offset as usize..(e.offset + e.len) as usize]);
+        bytes[at..at + entry_len].copy_from_slice(bytemuck::bytes_of(&e));
+    }
+    let mut h = header;
+    h.header_crc = 0;
+    let mut hasher = crc32fast::Hasher::new();
+    hasher.update(bytemuck::bytes_of(&h));
+    hasher.update(&bytes[dir_at..dir_at + n * entry_len]);
+    h.header_crc = hasher.finalize();
+    bytes[..size_of::<FileHeader>()].copy_from_slice(bytemuck::bytes_of(&h));
+}
+
+/// A vertex decoded outside its tile, checksums recomputed: every reader refuses the file
+/// with one line (info, verify, export), none panics.
+#[test]
+fn resealed_vertex_outside_the_tile_is_refused() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let good = dir.path().join("good.vkt");
+    let o = tiletool(&[
+        "build",
+        s(&data("srtm/N55W003.hgt")),
+        "-o",
+        s(&good),
+        "--levels",
+        "4",
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let mut bytes = std::fs::read(&good).expect("read");
+    let set = tiles::TileSet::open(&good).expect("open");
+    let tile_at = set.dir_entry(1, 1).expect("entry").offset as usize;
+    let tile = set.tile(1, 1).expect("tile");
+    let finest = tile.levels()[3];
+    drop(set);
+    // The finest block's first vertex: x = 300 (9 bits hold it; the tile is 0..=256).
+    let at = tile_at + finest.positions_offset as usize;
+    let packed = u32::from_le_bytes(bytes[at..at + 4].try_into().expect("4 bytes"));
+    let moved = (packed & !0x1ff) | 300;
+    bytes[at..at + 4].copy_from_slice(&moved.to_le_bytes());
+    reseal(&mut bytes);
+    let bad = write(dir.path(), "outside.vkt", &bytes);
+    let o = tiletool(&["info", s(&bad)]);
+    let err = assert_one_line_error(&o, "outside.vkt");
+    assert!(err.contains("outside the mesh extent"), "info: {err}");
+    // verify lists its problems, then a verdict line.
+    let o = tiletool(&["verify", s(&bad)]);
+    let err = stderr(&o);
+    assert!(
+        !o.status.success() && !err.contains("panicked"),
+        "verify: {err}"
+    );
+    assert!(err.contains("outside the mesh extent"), "verify: {err}");
+}
+
+/// An output that would destroy data is refused: the input itself, a FIFO, a file that is not
+/// a tile set (without --force); a tile set is replaced.
+#[test]
+fn build_never_replaces_what_it_should_not() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let src = dir.path().join("N55W003.hgt");
+    std::fs::copy(data("srtm/N55W003.hgt"), &src).expect("copy");
+    let before = std::fs::read(&src).expect("read");
+    let build = |out: &Path, extra: &[&str]| {
+        let mut args = vec!["build", s(&src), "-o", s(out), "--levels", "3", "--quiet"];
+        args.extend(extra);
+        tiletool(&args)
+    };
+    let o = build(&src, &[]);
+    assert_one_line_error(&o, "N55W003.hgt");
+    assert_eq!(
+        std::fs::read(&src).expect("read"),
+        before,
+        "the source changed"
+    );
+
+    let notes = write(dir.path(), "notes.txt", b"keep me");
+    let o = build(&notes, &[]);
+    assert!(assert_one_line_error(&o, "notes.txt").contains("--force"));
+    assert_eq!(std::fs::read(&notes).expect("read"), b"keep me");
+    assert!(build(&notes, &["--force"]).status.success());
+
+    let fifo = dir.path().join("pipe.vkt");
+    let made = Command::new("mkfifo").arg(&fifo).status().expect("mkfifo");
+    assert!(made.success());
+    let o = build(&fifo, &[]);
+    assert!(assert_one_line_error(&o, "pipe.vkt").contains("not a regular file"));
+    for cmd in ["info", "verify"] {
+        let o = tiletool(&[cmd, s(&fifo)]);
+        assert!(assert_one_line_error(&o, "pipe.vkt").contains("not a regular file"));
+    }
+
+    let set = dir.path().join("set.vkt");
+    assert!(build(&set, &[]).status.success());
+    assert!(
+        build(&set, &[]).status.success(),
+        "rebuilding a tile set in place"
+    );
+}
+
+/// A description with a terminal escape sequence (checksums recomputed) prints escaped.
+#[test]
+fn info_escapes_control_characters_in_the_description() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let good = dir.path().join("good.vkt");
+    let o = tiletool(&[
+        "build",
+        s(&data("srtm/N55W003.hgt")),
+        "-o",
+        s(&good),
+        "--levels",
+        "3",
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let mut bytes = std::fs::read(&good).expect("read");
+    let at = std::mem::offset_of!(tiles::format::FileHeader, description);
+    let evil = b"\x1b[2Jcleared\x07";
+    bytes[at..at + evil.len()].copy_from_slice(evil);
+    bytes[at + evil.len()] = 0;
+    reseal(&mut bytes);
+    let p = write(dir.path(), "evil.vkt", &bytes);
+    let o = tiletool(&["info", s(&p)]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!out.contains('\x1b') && !out.contains('\x07'), "{out}");
+    assert!(out.contains("\\u{1b}[2Jcleared"), "{out}");
+}
