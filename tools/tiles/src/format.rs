@@ -297,6 +297,63 @@ impl Drop for TileSetWriter {
     }
 }
 
+/// Largest |height| and spacing a tile set may declare, metres: far beyond any planet's relief
+/// and any useful grid, well inside what f32 arithmetic handles.
+const MAX_METRES: f64 = 1e7;
+
+/// What is wrong with the header's numbers, if anything: every one finite, spacings and the
+/// base error positive, the height range ordered, all within [`MAX_METRES`].
+fn header_numbers(h: &FileHeader) -> Option<String> {
+    let positive = |v: f64| v.is_finite() && v > 0.0 && v <= MAX_METRES;
+    if !positive(h.spacing_x) || !positive(h.spacing_y) {
+        return Some(format!(
+            "spacing {} x {} m is not a positive size up to {MAX_METRES} m",
+            h.spacing_x, h.spacing_y
+        ));
+    }
+    if !positive(h.base_error) {
+        return Some(format!("base error {} m is not positive", h.base_error));
+    }
+    let (lo, hi) = (f64::from(h.height_min), f64::from(h.height_max));
+    if !(lo.is_finite() && hi.is_finite() && lo <= hi && lo.abs().max(hi.abs()) <= MAX_METRES) {
+        return Some(format!(
+            "height range {lo}..{hi} m is not an ordered, finite range"
+        ));
+    }
+    None
+}
+
+/// What is wrong with a level's numbers, if anything: bound positive, errors and morph unit
+/// finite and not negative, z range ordered and finite.
+fn level_numbers(e: &LevelEntry) -> Option<String> {
+    let non_negative = |v: f32| v.is_finite() && v >= 0.0 && f64::from(v) <= MAX_METRES;
+    if !(non_negative(e.error_bound) && e.error_bound > 0.0) {
+        return Some(format!("error bound {} m is not positive", e.error_bound));
+    }
+    if !non_negative(e.max_error) || !non_negative(e.limited_excess) {
+        return Some(format!(
+            "measured error {} m (excess {} m) is not a finite, non-negative number",
+            e.max_error, e.limited_excess
+        ));
+    }
+    if !non_negative(e.morph_unit) {
+        return Some(format!(
+            "morph unit {} m is not finite and non-negative",
+            e.morph_unit
+        ));
+    }
+    let (lo, hi) = (f64::from(e.z_min), f64::from(e.z_max));
+    if !(lo.is_finite() && hi.is_finite() && lo <= hi && lo.abs().max(hi.abs()) <= MAX_METRES) {
+        return Some(format!(
+            "z range {lo}..{hi} m is not an ordered, finite range"
+        ));
+    }
+    if e.index_count == 0 || e.triangle_count == 0 || e.fan_count == 0 {
+        return Some("no triangles".into());
+    }
+    None
+}
+
 fn header_crc(header: &FileHeader, directory: &[u8]) -> u32 {
     let mut h = *header;
     h.header_crc = 0;
@@ -378,11 +435,8 @@ impl TileSet {
                 header.height_step
             )));
         }
-        if !(header.height_step.is_finite() && header.height_step > 0.0) {
-            return Err(invalid(format!(
-                "height step {} is not a positive number",
-                header.height_step
-            )));
+        if let Some(problem) = header_numbers(&header) {
+            return Err(invalid(problem));
         }
         if header.levels == 0 || header.levels > MAX_LEVELS {
             return Err(invalid(format!(
@@ -680,6 +734,9 @@ impl<'a> Tile<'a> {
             }
             if e.index_width != 2 && e.index_width != 4 {
                 return Err(err(format!("index width {}", e.index_width)));
+            }
+            if let Some(problem) = level_numbers(e) {
+                return Err(err(problem));
             }
             let level = tile.level_unchecked(i as u32).map_err(err)?;
             // Decoded positions inside the tile's mesh extent (readers index by them).

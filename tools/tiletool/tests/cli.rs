@@ -550,3 +550,90 @@ fn info_escapes_control_characters_in_the_description() {
     assert!(!out.contains('\x1b') && !out.contains('\x07'), "{out}");
     assert!(out.contains("\\u{1b}[2Jcleared"), "{out}");
 }
+
+/// Numbers that make no sense, checksums recomputed: NaN or negative spacing, a zero base
+/// error, an inverted height range, a negative measured error, a NaN z range. Every reader
+/// refuses them with one line naming the problem.
+#[test]
+fn resealed_nonsense_numbers_are_refused() {
+    use tiles::format::{FileHeader, LevelEntry, TileHeader};
+    let dir = tempfile::tempdir().expect("temp dir");
+    let good = dir.path().join("good.vkt");
+    let o = tiletool(&[
+        "build",
+        s(&data("srtm/N55W003.hgt")),
+        "-o",
+        s(&good),
+        "--levels",
+        "3",
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let bytes = std::fs::read(&good).expect("read");
+    let set = tiles::TileSet::open(&good).expect("open");
+    let tile_at = set.dir_entry(0, 0).expect("entry").offset as usize;
+    drop(set);
+    let level = |k: usize| tile_at + size_of::<TileHeader>() + k * size_of::<LevelEntry>();
+    let f64_at = |at: usize, v: f64| -> Vec<u8> {
+        let mut b = bytes.clone();
+        b[at..at + 8].copy_from_slice(&v.to_le_bytes());
+        reseal(&mut b);
+        b
+    };
+    let f32_at = |at: usize, v: f32| -> Vec<u8> {
+        let mut b = bytes.clone();
+        b[at..at + 4].copy_from_slice(&v.to_le_bytes());
+        reseal(&mut b);
+        b
+    };
+    let cases = [
+        (
+            "nan_spacing.vkt",
+            f64_at(std::mem::offset_of!(FileHeader, spacing_x), f64::NAN),
+            "spacing",
+        ),
+        (
+            "negative_spacing.vkt",
+            f64_at(std::mem::offset_of!(FileHeader, spacing_y), -30.0),
+            "spacing",
+        ),
+        (
+            "huge_spacing.vkt",
+            f64_at(std::mem::offset_of!(FileHeader, spacing_x), 1e300),
+            "spacing",
+        ),
+        (
+            "zero_error.vkt",
+            f64_at(std::mem::offset_of!(FileHeader, base_error), 0.0),
+            "base error",
+        ),
+        (
+            "inverted.vkt",
+            f32_at(std::mem::offset_of!(FileHeader, height_min), 1e6),
+            "height range",
+        ),
+        (
+            "negative_measured.vkt",
+            f32_at(level(1) + std::mem::offset_of!(LevelEntry, max_error), -1.0),
+            "measured error",
+        ),
+        (
+            "nan_z.vkt",
+            f32_at(level(2) + std::mem::offset_of!(LevelEntry, z_max), f32::NAN),
+            "z range",
+        ),
+    ];
+    for (name, content, what) in cases {
+        let p = write(dir.path(), name, &content);
+        let o = tiletool(&["info", s(&p)]);
+        let err = assert_one_line_error(&o, name);
+        assert!(err.contains(what), "info {name}: want {what:?} in {err}");
+        let o = tiletool(&["verify", s(&p)]);
+        let err = stderr(&o);
+        assert!(
+            !o.status.success() && !err.contains("panicked"),
+            "verify {name}: {err}"
+        );
+        assert!(err.contains(what), "verify {name}: want {what:?} in {err}");
+    }
+}
