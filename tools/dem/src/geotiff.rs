@@ -193,6 +193,21 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<Raster, DemError> {
     limits.intermediate_buffer_size = limits
         .intermediate_buffer_size
         .max(usize::try_from(file_len).unwrap_or(usize::MAX));
+    check_byte_counts(
+        &mut decoder,
+        &chunks,
+        compression == "uncompressed",
+        bytes_per_sample,
+        (width, height),
+        file_len,
+    )
+    .map_err(|e| match e {
+        ChunkError::Tiff(e) => malformed(e),
+        ChunkError::Bad(problem) => DemError::Malformed {
+            file: file.clone(),
+            problem,
+        },
+    })?;
     let mut decoder = decoder.with_limits(limits);
 
     let mut converter = Converter {
@@ -331,6 +346,71 @@ fn chunk_grid<R: std::io::Read + std::io::Seek>(
         across,
         count,
     })
+}
+
+/// Every chunk's stored bytes lie in the file and hold data: no byte count of 0, none running
+/// past the end, and uncompressed chunks as long as their samples need (a decoder would
+/// otherwise read past the declared count, into whatever follows).
+fn check_byte_counts<R: std::io::Read + std::io::Seek>(
+    decoder: &mut Decoder<R>,
+    chunks: &ChunkGrid,
+    uncompressed: bool,
+    bytes_per_sample: u64,
+    (width, height): (u32, u32),
+    file_len: u64,
+) -> Result<(), ChunkError> {
+    let (offsets_tag, counts_tag) = if chunks.tiled {
+        (Tag::TileOffsets, Tag::TileByteCounts)
+    } else {
+        (Tag::StripOffsets, Tag::StripByteCounts)
+    };
+    let offsets = decoder
+        .find_tag_unsigned_vec::<u64>(offsets_tag)?
+        .unwrap_or_default();
+    let counts = decoder
+        .find_tag_unsigned_vec::<u64>(counts_tag)?
+        .unwrap_or_default();
+    if offsets.len() != chunks.count as usize || counts.len() != chunks.count as usize {
+        return Err(ChunkError::Bad(format!(
+            "TIFF lists {} chunk offsets and {} byte counts for {} chunks",
+            offsets.len(),
+            counts.len(),
+            chunks.count
+        )));
+    }
+    for (k, (&offset, &count)) in offsets.iter().zip(&counts).enumerate() {
+        if count == 0 {
+            return Err(ChunkError::Bad(format!(
+                "TIFF chunk {k} has a byte count of 0"
+            )));
+        }
+        if offset.checked_add(count).is_none_or(|end| end > file_len) {
+            return Err(ChunkError::Bad(format!(
+                "TIFF chunk {k} ({count} bytes at {offset}) runs past the end of the file"
+            )));
+        }
+        if uncompressed {
+            // Tiles are stored whole; a strip holds its rows (the last one fewer).
+            let (_, _, w, h) = chunks.rect(k as u32, width, height);
+            let rows = if chunks.tiled {
+                chunks.height as u64
+            } else {
+                h as u64
+            };
+            let cols = if chunks.tiled {
+                chunks.width as u64
+            } else {
+                w as u64
+            };
+            let needed = rows * cols * bytes_per_sample;
+            if count < needed {
+                return Err(ChunkError::Bad(format!(
+                    "TIFF chunk {k} declares {count} bytes, its samples need {needed}"
+                )));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Where a decoded chunk goes: its image rectangle and its row stride in samples.

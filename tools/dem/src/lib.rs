@@ -205,6 +205,14 @@ pub fn read(paths: &[PathBuf], opts: &ReadOptions) -> Result<HeightGrid, DemErro
     finish(raster, &file, opts)
 }
 
+/// Sample spacings a DEM may have, metres: from a millimetre to a thousand kilometres.
+pub const MIN_SPACING: f64 = 1e-3;
+pub const MAX_SPACING: f64 = 1e6;
+
+/// Heights a DEM may hold, metres either way: ten times Olympus Mons; beyond is a broken file
+/// or an undeclared nodata value (such as -3.4e38).
+pub const MAX_HEIGHT: f64 = 250_000.0;
+
 /// Crop, spacing, fill: the steps every format shares.
 fn finish(raster: Raster, file: &str, opts: &ReadOptions) -> Result<HeightGrid, DemError> {
     let (x0, y0, width, height) = match opts.crop {
@@ -264,6 +272,17 @@ fn finish(raster: Raster, file: &str, opts: &ReadOptions) -> Result<HeightGrid, 
             (m, m)
         }
     };
+    let plausible = |s: f64| (MIN_SPACING..=MAX_SPACING).contains(&s);
+    if (spacing_x.is_finite() && spacing_y.is_finite() && spacing_x > 0.0 && spacing_y > 0.0)
+        && !(plausible(spacing_x) && plausible(spacing_y))
+    {
+        return Err(DemError::Option {
+            file: file.to_string(),
+            problem: format!(
+                "the spacing works out as {spacing_x:.3e} x {spacing_y:.3e} m, outside {MIN_SPACING}..{MAX_SPACING} m: pass --spacing METRES"
+            ),
+        });
+    }
     if !(spacing_x.is_finite() && spacing_y.is_finite() && spacing_x > 0.0 && spacing_y > 0.0) {
         return Err(DemError::Option {
             file: file.to_string(),
@@ -284,6 +303,21 @@ fn finish(raster: Raster, file: &str, opts: &ReadOptions) -> Result<HeightGrid, 
                 .crop
                 .map_or_else(String::new, |c| format!(" in crop {c}")),
         })?;
+
+    if let Some((k, h)) = heights
+        .iter()
+        .enumerate()
+        .find(|(_, h)| !(h.is_finite() && f64::from(h.abs()) <= MAX_HEIGHT))
+    {
+        return Err(DemError::Malformed {
+            file: file.to_string(),
+            problem: format!(
+                "height {h:.3e} m at column {}, row {} is beyond ±{MAX_HEIGHT} m (an undeclared nodata value?)",
+                k % width,
+                k / width
+            ),
+        });
+    }
 
     let mut description = raster.description;
     if let Some(c) = opts.crop {

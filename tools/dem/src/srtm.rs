@@ -21,7 +21,12 @@ impl Cell {
     /// `N42E001`, `s12w077.hgt`, `N42E001.SRTMGL1.hgt`: the first seven characters of the file
     /// name, any case, any directory.
     fn from_path(path: &Path) -> Option<Cell> {
-        let name = path.file_name()?.to_str()?.get(..7)?.to_ascii_uppercase();
+        let full = path.file_name()?.to_str()?;
+        // The seven characters end the name or are followed by a dot (`N42E001x.hgt` is not).
+        if !matches!(full.as_bytes().get(7), None | Some(b'.')) {
+            return None;
+        }
+        let name = full.get(..7)?.to_ascii_uppercase();
         let b = name.as_bytes();
         let lat: i32 = name.get(1..3)?.parse().ok()?;
         let lon: i32 = name.get(4..7)?.parse().ok()?;

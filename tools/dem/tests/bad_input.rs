@@ -378,3 +378,20 @@ fn damaged_files_never_panic() {
     // Both kinds of outcome happen, so the damage is neither always harmless nor always fatal.
     assert!(outcomes.0 > 0 && outcomes.1 > 0, "{outcomes:?}");
 }
+
+/// An SRTM name is its seven characters, then nothing or a dot: `N43E007x.hgt` says nothing
+/// about where it lies; `N43E007.SRTMGL1.hgt` does.
+#[test]
+fn srtm_names_must_end_after_the_cell() {
+    let dir = temp_dir();
+    let bytes = vec![0u8; 1201 * 1201 * 2];
+    let bad = write(dir.path(), "N43E007x.hgt", &bytes);
+    let e = read_err(&[bad], &ReadOptions::default());
+    assert!(
+        e.contains("N43E007x.hgt: the name does not say where"),
+        "{e}"
+    );
+    let good = write(dir.path(), "N43E007.SRTMGL1.hgt", &bytes);
+    let g = dem::read(&[good], &ReadOptions::default()).expect("a dotted SRTM name");
+    assert_eq!((g.width, g.height), (1201, 1201));
+}

@@ -526,3 +526,53 @@ fn truncated_real_geotiff() {
         );
     }
 }
+
+/// Hostile numbers in otherwise valid TIFFs: zero or short strip byte counts (a decoder would
+/// read past them), absurd pixel scales, heights no planet has. Each is one line, no grid.
+#[test]
+fn hostile_byte_counts_scales_and_heights_are_refused() {
+    let dir = temp_dir();
+    let metres = |scale: f64| {
+        vec![
+            (33550, TagValue::Double(vec![scale, scale, 0.0])),
+            (34735, TagValue::Short(vec![1, 1, 0, 1, 1024, 0, 1, 1])),
+        ]
+    };
+    let plain = TiffSpec::new(4, 4, Samples::I16(vec![7; 16]));
+    for (name, count, want) in [
+        ("zero.tif", 0, "byte count of 0"),
+        ("short.tif", 10, "declares 10 bytes"),
+    ] {
+        let mut bytes = plain.encode();
+        patch_long_tag(&mut bytes, 279, count);
+        let p = write(dir.path(), name, &bytes);
+        let opts = ReadOptions {
+            spacing: Some(1.0),
+            ..ReadOptions::default()
+        };
+        let e = read_err(&[p], &opts);
+        assert!(e.contains(name) && e.contains(want), "{e}");
+    }
+    for scale in [1e300, 1e-300] {
+        let mut spec = plain.clone();
+        spec.extra_tags = metres(scale);
+        let p = dir.path().join("scale.tif");
+        spec.write(&p);
+        let e = read_err(&[p], &ReadOptions::default());
+        assert!(
+            e.contains("scale.tif") && e.contains("spacing"),
+            "{scale}: {e}"
+        );
+    }
+    for h in [3e38f32, -3.4e38, 1e6] {
+        let mut spec = TiffSpec::new(2, 2, Samples::F32(vec![1.0, 2.0, h, 3.0]));
+        spec.extra_tags = metres(30.0);
+        let p = dir.path().join("heights.tif");
+        spec.write(&p);
+        let e = read_err(&[p], &ReadOptions::default());
+        assert!(
+            e.contains("heights.tif") && e.contains("column 0, row 1"),
+            "{h}: {e}"
+        );
+    }
+}
