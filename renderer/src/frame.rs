@@ -238,6 +238,26 @@ pub struct Renderer {
     last_end: Option<u64>,
     /// `vkterrain --measure-error`: the meter and every how many frames it runs.
     meter: Option<(crate::measure::ErrorMeter, u64)>,
+    /// Fault injection for tests (`VKTERRAIN_FAULT`, see [`Fault`]).
+    fault: Option<Fault>,
+}
+
+/// Faults the tests inject through the `VKTERRAIN_FAULT` environment variable, to check the
+/// paths that real faults take.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Fault {
+    /// `validation`: the first frame binds an index buffer at an offset that is not a multiple
+    /// of the index size, which the validation layer reports.
+    Validation,
+}
+
+impl Fault {
+    pub fn from_env() -> Option<Fault> {
+        match std::env::var("VKTERRAIN_FAULT").ok()?.as_str() {
+            "validation" => Some(Fault::Validation),
+            _ => None,
+        }
+    }
 }
 
 /// A frame recorded once and replayed (see [`Renderer::record_static`]).
@@ -303,6 +323,7 @@ impl Renderer {
                 trace: None,
                 last_end: None,
                 meter: None,
+                fault: Fault::from_env(),
             }),
             (pipeline, failure) => {
                 gpu.wait_idle();
@@ -522,6 +543,18 @@ impl Renderer {
             plan: &plan,
             stitch_ranges: &stitch_ranges,
         };
+        if self.fault == Some(Fault::Validation) && self.frame == 0 {
+            // SAFETY: deliberately invalid (offset 1 for 16-bit indices), for the tests of
+            // the validation path; the pass rebinds a valid index buffer before any draw.
+            unsafe {
+                gpu.device.cmd_bind_index_buffer(
+                    cmd,
+                    self.pool.buffer.raw,
+                    1,
+                    vk::IndexType::UINT16,
+                );
+            }
+        }
         let counts = pass.record();
         slot.timestamps.pass_end(gpu, cmd);
         if input.screenshot {

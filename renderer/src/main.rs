@@ -19,6 +19,10 @@ use renderer::terrain::Terrain;
 use renderer::vulkan::{Gpu, GpuOptions};
 use renderer::window::{self, WindowOptions};
 
+/// Exit codes (README, "Exit codes"): 0 success, 1 bad input or a failure (one line on
+/// stderr), 2 usage (clap), 3 the run completed but the validation layer spoke.
+const EXIT_VALIDATION: u8 = 3;
+
 #[derive(Parser)]
 #[command(
     name = "vkterrain",
@@ -116,7 +120,7 @@ struct Cli {
     /// Write every frame's visible tiles and wanted levels here (for `memsim`).
     #[arg(long, value_name = "FILE")]
     trace: Option<PathBuf>,
-    /// Enable the Khronos validation layer; any message makes the exit code 2.
+    /// Enable the Khronos validation layer; any message makes the exit code 3.
     #[arg(long)]
     validation: bool,
     /// Use the device whose name contains this.
@@ -422,7 +426,7 @@ fn finish(
     println!("{json}");
     if validation > 0 {
         eprintln!("vkterrain: {validation} validation messages");
-        return Ok(ExitCode::from(2));
+        return Ok(ExitCode::from(EXIT_VALIDATION));
     }
     Ok(ExitCode::SUCCESS)
 }

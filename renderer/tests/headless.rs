@@ -541,3 +541,46 @@ fn bad_flags_and_non_files_give_one_clear_line() {
     assert_eq!(o.status.code(), Some(1), "{err}");
     assert!(err.contains("not a regular file"), "{err}");
 }
+
+/// The exit codes of the README's table: 0 success, 1 bad input, 2 usage, 3 validation
+/// messages (a fault injected by `VKTERRAIN_FAULT=validation`).
+#[test]
+fn exit_codes_follow_the_table() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = puget(dir.path());
+    let run = |args: &[&str], fault: Option<&str>| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_vkterrain"));
+        c.args(args);
+        if let Some(f) = fault {
+            c.env("VKTERRAIN_FAULT", f);
+        }
+        c.output().expect("vkterrain runs")
+    };
+    let quick = [
+        s(&set),
+        "--headless",
+        "--frames",
+        "2",
+        "--size",
+        "128x96",
+        "--validation",
+    ];
+    assert_eq!(run(&quick, None).status.code(), Some(0));
+    assert_eq!(
+        run(&[s(&set), "--no-such-flag"], None).status.code(),
+        Some(2)
+    );
+    let missing = dir.path().join("missing.vkt");
+    assert_eq!(
+        run(&[s(&missing), "--headless"], None).status.code(),
+        Some(1)
+    );
+    let o = run(&quick, Some("validation"));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(3), "{err}");
+    assert!(err.contains("VUID-vkCmdBindIndexBuffer"), "{err}");
+    // The flight still completed: its summary was printed.
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).expect("summary");
+    assert_eq!(summary["frames"], 2);
+    assert_eq!(summary["validation_messages"], 1);
+}

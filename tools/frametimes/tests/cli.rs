@@ -195,3 +195,31 @@ fn odd_logs_get_notes_and_other_files_an_error() {
     assert_eq!(o.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&o.stderr).contains(".png or .svg"));
 }
+
+/// Exit codes of the README's table (3, a regression, is checked above): 0, 1 for a file
+/// that is no log (a FIFO, /dev/zero, negative frame times only), 2 for usage.
+#[test]
+fn exit_codes_follow_the_table() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    assert_eq!(
+        frametimes(&["summary", s(&log("short.csv"))]).status.code(),
+        Some(0)
+    );
+    assert_eq!(
+        frametimes(&["summary", "--no-such-flag"]).status.code(),
+        Some(2)
+    );
+    assert_eq!(frametimes(&["summary", "/dev/zero"]).status.code(), Some(1));
+    let fifo = dir.path().join("pipe.csv");
+    let made = Command::new("mkfifo").arg(&fifo).status().expect("mkfifo");
+    assert!(made.success());
+    let o = frametimes(&["summary", s(&fifo)]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("not a regular file"));
+    let negative = dir.path().join("negative.csv");
+    std::fs::write(&negative, "frame,frame_ms\n0,-5\n1,-1\n").expect("write");
+    assert_eq!(
+        frametimes(&["summary", s(&negative)]).status.code(),
+        Some(1)
+    );
+}

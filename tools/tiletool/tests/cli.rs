@@ -637,3 +637,25 @@ fn resealed_nonsense_numbers_are_refused() {
         assert!(err.contains(what), "verify {name}: want {what:?} in {err}");
     }
 }
+
+/// Exit codes of the README's table: 0 success, 1 bad input or a failed check, 2 usage.
+#[test]
+fn exit_codes_follow_the_table() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = dir.path().join("set.vkt");
+    let hgt = data("srtm/N55W003.hgt");
+    let build = tiletool(&["build", s(&hgt), "-o", s(&set), "--levels", "3", "--quiet"]);
+    assert_eq!(build.status.code(), Some(0), "{}", stderr(&build));
+    assert_eq!(tiletool(&["info", s(&set)]).status.code(), Some(0));
+    assert_eq!(tiletool(&["info"]).status.code(), Some(2));
+    assert_eq!(
+        tiletool(&["build", "--no-such-flag"]).status.code(),
+        Some(2)
+    );
+    let missing = dir.path().join("missing.vkt");
+    assert_eq!(tiletool(&["info", s(&missing)]).status.code(), Some(1));
+    // verify against the wrong source: a failed check is 1 too.
+    let other = data("srtm/N43E007.hgt");
+    let o = tiletool(&["verify", s(&set), "--source", s(&other)]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+}
