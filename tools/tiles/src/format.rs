@@ -175,6 +175,59 @@ fn align_up(n: u64, a: u64) -> u64 {
 
 /// Writes a tile set to a temporary file and renames it into place on [`finish`](Self::finish).
 /// Dropped unfinished, it deletes the temporary file.
+/// The hidden temporary file a build of `path` writes before renaming it into place:
+/// `.NAME.tmp.PID` beside it (the PID of this process).
+pub fn temp_path(path: &Path) -> Result<PathBuf, FormatError> {
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let name = path.file_name().ok_or_else(|| FormatError::Invalid {
+        path: path.to_path_buf(),
+        what: "not a file name".into(),
+    })?;
+    Ok(dir.join(format!(
+        ".{}.tmp.{}",
+        name.to_string_lossy(),
+        std::process::id()
+    )))
+}
+
+/// Removes temporaries of earlier builds of `path` whose process is provably gone (a build
+/// killed with SIGKILL cannot clean up after itself): `.NAME.tmp.PID` with no `/proc/PID`.
+/// A live process's file, or one that cannot be checked, is left alone.
+fn remove_stale_temporaries(path: &Path) {
+    let (Some(dir), Some(name)) = (path.parent(), path.file_name()) else {
+        return;
+    };
+    let dir = if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
+    };
+    if !Path::new("/proc/self").exists() {
+        return; // no way to prove a process dead
+    }
+    let prefix = format!(".{}.tmp.", name.to_string_lossy());
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let file = entry.file_name();
+        let Some(pid) = file
+            .to_str()
+            .and_then(|f| f.strip_prefix(&prefix))
+            .and_then(|p| p.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        let alive = Path::new(&format!("/proc/{pid}")).exists();
+        if pid != std::process::id() && !alive {
+            let _ = std::fs::remove_file(entry.path());
+        }
+    }
+}
+
 pub struct TileSetWriter {
     path: PathBuf,
     tmp_path: PathBuf,
@@ -187,19 +240,8 @@ pub struct TileSetWriter {
 
 impl TileSetWriter {
     pub fn create(path: &Path, header: FileHeader) -> Result<Self, FormatError> {
-        let dir = match path.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
-        let name = path.file_name().ok_or_else(|| FormatError::Invalid {
-            path: path.to_path_buf(),
-            what: "not a file name".into(),
-        })?;
-        let tmp_path = dir.join(format!(
-            ".{}.tmp.{}",
-            name.to_string_lossy(),
-            std::process::id()
-        ));
+        let tmp_path = temp_path(path)?;
+        remove_stale_temporaries(path);
         let file = File::create(&tmp_path).map_err(io_err(path))?;
         let tiles = header.tiles_x as usize * header.tiles_y as usize;
         let pos = align_up(

@@ -137,6 +137,44 @@ impl ReadArgs {
     }
 }
 
+/// The temporary file of the build in progress, for the signal handler (a leaked C string,
+/// set once before the build starts).
+static TEMP_FILE: std::sync::atomic::AtomicPtr<libc::c_char> =
+    std::sync::atomic::AtomicPtr::new(std::ptr::null_mut());
+
+/// On SIGINT, SIGTERM or SIGHUP: unlink the build's temporary file and exit with 128 + the
+/// signal, as the shell would report it. Only async-signal-safe calls.
+extern "C" fn on_signal(signal: libc::c_int) {
+    let path = TEMP_FILE.load(std::sync::atomic::Ordering::SeqCst);
+    // SAFETY: `path` is null or a NUL-terminated string leaked for the process's lifetime;
+    // unlink and _exit are async-signal-safe.
+    unsafe {
+        if !path.is_null() {
+            libc::unlink(path);
+        }
+        libc::_exit(128 + signal);
+    }
+}
+
+/// Makes an interrupted build remove its temporary file (a SIGKILLed one cannot: the next
+/// build into the same folder removes it, see `tiles::format::TileSetWriter::create`).
+fn remove_on_signal(output: &Path) -> Result<()> {
+    use std::os::unix::ffi::OsStrExt;
+    let tmp = tiles::format::temp_path(output)?;
+    let c = std::ffi::CString::new(tmp.as_os_str().as_bytes())
+        .map_err(|_| anyhow::anyhow!("{}: a NUL byte in the path", output.display()))?;
+    TEMP_FILE.store(c.into_raw(), std::sync::atomic::Ordering::SeqCst);
+    for signal in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
+        // SAFETY: installs a handler that only makes async-signal-safe calls.
+        let previous =
+            unsafe { libc::signal(signal, on_signal as *const () as libc::sighandler_t) };
+        if previous == libc::SIG_ERR {
+            bail!("cannot install a signal handler");
+        }
+    }
+    Ok(())
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
@@ -148,6 +186,7 @@ fn main() -> ExitCode {
             quiet,
             force,
         } => check_output(&output, &input.inputs, force).and_then(|()| {
+            remove_on_signal(&output)?;
             build(
                 &input,
                 &output,

@@ -659,3 +659,52 @@ fn exit_codes_follow_the_table() {
     let o = tiletool(&["verify", s(&set), "--source", s(&other)]);
     assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
 }
+
+/// An interrupted build leaves nothing behind: SIGTERM mid-build removes the temporary file
+/// (exit 128 + 15), and a build finds and removes the temporary of a dead earlier build
+/// (as SIGKILL leaves) while keeping a live process's.
+#[test]
+fn interrupted_builds_leave_no_temporary_files() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = dir.path().join("big.vkt");
+    let dead = dir.path().join(".big.vkt.tmp.999999999");
+    let alive = dir
+        .path()
+        .join(format!(".big.vkt.tmp.{}", std::process::id()));
+    std::fs::write(&dead, b"left by a SIGKILL").expect("write");
+    std::fs::write(&alive, b"another build, running").expect("write");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_tiletool"))
+        .args([
+            "build",
+            s(&data("puget/ps_height_4k_8bit.jpg")),
+            "--spacing",
+            "40",
+            "--vertical-scale",
+            "25.7",
+            "-o",
+            s(&out),
+            "--quiet",
+        ])
+        .spawn()
+        .expect("spawn");
+    let own = dir.path().join(format!(".big.vkt.tmp.{}", child.id()));
+    let start = std::time::Instant::now();
+    while !own.exists() {
+        assert!(
+            start.elapsed().as_secs() < 60,
+            "the build never started writing"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    assert!(!dead.exists(), "the dead build's temporary was kept");
+    assert!(alive.exists(), "a live build's temporary was removed");
+    let killed = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .expect("kill");
+    assert!(killed.success());
+    let status = child.wait().expect("wait");
+    assert_eq!(status.code(), Some(128 + 15));
+    assert!(!own.exists(), "SIGTERM left the temporary file");
+    assert!(!out.exists(), "a half-written output");
+}
