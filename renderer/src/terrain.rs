@@ -96,6 +96,7 @@ impl Terrain {
                 });
             }
         }
+        check_tiles(&set, &tiles)?;
         Ok(Terrain {
             set,
             tiles,
@@ -191,6 +192,32 @@ impl Terrain {
             best
         } else {
             self.bounds().1.z
+        }
+    }
+}
+
+/// Refuses the tile set if any tile has a problem `tiletool verify` (without a source) would
+/// report: fans, coverage, nesting, blocks, borders, morph offsets. Checksums catch accidents;
+/// this catches a file whose checksums were recomputed over nonsense, before any of its bytes
+/// reach the GPU. About 50 ms a tile, on every core.
+fn check_tiles(set: &TileSet, tiles: &[TileInfo]) -> Result<(), tiles::FormatError> {
+    use rayon::prelude::*;
+    let problem = tiles.par_iter().find_map_first(|t| {
+        let tile = match set.tile(t.tx, t.ty) {
+            Ok(tile) => tile,
+            Err(e) => return Some(e.to_string()),
+        };
+        tiles::verify::tile_problems(set, &tile).into_iter().next()
+    });
+    match problem {
+        None => Ok(()),
+        Some(what) => {
+            // verify's problems start with the file's name; the error adds it back.
+            let prefix = format!("{}: ", set.path().display());
+            Err(tiles::FormatError::Invalid {
+                path: set.path().to_path_buf(),
+                what: what.strip_prefix(&prefix).unwrap_or(&what).to_string(),
+            })
         }
     }
 }

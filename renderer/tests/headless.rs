@@ -584,3 +584,46 @@ fn exit_codes_follow_the_table() {
     assert_eq!(summary["frames"], 2);
     assert_eq!(summary["validation_messages"], 1);
 }
+
+/// Fans `tiletool verify` refuses, with checksums recomputed (so only the semantic checks can
+/// see them): a ring walked the wrong way, an index array of restarts only. vkterrain refuses
+/// the file with one line and exit 1 before any GPU work.
+#[test]
+fn resealed_broken_fans_are_refused_before_the_gpu() {
+    use tiles::format::{LevelEntry, TileHeader};
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = puget(dir.path());
+    let bytes = std::fs::read(&set).expect("read");
+    let ts = tiles::TileSet::open(&set).expect("open");
+    let tile_at = ts.dir_entry(1, 2).expect("entry").offset as usize;
+    let level = 2usize;
+    let entry: LevelEntry = bytemuck::pod_read_unaligned(
+        &bytes[tile_at + size_of::<TileHeader>() + level * size_of::<LevelEntry>()..]
+            [..size_of::<LevelEntry>()],
+    );
+    drop(ts);
+    assert_eq!(entry.index_width, 2, "level {level} has 16-bit indices");
+    let indices = tile_at + entry.index_offset as usize;
+    let count = entry.index_count as usize;
+    let mut reversed = bytes.clone();
+    // Swap the first fan's first two ring entries: the walk turns clockwise.
+    let (a, b) = (indices + 2, indices + 4);
+    let (x, y) = (reversed[a..a + 2].to_vec(), reversed[b..b + 2].to_vec());
+    reversed[a..a + 2].copy_from_slice(&y);
+    reversed[b..b + 2].copy_from_slice(&x);
+    let mut restarts = bytes.clone();
+    restarts[indices..indices + 2 * count].fill(0xff);
+    for (name, mut content) in [("reversed.vkt", reversed), ("restarts.vkt", restarts)] {
+        tiles::format::reseal(&mut content).expect("reseal");
+        let p = dir.path().join(name);
+        std::fs::write(&p, &content).expect("write");
+        let o = vkterrain(&[s(&p), "--headless", "--frames", "1", "--validation"]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{name}: {err}");
+        assert_eq!(err.lines().count(), 1, "{name}: {err}");
+        assert!(
+            err.contains(name) && err.contains("tile 1,2 level 2"),
+            "{name}: {err}"
+        );
+    }
+}

@@ -396,6 +396,37 @@ fn level_numbers(e: &LevelEntry) -> Option<String> {
     None
 }
 
+/// Recomputes every tile's checksum and the header's in a tile set's bytes, so that only the
+/// semantic checks can reject what was changed: for tests and fuzzing, which mutate files as
+/// a hostile user would. Fails on bytes whose header or directory does not fit.
+pub fn reseal(bytes: &mut [u8]) -> Result<(), String> {
+    if bytes.len() < size_of::<FileHeader>() {
+        return Err("shorter than a header".into());
+    }
+    let mut h: FileHeader = bytemuck::pod_read_unaligned(&bytes[..size_of::<FileHeader>()]);
+    let n = h.tiles_x as usize * h.tiles_y as usize;
+    let dir_at = h.directory_offset as usize;
+    let entry_len = size_of::<DirEntry>();
+    let dir_end = n
+        .checked_mul(entry_len)
+        .and_then(|l| l.checked_add(dir_at))
+        .filter(|&end| end <= bytes.len())
+        .ok_or("directory outside the file")?;
+    for k in 0..n {
+        let at = dir_at + k * entry_len;
+        let mut e: DirEntry = bytemuck::pod_read_unaligned(&bytes[at..at + entry_len]);
+        let (start, end) = (e.offset as usize, e.offset.saturating_add(e.len) as usize);
+        if start <= end && end <= bytes.len() {
+            e.crc = crc32fast::hash(&bytes[start..end]);
+            bytes[at..at + entry_len].copy_from_slice(bytemuck::bytes_of(&e));
+        }
+    }
+    h.header_crc = 0;
+    h.header_crc = header_crc(&h, &bytes[dir_at..dir_end]);
+    bytes[..size_of::<FileHeader>()].copy_from_slice(bytemuck::bytes_of(&h));
+    Ok(())
+}
+
 fn header_crc(header: &FileHeader, directory: &[u8]) -> u32 {
     let mut h = *header;
     h.header_crc = 0;

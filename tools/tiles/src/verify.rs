@@ -5,8 +5,6 @@
 //! rasterised with their own barycentric code in f64, and the spacing rule is re-derived from
 //! each fan's geometry. A tile set that passes is what the renderer will draw.
 
-use std::collections::HashSet;
-
 use crate::build::{tile_samples, Grid};
 use crate::format::{Tile, TileSet};
 use crate::mesh::{TILE_CELLS, TILE_SIZE};
@@ -75,6 +73,18 @@ pub fn verify(set: &TileSet, source: Option<&Grid>) -> VerifyReport {
     report
 }
 
+/// What `verify` (without a source) finds wrong with one tile: fans, coverage, nesting, blocks,
+/// borders, morph offsets. Empty when the tile is sound. Renderers call it before any of the
+/// tile's data leaves for the GPU.
+pub fn tile_problems(set: &TileSet, tile: &Tile) -> Vec<String> {
+    let mut report = VerifyReport {
+        recomputed_max_error: vec![0.0; set.header().levels as usize],
+        ..Default::default()
+    };
+    check_tile(set, tile, None, &mut report);
+    report.problems
+}
+
 /// A grid point on the edge between two tiles must decode to the same height in both (the
 /// shared height lattice), or stitching could not close the seam exactly.
 fn check_shared_edges(set: &TileSet, tile: &Tile, report: &mut VerifyReport) {
@@ -138,7 +148,9 @@ fn check_tile(set: &TileSet, tile: &Tile, source: Option<&Grid>, report: &mut Ve
     }
     let vertices = tile.vertices();
     let samples = source.map(|g| tile_samples(g, tx, ty));
-    let mut previous: HashSet<u32> = HashSet::new();
+    // Vertices in use by the previous level, as sorted lists (sets by bitmap below: the
+    // hash sets these replace were most of verify's time).
+    let mut previous: Vec<u32> = Vec::new();
     for level in 0..th.levels {
         report.levels_checked += 1;
         let Some(l) = tile.level(level) else {
@@ -160,9 +172,21 @@ fn check_tile(set: &TileSet, tile: &Tile, source: Option<&Grid>, report: &mut Ve
                 format!("{} fans, table says {}", fans.len(), e.fan_count),
             );
         }
-        let used: HashSet<u32> = fans.iter().flatten().copied().collect();
+        let mut in_use = vec![false; vertices.len()];
+        let mut used: Vec<u32> = Vec::new();
+        for &v in fans.iter().flatten() {
+            match in_use.get_mut(v as usize) {
+                Some(seen) if !*seen => {
+                    *seen = true;
+                    used.push(v);
+                }
+                Some(_) => {}
+                None => used.push(v), // out of range: reported below
+            }
+        }
+        let contains = |v: u32| in_use.get(v as usize).copied().unwrap_or(false);
         // Nesting: V_i ⊆ V_{i+1}, and block i holds exactly the vertices level i introduces.
-        if let Some(v) = previous.iter().find(|v| !used.contains(v)) {
+        if let Some(v) = previous.iter().find(|&&v| !contains(v)) {
             problem(
                 Some(level),
                 format!(
@@ -172,7 +196,7 @@ fn check_tile(set: &TileSet, tile: &Tile, source: Option<&Grid>, report: &mut Ve
             );
         }
         let block = e.block_start..e.vertex_count();
-        if used.len() != e.vertex_count() as usize || !block.clone().all(|v| used.contains(&v)) {
+        if used.len() != e.vertex_count() as usize || !block.clone().all(contains) {
             problem(
                 Some(level),
                 "vertices in use differ from blocks 0..=level".into(),

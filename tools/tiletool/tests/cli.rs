@@ -412,27 +412,8 @@ fn corrupted_tile_sets_are_rejected() {
     assert!(!dir.path().join("x.obj").exists());
 }
 
-/// Recomputes every tile's checksum and the header's, so only semantic checks can catch a
-/// corruption (as a hostile user would).
 fn reseal(bytes: &mut [u8]) {
-    use tiles::format::{DirEntry, FileHeader};
-    let header: FileHeader = bytemuck::pod_read_unaligned(&bytes[..size_of::<FileHeader>()]);
-    let n = (header.tiles_x * header.tiles_y) as usize;
-    let dir_at = header.directory_offset as usize;
-    let entry_len = size_of::<DirEntry>();
-    for k in 0..n {
-        let at = dir_at + k * entry_len;
-        let mut e: DirEntry = bytemuck::pod_read_unaligned(&bytes[at..at + entry_len]);
-        e.crc = crc32fast::hash(&bytes[e.offset as usize..(e.offset + e.len) as usize]);
-        bytes[at..at + entry_len].copy_from_slice(bytemuck::bytes_of(&e));
-    }
-    let mut h = header;
-    h.header_crc = 0;
-    let mut hasher = crc32fast::Hasher::new();
-    hasher.update(bytemuck::bytes_of(&h));
-    hasher.update(&bytes[dir_at..dir_at + n * entry_len]);
-    h.header_crc = hasher.finalize();
-    bytes[..size_of::<FileHeader>()].copy_from_slice(bytemuck::bytes_of(&h));
+    tiles::format::reseal(bytes).expect("reseal");
 }
 
 /// A vertex decoded outside its tile, checksums recomputed: every reader refuses the file
