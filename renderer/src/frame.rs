@@ -249,13 +249,24 @@ pub enum Fault {
     /// `validation`: the first frame binds an index buffer at an offset that is not a multiple
     /// of the index size, which the validation layer reports.
     Validation,
+    /// `device-lost-at-N`: frame N fails as if the device were lost.
+    DeviceLostAt(u64),
+    /// `oom-above-MB`: allocating a tile pool larger than MB megabytes fails as if device
+    /// memory ran out.
+    OomAbove(u64),
 }
 
 impl Fault {
     pub fn from_env() -> Option<Fault> {
-        match std::env::var("VKTERRAIN_FAULT").ok()?.as_str() {
+        let v = std::env::var("VKTERRAIN_FAULT").ok()?;
+        match v.as_str() {
             "validation" => Some(Fault::Validation),
-            _ => None,
+            _ => {
+                let number = |prefix: &str| v.strip_prefix(prefix).and_then(|n| n.parse().ok());
+                number("device-lost-at-")
+                    .map(Fault::DeviceLostAt)
+                    .or_else(|| number("oom-above-").map(|mb: u64| Fault::OomAbove(mb << 20)))
+            }
         }
     }
 }
@@ -284,13 +295,13 @@ impl Renderer {
             victim: Victim::Mixture,
             downgrade_slack: options.downgrade_slack,
         };
-        let manager = Manager::new(terrain.costs(), config);
+        let fault = Fault::from_env();
+        let (manager, pool) = allocate_pool(gpu, terrain, config, options.force_staging, fault)?;
         let sizes = SlotSizes {
             stitch: stitch_bound(terrain),
             staging: staging_bound(&manager, options.upload_budget),
             extent,
         };
-        let pool = TilePool::new(gpu, manager.pool_bytes(), options.force_staging)?;
         let commands = match Commands::new(gpu, "frame commands") {
             Ok(c) => c,
             Err(e) => {
@@ -323,7 +334,7 @@ impl Renderer {
                 trace: None,
                 last_end: None,
                 meter: None,
-                fault: Fault::from_env(),
+                fault,
             }),
             (pipeline, failure) => {
                 gpu.wait_idle();
@@ -500,6 +511,9 @@ impl Renderer {
         input: FrameInput<'_>,
     ) -> Result<Vec<Finished>, FrameError> {
         let allocations = gpu.allocations();
+        if self.fault == Some(Fault::DeviceLostAt(self.frame)) {
+            return Err(FrameError::Gpu(VkError::DeviceLost));
+        }
         let (_, finished) = self.begin_frame(gpu)?;
         let started = self.slot_ready.unwrap_or_else(Instant::now);
         let completed = self.completed();
@@ -775,6 +789,47 @@ impl Renderer {
         self.pool.destroy(gpu);
         self.pipeline.destroy(gpu);
         self.commands.destroy(gpu);
+    }
+}
+
+/// The smallest pool worth trying when device memory runs short.
+const MIN_POOL: u64 = 1 << 20;
+
+/// Plans and allocates the tile pool; when device memory runs out, halves the budget and tries
+/// again (down to [`MIN_POOL`]), saying so once on stderr: a smaller pool only means coarser
+/// tiles.
+fn allocate_pool(
+    gpu: &Gpu,
+    terrain: &Terrain,
+    mut config: Config,
+    force_staging: bool,
+    fault: Option<Fault>,
+) -> VkResult<(Manager, TilePool)> {
+    let mut first = None;
+    loop {
+        let manager = Manager::new(terrain.costs(), config);
+        let bytes = manager.pool_bytes();
+        let wanted = *first.get_or_insert(bytes);
+        let result = match fault {
+            Some(Fault::OomAbove(limit)) if bytes > limit => Err(VkError::OutOfMemory),
+            _ => TilePool::new(gpu, bytes, force_staging),
+        };
+        match result {
+            Ok(pool) => {
+                if bytes < wanted {
+                    eprintln!(
+                        "vkterrain: note: out of GPU memory for a {:.1} MB tile pool; flying with {:.1} MB (tiles may be drawn coarser)",
+                        wanted as f64 / 1e6,
+                        bytes as f64 / 1e6
+                    );
+                }
+                return Ok((manager, pool));
+            }
+            Err(VkError::OutOfMemory | VkError::Allocation(_)) if bytes / 2 >= MIN_POOL => {
+                config.pool_bytes = bytes / 2;
+            }
+            Err(e) => return Err(e),
+        }
     }
 }
 

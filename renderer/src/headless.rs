@@ -43,6 +43,9 @@ pub enum FlightError {
     Frame(#[from] FrameError),
     #[error("{}: {error}", path.display())]
     Write { path: PathBuf, error: String },
+    /// A timed frame failed.
+    #[error("frame {frame}: {error}")]
+    AtFrame { frame: u64, error: Box<FlightError> },
 }
 
 /// Writes an RGBA8 image as PNG through a temporary file.
@@ -68,6 +71,9 @@ pub struct FlightResult {
     pub pool_bytes: u64,
     /// Uploads went through the staging ring.
     pub staging: bool,
+    /// Why the flight stopped early (the device was lost, a tile set changed under it, ...):
+    /// `records` holds the frames that completed before.
+    pub error: Option<FlightError>,
 }
 
 /// Flies the path and returns one record per frame; with `meter`, every k-th frame's error
@@ -84,26 +90,32 @@ pub fn fly(
     if let Some((meter, every)) = meter {
         renderer.measure_error(meter, every);
     }
-    let result = run(gpu, flight, &mut renderer);
+    let mut records = Vec::with_capacity(flight.frames.min(1 << 16) as usize);
+    let error = run(gpu, flight, &mut renderer, &mut records).err();
     let trace = renderer.take_trace();
     let pool_bytes = renderer.manager().pool_bytes();
     let staging = !renderer.pool().direct();
     renderer.destroy(gpu);
     Ok(FlightResult {
-        records: result?,
+        records,
         trace,
         pool_bytes,
         staging,
+        error,
     })
 }
 
+/// Flies the timed frames, appending each finished frame's record to `records` (kept when
+/// a later frame fails).
 fn run(
     gpu: &Gpu,
     flight: &Flight,
     renderer: &mut Renderer,
-) -> Result<Vec<FrameRecord>, FlightError> {
+    records: &mut Vec<FrameRecord>,
+) -> Result<(), FlightError> {
     if flight.draw_only {
-        return draw_only(gpu, flight, renderer);
+        *records = draw_only(gpu, flight, renderer)?;
+        return Ok(());
     }
     if flight.warmup || flight.forget_after_warmup {
         warm_up(gpu, flight, renderer)?;
@@ -111,7 +123,6 @@ fn run(
     if flight.forget_after_warmup {
         renderer.forget_tiles(gpu)?;
     }
-    let mut records = Vec::with_capacity(flight.frames.min(1 << 16) as usize);
     for k in 0..flight.frames {
         let (t, camera) = camera_at(flight, k);
         let shot =
@@ -123,12 +134,18 @@ fn run(
             screenshot: shot,
             present: None,
         };
-        let finished = renderer.render(gpu, flight.terrain, &flight.settings, input)?;
-        keep(flight, finished, &mut records)?;
+        let at = |error: FlightError| FlightError::AtFrame {
+            frame: k,
+            error: Box::new(error),
+        };
+        let finished = renderer
+            .render(gpu, flight.terrain, &flight.settings, input)
+            .map_err(|e| at(e.into()))?;
+        keep(flight, finished, records).map_err(at)?;
     }
     let finished = renderer.finish_all(gpu)?;
-    keep(flight, finished, &mut records)?;
-    Ok(records)
+    keep(flight, finished, records)?;
+    Ok(())
 }
 
 /// Keeps finished frames' records and writes their screenshots.

@@ -382,7 +382,15 @@ fn run(cli: Cli) -> Result<ExitCode> {
     let validation = gpu.validation_messages();
     let device = gpu.device_name.clone();
     drop(gpu);
-    finish(&cli, &terrain, &result, &memory, &device, validation)
+    let code = finish(&cli, &terrain, &result, &memory, &device, validation)?;
+    match &result.error {
+        // The log of the frames before the failure is written; the failure is the one line.
+        Some(e) => bail!(
+            "{e} (the log keeps the {} frames completed before)",
+            result.records.len()
+        ),
+        None => Ok(code),
+    }
 }
 
 /// Writes the log, its summary and the trace, prints the summary, and turns validation

@@ -144,6 +144,7 @@ pub fn run(
         trace: app.trace.take(),
         pool_bytes: app.pool_bytes,
         staging: app.staging,
+        error: None,
     };
     Ok((result, app.gpu.device_name.clone(), validation))
 }

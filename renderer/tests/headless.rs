@@ -627,3 +627,72 @@ fn resealed_broken_fans_are_refused_before_the_gpu() {
         );
     }
 }
+
+/// A device lost mid-flight (injected: `VKTERRAIN_FAULT=device-lost-at-5`): one line naming
+/// the frame, exit 1, and the log of the frames completed before is written whole and stays
+/// readable (the same reader `frametimes` uses).
+#[test]
+fn a_lost_device_leaves_one_line_and_a_readable_log() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = puget(dir.path());
+    let log = dir.path().join("lost.csv");
+    let o = Command::new(env!("CARGO_BIN_EXE_vkterrain"))
+        .args([
+            s(&set),
+            "--headless",
+            "--frames",
+            "12",
+            "--size",
+            "128x96",
+            "--validation",
+            "--log",
+            s(&log),
+        ])
+        .env("VKTERRAIN_FAULT", "device-lost-at-5")
+        .output()
+        .expect("vkterrain runs");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(
+        err.contains("frame 5") && err.contains("device was lost"),
+        "{err}"
+    );
+    let parsed = frametimes::log::read(&log).expect("the log reads");
+    assert!(
+        (1..=5).contains(&parsed.frames),
+        "{} frames logged",
+        parsed.frames
+    );
+    assert!(parsed.notes.is_empty(), "{:?}", parsed.notes);
+}
+
+/// Device memory short at start (injected: `VKTERRAIN_FAULT=oom-above-3`, any pool over 3 MB
+/// fails): the pool is retried at half the size until it fits, a note says so, and the flight
+/// completes with every visible tile drawn.
+#[test]
+fn out_of_memory_at_start_retries_with_a_smaller_pool() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = puget(dir.path());
+    let o = Command::new(env!("CARGO_BIN_EXE_vkterrain"))
+        .args([
+            s(&set),
+            "--headless",
+            "--frames",
+            "6",
+            "--size",
+            "128x96",
+            "--validation",
+        ])
+        .env("VKTERRAIN_FAULT", "oom-above-3")
+        .output()
+        .expect("vkterrain runs");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "{err}");
+    assert!(err.contains("note: out of GPU memory"), "{err}");
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).expect("summary");
+    let pool = summary["pool_mb"].as_f64().expect("pool_mb");
+    assert!(pool > 0.5 && pool <= 3.0 * 1.048_576, "pool {pool} MB");
+    assert_eq!(summary["tiles_missing"], 0, "{summary}");
+    assert_eq!(summary["validation_messages"], 0);
+}
