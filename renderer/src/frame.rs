@@ -240,6 +240,8 @@ pub struct Renderer {
     meter: Option<(crate::measure::ErrorMeter, u64)>,
     /// Fault injection for tests (`VKTERRAIN_FAULT`, see [`Fault`]).
     fault: Option<Fault>,
+    /// Frames collected by a frame that then failed; [`Renderer::finish_all`] returns them.
+    collected: Vec<Finished>,
 }
 
 /// Faults the tests inject through the `VKTERRAIN_FAULT` environment variable, to check the
@@ -254,6 +256,9 @@ pub enum Fault {
     /// `oom-above-MB`: allocating a tile pool larger than MB megabytes fails as if device
     /// memory ran out.
     OomAbove(u64),
+    /// `truncate-at-N`: before frame N the tile set file is cut to half its length, as another
+    /// process rewriting it would.
+    TruncateAt(u64),
 }
 
 impl Fault {
@@ -265,6 +270,7 @@ impl Fault {
                 let number = |prefix: &str| v.strip_prefix(prefix).and_then(|n| n.parse().ok());
                 number("device-lost-at-")
                     .map(Fault::DeviceLostAt)
+                    .or_else(|| number("truncate-at-").map(Fault::TruncateAt))
                     .or_else(|| number("oom-above-").map(|mb: u64| Fault::OomAbove(mb << 20)))
             }
         }
@@ -335,6 +341,7 @@ impl Renderer {
                 last_end: None,
                 meter: None,
                 fault,
+                collected: Vec::new(),
             }),
             (pipeline, failure) => {
                 gpu.wait_idle();
@@ -469,7 +476,7 @@ impl Renderer {
     /// Waits for every frame in flight; returns them, oldest first.
     pub fn finish_all(&mut self, gpu: &Gpu) -> VkResult<Vec<Finished>> {
         let n = self.slots.len() as u64;
-        let mut finished = Vec::new();
+        let mut finished = std::mem::take(&mut self.collected);
         for f in self.frame.saturating_sub(n)..self.frame {
             let s = (f % n) as usize;
             if self.slots[s].pending.is_some() {
@@ -515,6 +522,25 @@ impl Renderer {
             return Err(FrameError::Gpu(VkError::DeviceLost));
         }
         let (_, finished) = self.begin_frame(gpu)?;
+        match self.render_begun(gpu, terrain, settings, input, allocations) {
+            Ok(()) => Ok(finished),
+            Err(e) => {
+                // Frames that finished before the failure are not lost: finish_all returns them.
+                self.collected.extend(finished);
+                Err(e)
+            }
+        }
+    }
+
+    /// The frame after its slot is free: plan, uploads, record, submit.
+    fn render_begun(
+        &mut self,
+        gpu: &Gpu,
+        terrain: &Terrain,
+        settings: &Settings,
+        input: FrameInput<'_>,
+        allocations: u64,
+    ) -> Result<(), FrameError> {
         let started = self.slot_ready.unwrap_or_else(Instant::now);
         let completed = self.completed();
         let extent = self.extent();
@@ -612,7 +638,7 @@ impl Renderer {
         });
         self.frame += 1;
         self.slot_ready = None;
-        Ok(finished)
+        Ok(())
     }
 
     fn write_trace(&mut self, plan: &Plan) {
@@ -650,6 +676,31 @@ impl Renderer {
                     .size(m.bytes)
             })
             .collect();
+        if self.fault == Some(Fault::TruncateAt(self.frame)) {
+            let path = terrain.set.path();
+            let half = terrain.set.file_len() / 2;
+            let _ = std::fs::OpenOptions::new()
+                .write(true)
+                .open(path)
+                .and_then(|f| f.set_len(half));
+        }
+        if !plan.uploads.is_empty() {
+            // Reading a mapped file that shrank would fault (SIGBUS): check its length before
+            // the frame's reads. (A file cut between this check and the copies can still fault;
+            // tile sets are meant to be replaced by rename, as tiletool writes them.)
+            let now = std::fs::metadata(terrain.set.path()).map(|m| m.len());
+            if now
+                .as_ref()
+                .map_or(true, |&len| len < terrain.set.file_len())
+            {
+                return Err(FrameError::Internal(format!(
+                    "{}: the tile set changed on disk while in use ({} bytes, was {})",
+                    terrain.set.path().display(),
+                    now.map_or_else(|e| e.to_string(), |l| l.to_string()),
+                    terrain.set.file_len()
+                )));
+            }
+        }
         let mut staged = Vec::new();
         for u in &plan.uploads {
             let bytes = terrain.part(u.tile as usize, u.part).ok_or_else(|| {

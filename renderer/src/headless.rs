@@ -92,6 +92,12 @@ pub fn fly(
     }
     let mut records = Vec::with_capacity(flight.frames.min(1 << 16) as usize);
     let error = run(gpu, flight, &mut renderer, &mut records).err();
+    if error.is_some() {
+        // Frames submitted before the failure still count if the device can finish them.
+        if let Ok(finished) = renderer.finish_all(gpu) {
+            records.extend(finished.into_iter().map(|f| f.record));
+        }
+    }
     let trace = renderer.take_trace();
     let pool_bytes = renderer.manager().pool_bytes();
     let staging = !renderer.pool().direct();

@@ -696,3 +696,33 @@ fn out_of_memory_at_start_retries_with_a_smaller_pool() {
     assert_eq!(summary["tiles_missing"], 0, "{summary}");
     assert_eq!(summary["validation_messages"], 0);
 }
+
+/// The tile set cut to half its length while mapped (injected: `VKTERRAIN_FAULT=truncate-at-2`
+/// truncates the file before frame 2, as another process might): the next frame that reads
+/// tile data stops the flight with one line instead of a SIGBUS, and the log is kept.
+#[test]
+fn a_tile_set_truncated_in_flight_stops_cleanly() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = puget(dir.path());
+    let log = dir.path().join("cut.csv");
+    let o = Command::new(env!("CARGO_BIN_EXE_vkterrain"))
+        .args([
+            s(&set),
+            "--headless",
+            "--frames",
+            "30",
+            "--size",
+            "128x96",
+            "--log",
+            s(&log),
+        ])
+        .env("VKTERRAIN_FAULT", "truncate-at-2")
+        .output()
+        .expect("vkterrain runs");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains("changed on disk while in use"), "{err}");
+    let parsed = frametimes::log::read(&log).expect("the log reads");
+    assert_eq!(parsed.frames, 2, "frames 0 and 1 completed");
+}
