@@ -63,26 +63,75 @@ impl Rng {
         z ^ (z >> 31)
     }
 
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n as u64) as usize
+    /// Uniform in (0, 1).
+    fn uniform(&mut self) -> f64 {
+        ((self.next() >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+    }
+
+    fn normal(&mut self) -> f64 {
+        let (u, v) = (self.uniform(), self.uniform());
+        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+    }
+
+    /// Gamma(shape, 1) for shape >= 1 (Marsaglia and Tsang).
+    fn gamma(&mut self, shape: f64) -> f64 {
+        let d = shape - 1.0 / 3.0;
+        let c = 1.0 / (9.0 * d).sqrt();
+        loop {
+            let x = self.normal();
+            let v = (1.0 + c * x).powi(3);
+            if v <= 0.0 {
+                continue;
+            }
+            if self.uniform().ln() < 0.5 * x * x + d - d * v + d * v.ln() {
+                return d * v;
+            }
+        }
+    }
+
+    fn beta(&mut self, a: f64, b: f64) -> f64 {
+        let x = self.gamma(a);
+        x / (x + self.gamma(b))
     }
 }
 
-fn resampled_median(values: &[f64], rng: &mut Rng, scratch: &mut Vec<f64>) -> f64 {
-    scratch.clear();
-    scratch.extend((0..values.len()).map(|_| values[rng.below(values.len())]));
-    scratch.sort_unstable_by(f64::total_cmp);
-    percentile(scratch, 50.0)
+/// The median of a bootstrap resample of `sorted` (n draws with replacement), drawn without
+/// drawing the resample: a resampled value is `sorted[ceil(n U) - 1]` for a uniform `U`,
+/// monotone in `U`, so the resample's k-th smallest value comes from the k-th smallest of n
+/// uniforms, which is Beta(k, n - k + 1); the next one above it is that plus
+/// `(1 - U_k) Beta(1, n - k)`. O(1) per resample instead of sorting n values (a 4.5 M-frame
+/// log took minutes).
+fn resampled_median(sorted: &[f64], rng: &mut Rng) -> f64 {
+    let n = sorted.len();
+    if n <= 1 {
+        return sorted.first().copied().unwrap_or(f64::NAN);
+    }
+    let at = |u: f64| sorted[((u * n as f64).ceil() as usize).clamp(1, n) - 1];
+    // Percentile 50 of n values: the ((n + 1) / 2)-th for odd n, the mean of the (n / 2)-th
+    // and the next for even n (1-based).
+    let k = n.div_ceil(2);
+    let u_k = rng.beta(k as f64, (n - k + 1) as f64);
+    if n % 2 == 1 {
+        return at(u_k);
+    }
+    let v = rng.uniform();
+    let u_next = u_k + (1.0 - u_k) * (1.0 - v.powf(1.0 / (n - k) as f64));
+    0.5 * (at(u_k) + at(u_next))
 }
 
 /// The 95% bootstrap interval of median(b) / median(a).
 pub fn bootstrap_median_ratio(a: &[f64], b: &[f64]) -> (f64, f64) {
     let mut rng = Rng(SEED);
-    let mut scratch = Vec::with_capacity(a.len().max(b.len()));
+    let sorted = |v: &[f64]| {
+        let mut s = v.to_vec();
+        s.sort_unstable_by(f64::total_cmp);
+        s
+    };
+    let (a, b) = (sorted(a), sorted(b));
     let mut ratios: Vec<f64> = (0..RESAMPLES)
         .map(|_| {
-            let ma = resampled_median(a, &mut rng, &mut scratch);
-            let mb = resampled_median(b, &mut rng, &mut scratch);
+            let ma = resampled_median(&a, &mut rng);
+            let mb = resampled_median(&b, &mut rng);
             mb / ma
         })
         .collect();
@@ -182,6 +231,47 @@ mod tests {
         );
         // Identical samples: no evidence of a difference.
         assert!(mann_whitney_p(&a, &a) > 0.9);
+    }
+
+    /// The shortcut draws resample medians from the same distribution as resampling: on odd
+    /// and even sizes, quantiles of 20 000 medians each way agree to a rank.
+    #[test]
+    fn resampled_medians_match_explicit_resampling() {
+        for n in [41usize, 40, 7, 2] {
+            let sorted: Vec<f64> = (0..n).map(|i| (i * i) as f64).collect();
+            let mut rng = Rng(7);
+            let draws = 20_000;
+            let mut fast: Vec<f64> = (0..draws)
+                .map(|_| resampled_median(&sorted, &mut rng))
+                .collect();
+            let mut slow: Vec<f64> = (0..draws)
+                .map(|_| {
+                    let mut r: Vec<f64> = (0..n)
+                        .map(|_| sorted[(rng.next() % n as u64) as usize])
+                        .collect();
+                    r.sort_unstable_by(f64::total_cmp);
+                    percentile(&r, 50.0)
+                })
+                .collect();
+            // Means within four standard errors of each other.
+            let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+            let (mf, ms) = (mean(&fast), mean(&slow));
+            let var = slow.iter().map(|x| (x - ms).powi(2)).sum::<f64>() / draws as f64;
+            let se = (2.0 * var / draws as f64).sqrt();
+            assert!(
+                (mf - ms).abs() <= 4.0 * se + 1e-9,
+                "n {n}: means {mf} vs {ms} (se {se})"
+            );
+            fast.sort_unstable_by(f64::total_cmp);
+            slow.sort_unstable_by(f64::total_cmp);
+            for q in [2.5, 25.0, 50.0, 75.0, 97.5] {
+                let (f, s) = (percentile(&fast, q), percentile(&slow, q));
+                // Within the gap to the neighbouring values of the sorted data.
+                let i = sorted.partition_point(|&v| v < s).min(n - 1);
+                let gap = sorted[(i + 1).min(n - 1)] - sorted[i.saturating_sub(1)];
+                assert!((f - s).abs() <= gap, "n {n} q {q}: {f} vs {s} (gap {gap})");
+            }
+        }
     }
 
     #[test]
