@@ -38,9 +38,10 @@ struct Cli {
     /// Open a window and fly with WASD/QE and the mouse (the default with a display).
     #[arg(long)]
     window: bool,
-    /// Window mode, for tests: ask for a new window size at a frame, FRAME=WxH.
-    #[arg(long, hide = true, value_parser = parse_resize)]
-    resize_at: Option<(u64, (u32, u32))>,
+    /// Window mode, for tests: ask for a new window size at a frame, FRAME=WxH (repeatable:
+    /// a resize storm).
+    #[arg(long, hide = true, value_parser = parse_resize, num_args = 1..)]
+    resize_at: Vec<(u64, (u32, u32))>,
     /// Camera path: a CSV keyframe file, or `orbit` / `flyover` generated from the tile set.
     #[arg(long, default_value = "flyover")]
     path: String,
@@ -346,7 +347,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             memory,
             trace: cli.trace.is_some(),
             frames: cli.frames,
-            resize_at: cli.resize_at,
+            resize_at: cli.resize_at.clone(),
             screenshot_dir: cli.out.clone().unwrap_or_else(|| PathBuf::from(".")),
             record: cli.record.clone(),
             start: path.at(path.keys[0].time),

@@ -35,7 +35,7 @@ pub struct WindowOptions {
     /// Close after this many frames (for scripted runs and tests).
     pub frames: Option<u64>,
     /// Ask the window for a new size at a frame (for tests of resizing).
-    pub resize_at: Option<(u64, (u32, u32))>,
+    pub resize_at: Vec<(u64, (u32, u32))>,
     pub screenshot_dir: PathBuf,
     /// Write the flown path here on exit.
     pub record: Option<PathBuf>,
@@ -351,7 +351,7 @@ impl App<'_> {
             });
         }
         self.frames += 1;
-        if let Some((at, (w, h))) = self.options.resize_at {
+        for &(at, (w, h)) in &self.options.resize_at {
             if self.frames == at {
                 let _ = live.window.request_inner_size(PhysicalSize::new(w, h));
             }
