@@ -25,12 +25,9 @@ use anyhow::{bail, Context, Result};
 use dem::{Crop, ReadOptions};
 use tiles::{build_tileset, BuildParams, Grid, TileSet, TileSetMeta};
 
+/// A file of the shared data, or an error saying it is missing.
 fn data(rel: &str) -> Result<PathBuf> {
-    let p = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data")).join(rel);
-    if !p.exists() {
-        bail!("benchmark data missing: {}", p.display());
-    }
-    Ok(p)
+    testdata::try_data(rel).map_err(anyhow::Error::msg)
 }
 
 fn main() -> std::process::ExitCode {

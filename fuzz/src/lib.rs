@@ -295,15 +295,9 @@ pub fn seeds(target: &Target) -> Result<Vec<Vec<u8>>, String> {
             out.push(std::fs::read(&f).map_err(|e| format!("{}: {e}", f.display()))?);
         }
     }
-    let shared = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
     for rel in target.shared {
-        let p = shared.join(rel);
-        out.push(std::fs::read(&p).map_err(|e| {
-            format!(
-                "{}: {e} (the shared data folder must sit beside the repo)",
-                p.display()
-            )
-        })?);
+        let p = testdata::try_data(rel)?;
+        out.push(std::fs::read(&p).map_err(|e| format!("{}: {e}", p.display()))?);
     }
     if out.is_empty() {
         return Err(format!("{}: no seeds", corpus.display()));
@@ -384,8 +378,7 @@ pub fn target(name: &str) -> Option<&'static Target> {
 /// enough to decode thousands of times a minute.
 pub fn write_image_seeds() -> Result<(), String> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let shared = root.join("../../shared/data");
-    let open = |rel: &str| image::open(shared.join(rel)).map_err(|e| format!("{rel}: {e}"));
+    let open = |rel: &str| image::open(testdata::try_data(rel)?).map_err(|e| format!("{rel}: {e}"));
     let save = |img: image::DynamicImage, folder: &str, name: &str| -> Result<(), String> {
         let dir = root.join("corpus").join(folder);
         std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;

@@ -3,19 +3,10 @@
 //! source: structure, nesting, fans, morph offsets and every level's recomputed error.
 
 use std::path::PathBuf;
+use testdata::data;
 
 use dem::{Encoding, ReadOptions};
 use tiles::{build_tileset, verify::verify, BuildParams, Grid, TileSet, TileSetMeta};
-
-fn data(rel: &str) -> PathBuf {
-    let p = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data")).join(rel);
-    assert!(
-        p.exists(),
-        "test data missing: {} (the shared data folder must sit beside the repo)",
-        p.display()
-    );
-    p
-}
 
 fn build_and_verify(files: &[&str], opts: ReadOptions, params: BuildParams) {
     let paths: Vec<PathBuf> = files.iter().map(|f| data(f)).collect();

@@ -7,24 +7,9 @@ use std::path::{Path, PathBuf};
 
 use tiles::{build_tileset, BuildParams, Grid, TileSetMeta};
 
-pub fn data(rel: &str) -> PathBuf {
-    let p = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data")).join(rel);
-    assert!(
-        p.exists(),
-        "test data missing: {} (the shared data folder must sit beside the repo)",
-        p.display()
-    );
-    p
-}
-
-pub fn sample() -> PathBuf {
-    let p = PathBuf::from(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../sample/ps_height_1k.png"
-    ));
-    assert!(p.exists(), "bundled sample missing: {}", p.display());
-    p
-}
+// Each test file uses its own subset.
+#[allow(unused_imports)]
+pub use testdata::{data, sample};
 
 /// Builds a tile set in `dir` from a DEM.
 pub fn tileset(dir: &Path, input: &Path, opts: dem::ReadOptions) -> PathBuf {

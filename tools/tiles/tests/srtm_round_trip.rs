@@ -1,19 +1,9 @@
 //! Builds real SRTM data into a tile set and checks it with the independent verifier.
 //! Reads the `.hgt` bytes directly (no DEM crate) so the tile model is tested on its own.
 
-use std::path::PathBuf;
+use testdata::data;
 
 use tiles::{build_tileset, verify::verify, BuildParams, Grid, TileSet, TileSetMeta};
-
-fn data(rel: &str) -> PathBuf {
-    let p = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data")).join(rel);
-    assert!(
-        p.exists(),
-        "test data missing: {} (the shared data folder must sit beside the repo)",
-        p.display()
-    );
-    p
-}
 
 /// A crop of an SRTM3 tile in metres (N55W003 has no voids).
 fn srtm_crop(x0: usize, y0: usize, w: usize, h: usize) -> Vec<f32> {

@@ -2,25 +2,7 @@
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-
-fn data(rel: &str) -> PathBuf {
-    let p = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data")).join(rel);
-    assert!(
-        p.exists(),
-        "test data missing: {} (the shared data folder must sit beside the repo)",
-        p.display()
-    );
-    p
-}
-
-fn sample() -> PathBuf {
-    let p = PathBuf::from(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../sample/ps_height_1k.png"
-    ));
-    assert!(p.exists(), "bundled sample missing: {}", p.display());
-    p
-}
+use testdata::{data, sample};
 
 fn tiletool(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_tiletool"))

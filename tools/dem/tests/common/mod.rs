@@ -4,21 +4,11 @@
 #![allow(dead_code)] // each test binary uses a different subset
 
 use std::path::{Path, PathBuf};
+// Each test file uses its own subset.
+#[allow(unused_imports)]
+pub use testdata::data;
 
 use tiff::encoder::compression::{CompressionAlgorithm, Deflate, Lzw, Packbits};
-
-/// A file under /work/shared/data; panics naming the path when the data is not there.
-pub fn data(rel: &str) -> PathBuf {
-    let root = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data"));
-    let path = root.join(rel);
-    assert!(
-        path.is_file(),
-        "real test data missing: {} (expected the shared data set at {})",
-        path.display(),
-        root.display()
-    );
-    path
-}
 
 pub fn temp_dir() -> tempfile::TempDir {
     tempfile::Builder::new()
