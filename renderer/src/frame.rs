@@ -620,7 +620,8 @@ impl Renderer {
             if input.label.is_multiple_of(*every) {
                 let draws: Vec<(usize, u32)> =
                     plan.draws.iter().map(|d| (d.tile, d.level)).collect();
-                record.max_error_px = meter.frame(terrain, input.camera, extent, &draws);
+                let m = meter.frame(terrain, input.camera, extent, &draws);
+                (record.max_error_px, record.pop_px) = (m.max_error_px, m.pop_px);
             }
         }
         record.frame = input.label;
@@ -1000,6 +1001,7 @@ fn frame_record(plan: &Plan, counts: DrawCounts, levels: u32) -> FrameRecord {
         used_bytes: st.used_bytes,
         tiles_per_level,
         max_error_px: f64::NAN,
+        pop_px: f64::NAN,
         ..Default::default()
     }
 }

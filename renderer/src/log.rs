@@ -7,7 +7,7 @@
 //! `gpu_allocations, upload_bytes_blocks, upload_bytes_indices, uploads_deferred_bytes,
 //! upload_overshoot_bytes, staged_bytes, tiles_coarser, tiles_missing, chunks_free,
 //! chunk_moves, chunk_move_bytes, hits, misses, used_bytes, cpu_residency_ms, gpu_draw_ms,
-//! upload_bytes_coarser, max_error_px`,
+//! upload_bytes_coarser, max_error_px, pop_px`,
 //! and last `tiles_level_0 .. tiles_level_{n-1}`.
 
 use std::io::Write;
@@ -53,6 +53,10 @@ pub struct FrameRecord {
     /// With `--measure-error`: the largest screen distance, pixels, between the drawn surface
     /// and a source sample (NaN when not measured this frame).
     pub max_error_px: f64,
+    /// With `--measure-error`: the largest screen jump of a surface point from the previous
+    /// measured frame's levels to this frame's, under this frame's camera (NaN when not
+    /// measured, and on the first measured frame).
+    pub pop_px: f64,
     /// Bytes still needed to draw every visible tile at its wanted level.
     pub uploads_deferred_bytes: u64,
     /// Bytes sent beyond the upload budget (new tiles' level 0, or one step larger than it).
@@ -74,7 +78,7 @@ pub struct FrameRecord {
     pub tiles_per_level: Vec<u64>,
 }
 
-pub const BASE_COLUMNS: [&str; 35] = [
+pub const BASE_COLUMNS: [&str; 36] = [
     "frame",
     "time_s",
     "frame_ms",
@@ -110,6 +114,7 @@ pub const BASE_COLUMNS: [&str; 35] = [
     "gpu_draw_ms",
     "upload_bytes_coarser",
     "max_error_px",
+    "pop_px",
 ];
 
 pub fn header(levels: u32) -> String {
@@ -174,6 +179,7 @@ impl FrameRecord {
         cells.push(ms_cell(self.gpu_draw_ms));
         cells.push(self.upload_bytes_coarser.to_string());
         cells.push(ms_cell(self.max_error_px));
+        cells.push(ms_cell(self.pop_px));
         cells.extend(self.tiles_per_level.iter().map(|n| n.to_string()));
         cells.join(",")
     }
@@ -243,6 +249,8 @@ pub struct Summary {
     /// were measured.
     pub max_error_px: Option<f64>,
     pub frames_measured: usize,
+    /// The largest `pop_px` of the flight.
+    pub pop_px: Option<f64>,
     pub staged_mb: f64,
     pub upload_bytes_p99: f64,
     pub upload_overshoot_mb: f64,
@@ -316,6 +324,11 @@ impl Summary {
                 .filter(|e| !e.is_nan())
                 .reduce(f64::max),
             frames_measured: records.iter().filter(|r| !r.max_error_px.is_nan()).count(),
+            pop_px: records
+                .iter()
+                .map(|r| r.pop_px)
+                .filter(|e| !e.is_nan())
+                .reduce(f64::max),
             staged_mb: sum(|r| r.staged_bytes) as f64 / 1e6,
             upload_bytes_p99: percentile(&uploads, 99.0),
             upload_overshoot_mb: sum(|r| r.upload_overshoot_bytes) as f64 / 1e6,

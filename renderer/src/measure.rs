@@ -1,12 +1,18 @@
-//! `vkterrain --measure-error`: the screen-space error a frame actually delivers, measured on
-//! the CPU against the source DEM.
+//! `vkterrain --measure-error`: the screen-space error and the pops a flight actually shows,
+//! measured on the CPU against the source DEM.
 //!
-//! For every drawn tile and every source sample the drawn level's triangles cover, the drawn
-//! surface's height there (interpolated in the triangle, as the rasteriser does) and the
-//! sample's are projected with the frame's camera; the distance between the two image points
-//! is that sample's error in pixels. Samples where either point is behind the near plane or
-//! off the image are skipped (nothing is seen there). The frame's `max_error_px` is the
-//! largest over all of them.
+//! Each drawn (tile, level) is rasterised once into a grid of the heights its triangles give
+//! at the tile's source samples (interpolated in each triangle, as the rasteriser does).
+//! - `max_error_px`: for every sample of every drawn tile, the drawn surface point and the
+//!   source sample are projected with the frame's camera; their distance on the image is that
+//!   sample's error. The frame's value is the largest.
+//! - `pop_px`: for every tile drawn in this frame and the previous one at different levels,
+//!   the surface point at each sample under the previous level and under the current one,
+//!   both projected with the *current* camera (so camera motion is factored out): the largest
+//!   distance is the frame's pop. A tile newly in view has no previous level: no pop.
+//!
+//! Samples where either point is behind the near plane or off the image are skipped (nothing
+//! is seen there).
 
 use std::collections::HashMap;
 
@@ -19,13 +25,23 @@ use tiles::Grid;
 use crate::camera::Camera;
 use crate::terrain::Terrain;
 
-type Triangle = [(u32, u32, f32); 3];
+/// The measures of one frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Measured {
+    pub max_error_px: f64,
+    /// NaN on the first measured frame (nothing to compare with).
+    pub pop_px: f64,
+}
 
-/// The source samples of every tile and the triangles of the levels drawn so far.
+/// The source samples of every tile, the height grids of the levels drawn so far, and the
+/// levels of the previous measured frame.
 pub struct ErrorMeter {
     /// Per tile, 257 x 257 source heights (row 0 north), and the last real column / row.
     samples: Vec<(Vec<f32>, u32, u32)>,
-    triangles: HashMap<(usize, u32), Vec<Triangle>>,
+    /// Per (tile, level): the drawn surface's height at each sample (NaN where no triangle
+    /// covers it).
+    surfaces: HashMap<(usize, u32), Vec<f32>>,
+    previous: Option<HashMap<usize, u32>>,
 }
 
 impl ErrorMeter {
@@ -49,19 +65,21 @@ impl ErrorMeter {
             .collect();
         Ok(ErrorMeter {
             samples,
-            triangles: HashMap::new(),
+            surfaces: HashMap::new(),
+            previous: None,
         })
     }
 
-    /// The largest error in pixels over the drawn tiles `draws` (tile, level) seen by `camera`
-    /// at `extent`; 0 when nothing is seen.
+    /// Measures a frame that drew `draws` (tile, level) seen by `camera` at `extent`; the
+    /// previous call's draws are the previous frame's (call it on consecutive frames for
+    /// `pop_px` to mean what it says).
     pub fn frame(
         &mut self,
         terrain: &Terrain,
         camera: &Camera,
         extent: (u32, u32),
         draws: &[(usize, u32)],
-    ) -> f64 {
+    ) -> Measured {
         let view = camera.view(extent.0, extent.1);
         let (w, h) = (f64::from(extent.0), f64::from(extent.1));
         let on_image = |p: DVec3| {
@@ -69,48 +87,75 @@ impl ErrorMeter {
                 .filter(|&(u, v)| (0.0..=w).contains(&u) && (0.0..=h).contains(&v))
         };
         let (sx, sy) = terrain.spacing;
-        let mut worst = 0.0f64;
+        let distance =
+            |a: (f64, f64), b: (f64, f64)| ((a.0 - b.0).powi(2) + (a.1 - b.1).powi(2)).sqrt();
+        let mut error = 0.0f64;
+        let mut pop = self.previous.as_ref().map(|_| 0.0f64);
         for &(tile, level) in draws {
+            let before = self
+                .previous
+                .as_ref()
+                .and_then(|p| p.get(&tile).copied())
+                .filter(|&l| l != level);
+            for l in [Some(level), before].into_iter().flatten() {
+                self.surfaces
+                    .entry((tile, l))
+                    .or_insert_with(|| surface(terrain, tile, l));
+            }
+            let now = &self.surfaces[&(tile, level)];
+            let then = before.map(|l| &self.surfaces[&(tile, l)]);
             let info = &terrain.tiles[tile];
             let (c0, r0) = (
                 f64::from(info.tx * TILE_CELLS),
                 f64::from(info.ty * TILE_CELLS),
             );
-            let triangles = self
-                .triangles
-                .entry((tile, level))
-                .or_insert_with(|| level_triangles(terrain, tile, level));
             let (source, max_x, max_y) = &self.samples[tile];
-            for &t in triangles.iter() {
-                raster_barycentric(t, *max_x, *max_y, |x, y, z| {
-                    let wx = (c0 + f64::from(x)) * sx;
-                    let wy = -(r0 + f64::from(y)) * sy;
-                    let sample = f64::from(source[y as usize * TILE_SIZE + x as usize]);
-                    let (Some(a), Some(b)) = (
-                        on_image(DVec3::new(wx, wy, z)),
-                        on_image(DVec3::new(wx, wy, sample)),
-                    ) else {
-                        return;
+            for y in 0..=*max_y as usize {
+                for x in 0..=*max_x as usize {
+                    let k = y * TILE_SIZE + x;
+                    let z = now[k];
+                    if z.is_nan() {
+                        continue;
+                    }
+                    let at = |z: f32| {
+                        on_image(DVec3::new(
+                            (c0 + x as f64) * sx,
+                            -(r0 + y as f64) * sy,
+                            f64::from(z),
+                        ))
                     };
-                    worst = worst.max(((a.0 - b.0).powi(2) + (a.1 - b.1).powi(2)).sqrt());
-                });
+                    let Some(drawn) = at(z) else { continue };
+                    if let Some(truth) = at(source[k]) {
+                        error = error.max(distance(drawn, truth));
+                    }
+                    if let (Some(pop), Some(then)) = (pop.as_mut(), then) {
+                        if let Some(old) = Some(then[k]).filter(|z| !z.is_nan()).and_then(at) {
+                            *pop = pop.max(distance(drawn, old));
+                        }
+                    }
+                }
             }
         }
-        worst
+        self.previous = Some(draws.iter().copied().collect());
+        Measured {
+            max_error_px: error,
+            pop_px: pop.unwrap_or(f64::NAN),
+        }
     }
 }
 
-/// The triangles of one level of one tile, vertices decoded to (column, row, metres).
-fn level_triangles(terrain: &Terrain, tile: usize, level: u32) -> Vec<Triangle> {
+/// The heights one level of one tile draws at the tile's samples (NaN where none).
+fn surface(terrain: &Terrain, tile: usize, level: u32) -> Vec<f32> {
+    let mut grid = vec![f32::NAN; TILE_SIZE * TILE_SIZE];
     let info = &terrain.tiles[tile];
     let Ok(t) = terrain.set.tile(info.tx, info.ty) else {
-        return Vec::new();
+        return grid;
     };
     let vertices = t.vertices();
     let Some(l) = t.level(level) else {
-        return Vec::new();
+        return grid;
     };
-    let mut out = Vec::new();
+    let (mx, my) = (info.header.mesh_max_x, info.header.mesh_max_y);
     for fan in l.indices.fans() {
         let v = |i: u32| vertices.get(i as usize).copied();
         let Some(c) = fan.first().and_then(|&i| v(i)) else {
@@ -118,9 +163,11 @@ fn level_triangles(terrain: &Terrain, tile: usize, level: u32) -> Vec<Triangle> 
         };
         for pair in fan[1..].windows(2) {
             if let (Some(a), Some(b)) = (v(pair[0]), v(pair[1])) {
-                out.push([c, a, b]);
+                raster_barycentric([c, a, b], mx, my, |x, y, z| {
+                    grid[y as usize * TILE_SIZE + x as usize] = z as f32;
+                });
             }
         }
     }
-    out
+    grid
 }

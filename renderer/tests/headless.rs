@@ -726,3 +726,40 @@ fn a_tile_set_truncated_in_flight_stops_cleanly() {
     let parsed = frametimes::log::read(&log).expect("the log reads");
     assert_eq!(parsed.frames, 2, "frames 0 and 1 completed");
 }
+
+/// `pop_px` sees the pops of discrete LOD (a tile switching level jumps by up to about tau
+/// pixels: the control geomorphing will be measured against), and none when every tile stays
+/// at one forced level.
+#[test]
+fn pops_of_discrete_lod_are_measured() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = puget(dir.path());
+    let sample = common::sample();
+    let run = |extra: &[&str]| -> serde_json::Value {
+        let mut args = vec![
+            s(&set),
+            "--headless",
+            "--path",
+            "flyover",
+            "--frames",
+            "40",
+            "--size",
+            "480x360",
+            "--measure-error",
+            s(&sample),
+            "--source-spacing",
+            "160",
+            "--source-vertical-scale",
+            "0.1",
+        ];
+        args.extend(extra);
+        let o = vkterrain(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        serde_json::from_slice(&o.stdout).expect("summary")
+    };
+    let discrete = run(&["--tau", "2"]);
+    let pop = discrete["pop_px"].as_f64().expect("pop_px");
+    assert!(pop > 0.5, "discrete LOD at tau 2 popped only {pop} px");
+    let fixed = run(&["--level", "4"]);
+    assert_eq!(fixed["pop_px"].as_f64(), Some(0.0), "{fixed}");
+}
