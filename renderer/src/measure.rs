@@ -17,7 +17,7 @@
 use std::collections::HashMap;
 
 use glam::DVec3;
-use tiles::build::tile_samples;
+use tiles::grid::tile_samples;
 use tiles::mesh::{TILE_CELLS, TILE_SIZE};
 use tiles::verify::raster_barycentric;
 use tiles::Grid;

@@ -6,24 +6,15 @@ use std::sync::mpsc::sync_channel;
 
 use rayon::prelude::*;
 
-use crate::format::{FileHeader, LevelEntry, TileHeader, TileSetWriter, MAX_LEVELS, TILE_MAGIC};
-use crate::mesh::{
-    lattice, plane, triangle_spans, Mesher, Quad, TileSamples, TILE_CELLS, TILE_SIZE,
+use crate::format::{
+    level_error, tile_count, FileHeader, LevelEntry, TileHeader, TileSetWriter, MAX_LEVELS,
+    TILE_MAGIC,
 };
+use crate::grid::{tile_samples, Grid};
+use crate::mesh::{lattice, plane, triangle_spans, Mesher, Quad, TILE_CELLS, TILE_SIZE};
 use crate::pack::{morph_offset, morph_unit, pack};
 use crate::quantise::{lattice_step, Quantiser};
 use crate::BuildError;
-
-/// A height field in metres, row-major, row 0 = north.
-#[derive(Clone, Copy, Debug)]
-pub struct Grid<'a> {
-    pub width: usize,
-    pub height: usize,
-    pub heights: &'a [f32],
-    /// Metres between columns / rows.
-    pub spacing_x: f64,
-    pub spacing_y: f64,
-}
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BuildParams {
@@ -60,45 +51,6 @@ impl BuildParams {
 
     pub fn level_error(&self, level: u32) -> f64 {
         level_error(self.base_error, self.levels, level)
-    }
-}
-
-/// `e_i = base * 2^(n-1-i)`.
-pub fn level_error(base: f64, levels: u32, level: u32) -> f64 {
-    base * f64::powi(2.0, levels as i32 - 1 - level as i32)
-}
-
-/// Tiles across and down for a grid: tiles of 257 samples overlapping by one.
-pub fn tile_count(width: usize, height: usize) -> Result<(u32, u32), String> {
-    if width < 2 || height < 2 {
-        return Err("a grid needs at least 2 x 2 samples".into());
-    }
-    let cells = TILE_CELLS as usize;
-    let (tx, ty) = ((width - 1).div_ceil(cells), (height - 1).div_ceil(cells));
-    if tx > u32::MAX as usize / 2
-        || ty > u32::MAX as usize / 2
-        || (width as u64) * (height as u64) > 1 << 40
-    {
-        return Err("too many samples".into());
-    }
-    Ok((tx as u32, ty as u32))
-}
-
-/// The 257 x 257 samples of tile `(tx, ty)`, the last real row and column repeated past the data.
-pub fn tile_samples(grid: &Grid, tx: u32, ty: u32) -> TileSamples {
-    let cells = TILE_CELLS as usize;
-    let (x0, y0) = (tx as usize * cells, ty as usize * cells);
-    let data_max_x = (grid.width - 1 - x0).min(cells);
-    let data_max_y = (grid.height - 1 - y0).min(cells);
-    let mut heights = Vec::with_capacity(TILE_SIZE * TILE_SIZE);
-    for y in 0..TILE_SIZE {
-        let row = (y0 + y.min(data_max_y)) * grid.width;
-        heights.extend((0..TILE_SIZE).map(|x| grid.heights[row + x0 + x.min(data_max_x)]));
-    }
-    TileSamples {
-        heights,
-        data_max_x: data_max_x as u32,
-        data_max_y: data_max_y as u32,
     }
 }
 

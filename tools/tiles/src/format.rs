@@ -436,6 +436,27 @@ fn header_crc(header: &FileHeader, directory: &[u8]) -> u32 {
     hasher.finalize()
 }
 
+/// `e_i = base * 2^(n-1-i)`.
+pub fn level_error(base: f64, levels: u32, level: u32) -> f64 {
+    base * f64::powi(2.0, levels as i32 - 1 - level as i32)
+}
+
+/// Tiles across and down for a grid: tiles of 257 samples overlapping by one.
+pub fn tile_count(width: usize, height: usize) -> Result<(u32, u32), String> {
+    if width < 2 || height < 2 {
+        return Err("a grid needs at least 2 x 2 samples".into());
+    }
+    let cells = TILE_CELLS as usize;
+    let (tx, ty) = ((width - 1).div_ceil(cells), (height - 1).div_ceil(cells));
+    if tx > u32::MAX as usize / 2
+        || ty > u32::MAX as usize / 2
+        || (width as u64) * (height as u64) > 1 << 40
+    {
+        return Err("too many samples".into());
+    }
+    Ok((tx as u32, ty as u32))
+}
+
 /// A memory-mapped, validated tile set.
 pub struct TileSet {
     path: PathBuf,
@@ -517,14 +538,13 @@ impl TileSet {
                 header.levels
             )));
         }
-        let (tx, ty) =
-            crate::build::tile_count(header.grid_width as usize, header.grid_height as usize)
-                .map_err(|e| {
-                    invalid(format!(
-                        "grid {}x{}: {e}",
-                        header.grid_width, header.grid_height
-                    ))
-                })?;
+        let (tx, ty) = tile_count(header.grid_width as usize, header.grid_height as usize)
+            .map_err(|e| {
+                invalid(format!(
+                    "grid {}x{}: {e}",
+                    header.grid_width, header.grid_height
+                ))
+            })?;
         if (tx, ty) != (header.tiles_x, header.tiles_y) {
             return Err(invalid(format!(
                 "{}x{} tiles does not match the {}x{} grid",
@@ -600,7 +620,7 @@ impl TileSet {
 
     /// `e_i` in metres.
     pub fn level_error(&self, level: u32) -> f64 {
-        crate::build::level_error(self.header.base_error, self.header.levels, level)
+        level_error(self.header.base_error, self.header.levels, level)
     }
 
     fn entry(&self, i: usize) -> DirEntry {

@@ -16,13 +16,15 @@
 
 pub mod build;
 pub mod format;
+pub mod grid;
 pub mod mesh;
 pub mod pack;
 pub mod quantise;
 pub mod verify;
 
-pub use build::{build_tile, build_tileset, BuildParams, BuildSummary, Grid, TileSetMeta};
+pub use build::{build_tile, build_tileset, BuildParams, BuildSummary, TileSetMeta};
 pub use format::{FormatError, TileSet};
+pub use grid::Grid;
 
 /// Why a build failed.
 #[derive(Debug, thiserror::Error)]

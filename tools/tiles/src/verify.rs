@@ -5,8 +5,8 @@
 //! rasterised with their own barycentric code in f64, and the spacing rule is re-derived from
 //! each fan's geometry. A tile set that passes is what the renderer will draw.
 
-use crate::build::{tile_samples, Grid};
 use crate::format::{Tile, TileSet};
+use crate::grid::{tile_samples, Grid};
 use crate::mesh::{TILE_CELLS, TILE_SIZE};
 
 /// One place where a level was allowed to exceed its bound (refinement forbidden there).

@@ -268,7 +268,7 @@ fn build(
     let start = Instant::now();
     let grid = read_dem(&input.inputs, &input.read)?;
     let decoded = start.elapsed();
-    let (tiles_x, tiles_y) = tiles::build::tile_count(grid.width, grid.height)
+    let (tiles_x, tiles_y) = tiles::format::tile_count(grid.width, grid.height)
         .map_err(|e| anyhow::anyhow!("{}: {e}", input.inputs[0].display()))?;
     let bar = ProgressBar::with_draw_target(
         Some(u64::from(tiles_x * tiles_y)),
