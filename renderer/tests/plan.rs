@@ -164,3 +164,89 @@ fn tight_budget_draws_what_is_resident_and_stitches_granted_levels() {
         "stitching at wanted levels never differed"
     );
 }
+
+/// Which polyline segments a stitch closes: edges (as vertex pairs, in `a`'s frame) of its
+/// triangles.
+fn stitch_edges(s: &renderer::stitch::Stitch) -> std::collections::HashSet<(u32, u32)> {
+    let mut edges = std::collections::HashSet::new();
+    for t in s.indices.split(|&i| i == renderer::stitch::RESTART) {
+        if t.len() == 3 {
+            for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+                let (p, q) = (s.vertices[a as usize], s.vertices[b as usize]);
+                edges.insert((p.min(q), p.max(q)));
+            }
+        }
+    }
+    edges
+}
+
+/// Every segment of either border polyline that the other does not share is an edge of a
+/// stitching triangle (so no T-junction is left open), every stitch vertex lies on the shared
+/// edge, and the triangles have no area in plan view. For every pair of neighbouring tiles of
+/// the Puget set at every pair of levels. Dropping one triangle breaks it (the control).
+#[test]
+fn stitches_close_every_seam_at_every_level_pair() {
+    use renderer::stitch::{stitch_side, Stitch};
+    use tiles::pack::unpack;
+    let (_dir, terrain) = puget();
+    let mut checked = 0;
+    let mut control_failed = 0;
+    for a in &terrain.tiles {
+        for (k, (dx, dy)) in [(1usize, (1u32, 0u32)), (2, (0, 1))] {
+            let Some(j) = terrain.tile_index(a.tx + dx, a.ty + dy) else {
+                continue;
+            };
+            let b = &terrain.tiles[j];
+            for la in 0..terrain.levels {
+                for lb in 0..terrain.levels {
+                    let mut s = Stitch::default();
+                    assert!(stitch_side(&mut s, a, la, b, lb, k), "borders differ");
+                    let on_edge = |p: u32| {
+                        let (x, y, _) = unpack(p);
+                        if k == 1 {
+                            x == 256
+                        } else {
+                            y == 256
+                        }
+                    };
+                    assert!(s.vertices.iter().all(|&p| on_edge(p)));
+                    let mine = &a.borders[la as usize][k];
+                    let theirs: Vec<u32> = s.vertices[mine.len().min(s.vertices.len())..].to_vec();
+                    let open = |edges: &std::collections::HashSet<(u32, u32)>| {
+                        let segs = |line: &[u32]| -> Vec<(u32, u32)> {
+                            line.windows(2)
+                                .map(|w| (w[0].min(w[1]), w[0].max(w[1])))
+                                .collect()
+                        };
+                        let (m, t) = (segs(mine), segs(&theirs));
+                        m.iter()
+                            .filter(|e| !t.contains(e))
+                            .chain(t.iter().filter(|e| !m.contains(e)))
+                            .any(|e| !edges.contains(e))
+                    };
+                    if s.vertices.is_empty() {
+                        continue; // identical borders: nothing to close
+                    }
+                    assert!(
+                        !open(&stitch_edges(&s)),
+                        "tiles {},{} k {k} levels {la}/{lb}",
+                        a.tx,
+                        a.ty
+                    );
+                    checked += 1;
+                    // The control: without its last triangle the seam is open somewhere.
+                    if s.triangles > 0 {
+                        let mut cut = s.clone();
+                        cut.indices.truncate(cut.indices.len() - 4);
+                        control_failed += usize::from(open(&stitch_edges(&cut)));
+                    }
+                }
+            }
+        }
+    }
+    assert!(checked > 500, "only {checked} seams checked");
+    assert!(
+        control_failed > 0,
+        "dropping a triangle never opened a seam"
+    );
+}
