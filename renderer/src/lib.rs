@@ -14,6 +14,7 @@ pub mod headless;
 pub mod lod;
 pub mod log;
 pub mod measure;
+pub mod morph;
 pub mod path;
 pub mod plan;
 pub mod stitch;
