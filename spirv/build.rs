@@ -4,12 +4,25 @@
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
-const SHADERS: [(&str, &str, shaderc::ShaderKind); 2] = [
-    ("TERRAIN_VERT", "terrain.vert", shaderc::ShaderKind::Vertex),
+/// (constant, file, stage, macro defined for this build).
+const SHADERS: [(&str, &str, shaderc::ShaderKind, Option<&str>); 3] = [
+    (
+        "TERRAIN_VERT",
+        "terrain.vert",
+        shaderc::ShaderKind::Vertex,
+        None,
+    ),
+    (
+        "TERRAIN_VERT_BRANCHES",
+        "terrain.vert",
+        shaderc::ShaderKind::Vertex,
+        Some("MORPH_BRANCHES"),
+    ),
     (
         "TERRAIN_FRAG",
         "terrain.frag",
         shaderc::ShaderKind::Fragment,
+        None,
     ),
 ];
 
@@ -17,15 +30,18 @@ fn main() {
     let dir =
         PathBuf::from(std::env::var("CARGO_MANIFEST_DIR").expect("cargo sets it")).join("shaders");
     let compiler = shaderc::Compiler::new().expect("shaderc initialises");
-    let mut options = shaderc::CompileOptions::new().expect("shaderc options");
-    options.set_target_env(
-        shaderc::TargetEnv::Vulkan,
-        shaderc::EnvVersion::Vulkan1_2 as u32,
-    );
-    options.set_optimization_level(shaderc::OptimizationLevel::Performance);
-    options.set_warnings_as_errors();
     let mut out = String::new();
-    for (name, file, kind) in SHADERS {
+    for (name, file, kind, define) in SHADERS {
+        let mut options = shaderc::CompileOptions::new().expect("shaderc options");
+        options.set_target_env(
+            shaderc::TargetEnv::Vulkan,
+            shaderc::EnvVersion::Vulkan1_2 as u32,
+        );
+        options.set_optimization_level(shaderc::OptimizationLevel::Performance);
+        options.set_warnings_as_errors();
+        if let Some(d) = define {
+            options.add_macro_definition(d, None);
+        }
         let path = dir.join(file);
         println!("cargo:rerun-if-changed={}", path.display());
         let source =
@@ -36,7 +52,8 @@ fn main() {
         let words = binary.as_binary();
         let _ = writeln!(
             out,
-            "/// SPIR-V of `shaders/{file}`.\npub const {name}: &[u32] = &{words:?};"
+            "/// SPIR-V of `shaders/{file}`{}.\npub const {name}: &[u32] = &{words:?};",
+            define.map_or(String::new(), |d| format!(" with `{d}` defined"))
         );
     }
     let dest = PathBuf::from(std::env::var("OUT_DIR").expect("cargo sets it")).join("shaders.rs");

@@ -19,12 +19,14 @@ use memory::{Config, Manager, Scheme, Victim};
 
 use crate::camera::Camera;
 use crate::log::FrameRecord;
+use crate::measure::State;
+use crate::morph::MAX_LEVELS;
 use crate::plan::{self, BorderMismatch, LevelRule, Plan};
-use crate::stitch::Stitch;
+use crate::stitch::{pulled, Stitch, MAX_RECORDS};
 use crate::target::{Target, COLOR_FORMAT, DEPTH_FORMAT};
 use crate::terrain::Terrain;
 use crate::vulkan::buffer::BufferDesc;
-use crate::vulkan::pipeline::TerrainPipeline;
+use crate::vulkan::pipeline::{TerrainPipeline, TerrainSets};
 use crate::vulkan::pool::{self, Staging, TilePool};
 use crate::vulkan::sync::{self, Commands};
 use crate::vulkan::timestamps::Timestamps;
@@ -46,6 +48,19 @@ pub struct Settings {
     pub no_stitch: bool,
     /// How the level for tau is chosen (the guaranteed bound, or the old sampling).
     pub bound: crate::lod::Bound,
+    /// Continuous levels, heights blended between levels (off: `--no-geomorph`).
+    pub geomorph: bool,
+    pub morph_shader: MorphShader,
+}
+
+/// Which vertex shader blends the levels.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum MorphShader {
+    /// Clamped forward differences and dot products (the paper's, the default).
+    #[default]
+    ForwardDifferences,
+    /// The reference that finds the two levels with branches (`--morph-shader branches`).
+    Branches,
 }
 
 impl Settings {
@@ -54,6 +69,8 @@ impl Settings {
             LevelRule::Finest
         } else if let Some(l) = self.forced_level {
             LevelRule::Forced(l)
+        } else if self.geomorph {
+            LevelRule::Morph(self.tau, self.bound)
         } else {
             LevelRule::Tau(self.tau, self.bound)
         }
@@ -130,38 +147,51 @@ pub enum FrameError {
     Internal(String),
 }
 
-/// Per-draw constants, laid out as the vertex shader's push-constant block.
+/// Per-frame constants, laid out as the shaders' push-constant block.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
-struct DrawConstants {
+struct FrameConstants {
     view_proj: [f32; 16],
     camera: [f32; 4],
-    tile_offset: [i32; 2],
     spacing_y: f32,
     height_step: f32,
-    height_base: i32,
-    level: u32,
-    pad: [u32; 2],
-    tint: [f32; 4],
+    flags: u32,
+    pad: u32,
 }
 
 const _: () = assert!(
-    std::mem::size_of::<DrawConstants>() == crate::vulkan::pipeline::PUSH_CONSTANT_BYTES as usize
+    std::mem::size_of::<FrameConstants>() == crate::vulkan::pipeline::PUSH_CONSTANT_BYTES as usize
 );
 
-/// Debug colours of levels 0.. (coarse blue to fine red).
-const LEVEL_COLOURS: [[f32; 3]; 10] = [
-    [0.10, 0.20, 0.90],
-    [0.10, 0.55, 0.95],
-    [0.10, 0.85, 0.85],
-    [0.15, 0.80, 0.30],
-    [0.60, 0.90, 0.10],
-    [0.95, 0.90, 0.10],
-    [0.98, 0.60, 0.10],
-    [0.95, 0.30, 0.10],
-    [0.85, 0.10, 0.10],
-    [0.60, 0.05, 0.40],
-];
+/// `FrameConstants::flags`.
+const FLAG_GEOMORPH: u32 = 1;
+const FLAG_LEVEL_COLOURS: u32 = 2;
+
+/// One drawn tile as the vertex shader reads it (`TileRecord` in `terrain.vert`, std430).
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct TileRecord {
+    tile_offset: [i32; 2],
+    height_base: i32,
+    /// Pool word of block 0's first vertex.
+    positions: u32,
+    corners: [f32; 4],
+    /// First vertex of blocks 1..=8 (u32::MAX past the last block).
+    starts: [u32; 8],
+    /// Metres per morph offset unit of levels 0..8.
+    units: [f32; 8],
+    level: u32,
+    /// Pool byte of block 0's morph rows.
+    morph: u32,
+    pad0: [u32; 2],
+    block_start: [u32; 9],
+    block_len: [u32; 9],
+    morph_start: [u32; 9],
+    pad1: u32,
+}
+
+const RECORD_BYTES: u64 = std::mem::size_of::<TileRecord>() as u64;
+const _: () = assert!(RECORD_BYTES == 224);
 
 /// A frame submitted from a slot and not yet collected.
 struct Pending {
@@ -179,6 +209,7 @@ struct Slot {
     acquired: vk::Semaphore,
     timestamps: Timestamps,
     stitch: Buffer,
+    records: Buffer,
     staging: Staging,
     target: Target,
     pending: Option<Pending>,
@@ -186,7 +217,6 @@ struct Slot {
 
 impl Slot {
     fn new(gpu: &Gpu, commands: &Commands, i: usize, sizes: SlotSizes) -> VkResult<Slot> {
-        let usage = vk::BufferUsageFlags::VERTEX_BUFFER | vk::BufferUsageFlags::INDEX_BUFFER;
         Ok(Slot {
             cmd: commands.allocate(gpu, &format!("frame slot {i} commands"))?,
             fence: sync::fence(gpu, false, &format!("frame slot {i} fence"))?,
@@ -194,8 +224,13 @@ impl Slot {
             timestamps: Timestamps::new(gpu, &format!("frame slot {i} timestamps"))?,
             stitch: Buffer::new(
                 gpu,
-                BufferDesc::upload(sizes.stitch, usage),
+                BufferDesc::upload(sizes.stitch, vk::BufferUsageFlags::INDEX_BUFFER),
                 &format!("frame slot {i} stitch geometry"),
+            )?,
+            records: Buffer::new(
+                gpu,
+                BufferDesc::upload(sizes.records, vk::BufferUsageFlags::STORAGE_BUFFER),
+                &format!("frame slot {i} tile records"),
             )?,
             staging: Staging::new(gpu, sizes.staging, &format!("frame slot {i} staging"))?,
             target: Target::new(gpu, sizes.extent.0, sizes.extent.1)?,
@@ -208,6 +243,7 @@ impl Slot {
         sync::destroy_semaphore(gpu, self.acquired);
         self.timestamps.destroy(gpu);
         self.stitch.destroy(gpu);
+        self.records.destroy(gpu);
         self.staging.destroy(gpu);
         self.target.destroy(gpu);
     }
@@ -216,12 +252,15 @@ impl Slot {
 #[derive(Clone, Copy)]
 struct SlotSizes {
     stitch: u64,
+    records: u64,
     staging: u64,
     extent: (u32, u32),
 }
 
 pub struct Renderer {
     pipeline: TerrainPipeline,
+    /// One descriptor set per slot: the pool and the slot's records.
+    sets: Option<TerrainSets>,
     commands: Commands,
     slots: Vec<Slot>,
     pool: TilePool,
@@ -281,6 +320,8 @@ impl Fault {
 pub struct StaticFrame {
     cmd: vk::CommandBuffer,
     stitch: Option<Buffer>,
+    records: Option<Buffer>,
+    sets: Option<TerrainSets>,
     record: FrameRecord,
 }
 
@@ -292,8 +333,10 @@ impl Renderer {
         extent: (u32, u32),
         options: MemoryOptions,
     ) -> VkResult<Renderer> {
+        // The shader reads the pool as one storage buffer.
+        let readable = u64::from(gpu.properties.limits.max_storage_buffer_range);
         let config = Config {
-            pool_bytes: options.gpu_budget_bytes,
+            pool_bytes: options.gpu_budget_bytes.min(readable),
             upload_budget: options.upload_budget,
             weight: options.weight,
             class_ratio: 2.0,
@@ -305,6 +348,7 @@ impl Renderer {
         let (manager, pool) = allocate_pool(gpu, terrain, config, options.force_staging, fault)?;
         let sizes = SlotSizes {
             stitch: stitch_bound(terrain),
+            records: RECORD_BYTES * terrain.tiles.len().clamp(1, MAX_RECORDS) as u64,
             staging: staging_bound(&manager, options.upload_budget),
             extent,
         };
@@ -327,9 +371,18 @@ impl Renderer {
                 Err(e) => failure = Some(e.to_string()),
             }
         }
+        let mut sets = None;
+        if let (Ok(p), None) = (&pipeline, &failure) {
+            let records: Vec<&Buffer> = slots.iter().map(|s| &s.records).collect();
+            match TerrainSets::new(gpu, p, &pool.buffer, &records, "frame descriptor sets") {
+                Ok(s) => sets = Some(s),
+                Err(e) => failure = Some(e.to_string()),
+            }
+        }
         match (pipeline, failure) {
             (Ok(pipeline), None) => Ok(Renderer {
                 pipeline,
+                sets,
                 commands,
                 slots,
                 pool,
@@ -379,6 +432,11 @@ impl Renderer {
     /// [`crate::measure`]); the log's `max_error_px`.
     pub fn measure_error(&mut self, meter: crate::measure::ErrorMeter, every: u64) {
         self.meter = Some((meter, every.max(1)));
+    }
+
+    /// Stops measuring; returns the meter (and its period) to resume with later.
+    pub fn take_meter(&mut self) -> Option<(crate::measure::ErrorMeter, u64)> {
+        self.meter.take()
     }
 
     pub fn take_trace(&mut self) -> Option<String> {
@@ -565,6 +623,11 @@ impl Renderer {
         let t = Instant::now();
         let slot = &mut self.slots[s];
         let stitch_ranges = write_stitches(&mut slot.stitch, &plan.stitches)?;
+        write_records(&mut slot.records, terrain, input.camera, &plan)?;
+        let set = self
+            .sets
+            .as_ref()
+            .map_or(vk::DescriptorSet::null(), |t| t.sets[s]);
         let cmd = slot.cmd;
         sync::begin(gpu, cmd, true)?;
         slot.timestamps.begin(gpu, cmd);
@@ -577,6 +640,7 @@ impl Renderer {
             target: &slot.target,
             pool: self.pool.buffer.raw,
             stitch: slot.stitch.raw,
+            set,
             terrain,
             camera: input.camera,
             settings,
@@ -618,8 +682,21 @@ impl Renderer {
         let mut record = frame_record(&plan, counts, terrain.levels);
         if let Some((meter, every)) = &mut self.meter {
             if input.label.is_multiple_of(*every) {
-                let draws: Vec<(usize, u32)> =
-                    plan.draws.iter().map(|d| (d.tile, d.level)).collect();
+                let morphing = matches!(settings.rule(), LevelRule::Morph(..));
+                let draws: Vec<(usize, State)> = plan
+                    .draws
+                    .iter()
+                    .map(|d| {
+                        let corners = morphing.then_some(d.corners);
+                        (
+                            d.tile,
+                            State {
+                                level: d.level,
+                                corners,
+                            },
+                        )
+                    })
+                    .collect();
                 let m = meter.frame(terrain, input.camera, extent, &draws);
                 (record.max_error_px, record.pop_px) = (m.max_error_px, m.pop_px);
             }
@@ -757,24 +834,42 @@ impl Renderer {
         let bytes: u64 = plan
             .stitches
             .iter()
-            .map(|(_, s)| 4 * (s.vertices.len() + s.indices.len()) as u64)
+            .map(|(_, s)| 4 * s.indices.len() as u64)
             .sum();
-        let usage = vk::BufferUsageFlags::VERTEX_BUFFER | vk::BufferUsageFlags::INDEX_BUFFER;
-        let mut stitch = Buffer::new(gpu, BufferDesc::upload(bytes, usage), "static stitches")?;
-        let cmd = match self.commands.allocate(gpu, "static frame") {
-            Ok(c) => c,
-            Err(e) => {
-                stitch.destroy(gpu);
-                return Err(e.into());
-            }
-        };
-        let frame = StaticFrame {
-            cmd,
+        let mut frame = StaticFrame {
+            cmd: vk::CommandBuffer::null(),
             stitch: None,
+            records: None,
+            sets: None,
             record: FrameRecord::default(),
         };
         let result = (|| {
-            let ranges = write_stitches(&mut stitch, &plan.stitches)?;
+            let usage = vk::BufferUsageFlags::INDEX_BUFFER;
+            let stitch = frame.stitch.insert(Buffer::new(
+                gpu,
+                BufferDesc::upload(bytes.max(4), usage),
+                "static stitches",
+            )?);
+            let ranges = write_stitches(stitch, &plan.stitches)?;
+            let record_bytes = RECORD_BYTES * plan.draws.len().max(1) as u64;
+            let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
+            let records = frame.records.insert(Buffer::new(
+                gpu,
+                BufferDesc::upload(record_bytes, usage),
+                "static tile records",
+            )?);
+            write_records(records, terrain, camera, &plan)?;
+            let sets = frame.sets.insert(TerrainSets::new(
+                gpu,
+                &self.pipeline,
+                &self.pool.buffer,
+                &[records],
+                "static frame descriptor set",
+            )?);
+            let set = sets.sets[0];
+            let stitch = frame.stitch.as_ref().map_or(vk::Buffer::null(), |b| b.raw);
+            frame.cmd = self.commands.allocate(gpu, "static frame")?;
+            let cmd = frame.cmd;
             let slot = &self.slots[0];
             sync::begin(gpu, cmd, false)?;
             slot.timestamps.begin(gpu, cmd);
@@ -785,7 +880,8 @@ impl Renderer {
                 pipeline: &self.pipeline,
                 target: &slot.target,
                 pool: self.pool.buffer.raw,
-                stitch: stitch.raw,
+                stitch,
+                set,
                 terrain,
                 camera,
                 settings,
@@ -798,10 +894,6 @@ impl Renderer {
             sync::end(gpu, cmd)?;
             Ok::<_, FrameError>(counts)
         })();
-        let mut frame = StaticFrame {
-            stitch: Some(stitch),
-            ..frame
-        };
         match result {
             Ok(counts) => {
                 frame.record = frame_record(&plan, counts, terrain.levels);
@@ -827,14 +919,25 @@ impl Renderer {
 
     pub fn destroy_static(&self, gpu: &Gpu, frame: StaticFrame) {
         gpu.wait_idle();
-        self.commands.free(gpu, frame.cmd);
+        if frame.cmd != vk::CommandBuffer::null() {
+            self.commands.free(gpu, frame.cmd);
+        }
         if let Some(b) = frame.stitch {
             b.destroy(gpu);
+        }
+        if let Some(b) = frame.records {
+            b.destroy(gpu);
+        }
+        if let Some(s) = frame.sets {
+            s.destroy(gpu);
         }
     }
 
     pub fn destroy(self, gpu: &Gpu) {
         gpu.wait_idle();
+        if let Some(s) = self.sets {
+            s.destroy(gpu);
+        }
         for s in self.slots {
             s.destroy(gpu);
         }
@@ -892,7 +995,7 @@ fn terrain_costs(manager: &Manager) -> Vec<memory::TileCost> {
 }
 
 /// Bytes of stitch geometry a frame can need at most: every pair of neighbouring tiles, each
-/// side at its longest border (vertices of both sides, and a 4-index fan per triangle).
+/// side at its longest border (a 4-index fan per triangle, fewer triangles than vertices).
 fn stitch_bound(terrain: &Terrain) -> u64 {
     let longest = |t: usize, side: usize| {
         terrain.tiles[t]
@@ -907,7 +1010,7 @@ fn stitch_bound(terrain: &Terrain) -> u64 {
         for (side, (dx, dy)) in [(1usize, (1u32, 0u32)), (2, (0, 1))] {
             if let Some(j) = terrain.tile_index(a.tx + dx, a.ty + dy) {
                 let v = longest(i, side) + longest(j, (side + 2) % 4);
-                bytes += 4 * v + 16 * v.saturating_sub(2);
+                bytes += 16 * v;
             }
         }
     }
@@ -930,30 +1033,96 @@ fn staging_bound(manager: &Manager, upload_budget: u64) -> u64 {
     upload_budget.min(everything) + presence + step + padding
 }
 
-/// Writes this frame's stitches into `buffer`; returns per stitch (vertex byte offset, index
-/// byte offset, index count).
+/// Writes this frame's stitches (their pulled indices) into `buffer`; returns per stitch
+/// (first index, index count).
 fn write_stitches(
     buffer: &mut Buffer,
     stitches: &[(usize, Stitch)],
-) -> Result<Vec<(u64, u64, u32)>, FrameError> {
+) -> Result<Vec<(u32, u32)>, FrameError> {
     let mut ranges = Vec::with_capacity(stitches.len());
-    let mut at = 0usize;
+    let mut indices: Vec<u32> = Vec::new();
     for (_, s) in stitches {
-        let v = at;
-        let i = v + 4 * s.vertices.len();
-        let end = i + 4 * s.indices.len();
-        if !(buffer.write(v, bytemuck::cast_slice(&s.vertices))
-            && buffer.write(i, bytemuck::cast_slice(&s.indices)))
-        {
-            return Err(FrameError::Internal(format!(
-                "stitch geometry ({end} bytes) does not fit its buffer ({} bytes)",
-                buffer.size
-            )));
-        }
-        at = end;
-        ranges.push((v as u64, i as u64, s.indices.len() as u32));
+        ranges.push((indices.len() as u32, s.indices.len() as u32));
+        indices.extend(s.gpu_indices());
+    }
+    if !indices.is_empty() && !buffer.write(0, bytemuck::cast_slice(&indices)) {
+        return Err(FrameError::Internal(format!(
+            "stitch geometry ({} bytes) does not fit its buffer ({} bytes)",
+            4 * indices.len(),
+            buffer.size
+        )));
     }
     Ok(ranges)
+}
+
+/// Where the camera is for the shader: its tile (column, row of tiles) and its position
+/// relative to that tile's north-west corner. Positions are expressed relative to that tile,
+/// from integers, so a grid point shared by two tiles lands on the same f32 in both.
+fn camera_tile(terrain: &Terrain, camera: &Camera) -> ((f64, f64), DVec3) {
+    let (sx, sy) = terrain.spacing;
+    let cells = f64::from(tiles::mesh::TILE_CELLS);
+    let p = camera.position;
+    let tile = ((p.x / (cells * sx)).floor(), (-p.y / (cells * sy)).floor());
+    let relative = DVec3::new(p.x - tile.0 * cells * sx, p.y + tile.1 * cells * sy, p.z);
+    (tile, relative)
+}
+
+/// Writes the frame's tile records, one per draw in order (a draw's record is its index).
+fn write_records(
+    buffer: &mut Buffer,
+    terrain: &Terrain,
+    camera: &Camera,
+    plan: &Plan,
+) -> Result<(), FrameError> {
+    if plan.draws.len() > MAX_RECORDS {
+        return Err(FrameError::Internal(format!(
+            "{} tiles in view; at most {MAX_RECORDS} can be drawn in one frame",
+            plan.draws.len()
+        )));
+    }
+    let cells = f64::from(tiles::mesh::TILE_CELLS);
+    let (cam_tile, _) = camera_tile(terrain, camera);
+    let records: Vec<TileRecord> = plan
+        .draws
+        .iter()
+        .map(|d| {
+            let info = &terrain.tiles[d.tile];
+            let mut r = TileRecord::zeroed();
+            r.tile_offset = [
+                ((f64::from(info.tx) - cam_tile.0) * cells) as i32,
+                ((f64::from(info.ty) - cam_tile.1) * cells) as i32,
+            ];
+            r.height_base = info.header.height_base;
+            r.positions = (d.vertex_offset / 4) as u32;
+            r.corners = d.corners;
+            r.starts = [u32::MAX; 8];
+            r.level = d.level;
+            r.morph = d.morph_offset as u32;
+            let (mut start, mut morph) = (0u32, 0u32);
+            for (j, l) in info.levels.iter().enumerate().take(MAX_LEVELS) {
+                r.block_start[j] = start;
+                r.block_len[j] = l.block_len;
+                r.morph_start[j] = morph;
+                if j > 0 {
+                    r.starts[j - 1] = start;
+                }
+                if j < 8 {
+                    r.units[j] = l.morph_unit;
+                }
+                start += l.block_len;
+                morph += (j as u32 * l.block_len).div_ceil(4) * 4;
+            }
+            r
+        })
+        .collect();
+    if !records.is_empty() && !buffer.write(0, bytemuck::cast_slice(&records)) {
+        return Err(FrameError::Internal(format!(
+            "{} tile records do not fit their buffer ({} bytes)",
+            records.len(),
+            buffer.size
+        )));
+    }
+    Ok(())
 }
 
 /// What the terrain pass drew.
@@ -1007,7 +1176,8 @@ fn frame_record(plan: &Plan, counts: DrawCounts, levels: u32) -> FrameRecord {
 }
 
 /// The terrain pass of one frame: clear, one indexed fan draw per tile from the pool, then
-/// the stitches from the slot's stitch buffer.
+/// the stitches from the slot's stitch buffer; every vertex pulled by the shader with its
+/// tile's record.
 struct Pass<'a> {
     gpu: &'a Gpu,
     cmd: vk::CommandBuffer,
@@ -1015,45 +1185,61 @@ struct Pass<'a> {
     target: &'a Target,
     pool: vk::Buffer,
     stitch: vk::Buffer,
+    /// The pool and this frame's records.
+    set: vk::DescriptorSet,
     terrain: &'a Terrain,
     camera: &'a Camera,
     settings: &'a Settings,
     plan: &'a Plan,
-    stitch_ranges: &'a [(u64, u64, u32)],
+    stitch_ranges: &'a [(u32, u32)],
 }
 
 impl Pass<'_> {
     fn record(&self) -> DrawCounts {
         let (gpu, cmd) = (self.gpu, self.cmd);
         begin_rendering(self.gpu, self.cmd, self.target, self.settings.sky);
-        let pipeline = if self.settings.wireframe {
-            self.pipeline.wireframe.unwrap_or(self.pipeline.fill)
-        } else {
-            self.pipeline.fill
+        let pipeline = match (self.settings.wireframe, self.settings.morph_shader) {
+            (true, _) => self.pipeline.wireframe.unwrap_or(self.pipeline.fill),
+            (false, MorphShader::Branches) => self.pipeline.branches,
+            (false, MorphShader::ForwardDifferences) => self.pipeline.fill,
         };
+        let constants = self.constants();
         let mut counts = DrawCounts::default();
-        // SAFETY: recording inside dynamic rendering; the pool and stitch buffer outlive the
-        // frame, and every range drawn was written before (the manager's grants).
+        // SAFETY: recording inside dynamic rendering; the pool, the records and the stitch
+        // buffer outlive the frame, and every range drawn was written before (the manager's
+        // grants; records and stitches by this frame).
         unsafe {
             gpu.device
                 .cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, pipeline);
-            // One vertex buffer for every tile: draws address their chunk by vertexOffset.
-            gpu.device
-                .cmd_bind_vertex_buffers(cmd, 0, &[self.pool], &[0]);
+            gpu.device.cmd_bind_descriptor_sets(
+                cmd,
+                vk::PipelineBindPoint::GRAPHICS,
+                self.pipeline.layout,
+                0,
+                &[self.set],
+                &[],
+            );
+            gpu.device.cmd_push_constants(
+                cmd,
+                self.pipeline.layout,
+                vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT,
+                0,
+                bytemuck::bytes_of(&constants),
+            );
             let mut bound: Option<u32> = None;
-            for d in &self.plan.draws {
+            for (record, d) in self.plan.draws.iter().enumerate() {
                 if bound != Some(d.index_width) {
                     gpu.device
                         .cmd_bind_index_buffer(cmd, self.pool, 0, index_type(d.index_width));
                     bound = Some(d.index_width);
                 }
-                self.push(d.tile, d.level);
+                // The tile's local indices plus vertexOffset: the pulled index of its record.
                 gpu.device.cmd_draw_indexed(
                     cmd,
                     d.index_count,
                     1,
                     (d.index_offset / u64::from(d.index_width)) as u32,
-                    (d.vertex_offset / 4) as i32,
+                    pulled(record as u32, 0) as i32,
                     0,
                 );
                 let entry = &self.terrain.tiles[d.tile].levels[d.level as usize];
@@ -1062,15 +1248,9 @@ impl Pass<'_> {
             }
             if !self.settings.no_stitch && !self.plan.stitches.is_empty() {
                 gpu.device
-                    .cmd_bind_vertex_buffers(cmd, 0, &[self.stitch], &[0]);
-                gpu.device
                     .cmd_bind_index_buffer(cmd, self.stitch, 0, vk::IndexType::UINT32);
-                for ((draw, s), &(v, i, count)) in self.plan.stitches.iter().zip(self.stitch_ranges)
-                {
-                    let d = &self.plan.draws[*draw];
-                    self.push(d.tile, d.level);
-                    gpu.device
-                        .cmd_draw_indexed(cmd, count, 1, (i / 4) as u32, (v / 4) as i32, 0);
+                for ((_, s), &(first, count)) in self.plan.stitches.iter().zip(self.stitch_ranges) {
+                    gpu.device.cmd_draw_indexed(cmd, count, 1, first, 0, 0);
                     counts.stitch_triangles += u64::from(s.triangles);
                 }
             }
@@ -1079,36 +1259,17 @@ impl Pass<'_> {
         counts
     }
 
-    fn push(&self, tile: usize, level: u32) {
-        let c = self.constants(tile, level);
-        let stages = vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT;
-        // SAFETY: recording; the block matches the pipeline layout's push-constant range.
-        unsafe {
-            self.gpu.device.cmd_push_constants(
-                self.cmd,
-                self.pipeline.layout,
-                stages,
-                0,
-                bytemuck::bytes_of(&c),
-            );
-        }
-    }
-
-    /// Positions are expressed relative to the tile the camera is over, from integers, so a
-    /// grid point shared by two tiles lands on the same f32 in both (see the vertex shader).
-    fn constants(&self, tile: usize, level: u32) -> DrawConstants {
+    fn constants(&self) -> FrameConstants {
         let (sx, sy) = self.terrain.spacing;
-        let cells = f64::from(tiles::mesh::TILE_CELLS);
-        let p = self.camera.position;
-        let cam_tile = ((p.x / (cells * sx)).floor(), (-p.y / (cells * sy)).floor());
-        let cam_rel = DVec3::new(
-            p.x - cam_tile.0 * cells * sx,
-            p.y + cam_tile.1 * cells * sy,
-            p.z,
-        );
-        let info = &self.terrain.tiles[tile];
-        let colour = LEVEL_COLOURS[(level as usize).min(LEVEL_COLOURS.len() - 1)];
-        DrawConstants {
+        let (_, cam_rel) = camera_tile(self.terrain, self.camera);
+        let mut flags = 0;
+        if matches!(self.settings.rule(), LevelRule::Morph(..)) {
+            flags |= FLAG_GEOMORPH;
+        }
+        if self.settings.level_colours {
+            flags |= FLAG_LEVEL_COLOURS;
+        }
+        FrameConstants {
             view_proj: self.plan.view.view_proj.to_cols_array(),
             camera: [
                 cam_rel.x as f32,
@@ -1116,25 +1277,10 @@ impl Pass<'_> {
                 cam_rel.z as f32,
                 sx as f32,
             ],
-            tile_offset: [
-                ((f64::from(info.tx) - cam_tile.0) * cells) as i32,
-                ((f64::from(info.ty) - cam_tile.1) * cells) as i32,
-            ],
             spacing_y: sy as f32,
             height_step: self.terrain.height_step,
-            height_base: info.header.height_base,
-            level,
-            pad: [0; 2],
-            tint: [
-                colour[0],
-                colour[1],
-                colour[2],
-                if self.settings.level_colours {
-                    0.65
-                } else {
-                    0.0
-                },
-            ],
+            flags,
+            pad: 0,
         }
     }
 }

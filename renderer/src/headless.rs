@@ -178,6 +178,16 @@ fn camera_at(flight: &Flight, k: u64) -> (f64, Camera) {
 
 /// Flies the path once, untimed, so every tile it needs is resident.
 fn warm_up(gpu: &Gpu, flight: &Flight, renderer: &mut Renderer) -> Result<(), FlightError> {
+    // Not measured: the timed flight's first frame has nothing before it to pop from.
+    let meter = renderer.take_meter();
+    let result = warm_up_frames(gpu, flight, renderer);
+    if let Some((meter, every)) = meter {
+        renderer.measure_error(meter, every);
+    }
+    result
+}
+
+fn warm_up_frames(gpu: &Gpu, flight: &Flight, renderer: &mut Renderer) -> Result<(), FlightError> {
     for k in 0..flight.frames {
         let (t, camera) = camera_at(flight, k);
         let input = FrameInput {

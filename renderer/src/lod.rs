@@ -170,6 +170,46 @@ pub fn level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: Bound)
     level_for(tile, tolerable_error(view, camera, tile, tau, rule))
 }
 
+/// [`bound`] over all `n x n` sub-boxes, off-screen ones included: a bound that changes
+/// continuously with the camera (skipping sub-boxes as they leave the frustum would make it
+/// jump, and a jump in a geomorphing level is a pop).
+pub fn continuous_bound(view: &View, lo: DVec3, hi: DVec3, n: u32) -> f64 {
+    let n = n.max(1);
+    let step = (hi - lo) / f64::from(n);
+    (0..n * n)
+        .map(|i| {
+            let a = lo + DVec3::new(step.x * f64::from(i % n), step.y * f64::from(i / n), 0.0);
+            bound(view, a, DVec3::new(a.x + step.x, a.y + step.y, hi.z))
+        })
+        .fold(0.0, f64::max)
+}
+
+/// The continuous level a tile morphs to for `tau` (geomorphing): where its error, linear
+/// between its levels, projects to `tau` pixels under a bound continuous in the camera. Between
+/// levels `k` and `k + 1` with weight `f` the morphed surface is `(1 - f) S_k + f S_(k+1)` (the
+/// levels are nested), whose error is at most `(1 - f) e_k + f e_(k+1)`; a finer vertex at level
+/// `k` sits within half a morph unit of `S_k`, which the errors include.
+pub fn continuous_level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: Bound) -> f64 {
+    let s = match rule {
+        Bound::Guaranteed => {
+            let (lo, hi) = tile_box(tile);
+            continuous_bound(view, lo - camera, hi - camera, SPLIT)
+        }
+        Bound::Sampled => sampled_pixels_per_metre(view, tile.min - camera, tile.max - camera),
+    };
+    let r = if s.is_finite() && s > 0.0 {
+        tau / s
+    } else {
+        0.0
+    };
+    let errors: Vec<f32> = tile
+        .levels
+        .iter()
+        .map(|l| l.max_error.max(0.0) + 0.5 * l.morph_unit)
+        .collect();
+    crate::morph::continuous_level(&errors, r)
+}
+
 /// The coarsest level whose measured error is within `r` metres (the finest if none is).
 pub fn level_for(tile: &TileInfo, r: f64) -> u32 {
     tile.levels

@@ -10,7 +10,7 @@ use std::process::ExitCode;
 
 use anyhow::{bail, Context, Result};
 use clap::Parser;
-use renderer::frame::{MemoryOptions, Settings};
+use renderer::frame::{MemoryOptions, MorphShader, Settings};
 use renderer::headless::{fly, Flight, FlightResult};
 use renderer::log::{write_csv, RunInfo, Summary};
 use renderer::measure::ErrorMeter;
@@ -99,6 +99,14 @@ struct Cli {
     /// Jacobian sampled at the box's corners and nearest point (sampled; can exceed tau).
     #[arg(long, value_enum, default_value_t = LodBound::Guaranteed)]
     lod_bound: LodBound,
+    /// Discrete levels: no geomorphing (each tile at one level, heights unblended; levels
+    /// change in one frame, which pops).
+    #[arg(long)]
+    no_geomorph: bool,
+    /// The vertex shader that blends levels: forward-differences (clamped forward
+    /// differences and dot products, the paper's) or branches (the reference it beat).
+    #[arg(long, value_enum, default_value_t = MorphShaderArg::ForwardDifferences)]
+    morph_shader: MorphShaderArg,
     /// How tile levels travel: progressive (new blocks and one index array per refinement),
     /// per-level (each level from scratch) or whole-tile (every level at once, the old scheme).
     /// --draw-only uses whole-tile, so that every pre-recorded frame finds its levels.
@@ -231,6 +239,12 @@ fn error_meter(cli: &Cli, terrain: &Terrain, sources: &[PathBuf]) -> Result<Erro
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum MorphShaderArg {
+    ForwardDifferences,
+    Branches,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 enum LodBound {
     Guaranteed,
     Sampled,
@@ -299,6 +313,11 @@ fn run(cli: Cli) -> Result<ExitCode> {
         bound: match cli.lod_bound {
             LodBound::Guaranteed => renderer::lod::Bound::Guaranteed,
             LodBound::Sampled => renderer::lod::Bound::Sampled,
+        },
+        geomorph: !cli.no_geomorph,
+        morph_shader: match cli.morph_shader {
+            MorphShaderArg::ForwardDifferences => MorphShader::ForwardDifferences,
+            MorphShaderArg::Branches => MorphShader::Branches,
         },
     };
     if !(cli.tau.is_finite() && cli.tau > 0.0) {

@@ -1,15 +1,18 @@
 //! `vkterrain --measure-error`: the screen-space error and the pops a flight actually shows,
 //! measured on the CPU against the source DEM.
 //!
-//! Each drawn (tile, level) is rasterised once into a grid of the heights its triangles give
-//! at the tile's source samples (interpolated in each triangle, as the rasteriser does).
+//! Each drawn tile is rasterised into a grid of the heights its triangles give at the tile's
+//! source samples (interpolated in each triangle, as the rasteriser does), with its vertices
+//! geomorphed as the vertex shader does ([`crate::morph`], the shader's CPU mirror) when the
+//! frame morphs. Unmorphed levels are rasterised once and kept.
 //! - `max_error_px`: for every sample of every drawn tile, the drawn surface point and the
 //!   source sample are projected with the frame's camera; their distance on the image is that
 //!   sample's error. The frame's value is the largest.
-//! - `pop_px`: for every tile drawn in this frame and the previous one at different levels,
-//!   the surface point at each sample under the previous level and under the current one,
-//!   both projected with the *current* camera (so camera motion is factored out): the largest
-//!   distance is the frame's pop. A tile newly in view has no previous level: no pop.
+//! - `pop_px`: for every tile drawn in this frame and the previous one with a different LOD
+//!   state (level, or corner levels when morphing), the surface point at each sample under
+//!   the previous state and under the current one, both projected with the *current* camera
+//!   (so camera motion is factored out): the largest distance is the frame's pop. A tile newly
+//!   in view has no previous state: no pop.
 //!
 //! Samples where either point is behind the near plane or off the image are skipped (nothing
 //! is seen there).
@@ -23,6 +26,7 @@ use tiles::verify::raster_barycentric;
 use tiles::Grid;
 
 use crate::camera::Camera;
+use crate::morph;
 use crate::terrain::Terrain;
 
 /// The measures of one frame.
@@ -38,10 +42,21 @@ pub struct Measured {
 pub struct ErrorMeter {
     /// Per tile, 257 x 257 source heights (row 0 north), and the last real column / row.
     samples: Vec<(Vec<f32>, u32, u32)>,
-    /// Per (tile, level): the drawn surface's height at each sample (NaN where no triangle
-    /// covers it).
+    /// Per (tile, level), unmorphed: the drawn surface's height at each sample (NaN where no
+    /// triangle covers it).
     surfaces: HashMap<(usize, u32), Vec<f32>>,
-    previous: Option<HashMap<usize, u32>>,
+    /// The previous measured frame's state of each tile, and its surface when morphed.
+    previous: Option<HashMap<usize, Drawn>>,
+}
+
+/// A tile's state in a measured frame, and its surface when morphed (not cached).
+type Drawn = (State, Option<Vec<f32>>);
+
+/// What a tile's drawn surface depends on: its level, and its corner levels when morphing.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct State {
+    pub level: u32,
+    pub corners: Option<[f32; 4]>,
 }
 
 impl ErrorMeter {
@@ -70,7 +85,7 @@ impl ErrorMeter {
         })
     }
 
-    /// Measures a frame that drew `draws` (tile, level) seen by `camera` at `extent`; the
+    /// Measures a frame that drew `draws` (tile, state) seen by `camera` at `extent`; the
     /// previous call's draws are the previous frame's (call it on consecutive frames for
     /// `pop_px` to mean what it says).
     pub fn frame(
@@ -78,7 +93,7 @@ impl ErrorMeter {
         terrain: &Terrain,
         camera: &Camera,
         extent: (u32, u32),
-        draws: &[(usize, u32)],
+        draws: &[(usize, State)],
     ) -> Measured {
         let view = camera.view(extent.0, extent.1);
         let (w, h) = (f64::from(extent.0), f64::from(extent.1));
@@ -91,19 +106,31 @@ impl ErrorMeter {
             |a: (f64, f64), b: (f64, f64)| ((a.0 - b.0).powi(2) + (a.1 - b.1).powi(2)).sqrt();
         let mut error = 0.0f64;
         let mut pop = self.previous.as_ref().map(|_| 0.0f64);
-        for &(tile, level) in draws {
-            let before = self
-                .previous
-                .as_ref()
-                .and_then(|p| p.get(&tile).copied())
-                .filter(|&l| l != level);
-            for l in [Some(level), before].into_iter().flatten() {
+        let mut previous = self.previous.take().unwrap_or_default();
+        let mut current = HashMap::new();
+        for &(tile, state) in draws {
+            let before = previous.remove(&tile).filter(|(s, _)| *s != state);
+            let mut fetch = |s: State| {
+                if s.corners.is_some() {
+                    return None;
+                }
                 self.surfaces
-                    .entry((tile, l))
-                    .or_insert_with(|| surface(terrain, tile, l));
-            }
-            let now = &self.surfaces[&(tile, level)];
-            let then = before.map(|l| &self.surfaces[&(tile, l)]);
+                    .entry((tile, s.level))
+                    .or_insert_with(|| surface(terrain, tile, s));
+                Some(s.level)
+            };
+            let morphed_now = match fetch(state) {
+                Some(_) => None,
+                None => Some(surface(terrain, tile, state)),
+            };
+            let before = before.map(|(s, grid)| (fetch(s), grid));
+            let now = morphed_now
+                .as_ref()
+                .unwrap_or_else(|| &self.surfaces[&(tile, state.level)]);
+            let then = before.as_ref().and_then(|(level, grid)| match level {
+                Some(l) => self.surfaces.get(&(tile, *l)),
+                None => grid.as_ref(),
+            });
             let info = &terrain.tiles[tile];
             let (c0, r0) = (
                 f64::from(info.tx * TILE_CELLS),
@@ -135,8 +162,9 @@ impl ErrorMeter {
                     }
                 }
             }
+            current.insert(tile, (state, morphed_now));
         }
-        self.previous = Some(draws.iter().copied().collect());
+        self.previous = Some(current);
         Measured {
             max_error_px: error,
             pop_px: pop.unwrap_or(f64::NAN),
@@ -144,15 +172,35 @@ impl ErrorMeter {
     }
 }
 
-/// The heights one level of one tile draws at the tile's samples (NaN where none).
-fn surface(terrain: &Terrain, tile: usize, level: u32) -> Vec<f32> {
+/// The heights one tile draws at its samples in `state` (NaN where none): the level's
+/// triangles over its vertices, geomorphed when `state` has corner levels.
+fn surface(terrain: &Terrain, tile: usize, state: State) -> Vec<f32> {
     let mut grid = vec![f32::NAN; TILE_SIZE * TILE_SIZE];
     let info = &terrain.tiles[tile];
     let Ok(t) = terrain.set.tile(info.tx, info.ty) else {
         return grid;
     };
-    let vertices = t.vertices();
-    let Some(l) = t.level(level) else {
+    let mut vertices = t.vertices();
+    if let Some(corners) = state.corners {
+        let units: Vec<f32> = info.levels.iter().map(|l| l.morph_unit).collect();
+        let mut start = 0usize;
+        let mut offsets = Vec::with_capacity(morph::MAX_LEVELS);
+        for j in 0..=state.level {
+            let Some(block) = t.level(j) else { break };
+            let n = block.positions.len();
+            for i in 0..n {
+                let Some(v) = vertices.get_mut(start + i) else {
+                    break;
+                };
+                offsets.clear();
+                offsets.extend((0..j as usize).map(|k| block.morph[k * n + i]));
+                let l = morph::vertex_level(corners, v.0, v.1);
+                v.2 = morph::morphed_height(v.2, &offsets, &units, l);
+            }
+            start += n;
+        }
+    }
+    let Some(l) = t.level(state.level) else {
         return grid;
     };
     let (mx, my) = (info.header.mesh_max_x, info.header.mesh_max_y);

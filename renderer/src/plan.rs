@@ -11,7 +11,8 @@ use glam::DVec3;
 use memory::{Manager, Request, Stats};
 
 use crate::camera::{Camera, View};
-use crate::stitch::{stitch_side, Stitch};
+use crate::morph;
+use crate::stitch::{stitch_side, Side, Stitch};
 use crate::terrain::Terrain;
 use crate::{cull, lod};
 
@@ -24,16 +25,26 @@ pub enum LevelRule {
     Forced(u32),
     /// Every visible tile at its finest level (the baseline).
     Finest,
+    /// Geomorphing (paper, section 5): a continuous level per tile, the smallest whose
+    /// interpolated error projects to at most `tau` pixels under a bound that is continuous in
+    /// the camera ([`lod::continuous_level`]); corner levels shared by neighbours; each tile
+    /// drawn at the ceiling of its largest corner.
+    Morph(f64, lod::Bound),
 }
 
 /// One tile to draw, where its data sits in the pool.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Draw {
     pub tile: usize,
     pub wanted: u32,
     pub level: u32,
-    /// Pool byte offsets of block 0's positions and of the level's index array.
+    /// Continuous levels at the NW, NE, SW, SE corners (all `level` without geomorphing),
+    /// never above `level`, each shared with every drawn tile at that corner.
+    pub corners: [f32; 4],
+    /// Pool byte offsets of block 0's positions, of block 0's morph rows and of the level's
+    /// index array.
     pub vertex_offset: u64,
+    pub morph_offset: u64,
     pub index_offset: u64,
     /// 2 or 4 bytes.
     pub index_width: u32,
@@ -86,13 +97,61 @@ pub fn plan(
     let cpu_cull_ms = ms(t);
 
     let t = Instant::now();
-    let requests: Vec<Request> = visible
-        .iter()
-        .map(|&i| Request {
-            tile: i as u32,
-            wanted: wanted_level(terrain, i, &view, camera.position, rule),
-        })
-        .collect();
+    let morphing = matches!(rule, LevelRule::Morph(..));
+    let mut corner_grid = Vec::new();
+    let requests: Vec<Request> = if let LevelRule::Morph(tau, bound) = rule {
+        // The visible tiles and their neighbours: a tile leaving the view keeps shaping its
+        // visible neighbours' corners until it is no longer next to any, so no corner jumps.
+        let mut near: Vec<usize> = visible
+            .iter()
+            .flat_map(|&i| {
+                let t = &terrain.tiles[i];
+                (0..9).filter_map(move |n| {
+                    let (x, y) = (
+                        (t.tx + n % 3).checked_sub(1)?,
+                        (t.ty + n / 3).checked_sub(1)?,
+                    );
+                    terrain.tile_index(x, y)
+                })
+            })
+            .collect();
+        near.sort_unstable();
+        near.dedup();
+        let levels: HashMap<usize, f32> = near
+            .iter()
+            .map(|&i| {
+                let l =
+                    lod::continuous_level(&view, camera.position, &terrain.tiles[i], tau, bound);
+                (i, l as f32)
+            })
+            .collect();
+        corner_grid = morph::corner_levels(terrain.tiles_x, terrain.tiles_y, |tx, ty| {
+            terrain
+                .tile_index(tx, ty)
+                .and_then(|i| levels.get(&i).copied())
+        });
+        let finest = terrain.levels - 1;
+        visible
+            .iter()
+            .map(|&i| {
+                let t = &terrain.tiles[i];
+                let c = morph::tile_corners(&corner_grid, terrain.tiles_x, t.tx, t.ty);
+                let top = c.iter().fold(0.0f32, |a, &b| a.max(b));
+                Request {
+                    tile: i as u32,
+                    wanted: (top.ceil() as u32).min(finest),
+                }
+            })
+            .collect()
+    } else {
+        visible
+            .iter()
+            .map(|&i| Request {
+                tile: i as u32,
+                wanted: wanted_level(terrain, i, &view, camera.position, rule),
+            })
+            .collect()
+    };
     let cpu_lod_ms = ms(t);
 
     let t = Instant::now();
@@ -106,17 +165,23 @@ pub fn plan(
                 tile: g.tile as usize,
                 wanted: g.wanted,
                 level,
+                corners: [level as f32; 4],
                 vertex_offset: g.vertex_offset,
+                morph_offset: g.morph_offset,
                 index_offset: g.index_offset,
                 index_width: g.index_width,
                 index_count: terrain.tiles[g.tile as usize].levels[level as usize].index_count,
             })
         })
         .collect();
+    let mut draws = draws;
+    if morphing {
+        granted_corners(terrain, &corner_grid, &mut draws);
+    }
     let cpu_residency_ms = ms(t);
 
     let t = Instant::now();
-    let stitches = stitch_granted(terrain, &draws)?;
+    let stitches = stitch_granted(terrain, &draws, morphing)?;
     let cpu_stitch_ms = ms(t);
 
     Ok(Plan {
@@ -158,17 +223,51 @@ fn wanted_level(terrain: &Terrain, i: usize, view: &View, camera: DVec3, rule: L
     match rule {
         LevelRule::Finest => finest,
         LevelRule::Forced(l) => l.min(finest),
-        LevelRule::Tau(tau, bound) => lod::level(view, camera, tile, tau, bound).min(finest),
+        LevelRule::Tau(tau, bound) | LevelRule::Morph(tau, bound) => {
+            lod::level(view, camera, tile, tau, bound).min(finest)
+        }
+    }
+}
+
+/// Each draw's corner levels: the shared corner values of `wanted` (the largest continuous
+/// level of the visible tiles at each corner), lowered where a tile at that corner is drawn
+/// coarser than that (its data is not resident yet), so no tile morphs past its level and the
+/// corners stay shared.
+fn granted_corners(terrain: &Terrain, wanted: &[f32], draws: &mut [Draw]) {
+    let mut cap = vec![f32::INFINITY; wanted.len()];
+    let w = terrain.tiles_x as usize + 1;
+    let corners_of = |tile: usize| {
+        let t = &terrain.tiles[tile];
+        let (x, y) = (t.tx as usize, t.ty as usize);
+        [
+            y * w + x,
+            y * w + x + 1,
+            (y + 1) * w + x,
+            (y + 1) * w + x + 1,
+        ]
+    };
+    for d in draws.iter() {
+        for c in corners_of(d.tile) {
+            cap[c] = cap[c].min(d.level as f32);
+        }
+    }
+    for d in draws.iter_mut() {
+        d.corners = corners_of(d.tile).map(|c| wanted[c].min(cap[c]));
     }
 }
 
 /// Stitches between drawn neighbours at their granted levels, each pair once (from the tile
-/// west or north of the seam).
+/// west or north of the seam); `morph` as in [`stitch_side`]. A draw's record is its index.
 pub fn stitch_granted(
     terrain: &Terrain,
     draws: &[Draw],
+    morph: bool,
 ) -> Result<Vec<(usize, Stitch)>, BorderMismatch> {
-    let level_of: HashMap<usize, u32> = draws.iter().map(|d| (d.tile, d.level)).collect();
+    let level_of: HashMap<usize, (u32, u32)> = draws
+        .iter()
+        .enumerate()
+        .map(|(k, d)| (d.tile, (d.level, k as u32)))
+        .collect();
     let mut stitches = Vec::new();
     for (k, d) in draws.iter().enumerate() {
         let a = &terrain.tiles[d.tile];
@@ -177,11 +276,21 @@ pub fn stitch_granted(
             let Some(j) = terrain.tile_index(a.tx + dx, a.ty + dy) else {
                 continue;
             };
-            let Some(&level_b) = level_of.get(&j) else {
+            let Some(&(level_b, record_b)) = level_of.get(&j) else {
                 continue;
             };
             let b = &terrain.tiles[j];
-            if !stitch_side(&mut s, a, d.level, b, level_b, side) {
+            let mine = Side {
+                tile: a,
+                level: d.level,
+                record: k as u32,
+            };
+            let theirs = Side {
+                tile: b,
+                level: level_b,
+                record: record_b,
+            };
+            if !stitch_side(&mut s, mine, theirs, side, morph) {
                 return Err(BorderMismatch {
                     a: (a.tx, a.ty),
                     b: (b.tx, b.ty),

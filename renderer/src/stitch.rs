@@ -9,6 +9,13 @@
 //! coordinates relative to the camera's tile, so a neighbour's vertex re-expressed in A's frame
 //! lands on exactly the position the neighbour draws it at. The corner where four tiles meet
 //! is a vertex of all four, at the same position, so it needs no extra triangle.
+//!
+//! With geomorphing a border vertex's height depends on its own tile's coarser levels along
+//! that border, which differ between the two tiles, so a vertex both tiles have may sit at two
+//! heights. Every vertex of a stitch is therefore drawn as its own tile draws it (the shader
+//! pulls it with that tile's record, see [`pulled`]), and morphing stitches keep the triangles
+//! at shared vertices: they are vertical slivers in the plane of the edge that close the gap
+//! between the two morphed polylines (zero area in plan view, as before).
 
 use tiles::pack::{pack, unpack};
 
@@ -17,12 +24,48 @@ use crate::terrain::TileInfo;
 /// Restart index of the stitch index arrays.
 pub const RESTART: u32 = u32::MAX;
 
-/// Stitch geometry for one tile: packed vertices in the tile's frame and fan indices.
+/// Stitch geometry for one tile: packed vertices in the tile's frame, the same vertices as the
+/// shader pulls them, and fan indices into `vertices`.
 #[derive(Default, Debug, Clone, PartialEq)]
 pub struct Stitch {
     pub vertices: Vec<u32>,
+    /// Per vertex: `pulled(record, index)` of the tile it belongs to.
+    pub pulled: Vec<u32>,
     pub indices: Vec<u32>,
     pub triangles: u32,
+}
+
+/// Bits of a pulled vertex index that hold the vertex's index in its tile (257 x 257 < 2^17).
+pub const LOCAL_BITS: u32 = 17;
+
+/// Draw records a frame may have: the record goes in the top bits of a pulled index, which
+/// the tile draws set through the (signed) vertexOffset.
+pub const MAX_RECORDS: usize = 1 << (31 - LOCAL_BITS);
+
+/// The index the vertex shader decodes: the draw record and the vertex's index in its tile.
+pub fn pulled(record: u32, index: u32) -> u32 {
+    (record << LOCAL_BITS) | index
+}
+
+/// One side of a seam: a drawn tile, its level and its draw record.
+#[derive(Clone, Copy)]
+pub struct Side<'a> {
+    pub tile: &'a TileInfo,
+    pub level: u32,
+    pub record: u32,
+}
+
+impl Stitch {
+    /// The index array as the GPU draws it: each vertex replaced by its pulled index.
+    pub fn gpu_indices(&self) -> impl Iterator<Item = u32> + '_ {
+        self.indices.iter().map(|&i| {
+            if i == RESTART {
+                RESTART
+            } else {
+                self.pulled[i as usize]
+            }
+        })
+    }
 }
 
 /// Along-side coordinate of a packed vertex on side `k` (N/S: x, E/W: y).
@@ -52,23 +95,18 @@ fn rebase(p: u32, k: usize, from: &TileInfo, to: &TileInfo) -> Option<u32> {
     ok.then(|| pack(x as u32, y as u32, code as u16))
 }
 
-/// Adds the triangles between tile `a` (at `level_a`) and its neighbour `b` across side `k`
-/// of `a` (at `level_b`). Returns false if the borders do not line up (a broken file).
-pub fn stitch_side(
-    out: &mut Stitch,
-    a: &TileInfo,
-    level_a: u32,
-    b: &TileInfo,
-    level_b: u32,
-    k: usize,
-) -> bool {
-    let mine = &a.borders[level_a as usize][k];
-    let theirs: Option<Vec<u32>> = b.borders[level_b as usize][(k + 2) % 4]
+/// Adds the triangles between tile `a` and its neighbour `b` across side `k` of `a`. With
+/// `morph`, vertices both borders share are joined too (see the module header). Returns false
+/// if the borders do not line up (a broken file).
+pub fn stitch_side(out: &mut Stitch, a: Side, b: Side, k: usize, morph: bool) -> bool {
+    let mine = &a.tile.borders[a.level as usize][k];
+    let far = (k + 2) % 4;
+    let theirs: Option<Vec<u32>> = b.tile.borders[b.level as usize][far]
         .iter()
-        .map(|&p| rebase(p, k, b, a))
+        .map(|&p| rebase(p, k, b.tile, a.tile))
         .collect();
     let Some(theirs) = theirs else { return false };
-    if *mine == theirs {
+    if *mine == theirs && !morph {
         return true;
     }
     if mine.len() < 2
@@ -81,12 +119,18 @@ pub fn stitch_side(
     let base = out.vertices.len() as u32;
     out.vertices.extend_from_slice(mine);
     out.vertices.extend_from_slice(&theirs);
+    for (side, s) in [(a, k), (b, far)] {
+        let indices = &side.tile.border_indices[side.level as usize][s];
+        out.pulled
+            .extend(indices.iter().map(|&i| pulled(side.record, i)));
+    }
     let q0 = base + mine.len() as u32;
     let (mut i, mut j) = (0usize, 0usize);
     let push = |out: &mut Stitch, t: [u32; 3], v: &[u32]| {
-        // Two equal vertices make a triangle with no area even in 3D: skip it.
+        // Two equal vertices make a triangle with no area even in 3D, unless morphing may
+        // move the two tiles' copies apart: skip it then.
         let p = t.map(|i| v[(i - base) as usize]);
-        if p[0] != p[1] && p[1] != p[2] && p[0] != p[2] {
+        if morph || (p[0] != p[1] && p[1] != p[2] && p[0] != p[2]) {
             out.indices.extend_from_slice(&[t[0], t[1], t[2], RESTART]);
             out.triangles += 1;
         }

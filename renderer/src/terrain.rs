@@ -21,6 +21,8 @@ pub struct TileInfo {
     pub max: DVec3,
     /// Per level, per side (N, E, S, W): the packed border vertices in order along the side.
     pub borders: Vec<[Vec<u32>; 4]>,
+    /// The same vertices as indices into the tile's vertex array (blocks 0.. in order).
+    pub border_indices: Vec<[Vec<u32>; 4]>,
     heights: [f32; HEIGHT_CELLS * HEIGHT_CELLS],
 }
 
@@ -69,10 +71,15 @@ impl Terrain {
                         packed.extend_from_slice(l.positions);
                     }
                 }
-                let borders = (0..h.levels)
+                let border_indices: Vec<[Vec<u32>; 4]> = (0..h.levels)
                     .filter_map(|i| tile.level(i))
-                    .map(|l| {
-                        l.border
+                    .map(|l| l.border.map(|side| side.to_vec()))
+                    .collect();
+                let borders = border_indices
+                    .iter()
+                    .map(|sides| {
+                        sides
+                            .clone()
                             .map(|side| side.iter().map(|&v| packed[v as usize]).collect())
                     })
                     .collect();
@@ -92,6 +99,7 @@ impl Terrain {
                     min,
                     max,
                     borders,
+                    border_indices,
                     heights,
                 });
             }

@@ -410,6 +410,7 @@ impl ApplicationHandler for App<'_> {
                     KeyCode::Equal | KeyCode::NumpadAdd => s.tau = (s.tau * 2.0).min(64.0),
                     KeyCode::Minus | KeyCode::NumpadSubtract => s.tau = (s.tau / 2.0).max(0.25),
                     KeyCode::KeyL => s.level_colours = !s.level_colours,
+                    KeyCode::KeyG => s.geomorph = !s.geomorph,
                     KeyCode::F12 => self.screenshot = true,
                     _ => {}
                 }

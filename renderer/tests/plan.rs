@@ -141,7 +141,7 @@ fn tight_budget_draws_what_is_resident_and_stitches_granted_levels() {
             coarser += u64::from(d.level < d.wanted);
         }
         assert_eq!(coarser, p.stats.tiles_coarser, "frame {f}");
-        let granted = stitch_granted(&terrain, &p.draws).expect("stitch");
+        let granted = stitch_granted(&terrain, &p.draws, false).expect("stitch");
         assert_eq!(granted, p.stitches, "frame {f}");
         if coarser > 0 {
             coarser_frames += 1;
@@ -153,7 +153,7 @@ fn tight_budget_draws_what_is_resident_and_stitches_granted_levels() {
                     ..*d
                 })
                 .collect();
-            if stitch_granted(&terrain, &wanted).expect("stitch") != p.stitches {
+            if stitch_granted(&terrain, &wanted, false).expect("stitch") != p.stitches {
                 seams_differ += 1;
             }
         }
@@ -186,7 +186,7 @@ fn stitch_edges(s: &renderer::stitch::Stitch) -> std::collections::HashSet<(u32,
 /// the Puget set at every pair of levels. Dropping one triangle breaks it (the control).
 #[test]
 fn stitches_close_every_seam_at_every_level_pair() {
-    use renderer::stitch::{stitch_side, Stitch};
+    use renderer::stitch::{stitch_side, Side, Stitch, LOCAL_BITS};
     use tiles::pack::unpack;
     let (_dir, terrain) = puget();
     let mut checked = 0;
@@ -197,10 +197,46 @@ fn stitches_close_every_seam_at_every_level_pair() {
                 continue;
             };
             let b = &terrain.tiles[j];
-            for la in 0..terrain.levels {
-                for lb in 0..terrain.levels {
+            for (la, lb, morph) in (0..terrain.levels).flat_map(|la| {
+                (0..terrain.levels).flat_map(move |lb| [(la, lb, false), (la, lb, true)])
+            }) {
+                {
                     let mut s = Stitch::default();
-                    assert!(stitch_side(&mut s, a, la, b, lb, k), "borders differ");
+                    let mine = Side {
+                        tile: a,
+                        level: la,
+                        record: 0,
+                    };
+                    let theirs = Side {
+                        tile: b,
+                        level: lb,
+                        record: 1,
+                    };
+                    assert!(
+                        stitch_side(&mut s, mine, theirs, k, morph),
+                        "borders differ"
+                    );
+                    // Each vertex is pulled from its own tile: a's first, then b's, each the
+                    // border vertex it stands for.
+                    let n = a.borders[la as usize][k].len();
+                    assert_eq!(s.pulled.len(), s.vertices.len());
+                    for (i, &p) in s.pulled.iter().enumerate() {
+                        let (record, local) = (p >> LOCAL_BITS, p & ((1 << LOCAL_BITS) - 1));
+                        let (tile, level, side, at) = if i < n {
+                            (a, la, k, i)
+                        } else {
+                            (b, lb, (k + 2) % 4, i - n)
+                        };
+                        assert_eq!(record, u32::from(i >= n));
+                        assert_eq!(tile.border_indices[level as usize][side][at], local);
+                    }
+                    if morph {
+                        // Morphing keeps the triangles at shared vertices: one per segment
+                        // of either polyline.
+                        let m = a.borders[la as usize][k].len()
+                            + b.borders[lb as usize][(k + 2) % 4].len();
+                        assert_eq!(s.triangles as usize, m - 2, "levels {la}/{lb}");
+                    }
                     let on_edge = |p: u32| {
                         let (x, y, _) = unpack(p);
                         if k == 1 {

@@ -23,6 +23,8 @@ fn settings(forced_level: Option<u32>) -> Settings {
         sky: [0.5, 0.6, 0.9],
         no_stitch: false,
         bound: Default::default(),
+        geomorph: true,
+        morph_shader: Default::default(),
     }
 }
 

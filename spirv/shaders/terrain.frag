@@ -5,7 +5,8 @@
 
 layout(location = 0) in vec3 relative;
 layout(location = 1) in float height;
-layout(location = 2) in vec4 tint;
+layout(location = 2) in float level;
+layout(location = 3) flat in uint flags;
 
 layout(location = 0) out vec4 colour;
 
@@ -23,6 +24,18 @@ vec3 ground(float h) {
     return colours[5];
 }
 
+// Debug colours of levels 0.. (coarse blue to fine red), blended at fractional levels.
+vec3 level_colour(float l) {
+    const vec3 colours[10] = vec3[](
+        vec3(0.10, 0.20, 0.90), vec3(0.10, 0.55, 0.95), vec3(0.10, 0.85, 0.85),
+        vec3(0.15, 0.80, 0.30), vec3(0.60, 0.90, 0.10), vec3(0.95, 0.90, 0.10),
+        vec3(0.98, 0.60, 0.10), vec3(0.95, 0.30, 0.10), vec3(0.85, 0.10, 0.10),
+        vec3(0.60, 0.05, 0.40));
+    float c = clamp(l, 0.0, 9.0);
+    int k = min(int(floor(c)), 8);
+    return mix(colours[k], colours[k + 1], c - float(k));
+}
+
 void main() {
     vec3 n = normalize(cross(dFdx(relative), dFdy(relative)));
     if (n.z < 0.0) n = -n;
@@ -30,6 +43,7 @@ void main() {
     if (any(isnan(n))) n = vec3(0.0, 0.0, 1.0);
     vec3 sun = normalize(vec3(-0.45, 0.55, 0.70));
     float light = 0.25 + 0.75 * max(dot(n, sun), 0.0);
-    vec3 base = mix(ground(height), tint.rgb, tint.a);
+    vec3 base = ground(height);
+    if ((flags & 2u) != 0u) base = mix(base, level_colour(level), 0.65);
     colour = vec4(base * light, 1.0);
 }

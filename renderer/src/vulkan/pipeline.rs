@@ -1,5 +1,7 @@
-//! The terrain pipeline: packed 2 x u16 vertices, triangle fans with primitive restart, one
-//! push-constant block per draw, reversed-Z depth, dynamic rendering.
+//! The terrain pipeline: vertices pulled from the tile pool (a storage buffer) with each draw's
+//! tile record (another), triangle fans with primitive restart, one push-constant block per
+//! frame, reversed-Z depth, dynamic rendering. Two vertex shaders: geomorphing by forward
+//! differences (the default) and the branching reference.
 
 use std::ffi::CStr;
 
@@ -7,12 +9,16 @@ use ash::vk;
 
 use super::{Gpu, VkResult};
 
-/// Size of the per-draw push constants (the guaranteed minimum limit).
-pub const PUSH_CONSTANT_BYTES: u32 = 128;
+/// Size of the per-frame push constants.
+pub const PUSH_CONSTANT_BYTES: u32 = 96;
 
 pub struct TerrainPipeline {
+    /// Binding 0: the tile pool; binding 1: the frame's tile records (both storage buffers).
+    pub set_layout: vk::DescriptorSetLayout,
     pub layout: vk::PipelineLayout,
     pub fill: vk::Pipeline,
+    /// The same with the branching morph shader (`--morph-shader branches`).
+    pub branches: vk::Pipeline,
     /// Present when the device supports `fillModeNonSolid`.
     pub wireframe: Option<vk::Pipeline>,
 }
@@ -30,11 +36,33 @@ impl TerrainPipeline {
         let ranges = [vk::PushConstantRange::default()
             .stage_flags(vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT)
             .size(PUSH_CONSTANT_BYTES)];
-        let layout_info = vk::PipelineLayoutCreateInfo::default().push_constant_ranges(&ranges);
+        let bindings = [0, 1].map(|b| {
+            vk::DescriptorSetLayoutBinding::default()
+                .binding(b)
+                .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                .descriptor_count(1)
+                .stage_flags(vk::ShaderStageFlags::VERTEX)
+        });
+        let set_info = vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings);
         // SAFETY: valid create info.
-        let layout = unsafe { gpu.device.create_pipeline_layout(&layout_info, None) }?;
+        let set_layout = unsafe { gpu.device.create_descriptor_set_layout(&set_info, None) }?;
+        gpu.name(set_layout, "terrain descriptor set layout");
+        let set_layouts = [set_layout];
+        let layout_info = vk::PipelineLayoutCreateInfo::default()
+            .set_layouts(&set_layouts)
+            .push_constant_ranges(&ranges);
+        // SAFETY: valid create info.
+        let layout = match unsafe { gpu.device.create_pipeline_layout(&layout_info, None) } {
+            Ok(l) => l,
+            Err(e) => {
+                // SAFETY: unused.
+                unsafe { gpu.device.destroy_descriptor_set_layout(set_layout, None) };
+                return Err(e.into());
+            }
+        };
         gpu.name(layout, "terrain pipeline layout");
         let vert = shader(gpu, spirv::TERRAIN_VERT, "terrain.vert")?;
+        let vert_branches = shader(gpu, spirv::TERRAIN_VERT_BRANCHES, "terrain.vert (branches)")?;
         let frag = shader(gpu, spirv::TERRAIN_FRAG, "terrain.frag")?;
         let fill = Self::build(
             gpu,
@@ -45,6 +73,16 @@ impl TerrainPipeline {
             depth,
             vk::PolygonMode::FILL,
             "terrain (fill)",
+        );
+        let branches = Self::build(
+            gpu,
+            layout,
+            vert_branches,
+            frag,
+            color,
+            depth,
+            vk::PolygonMode::FILL,
+            "terrain (fill, branching morph)",
         );
         let wireframe = if gpu.wireframe_supported {
             Some(Self::build(
@@ -63,13 +101,17 @@ impl TerrainPipeline {
         // SAFETY: modules are only needed during pipeline creation.
         unsafe {
             gpu.device.destroy_shader_module(vert, None);
+            gpu.device.destroy_shader_module(vert_branches, None);
             gpu.device.destroy_shader_module(frag, None);
         }
         let fill = fill?;
+        let branches = branches?;
         let wireframe = wireframe.transpose()?;
         Ok(TerrainPipeline {
+            set_layout,
             layout,
             fill,
+            branches,
             wireframe,
         })
     }
@@ -96,18 +138,8 @@ impl TerrainPipeline {
                 .module(frag)
                 .name(entry),
         ];
-        let bindings = [vk::VertexInputBindingDescription::default()
-            .binding(0)
-            .stride(4)
-            .input_rate(vk::VertexInputRate::VERTEX)];
-        let attributes = [vk::VertexInputAttributeDescription::default()
-            .location(0)
-            .binding(0)
-            .format(vk::Format::R16G16_UINT)
-            .offset(0)];
-        let vertex_input = vk::PipelineVertexInputStateCreateInfo::default()
-            .vertex_binding_descriptions(&bindings)
-            .vertex_attribute_descriptions(&attributes);
+        // No vertex input: the shader pulls its vertices from the pool.
+        let vertex_input = vk::PipelineVertexInputStateCreateInfo::default();
         // Paper, section 4: recursive fans joined by primitive restart, one draw per tile.
         let assembly = vk::PipelineInputAssemblyStateCreateInfo::default()
             .topology(vk::PrimitiveTopology::TRIANGLE_FAN)
@@ -165,10 +197,85 @@ impl TerrainPipeline {
         // SAFETY: no command buffer in flight uses them.
         unsafe {
             gpu.device.destroy_pipeline(self.fill, None);
+            gpu.device.destroy_pipeline(self.branches, None);
             if let Some(w) = self.wireframe {
                 gpu.device.destroy_pipeline(w, None);
             }
             gpu.device.destroy_pipeline_layout(self.layout, None);
+            gpu.device
+                .destroy_descriptor_set_layout(self.set_layout, None);
         }
+    }
+}
+
+/// Descriptor sets of the terrain pipeline's layout, from a pool of their own.
+pub struct TerrainSets {
+    pool: vk::DescriptorPool,
+    pub sets: Vec<vk::DescriptorSet>,
+}
+
+impl TerrainSets {
+    /// `count` sets, each pointing at the tile pool and at its own records buffer.
+    pub fn new(
+        gpu: &Gpu,
+        pipeline: &TerrainPipeline,
+        tile_pool: &super::Buffer,
+        records: &[&super::Buffer],
+        name: &str,
+    ) -> VkResult<TerrainSets> {
+        let count = records.len().max(1) as u32;
+        let sizes = [vk::DescriptorPoolSize::default()
+            .ty(vk::DescriptorType::STORAGE_BUFFER)
+            .descriptor_count(2 * count)];
+        let info = vk::DescriptorPoolCreateInfo::default()
+            .max_sets(count)
+            .pool_sizes(&sizes);
+        // SAFETY: valid create info.
+        let pool = unsafe { gpu.device.create_descriptor_pool(&info, None) }?;
+        gpu.name(pool, name);
+        let layouts = vec![pipeline.set_layout; records.len()];
+        let alloc = vk::DescriptorSetAllocateInfo::default()
+            .descriptor_pool(pool)
+            .set_layouts(&layouts);
+        // SAFETY: the pool has room for these sets.
+        let sets = match unsafe { gpu.device.allocate_descriptor_sets(&alloc) } {
+            Ok(s) => s,
+            Err(e) => {
+                // SAFETY: nothing allocated from it.
+                unsafe { gpu.device.destroy_descriptor_pool(pool, None) };
+                return Err(e.into());
+            }
+        };
+        let range = tile_pool
+            .size
+            .min(u64::from(gpu.properties.limits.max_storage_buffer_range));
+        for (&set, r) in sets.iter().zip(records) {
+            let pool_info = [vk::DescriptorBufferInfo::default()
+                .buffer(tile_pool.raw)
+                .range(range)];
+            let record_info = [vk::DescriptorBufferInfo::default()
+                .buffer(r.raw)
+                .range(vk::WHOLE_SIZE)];
+            let writes = [
+                vk::WriteDescriptorSet::default()
+                    .dst_set(set)
+                    .dst_binding(0)
+                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .buffer_info(&pool_info),
+                vk::WriteDescriptorSet::default()
+                    .dst_set(set)
+                    .dst_binding(1)
+                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .buffer_info(&record_info),
+            ];
+            // SAFETY: the set is not in use; the buffers are live.
+            unsafe { gpu.device.update_descriptor_sets(&writes, &[]) };
+        }
+        Ok(TerrainSets { pool, sets })
+    }
+
+    pub fn destroy(self, gpu: &Gpu) {
+        // SAFETY: no command buffer in flight uses the sets.
+        unsafe { gpu.device.destroy_descriptor_pool(self.pool, None) };
     }
 }
