@@ -108,18 +108,48 @@ pub const SPLIT: u32 = 4;
 /// corner is off screen, as for tiles under and beside the camera.
 pub fn subdivided_bound(view: &View, lo: DVec3, hi: DVec3, n: u32) -> f64 {
     let planes = view.frustum();
+    sub_boxes(lo, hi, n)
+        .filter(|&(a, b)| !crate::cull::box_outside(&planes, a, b))
+        .map(|(a, b)| bound(view, a, b))
+        .fold(0.0, f64::max)
+}
+
+/// The `n x n` sub-boxes of `lo..hi`, split in x and y (each spans the whole height).
+fn sub_boxes(lo: DVec3, hi: DVec3, n: u32) -> impl Iterator<Item = (DVec3, DVec3)> {
     let n = n.max(1);
     let step = (hi - lo) / f64::from(n);
-    let mut worst = 0.0f64;
-    for i in 0..n * n {
+    (0..n * n).map(move |i| {
         let a = lo + DVec3::new(step.x * f64::from(i % n), step.y * f64::from(i / n), 0.0);
-        let b = DVec3::new(a.x + step.x, a.y + step.y, hi.z);
-        if crate::cull::box_outside(&planes, a, b) {
-            continue;
+        (a, DVec3::new(a.x + step.x, a.y + step.y, hi.z))
+    })
+}
+
+/// `|J z|` over a tile under `rule`, the guaranteed rule splitting its box with `split` (one of
+/// [`subdivided_bound`] and [`continuous_bound`]).
+fn tile_bound(
+    view: &View,
+    camera: DVec3,
+    tile: &TileInfo,
+    rule: Bound,
+    split: fn(&View, DVec3, DVec3, u32) -> f64,
+) -> f64 {
+    match rule {
+        Bound::Guaranteed => {
+            let (lo, hi) = tile_box(tile);
+            split(view, lo - camera, hi - camera, SPLIT)
         }
-        worst = worst.max(bound(view, a, b));
+        Bound::Sampled => sampled_pixels_per_metre(view, tile.min - camera, tile.max - camera),
     }
-    worst
+}
+
+/// The vertical error that projects to `tau` pixels at `s` pixels per metre (0, the finest
+/// level, for a degenerate bound).
+fn error_for(s: f64, tau: f64) -> f64 {
+    if s.is_finite() && s > 0.0 {
+        tau / s
+    } else {
+        0.0
+    }
 }
 
 /// The previous rule: `|J z|` at the vertex box's 8 corners and at its point nearest the
@@ -141,18 +171,7 @@ pub fn sampled_pixels_per_metre(view: &View, lo: DVec3, hi: DVec3) -> f64 {
 /// The largest vertical error, metres, that projects to at most `tau` pixels anywhere on the
 /// tile (0 when the camera is in or at the tile's box: the finest level).
 pub fn tolerable_error(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: Bound) -> f64 {
-    let s = match rule {
-        Bound::Guaranteed => {
-            let (lo, hi) = tile_box(tile);
-            subdivided_bound(view, lo - camera, hi - camera, SPLIT)
-        }
-        Bound::Sampled => sampled_pixels_per_metre(view, tile.min - camera, tile.max - camera),
-    };
-    if s.is_finite() && s > 0.0 {
-        tau / s
-    } else {
-        0.0
-    }
+    error_for(tile_bound(view, camera, tile, rule, subdivided_bound), tau)
 }
 
 /// The level a tile is drawn at for `tau`: the coarsest whose measured error projects to at
@@ -163,7 +182,7 @@ pub fn level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: Bound)
     if rule == Bound::Guaranteed {
         let (lo, hi) = tile_box(tile);
         let s = bound(view, lo - camera, hi - camera);
-        if s.is_finite() && s > 0.0 && level_for(tile, tau / s) == 0 {
+        if level_for(tile, error_for(s, tau)) == 0 {
             return 0;
         }
     }
@@ -174,13 +193,8 @@ pub fn level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: Bound)
 /// continuously with the camera (skipping sub-boxes as they leave the frustum would make it
 /// jump, and a jump in a geomorphing level is a pop).
 pub fn continuous_bound(view: &View, lo: DVec3, hi: DVec3, n: u32) -> f64 {
-    let n = n.max(1);
-    let step = (hi - lo) / f64::from(n);
-    (0..n * n)
-        .map(|i| {
-            let a = lo + DVec3::new(step.x * f64::from(i % n), step.y * f64::from(i / n), 0.0);
-            bound(view, a, DVec3::new(a.x + step.x, a.y + step.y, hi.z))
-        })
+    sub_boxes(lo, hi, n)
+        .map(|(a, b)| bound(view, a, b))
         .fold(0.0, f64::max)
 }
 
@@ -190,18 +204,7 @@ pub fn continuous_bound(view: &View, lo: DVec3, hi: DVec3, n: u32) -> f64 {
 /// levels are nested), whose error is at most `(1 - f) e_k + f e_(k+1)`; a finer vertex at level
 /// `k` sits within half a morph unit of `S_k`, which the errors include.
 pub fn continuous_level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: Bound) -> f64 {
-    let s = match rule {
-        Bound::Guaranteed => {
-            let (lo, hi) = tile_box(tile);
-            continuous_bound(view, lo - camera, hi - camera, SPLIT)
-        }
-        Bound::Sampled => sampled_pixels_per_metre(view, tile.min - camera, tile.max - camera),
-    };
-    let r = if s.is_finite() && s > 0.0 {
-        tau / s
-    } else {
-        0.0
-    };
+    let r = error_for(tile_bound(view, camera, tile, rule, continuous_bound), tau);
     let errors: Vec<f32> = tile
         .levels
         .iter()
