@@ -235,6 +235,7 @@ fn economy() -> Result<()> {
     let params = BuildParams {
         levels: 9,
         base_error: 1.0,
+        ..BuildParams::default()
     };
     let dir = std::env::temp_dir().join(format!("tilebench-eco-{}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
@@ -315,6 +316,7 @@ fn acmr() -> Result<()> {
     let params = BuildParams {
         levels: 9,
         base_error: 1.0,
+        ..BuildParams::default()
     };
     let dir = std::env::temp_dir().join(format!("tilebench-acmr-{}", std::process::id()));
     std::fs::create_dir_all(&dir)?;

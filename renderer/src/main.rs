@@ -156,6 +156,11 @@ struct Cli {
     /// Diagnostic: do not draw the stitching triangles (shows the cracks they close).
     #[arg(long)]
     no_stitch: bool,
+    /// Diagnostic: geomorph a tile set built with `--independent-sides` without the sliver
+    /// triangles that join the two tiles' differently morphed copies of a shared side vertex
+    /// (shows the cracks they close; sets built with shared sides need none).
+    #[arg(long)]
+    no_slivers: bool,
     /// Write the path flown (CSV keyframes) here.
     #[arg(long)]
     record: Option<PathBuf>,
@@ -278,7 +283,8 @@ fn main() -> ExitCode {
 }
 
 fn run(cli: Cli) -> Result<ExitCode> {
-    let terrain = Terrain::open(&cli.tileset)?;
+    let mut terrain = Terrain::open(&cli.tileset)?;
+    terrain.shared_sides |= cli.no_slivers;
     let path = match cli.path.as_str() {
         "orbit" => CameraPath::orbit(&terrain),
         "flyover" => CameraPath::flyover(&terrain),

@@ -180,26 +180,7 @@ fn surface(terrain: &Terrain, tile: usize, state: State) -> Vec<f32> {
     let Ok(t) = terrain.set.tile(info.tx, info.ty) else {
         return grid;
     };
-    let mut vertices = t.vertices();
-    if let Some(corners) = state.corners {
-        let units: Vec<f32> = info.levels.iter().map(|l| l.morph_unit).collect();
-        let mut start = 0usize;
-        let mut offsets = Vec::with_capacity(morph::MAX_LEVELS);
-        for j in 0..=state.level {
-            let Some(block) = t.level(j) else { break };
-            let n = block.positions.len();
-            for i in 0..n {
-                let Some(v) = vertices.get_mut(start + i) else {
-                    break;
-                };
-                offsets.clear();
-                offsets.extend((0..j as usize).map(|k| block.morph[k * n + i]));
-                let l = morph::vertex_level(corners, v.0, v.1);
-                v.2 = morph::morphed_height(v.2, &offsets, &units, l);
-            }
-            start += n;
-        }
-    }
+    let vertices = morph::tile_vertices(&t, state.level, state.corners);
     let Some(l) = t.level(state.level) else {
         return grid;
     };

@@ -66,6 +66,36 @@ pub fn vertex_level(corners: [f32; 4], x: u32, y: u32) -> f32 {
     }
 }
 
+/// The vertices of a tile's blocks `0..=level`, decoded: `(x, y, height)` in index order,
+/// each height geomorphed at the vertex's continuous level when `corners` are given (the
+/// tile's corner levels), as the vertex shader places it.
+pub fn tile_vertices(
+    tile: &tiles::format::Tile,
+    level: u32,
+    corners: Option<[f32; 4]>,
+) -> Vec<(u32, u32, f32)> {
+    let mut vertices = tile.vertices();
+    let blocks = (0..=level).map_while(|j| tile.level(j));
+    let end = blocks.clone().map(|b| b.positions.len()).sum::<usize>();
+    vertices.truncate(end);
+    let Some(corners) = corners else {
+        return vertices;
+    };
+    let units: Vec<f32> = tile.levels().iter().map(|l| l.morph_unit).collect();
+    let mut offsets = Vec::with_capacity(MAX_LEVELS);
+    let mut start = 0usize;
+    for (j, block) in blocks.enumerate() {
+        let n = block.positions.len();
+        for (i, v) in vertices[start..start + n].iter_mut().enumerate() {
+            offsets.clear();
+            offsets.extend((0..j).map(|k| block.morph[k * n + i]));
+            v.2 = morphed_height(v.2, &offsets, &units, vertex_level(corners, v.0, v.1));
+        }
+        start += n;
+    }
+    vertices
+}
+
 /// The continuous level at which a tile's error, interpolated linearly between its levels'
 /// measured errors `errors` (coarsest first), equals `r` metres: 0 when even level 0 is within
 /// `r`, the finest level when none is. Non-increasing in `r`.

@@ -181,7 +181,8 @@ pub fn plan(
     let cpu_residency_ms = ms(t);
 
     let t = Instant::now();
-    let stitches = stitch_granted(terrain, &draws, morphing)?;
+    // Two morphed copies of a shared side vertex coincide only where the sides are shared.
+    let stitches = stitch_granted(terrain, &draws, morphing && !terrain.shared_sides)?;
     let cpu_stitch_ms = ms(t);
 
     Ok(Plan {
@@ -257,11 +258,11 @@ fn granted_corners(terrain: &Terrain, wanted: &[f32], draws: &mut [Draw]) {
 }
 
 /// Stitches between drawn neighbours at their granted levels, each pair once (from the tile
-/// west or north of the seam); `morph` as in [`stitch_side`]. A draw's record is its index.
+/// west or north of the seam); `slivers` as in [`stitch_side`]. A draw's record is its index.
 pub fn stitch_granted(
     terrain: &Terrain,
     draws: &[Draw],
-    morph: bool,
+    slivers: bool,
 ) -> Result<Vec<(usize, Stitch)>, BorderMismatch> {
     let level_of: HashMap<usize, (u32, u32)> = draws
         .iter()
@@ -290,7 +291,7 @@ pub fn stitch_granted(
                 level: level_b,
                 record: record_b,
             };
-            if !stitch_side(&mut s, mine, theirs, side, morph) {
+            if !stitch_side(&mut s, mine, theirs, side, slivers) {
                 return Err(BorderMismatch {
                     a: (a.tx, a.ty),
                     b: (b.tx, b.ty),

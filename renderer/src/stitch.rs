@@ -10,12 +10,16 @@
 //! lands on exactly the position the neighbour draws it at. The corner where four tiles meet
 //! is a vertex of all four, at the same position, so it needs no extra triangle.
 //!
-//! With geomorphing a border vertex's height depends on its own tile's coarser levels along
-//! that border, which differ between the two tiles, so a vertex both tiles have may sit at two
-//! heights. Every vertex of a stitch is therefore drawn as its own tile draws it (the shader
-//! pulls it with that tile's record, see [`pulled`]), and morphing stitches keep the triangles
-//! at shared vertices: they are vertical slivers in the plane of the edge that close the gap
-//! between the two morphed polylines (zero area in plan view, as before).
+//! Geomorphing: every vertex of a stitch is drawn as its own tile draws it (the shader pulls
+//! it with that tile's record, see [`pulled`]). A border vertex's morphed height comes from its
+//! tile's coarser levels along that border. In tile sets built with shared sides
+//! ([`tiles::format::FLAG_SHARED_SIDES`]) those are the same in both tiles, and so is the
+//! vertex's continuous level (it depends on the edge's two shared corners alone), so both
+//! copies of a shared vertex land on the same position, bit for bit, and stitching is as
+//! without morphing. In sets built with independent sides the two copies may sit at two
+//! heights; stitching with `slivers` then keeps the triangles at shared vertices: vertical
+//! slivers in the plane of the edge that close the gap between the two morphed polylines
+//! (zero area in plan view, as before).
 
 use tiles::pack::{pack, unpack};
 
@@ -80,7 +84,7 @@ fn along(p: u32, k: usize) -> u32 {
 
 /// Moves a neighbour's border vertex into `a`'s frame: the neighbour across side `k`, with the
 /// height code re-based onto `a`'s base (same lattice, so the same height).
-fn rebase(p: u32, k: usize, from: &TileInfo, to: &TileInfo) -> Option<u32> {
+pub(crate) fn rebase(p: u32, k: usize, from: &TileInfo, to: &TileInfo) -> Option<u32> {
     let (x, y, code) = unpack(p);
     let cells = tiles::mesh::TILE_CELLS as i64;
     let (x, y) = match k {
@@ -96,9 +100,9 @@ fn rebase(p: u32, k: usize, from: &TileInfo, to: &TileInfo) -> Option<u32> {
 }
 
 /// Adds the triangles between tile `a` and its neighbour `b` across side `k` of `a`. With
-/// `morph`, vertices both borders share are joined too (see the module header). Returns false
-/// if the borders do not line up (a broken file).
-pub fn stitch_side(out: &mut Stitch, a: Side, b: Side, k: usize, morph: bool) -> bool {
+/// `slivers`, vertices both borders share are joined too (see the module header). Returns
+/// false if the borders do not line up (a broken file).
+pub fn stitch_side(out: &mut Stitch, a: Side, b: Side, k: usize, slivers: bool) -> bool {
     let mine = &a.tile.borders[a.level as usize][k];
     let far = (k + 2) % 4;
     let theirs: Option<Vec<u32>> = b.tile.borders[b.level as usize][far]
@@ -106,7 +110,7 @@ pub fn stitch_side(out: &mut Stitch, a: Side, b: Side, k: usize, morph: bool) ->
         .map(|&p| rebase(p, k, b.tile, a.tile))
         .collect();
     let Some(theirs) = theirs else { return false };
-    if *mine == theirs && !morph {
+    if *mine == theirs && !slivers {
         return true;
     }
     if mine.len() < 2
@@ -130,7 +134,7 @@ pub fn stitch_side(out: &mut Stitch, a: Side, b: Side, k: usize, morph: bool) ->
         // Two equal vertices make a triangle with no area even in 3D, unless morphing may
         // move the two tiles' copies apart: skip it then.
         let p = t.map(|i| v[(i - base) as usize]);
-        if morph || (p[0] != p[1] && p[1] != p[2] && p[0] != p[2]) {
+        if slivers || (p[0] != p[1] && p[1] != p[2] && p[0] != p[2]) {
             out.indices.extend_from_slice(&[t[0], t[1], t[2], RESTART]);
             out.triangles += 1;
         }

@@ -34,6 +34,11 @@ pub struct Terrain {
     pub levels: u32,
     pub spacing: (f64, f64),
     pub height_step: f32,
+    /// Neighbouring tiles have the same side vertices at every level, with the same morph
+    /// offsets ([`tiles::format::FLAG_SHARED_SIDES`], checked against the borders here):
+    /// geomorphing gives a shared side vertex the same height from both tiles, so stitches
+    /// need no slivers between two copies of it.
+    pub shared_sides: bool,
 }
 
 impl Terrain {
@@ -105,7 +110,7 @@ impl Terrain {
             }
         }
         check_tiles(&set, &tiles)?;
-        Ok(Terrain {
+        let mut terrain = Terrain {
             set,
             tiles,
             tiles_x: h.tiles_x,
@@ -113,6 +118,38 @@ impl Terrain {
             levels: h.levels,
             spacing: (sx, sy),
             height_step: h.height_step,
+            shared_sides: false,
+        };
+        // A file that claims shared sides but whose borders differ (tampered with) is drawn as
+        // one without: the seams stay closed by slivers.
+        terrain.shared_sides =
+            h.flags & tiles::format::FLAG_SHARED_SIDES != 0 && terrain.sides_agree();
+        Ok(terrain)
+    }
+
+    /// Whether every two neighbouring tiles hold the same border vertices at every level, and
+    /// every tile the same morph units.
+    fn sides_agree(&self) -> bool {
+        let units = |t: &TileInfo| -> Vec<u32> {
+            t.levels.iter().map(|l| l.morph_unit.to_bits()).collect()
+        };
+        self.tiles.iter().all(|a| {
+            units(a) == units(&self.tiles[0])
+                && [(1usize, (1u32, 0u32)), (2, (0, 1))]
+                    .iter()
+                    .all(|&(k, (dx, dy))| {
+                        let Some(j) = self.tile_index(a.tx + dx, a.ty + dy) else {
+                            return true;
+                        };
+                        let b = &self.tiles[j];
+                        (0..self.levels as usize).all(|level| {
+                            let theirs: Option<Vec<u32>> = b.borders[level][(k + 2) % 4]
+                                .iter()
+                                .map(|&p| crate::stitch::rebase(p, k, b, a))
+                                .collect();
+                            theirs.as_ref() == Some(&a.borders[level][k])
+                        })
+                    })
         })
     }
 

@@ -286,3 +286,77 @@ fn stitches_close_every_seam_at_every_level_pair() {
         "dropping a triangle never opened a seam"
     );
 }
+
+/// Border continuity (the CPU mirror of the vertex shader's morph): in a tile set built with
+/// shared sides, every vertex two neighbouring tiles both hold on their shared side gets the
+/// same morphed height from both tiles, bit for bit, whatever the (shared) corner levels. The
+/// control: built with independent sides, some shared vertices morph to different heights.
+#[test]
+fn shared_side_vertices_morph_to_one_height_from_both_tiles() {
+    use renderer::morph::{tile_corners, tile_vertices};
+    let (a, b) = (
+        tempfile::tempdir().expect("tempdir"),
+        tempfile::tempdir().expect("tempdir"),
+    );
+    let shared = Terrain::open(&common::puget(a.path())).expect("open");
+    let alone = Terrain::open(&common::puget_independent(b.path())).expect("open");
+    assert!(shared.shared_sides && !alone.shared_sides);
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    let mut random = move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 40) as f32 / (1u64 << 24) as f32
+    };
+    for (terrain, name) in [(&shared, "shared"), (&alone, "independent")] {
+        let finest = terrain.levels - 1;
+        let (mut compared, mut differing) = (0usize, 0usize);
+        for _trial in 0..6 {
+            // One continuous level per grid corner, shared by the tiles at that corner.
+            let grid: Vec<f32> = (0..(terrain.tiles_x + 1) * (terrain.tiles_y + 1))
+                .map(|_| random() * finest as f32)
+                .collect();
+            for a in &terrain.tiles {
+                let ta = terrain.set.tile(a.tx, a.ty).expect("tile");
+                let va = tile_vertices(
+                    &ta,
+                    finest,
+                    Some(tile_corners(&grid, terrain.tiles_x, a.tx, a.ty)),
+                );
+                for (dx, dy) in [(1u32, 0u32), (0, 1)] {
+                    let Some(j) = terrain.tile_index(a.tx + dx, a.ty + dy) else {
+                        continue;
+                    };
+                    let b = &terrain.tiles[j];
+                    let tb = terrain.set.tile(b.tx, b.ty).expect("tile");
+                    let vb = tile_vertices(
+                        &tb,
+                        finest,
+                        Some(tile_corners(&grid, terrain.tiles_x, b.tx, b.ty)),
+                    );
+                    // Heights along the shared side, by position along it.
+                    let side = |v: &[(u32, u32, f32)], at: u32| {
+                        v.iter()
+                            .filter(|p| if dx == 1 { p.0 == at } else { p.1 == at })
+                            .map(|p| (if dx == 1 { p.1 } else { p.0 }, p.2.to_bits()))
+                            .collect::<std::collections::HashMap<u32, u32>>()
+                    };
+                    let (mine, theirs) = (side(&va, 256), side(&vb, 0));
+                    for (at, h) in &mine {
+                        if let Some(g) = theirs.get(at) {
+                            compared += 1;
+                            differing += usize::from(g != h);
+                        }
+                    }
+                }
+            }
+        }
+        assert!(compared > 1000, "{name}: only {compared} shared vertices");
+        if terrain.shared_sides {
+            assert_eq!(differing, 0, "{name}: {differing} of {compared} differ");
+        } else {
+            assert!(differing > 0, "{name}: the control found no difference");
+        }
+        eprintln!("{name} sides: {differing} of {compared} shared side vertices differ");
+    }
+}

@@ -85,6 +85,7 @@ fn puget_4k_jpeg() {
         BuildParams {
             levels: 9,
             base_error: 4.0,
+            ..BuildParams::default()
         },
     );
 }
@@ -135,6 +136,7 @@ fn terrain_rgb_tiles() {
         BuildParams {
             levels: 8,
             base_error: 0.5,
+            ..BuildParams::default()
         },
     );
     build_and_verify(
@@ -143,6 +145,7 @@ fn terrain_rgb_tiles() {
         BuildParams {
             levels: 8,
             base_error: 0.25,
+            ..BuildParams::default()
         },
     );
 }

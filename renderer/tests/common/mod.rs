@@ -18,6 +18,16 @@ pub fn tileset(dir: &Path, input: &Path, opts: dem::ReadOptions) -> PathBuf {
 
 /// Builds a tile set in `dir` from DEM files read together (an SRTM mosaic).
 pub fn tileset_of(dir: &Path, inputs: &[PathBuf], opts: dem::ReadOptions) -> PathBuf {
+    tileset_with(dir, inputs, opts, &BuildParams::default())
+}
+
+/// [`tileset_of`] with build parameters.
+pub fn tileset_with(
+    dir: &Path,
+    inputs: &[PathBuf],
+    opts: dem::ReadOptions,
+    params: &BuildParams,
+) -> PathBuf {
     let grid = dem::read(inputs, &opts).unwrap_or_else(|e| panic!("{e}"));
     let view = Grid {
         width: grid.width,
@@ -27,25 +37,28 @@ pub fn tileset_of(dir: &Path, inputs: &[PathBuf], opts: dem::ReadOptions) -> Pat
         spacing_y: grid.spacing_y,
     };
     let out = dir.join("set.vkt");
-    build_tileset(
-        &view,
-        &BuildParams::default(),
-        &TileSetMeta::default(),
-        &out,
-        &|| {},
-    )
-    .expect("build");
+    build_tileset(&view, params, &TileSetMeta::default(), &out, &|| {}).expect("build");
     out
 }
 
+/// How the tests read the bundled Puget Sound sample.
+pub fn puget_options() -> dem::ReadOptions {
+    dem::ReadOptions {
+        spacing: Some(160.0),
+        vertical_scale: Some(0.1),
+        ..Default::default()
+    }
+}
+
 pub fn puget(dir: &Path) -> PathBuf {
-    tileset(
-        dir,
-        &sample(),
-        dem::ReadOptions {
-            spacing: Some(160.0),
-            vertical_scale: Some(0.1),
-            ..Default::default()
-        },
-    )
+    tileset(dir, &sample(), puget_options())
+}
+
+/// The Puget sample built with its tiles' sides independent (no agreement between neighbours).
+pub fn puget_independent(dir: &Path) -> PathBuf {
+    let params = BuildParams {
+        shared_sides: false,
+        ..BuildParams::default()
+    };
+    tileset_with(dir, &[sample()], puget_options(), &params)
 }

@@ -7,8 +7,8 @@ use std::sync::mpsc::sync_channel;
 use rayon::prelude::*;
 
 use crate::format::{
-    level_error, tile_count, FileHeader, LevelEntry, TileHeader, TileSetWriter, MAX_LEVELS,
-    TILE_MAGIC,
+    level_error, tile_count, FileHeader, LevelEntry, TileHeader, TileSetWriter, FLAG_SHARED_SIDES,
+    MAX_LEVELS, TILE_MAGIC,
 };
 use crate::grid::{tile_samples, Grid};
 use crate::mesh::{lattice, plane, triangle_spans, Mesher, Quad, TILE_CELLS, TILE_SIZE};
@@ -21,6 +21,10 @@ pub struct BuildParams {
     pub levels: u32,
     /// `e_{levels-1}`, the finest level's bound, metres.
     pub base_error: f64,
+    /// Make neighbouring tiles agree on their shared sides ([`FLAG_SHARED_SIDES`]): the same
+    /// side vertices at every level and the same morph offsets for them. Off builds every
+    /// tile on its own (one pass, fewer vertices; geomorphing then needs sliver triangles).
+    pub shared_sides: bool,
 }
 
 impl Default for BuildParams {
@@ -28,6 +32,7 @@ impl Default for BuildParams {
         BuildParams {
             levels: 9,
             base_error: 1.0,
+            shared_sides: true,
         }
     }
 }
@@ -96,6 +101,24 @@ pub struct BuiltTile {
     pub ty: u32,
     pub blob: Vec<u8>,
     pub levels: Vec<LevelStats>,
+    /// Where the tile's side vertices are, per level.
+    pub sides: Sides,
+    /// Per level, the largest distance of a finer vertex from the level's surface (metres;
+    /// 0 for the finest level).
+    pub deviation: Vec<f64>,
+}
+
+/// The side vertices of a tile, per level and side (north, east, south, west): each vertex's
+/// column (north and south sides) or row (east and west), ascending.
+pub type Sides = Vec<[Vec<u16>; 4]>;
+
+/// What a tile is built to agree on with its neighbours (empty: nothing, the tile on its own).
+#[derive(Clone, Debug, Default)]
+pub struct Agreement {
+    /// Per level and side, positions that must be vertices of that level on that side.
+    pub forced: Sides,
+    /// Per level, the morph unit every tile of the set uses (None: the tile's own units).
+    pub units: Option<Vec<f64>>,
 }
 
 /// Position of a cell along the Hilbert curve over `n x n` cells (`n` a power of two).
@@ -317,6 +340,7 @@ pub fn build_tile(
     ty: u32,
     params: &BuildParams,
     step: f32,
+    agreement: &Agreement,
 ) -> Result<BuiltTile, BuildError> {
     let samples = tile_samples(grid, tx, ty);
     let lo = samples
@@ -339,9 +363,19 @@ pub fn build_tile(
     let mut sides: [Vec<(u32, u32)>; 4] = Default::default();
     let (mut z_min, mut z_max) = (f32::INFINITY, f32::NEG_INFINITY);
 
+    let mut positions: Sides = Vec::with_capacity(n);
     for level in 0..n {
         let e = params.level_error(level as u32);
         mesher.refine(e);
+        if let Some(forced) = agreement.forced.get(level) {
+            for (k, side) in forced.iter().enumerate() {
+                for &at in side {
+                    mesher.insert_side_vertex(side_point(k, at, mesh_max));
+                }
+            }
+            // A forced split can leave finer cells over `e`.
+            mesher.refine(e);
+        }
         let leaves = p_order(mesher.leaves());
         let block_start = vertices.lattice_of.len();
         let (indices, triangles) = emit_fans(&mesher, &leaves, &mut vertices, &mut cache);
@@ -351,10 +385,6 @@ pub fn build_tile(
                     "tile {tx},{ty} level {level}: a triangle of cell {q:?} exceeds {e} m"
                 ))
             })?;
-        if level + 1 < n {
-            surfaces.push(rasterise_surface(&mesher, &leaves, mesh_max));
-        }
-
         let heights = mesher.quantised_heights();
         let new = &vertices.lattice_of[block_start..];
         let block: Vec<u32> = new
@@ -384,6 +414,12 @@ pub fn build_tile(
             sides[k].sort_unstable();
             sides[k].iter().map(|&(_, v)| v).collect::<Vec<u32>>()
         });
+        positions.push([0, 1, 2, 3].map(|k| sides[k].iter().map(|&(at, _)| at as u16).collect()));
+        if level + 1 < n {
+            let mut surface = rasterise_surface(&mesher, &leaves, mesh_max);
+            along_sides(&mut surface, &positions[level], heights, mesh_max);
+            surfaces.push(surface);
+        }
         let vertex_count = vertices.lattice_of.len() as u32;
         let entry = LevelEntry {
             error_bound: e as f32,
@@ -414,11 +450,29 @@ pub fn build_tile(
         });
     }
 
+    let heights = mesher.quantised_heights();
+    let deviation = deviations(&levels, &surfaces, &vertices.lattice_of, heights);
+    let units: Vec<f64> = match &agreement.units {
+        Some(units) => {
+            if let Some(k) = (0..n).find(|&k| deviation[k] > units[k] * 127.0) {
+                return Err(BuildError::Internal(format!(
+                    "tile {tx},{ty} level {k}: a vertex lies {} m from the level's surface, \
+                     past the tile set's morph unit",
+                    deviation[k]
+                )));
+            }
+            units.clone()
+        }
+        None => (0..n)
+            .map(|k| morph_unit(levels[k].entry.error_bound.into(), deviation[k]))
+            .collect(),
+    };
     let morph = morph_offsets(
         &mut levels,
         &surfaces,
         &vertices.lattice_of,
-        mesher.quantised_heights(),
+        heights,
+        &units,
     );
     let header = TileHeader {
         magic: TILE_MAGIC,
@@ -440,28 +494,78 @@ pub fn build_tile(
         ty,
         blob,
         levels: stats,
+        sides: positions,
+        deviation,
     })
 }
 
+/// The lattice point at `at` along side `k` (north, east, south, west) of a mesh.
+fn side_point(k: usize, at: u16, (max_x, max_y): (u32, u32)) -> (u32, u32) {
+    let at = u32::from(at);
+    match k {
+        0 => (at, 0),
+        1 => (max_x, at),
+        2 => (at, max_y),
+        _ => (0, at),
+    }
+}
+
+/// Rewrites a level's surface along the mesh's sides as the interpolation between that side's
+/// vertices, computed from the side alone. The rasterised value is the same number in exact
+/// arithmetic, but it comes from whichever triangle holds the point, and the neighbouring tile
+/// has a different one; computed this way, two tiles with the same side vertices and heights
+/// get the same f32, hence the same morph offsets.
+fn along_sides(surface: &mut [f32], sides: &[Vec<u16>; 4], heights: &[f32], mesh_max: (u32, u32)) {
+    for (k, side) in sides.iter().enumerate() {
+        for pair in side.windows(2) {
+            let (a, b) = (
+                side_point(k, pair[0], mesh_max),
+                side_point(k, pair[1], mesh_max),
+            );
+            let (ha, hb) = (
+                f64::from(heights[lattice(a.0, a.1)]),
+                f64::from(heights[lattice(b.0, b.1)]),
+            );
+            let span = f64::from(pair[1] - pair[0]);
+            for at in pair[0]..=pair[1] {
+                let t = f64::from(at - pair[0]) / span;
+                let (x, y) = side_point(k, at, mesh_max);
+                surface[lattice(x, y)] = (ha + (hb - ha) * t) as f32;
+            }
+        }
+    }
+}
+
+/// Per level `k`, the largest distance of a finer vertex (one introduced after `k`) from level
+/// `k`'s surface; 0 for the finest level, which nothing morphs to.
+fn deviations(
+    levels: &[LevelOut],
+    surfaces: &[Vec<f32>],
+    lattice_of: &[u32],
+    heights: &[f32],
+) -> Vec<f64> {
+    let mut deviation = vec![0.0; levels.len()];
+    for (k, surface) in surfaces.iter().enumerate() {
+        let start = levels[k].entry.vertex_count() as usize;
+        deviation[k] = lattice_of[start..]
+            .iter()
+            .map(|&l| (f64::from(surface[l as usize]) - f64::from(heights[l as usize])).abs())
+            .fold(0.0, f64::max);
+    }
+    deviation
+}
+
 /// Morph offsets of each block `j` toward every coarser level `k < j` (row-major by `k`), in
-/// units sized so the largest deviation from level `k`'s surface fits; sets each level's unit.
+/// `units` (metres per offset step, one per level); stores each level's unit in its entry.
 fn morph_offsets(
     levels: &mut [LevelOut],
     surfaces: &[Vec<f32>],
     lattice_of: &[u32],
     heights: &[f32],
+    units: &[f64],
 ) -> Vec<Vec<i8>> {
-    for out in levels.iter_mut() {
-        out.entry.morph_unit = morph_unit(out.entry.error_bound.into(), 0.0) as f32;
-    }
-    for (k, surface) in surfaces.iter().enumerate() {
-        let start = levels[k].entry.vertex_count() as usize;
-        let deviation = lattice_of[start..]
-            .iter()
-            .map(|&l| (f64::from(surface[l as usize]) - f64::from(heights[l as usize])).abs())
-            .fold(0.0, f64::max);
-        levels[k].entry.morph_unit =
-            morph_unit(levels[k].entry.error_bound.into(), deviation) as f32;
+    for (out, &unit) in levels.iter_mut().zip(units) {
+        out.entry.morph_unit = unit as f32;
     }
     levels
         .iter()
@@ -557,6 +661,10 @@ pub struct BuildSummary {
     /// Per level, summed over tiles.
     pub levels: Vec<LevelStats>,
     pub file_bytes: u64,
+    /// Passes over the tiles until neighbours agreed on their sides, and the tiles meshed in
+    /// them (0 and 0 with independent sides); the written tiles are one more pass.
+    pub agreement_passes: u32,
+    pub agreement_meshes: u64,
 }
 
 /// Builds all tiles in parallel and streams them into `out` (temporary file, then rename).
@@ -612,9 +720,25 @@ pub fn build_tileset(
         height_step: step,
         ..bytemuck::Zeroable::zeroed()
     };
+    let (agreements, agreement_passes, agreement_meshes) = if params.shared_sides {
+        let (a, passes, meshes) = agree_sides(grid, params, step, (tiles_x, tiles_y))?;
+        (Some(a), passes, meshes)
+    } else {
+        (None, 0, 0)
+    };
+    let header = FileHeader {
+        flags: if params.shared_sides {
+            FLAG_SHARED_SIDES
+        } else {
+            0
+        },
+        ..header
+    };
     let mut writer = TileSetWriter::create(out, header)?;
     let mut summary = BuildSummary {
         levels: vec![LevelStats::default(); params.levels as usize],
+        agreement_passes,
+        agreement_meshes,
         ..Default::default()
     };
     let jobs: Vec<(u32, u32)> = (0..tiles_y)
@@ -625,9 +749,24 @@ pub fn build_tileset(
     std::thread::scope(|scope| -> Result<(), BuildError> {
         scope.spawn(move || {
             // A failed send means the writer stopped (an error): stop building too.
+            let alone = Agreement::default();
             let _ = jobs.par_iter().try_for_each_with(send, |send, &(tx, ty)| {
-                send.send(build_tile(grid, tx, ty, params, step))
-                    .map_err(|_| ())
+                let built = match &agreements {
+                    Some(a) => {
+                        let (agreement, sides) = &a[(ty * tiles_x + tx) as usize];
+                        build_tile(grid, tx, ty, params, step, agreement).and_then(|b| {
+                            if b.sides == *sides {
+                                Ok(b)
+                            } else {
+                                Err(BuildError::Internal(format!(
+                                    "tile {tx},{ty}: its sides changed after agreement"
+                                )))
+                            }
+                        })
+                    }
+                    None => build_tile(grid, tx, ty, params, step, &alone),
+                };
+                send.send(built).map_err(|_| ())
             });
         });
         for built in receive {
@@ -649,6 +788,123 @@ pub fn build_tileset(
     writer.finish()?;
     summary.file_bytes = std::fs::metadata(out).map(|m| m.len()).unwrap_or(0);
     Ok(summary)
+}
+
+/// Passes over the tile set until every pair of neighbours agrees on their shared side: the
+/// same vertices at every level. Returns, per tile (row-major), the agreement to build it with
+/// and the sides it will then have, with the number of passes and of tiles meshed.
+///
+/// A tile is built forcing, on each shared side, the union of its own side vertices and its
+/// neighbour's from the last pass. Forced vertices can cascade into more side vertices (2:1
+/// splits), so the sets only grow, and the passes stop when a pass changes none: then each
+/// tile holds its neighbour's set and the neighbour holds its, so the two are equal. Only
+/// tiles next to a change are rebuilt. The morph units are then the largest any tile needs
+/// per level, so a side vertex's offsets (same surface, same height) are the same bytes in
+/// both tiles.
+fn agree_sides(
+    grid: &Grid,
+    params: &BuildParams,
+    step: f32,
+    (tiles_x, tiles_y): (u32, u32),
+) -> Result<(Vec<(Agreement, Sides)>, u32, u64), BuildError> {
+    /// Far more than any data needs (a change spreads one tile per pass).
+    const MAX_PASSES: u32 = 1000;
+    let count = (tiles_x * tiles_y) as usize;
+    let levels = params.levels as usize;
+    let neighbour = |t: usize, k: usize| -> Option<usize> {
+        let (tx, ty) = ((t as u32 % tiles_x) as i64, (t as u32 / tiles_x) as i64);
+        let (nx, ny) = match k {
+            0 => (tx, ty - 1),
+            1 => (tx + 1, ty),
+            2 => (tx, ty + 1),
+            _ => (tx - 1, ty),
+        };
+        ((0..i64::from(tiles_x)).contains(&nx) && (0..i64::from(tiles_y)).contains(&ny))
+            .then(|| (ny * i64::from(tiles_x) + nx) as usize)
+    };
+    let forced = |t: usize, sides: &[Sides]| -> Sides {
+        (0..levels)
+            .map(|level| {
+                std::array::from_fn(|k| {
+                    let Some(n) = neighbour(t, k) else {
+                        return Vec::new();
+                    };
+                    let theirs = sides[n].get(level).map_or(&[][..], |s| &s[(k + 2) % 4][..]);
+                    let ours = sides[t].get(level).map_or(&[][..], |s| &s[k][..]);
+                    let mut union: Vec<u16> = ours.iter().chain(theirs).copied().collect();
+                    union.sort_unstable();
+                    union.dedup();
+                    union
+                })
+            })
+            .collect()
+    };
+    let mut sides: Vec<Sides> = vec![Vec::new(); count];
+    let mut deviation = vec![vec![0.0f64; levels]; count];
+    let mut dirty: Vec<usize> = (0..count).collect();
+    let (mut passes, mut rebuilt) = (0u32, 0u64);
+    while !dirty.is_empty() {
+        passes += 1;
+        rebuilt += dirty.len() as u64;
+        if passes > MAX_PASSES {
+            return Err(BuildError::Internal(format!(
+                "tile sides still changing after {MAX_PASSES} passes"
+            )));
+        }
+        let built: Vec<(usize, Sides, Vec<f64>)> = dirty
+            .par_iter()
+            .map(|&t| {
+                let (tx, ty) = (t as u32 % tiles_x, t as u32 / tiles_x);
+                let agreement = Agreement {
+                    forced: forced(t, &sides),
+                    units: None,
+                };
+                build_tile(grid, tx, ty, params, step, &agreement)
+                    .map(|b| (t, b.sides, b.deviation))
+            })
+            .collect::<Result<_, _>>()?;
+        let mut next = vec![false; count];
+        for (t, new, d) in built {
+            deviation[t] = d;
+            if new != sides[t] {
+                sides[t] = new;
+                next[t] = true;
+                for k in 0..4 {
+                    if let Some(n) = neighbour(t, k) {
+                        next[n] = true;
+                    }
+                }
+            }
+        }
+        dirty = (0..count).filter(|&t| next[t]).collect();
+    }
+    let units: Vec<f64> = (0..levels)
+        .map(|k| {
+            let widest = deviation.iter().map(|d| d[k]).fold(0.0, f64::max);
+            morph_unit(params.level_error(k as u32), widest)
+        })
+        .collect();
+    // Each tile now holds its neighbour's side and the neighbour holds its: they are equal.
+    for t in 0..count {
+        for k in [1, 2] {
+            let Some(n) = neighbour(t, k) else { continue };
+            if (0..levels).any(|l| sides[t][l][k] != sides[n][l][(k + 2) % 4]) {
+                return Err(BuildError::Internal(format!(
+                    "tiles {t} and {n} still disagree on their side after {passes} passes"
+                )));
+            }
+        }
+    }
+    let agreements = (0..count)
+        .map(|t| {
+            let agreement = Agreement {
+                forced: forced(t, &sides),
+                units: Some(units.clone()),
+            };
+            (agreement, sides[t].clone())
+        })
+        .collect();
+    Ok((agreements, passes, rebuilt))
 }
 
 #[cfg(test)]
@@ -680,6 +936,7 @@ mod tests {
         let p = BuildParams {
             levels: 9,
             base_error: 1.0,
+            ..BuildParams::default()
         };
         assert_eq!(p.level_error(0), 256.0);
         assert_eq!(p.level_error(8), 1.0);

@@ -33,6 +33,13 @@ use crate::quantise::Quantiser;
 pub const MAGIC: [u8; 8] = *b"VKTILES\0";
 pub const TILE_MAGIC: [u8; 4] = *b"TILE";
 pub const VERSION: u32 = 1;
+
+/// `FileHeader::flags`: every two neighbouring tiles have the same vertices on their shared
+/// side at every level, with the same heights and the same morph offsets (every tile uses the
+/// same morph unit per level). Geomorphing then gives a side vertex the same height from both
+/// tiles, bit for bit. Files without it (built with `--independent-sides`, or by older
+/// builders) are read the same way; the renderer closes their morphing seams with slivers.
+pub const FLAG_SHARED_SIDES: u32 = 1;
 /// The most levels a tile set may have (one morph byte per coarser level per vertex).
 pub const MAX_LEVELS: u32 = 16;
 /// Index value that restarts a fan (all ones at the index width).
@@ -70,7 +77,9 @@ pub struct FileHeader {
     pub description: [u8; 128],
     /// Metres per height code, the same for every tile (see `quantise`).
     pub height_step: f32,
-    pub reserved: [u32; 6],
+    /// [`FLAG_SHARED_SIDES`], or 0.
+    pub flags: u32,
+    pub reserved: [u32; 5],
     /// crc32 of this header (with this field zero) followed by the directory.
     pub header_crc: u32,
 }

@@ -432,6 +432,46 @@ impl<'a> Mesher<'a> {
         }
     }
 
+    /// Makes lattice point `p` on one of the tile's sides a vertex: splits the leaves above it
+    /// (with their 2:1 cascades) until `p` is a corner or a side midpoint of a leaf, and
+    /// activates that midpoint. The tile set builder calls this for the vertices a neighbouring
+    /// tile has on the shared side, so both tiles end up with the same side vertices per level.
+    /// Refinement only adds vertices, so the level stays within its bound; call
+    /// [`Self::refine`] again afterwards, because a forced split can leave finer cells over `e`.
+    pub fn insert_side_vertex(&mut self, p: (u32, u32)) {
+        let (mx, my) = self.mesh_max;
+        debug_assert!(
+            (p.0 == 0 || p.0 == mx || p.1 == 0 || p.1 == my) && p.0 <= mx && p.1 <= my,
+            "{p:?} is not on a side of the mesh"
+        );
+        let mut changed = Vec::new();
+        loop {
+            let q = self.leaf_at(p);
+            if (0..4).any(|k| q.corner(k) == p) {
+                return;
+            }
+            if let Some(k) = (0..4).find(|&k| q.midpoint(k) == p) {
+                if let Across::Free(_) = self.across(q, k) {
+                    self.present[lattice(p.0, p.1)] = true;
+                    return;
+                }
+            }
+            self.split(q, &mut changed);
+        }
+    }
+
+    /// A leaf whose cell holds `p` (inside or on its boundary; on a boundary between cells the
+    /// north-western one, which is never past the data).
+    fn leaf_at(&self, p: (u32, u32)) -> Quad {
+        let mut q = Quad::ROOT;
+        while self.state(q) == Node::Split {
+            let (cx, cy) = q.centre();
+            let child = usize::from(p.0 > cx) + 2 * usize::from(p.1 > cy);
+            q = q.children()[child];
+        }
+        q
+    }
+
     /// Whether fan triangle `t` of leaf `q` may exceed `e`: refining it is forbidden by the
     /// spacing rule, or it is already at full resolution.
     pub fn refinement_forbidden(&self, q: Quad, t: usize, e: f64) -> bool {

@@ -5,9 +5,10 @@
 //! rasterised with their own barycentric code in f64, and the spacing rule is re-derived from
 //! each fan's geometry. A tile set that passes is what the renderer will draw.
 
-use crate::format::{Tile, TileSet};
+use crate::format::{Tile, TileSet, FLAG_SHARED_SIDES};
 use crate::grid::{tile_samples, Grid};
 use crate::mesh::{TILE_CELLS, TILE_SIZE};
+use crate::pack::unpack;
 
 /// One place where a level was allowed to exceed its bound (refinement forbidden there).
 #[derive(Clone, Debug, PartialEq)]
@@ -117,7 +118,56 @@ fn check_shared_edges(set: &TileSet, tile: &Tile, report: &mut VerifyReport) {
                 set.path().display()
             ));
         }
+        if set.header().flags & FLAG_SHARED_SIDES != 0 {
+            if let Some(problem) = shared_side_problem(tile, &other, vertical) {
+                report.problems.push(format!(
+                    "{}: tiles {tx},{ty} and {nx},{ny} {problem}, although the set says they share their sides",
+                    set.path().display()
+                ));
+            }
+        }
     }
+}
+
+/// With [`FLAG_SHARED_SIDES`]: the two tiles must hold the same vertices on their shared side,
+/// introduced at the same level, with the same morph offsets, and the same morph units.
+fn shared_side_problem(tile: &Tile, other: &Tile, vertical: bool) -> Option<String> {
+    let units =
+        |t: &Tile| -> Vec<u32> { t.levels().iter().map(|e| e.morph_unit.to_bits()).collect() };
+    if units(tile) != units(other) {
+        return Some("use different morph units".into());
+    }
+    // Per position along the side: introducing level and morph offsets.
+    let side = |t: &Tile, at: u32| -> std::collections::BTreeMap<u32, (u32, Vec<i8>)> {
+        let mut out = std::collections::BTreeMap::new();
+        for j in 0..t.header.levels {
+            let Some(level) = t.level(j) else { continue };
+            let n = level.entry.block_len as usize;
+            for (i, &p) in level.positions.iter().enumerate() {
+                let (x, y, _) = unpack(p);
+                let (on, along) = if vertical { (x, y) } else { (y, x) };
+                if on == at {
+                    let offsets = (0..j as usize).map(|k| level.morph[k * n + i]).collect();
+                    out.insert(along, (j, offsets));
+                }
+            }
+        }
+        out
+    };
+    let (mine, theirs) = (side(tile, TILE_CELLS), side(other, 0));
+    let differing = mine
+        .keys()
+        .chain(theirs.keys())
+        .find(|p| mine.get(p) != theirs.get(p))?;
+    Some(match (mine.get(differing), theirs.get(differing)) {
+        (Some((a, _)), Some((b, _))) if a != b => {
+            format!("introduce their shared side vertex {differing} at levels {a} and {b}")
+        }
+        (Some(_), Some(_)) => {
+            format!("store different morph offsets for their shared side vertex {differing}")
+        }
+        _ => format!("do not both hold side vertex {differing}"),
+    })
 }
 
 fn check_tile(set: &TileSet, tile: &Tile, source: Option<&Grid>, report: &mut VerifyReport) {

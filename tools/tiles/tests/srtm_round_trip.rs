@@ -35,6 +35,7 @@ fn odd_sized_crop_builds_and_verifies_against_its_source() {
     let params = BuildParams {
         levels: 7,
         base_error: 1.0,
+        ..BuildParams::default()
     };
     let summary =
         build_tileset(&grid, &params, &TileSetMeta::default(), &out, &|| {}).expect("build");

@@ -46,6 +46,11 @@ enum Command {
         /// Error bound of the finest level in metres; level i gets base * 2^(levels-1-i).
         #[arg(long, default_value_t = 1.0)]
         base_error: f64,
+        /// Build every tile on its own instead of making neighbours agree on the vertices of
+        /// their shared sides. Faster and slightly smaller, but a geomorphing renderer must
+        /// then close the seams with sliver triangles; kept for comparisons.
+        #[arg(long)]
+        independent_sides: bool,
         /// No progress bar or summary.
         #[arg(long)]
         quiet: bool,
@@ -183,6 +188,7 @@ fn main() -> ExitCode {
             output,
             levels,
             base_error,
+            independent_sides,
             quiet,
             force,
         } => check_output(&output, &input.inputs, force).and_then(|()| {
@@ -190,7 +196,11 @@ fn main() -> ExitCode {
             build(
                 &input,
                 &output,
-                tiles::BuildParams { levels, base_error },
+                tiles::BuildParams {
+                    levels,
+                    base_error,
+                    shared_sides: !independent_sides,
+                },
                 quiet,
             )
         }),
@@ -322,6 +332,14 @@ fn build(
             "  tiles     {tiles_x} x {tiles_y} of 257 x 257, {} levels, base error {} m",
             params.levels, params.base_error
         );
+        if params.shared_sides {
+            println!(
+                "  sides     shared: neighbours agreed after {} passes ({} tile meshes)",
+                summary.agreement_passes, summary.agreement_meshes
+            );
+        } else {
+            println!("  sides     independent");
+        }
         println!(
             "  level     e_i (m)   max err (m)     vertices    triangles        bytes   limited"
         );

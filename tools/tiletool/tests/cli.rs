@@ -669,3 +669,50 @@ fn interrupted_builds_leave_no_temporary_files() {
     assert!(!own.exists(), "SIGTERM left the temporary file");
     assert!(!out.exists(), "a half-written output");
 }
+
+/// Built by default, neighbouring tiles share their sides, and verify checks it; a set built
+/// with `--independent-sides` whose header is forged to claim shared sides is caught (the
+/// control), and has more side vertices to disagree on than zero.
+#[test]
+fn shared_sides_verify_and_a_forged_claim_is_caught() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let src = sample();
+    let flags = ["--spacing", "160", "--vertical-scale", "0.1", "--quiet"];
+    let (shared, alone) = (dir.path().join("shared.vkt"), dir.path().join("alone.vkt"));
+    for (out, extra) in [(&shared, None), (&alone, Some("--independent-sides"))] {
+        let mut args = vec!["build", s(&src), "-o", s(out)];
+        args.extend(flags);
+        args.extend(extra);
+        let o = tiletool(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    let flag = |p: &Path| tiles::TileSet::open(p).expect("open").header().flags;
+    assert_eq!(flag(&shared), tiles::format::FLAG_SHARED_SIDES);
+    assert_eq!(flag(&alone), 0);
+    let o = tiletool(&["verify", s(&shared)]);
+    assert!(
+        o.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        stderr(&o)
+    );
+    let o = tiletool(&["verify", s(&alone)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+
+    let mut bytes = std::fs::read(&alone).expect("read");
+    let at = std::mem::offset_of!(tiles::format::FileHeader, flags);
+    bytes[at..at + 4].copy_from_slice(&tiles::format::FLAG_SHARED_SIDES.to_le_bytes());
+    reseal(&mut bytes);
+    let forged = dir.path().join("forged.vkt");
+    std::fs::write(&forged, &bytes).expect("write");
+    let o = tiletool(&["verify", s(&forged)]);
+    assert!(
+        !o.status.success(),
+        "verify missed a forged shared-sides claim"
+    );
+    let all = format!("{}{}", String::from_utf8_lossy(&o.stdout), stderr(&o));
+    assert!(
+        all.contains("although the set says they share their sides"),
+        "{all}"
+    );
+}
