@@ -721,8 +721,8 @@ pub fn build_tileset(
         ..bytemuck::Zeroable::zeroed()
     };
     let (agreements, agreement_passes, agreement_meshes) = if params.shared_sides {
-        let (a, passes, meshes) = agree_sides(grid, params, step, (tiles_x, tiles_y))?;
-        (Some(a), passes, meshes)
+        let agreed = agree_sides(grid, params, step, (tiles_x, tiles_y))?;
+        (Some(agreed.tiles), agreed.passes, agreed.meshes)
     } else {
         (None, 0, 0)
     };
@@ -806,7 +806,7 @@ fn agree_sides(
     params: &BuildParams,
     step: f32,
     (tiles_x, tiles_y): (u32, u32),
-) -> Result<(Vec<(Agreement, Sides)>, u32, u64), BuildError> {
+) -> Result<Agreed, BuildError> {
     /// Far more than any data needs (a change spreads one tile per pass).
     const MAX_PASSES: u32 = 1000;
     let count = (tiles_x * tiles_y) as usize;
@@ -904,7 +904,20 @@ fn agree_sides(
             (agreement, sides[t].clone())
         })
         .collect();
-    Ok((agreements, passes, rebuilt))
+    Ok(Agreed {
+        tiles: agreements,
+        passes,
+        meshes: rebuilt,
+    })
+}
+
+/// What [`agree_sides`] settled.
+struct Agreed {
+    /// Per tile (row-major): the agreement to build it with and the sides it will then have.
+    tiles: Vec<(Agreement, Sides)>,
+    passes: u32,
+    /// Tiles meshed over all passes.
+    meshes: u64,
 }
 
 #[cfg(test)]
