@@ -777,43 +777,66 @@ fn a_tile_set_truncated_in_flight_stops_cleanly() {
 }
 
 /// `pop_px` sees the pops of discrete LOD (a tile switching level jumps by up to about tau
-/// pixels: the control geomorphing will be measured against), and none when every tile stays
-/// at one forced level.
+/// pixels: the control geomorphing is measured against), and none when every tile stays at one
+/// forced level. Geomorphing keeps them under half a pixel on the Puget flyover (tau 1 and 2)
+/// and orbit and on an SRTM flyover (tau 1), 120 frames each.
 #[test]
 fn geomorphing_keeps_pops_under_half_a_pixel_and_discrete_lod_pops() {
     let dir = tempfile::tempdir().expect("temp dir");
     let set = puget(dir.path());
     let sample = common::sample();
-    let run = |extra: &[&str]| -> serde_json::Value {
+    let puget_source = [
+        "--measure-error",
+        s(&sample),
+        "--source-spacing",
+        "160",
+        "--source-vertical-scale",
+        "0.1",
+    ];
+    let hgt = data("srtm/N43E007.hgt");
+    let srtm_dir = tempfile::tempdir().expect("temp dir");
+    let srtm = tileset(srtm_dir.path(), &hgt, dem::ReadOptions::default());
+    let srtm_source = ["--measure-error", s(&hgt)];
+    let run = |set: &Path, path: &str, source: &[&str], extra: &[&str]| -> serde_json::Value {
         let mut args = vec![
-            s(&set),
+            s(set),
             "--headless",
             "--path",
-            "flyover",
+            path,
             "--frames",
             "120",
             "--size",
             "480x360",
-            "--measure-error",
-            s(&sample),
-            "--source-spacing",
-            "160",
-            "--source-vertical-scale",
-            "0.1",
         ];
+        args.extend(source);
         args.extend(extra);
         let o = vkterrain(&args);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         serde_json::from_slice(&o.stdout).expect("summary")
     };
     // Warm (tiles resident), so what is measured is the LOD's doing, not the upload budget's.
-    for (tau, limit) in [("1", 1.0), ("2", 2.0)] {
-        let morphed = run(&["--tau", tau, "--warmup", "--validation"]);
+    for (set, name, path, source, tau) in [
+        (&set, "Puget", "flyover", &puget_source[..], "1"),
+        (&set, "Puget", "flyover", &puget_source[..], "2"),
+        (&set, "Puget", "orbit", &puget_source[..], "1"),
+        (&srtm, "SRTM N43E007", "flyover", &srtm_source[..], "1"),
+    ] {
+        let morphed = run(
+            set,
+            path,
+            source,
+            &["--tau", tau, "--warmup", "--validation"],
+        );
         let pop = morphed["pop_px"].as_f64().expect("pop_px");
         let error = morphed["max_error_px"].as_f64().expect("max_error_px");
-        assert!(pop <= 0.5, "geomorphing at tau {tau} popped {pop} px");
-        assert!(error <= limit, "geomorphing at tau {tau}: {error} px");
+        let limit: f64 = tau.parse().expect("tau");
+        assert!(
+            pop <= 0.5,
+            "{name} {path} tau {tau}: geomorphing popped {pop} px"
+        );
+        assert!(error <= limit, "{name} {path} tau {tau}: {error} px");
     }
+    let run = |extra: &[&str]| run(&set, "flyover", &puget_source, extra);
     // The negative control: discrete levels pop, and the measure sees it.
     let discrete = run(&["--tau", "2", "--warmup", "--no-geomorph"]);
     let pop = discrete["pop_px"].as_f64().expect("pop_px");
