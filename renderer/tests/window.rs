@@ -20,18 +20,34 @@ impl Drop for Xvfb {
     fn drop(&mut self) {
         let _ = self.0.kill();
         let _ = self.0.wait();
+        // Killed, Xvfb leaves its lock and socket behind: remove them, or the display numbers
+        // run out over many test runs.
+        let n = self.1.trim_start_matches(':');
+        let _ = std::fs::remove_file(format!("/tmp/.X{n}-lock"));
+        let _ = std::fs::remove_file(format!("/tmp/.X11-unix/X{n}"));
     }
+}
+
+/// Whether display `n` is taken: its lock names a live process (a lock left by a killed server
+/// is stale, and Xvfb replaces it).
+fn display_taken(n: u32) -> bool {
+    let Ok(lock) = std::fs::read_to_string(format!("/tmp/.X{n}-lock")) else {
+        return Path::new(&format!("/tmp/.X11-unix/X{n}")).exists();
+    };
+    lock.trim()
+        .parse::<u32>()
+        .map_or(true, |pid| Path::new(&format!("/proc/{pid}")).exists())
 }
 
 /// Starts Xvfb on the first free display from :91 and waits for its socket.
 fn xvfb() -> Xvfb {
     let turn = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     for n in 91..120 {
-        if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists()
-            || Path::new(&format!("/tmp/.X{n}-lock")).exists()
-        {
+        if display_taken(n) {
             continue;
         }
+        // A stale socket would pass for the new server's.
+        let _ = std::fs::remove_file(format!("/tmp/.X11-unix/X{n}"));
         let display = format!(":{n}");
         let server = Xvfb(
             Command::new("Xvfb")
