@@ -114,30 +114,31 @@ fn horizon(img: &image::RgbaImage) -> Vec<Option<u32>> {
 fn without_stitching_the_seams_show() {
     let dir = tempfile::tempdir().expect("temp dir");
     let set = puget(dir.path());
-    let (a, b) = (dir.path().join("open"), dir.path().join("brute"));
-    let open = flight(
-        &set,
-        &a,
-        "flyover",
-        6,
-        &["--no-stitch", "--no-geomorph", "--size", "512x384"],
-    );
-    let brute = flight(
-        &set,
-        &b,
-        "flyover",
-        6,
-        &["--brute-force", "--size", "512x384"],
-    );
-    let total: usize = open
-        .iter()
-        .zip(&brute)
-        .map(|(o, b)| cracks(o, b).len())
-        .sum();
+    let total = flyover_cracks(&set, dir.path(), &["--no-stitch", "--no-geomorph"]);
     assert!(
         total > 0,
         "no crack pixels found with stitching off: the detector is blind"
     );
+}
+
+/// Crack pixels over a 6-frame flyover at 512x384 drawn with `open` flags, against brute
+/// force (screenshots under `dir`).
+fn flyover_cracks(set: &Path, dir: &Path, open: &[&str]) -> usize {
+    let size = ["--size", "512x384"];
+    let mut args = open.to_vec();
+    args.extend(size);
+    let open = flight(set, &dir.join("open"), "flyover", 6, &args);
+    let brute = flight(
+        set,
+        &dir.join("brute"),
+        "flyover",
+        6,
+        &["--brute-force", size[0], size[1]],
+    );
+    open.iter()
+        .zip(&brute)
+        .map(|(o, b)| cracks(o, b).len())
+        .sum()
 }
 
 /// With geomorphing (the default; the tile sets are built with shared sides, so the stitches
@@ -160,21 +161,11 @@ fn compare_with_brute_force(set: &Path, path: &str, frames: u32, tau: f64) {
 fn independent_sides_crack_while_morphing_without_slivers() {
     let dir = tempfile::tempdir().expect("temp dir");
     let set = common::puget_independent(dir.path());
-    let (a, b) = (dir.path().join("open"), dir.path().join("brute"));
-    let size = ["--size", "512x384"];
-    let open = flight(
+    let total = flyover_cracks(
         &set,
-        &a,
-        "flyover",
-        6,
-        &["--no-slivers", "--warmup", "--tau", "3", size[0], size[1]],
+        dir.path(),
+        &["--no-slivers", "--warmup", "--tau", "3"],
     );
-    let brute = flight(&set, &b, "flyover", 6, &["--brute-force", size[0], size[1]]);
-    let total: usize = open
-        .iter()
-        .zip(&brute)
-        .map(|(o, b)| cracks(o, b).len())
-        .sum();
     assert!(
         total > 0,
         "no crack without slivers: the seams were never tested"
