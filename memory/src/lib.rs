@@ -63,7 +63,7 @@ pub use classes::ClassPlan;
 pub use cost::{Layout, LevelCost, TileCost};
 pub use manager::{
     Config, FramePlan, Grant, Manager, Move, Part, Request, Scheme, Stats, TileId, Upload, Victim,
-    DEFAULT_DOWNGRADE_SLACK, DEFAULT_UPLOAD_BUDGET, DEFAULT_WEIGHT,
+    DEFAULT_DOWNGRADE_SLACK, DEFAULT_PREFETCH_FREE, DEFAULT_UPLOAD_BUDGET, DEFAULT_WEIGHT,
 };
 
 #[cfg(test)]

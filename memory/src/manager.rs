@@ -51,6 +51,9 @@ pub struct Config {
     /// How many levels finer than wanted a tile may stay drawn before its index array is
     /// replaced by the coarser one. Finer is always within tau; replacing costs an upload.
     pub downgrade_slack: u32,
+    /// [`Manager::prefetch`] runs while at least this share of the chunks is free, and stops
+    /// before taking the pool below it.
+    pub prefetch_free: f64,
 }
 
 /// The default per-frame upload budget: 4 MiB, ~240 MB/s at 60 frames per second, a small
@@ -63,6 +66,9 @@ pub const DEFAULT_DOWNGRADE_SLACK: u32 = 0;
 /// The default mixture weight (measured with `memsim`, see bench/README.md).
 pub const DEFAULT_WEIGHT: f64 = 1.0;
 
+/// The default share of free chunks below which nothing is prefetched.
+pub const DEFAULT_PREFETCH_FREE: f64 = 0.1;
+
 impl Default for Config {
     fn default() -> Self {
         Config {
@@ -73,6 +79,7 @@ impl Default for Config {
             scheme: Scheme::Progressive,
             victim: Victim::Mixture,
             downgrade_slack: DEFAULT_DOWNGRADE_SLACK,
+            prefetch_free: DEFAULT_PREFETCH_FREE,
         }
     }
 }
@@ -153,6 +160,12 @@ pub struct Stats {
     pub resident_bytes: u64,
     /// Bytes of tile data held (resident_bytes less the slack of tight fits).
     pub used_bytes: u64,
+    /// Of the uploads: bytes sent speculatively by [`Manager::prefetch`].
+    pub prefetch_bytes: u64,
+    /// Tiles drawn this frame using data prefetched for them (counted once per prefetch).
+    pub prefetch_hits: u64,
+    /// Prefetched bytes evicted this frame before anything drew them.
+    pub prefetch_wasted_bytes: u64,
 }
 
 #[derive(Clone, Debug, Default)]
@@ -185,6 +198,16 @@ struct Resident {
     index: Option<u32>,
     /// WholeTile: every level's index array is there.
     whole: bool,
+    /// Data prefetched and not drawn yet.
+    speculative: Option<Speculation>,
+}
+
+/// What a prefetch sent for a tile: blocks `from..` (and any index array), `bytes` in all. It is
+/// a hit once the tile is drawn at level `from` or finer.
+#[derive(Clone, Copy, Debug)]
+struct Speculation {
+    from: u32,
+    bytes: u64,
 }
 
 /// The chunk pool and who holds what.
@@ -205,6 +228,8 @@ pub struct Manager {
     completed: Option<u64>,
     /// For Belady: the frame at which a tile is next requested after the current one.
     oracle: Option<Box<dyn Fn(TileId, u64) -> u64>>,
+    /// Prefetching: chunks come from the free lists only, never from a victim.
+    speculating: bool,
 }
 
 impl Manager {
@@ -267,6 +292,7 @@ impl Manager {
             frame: 0,
             completed: None,
             oracle: None,
+            speculating: false,
         }
     }
 
@@ -389,9 +415,12 @@ impl Manager {
             match grant.level {
                 None => plan.stats.tiles_missing += 1,
                 Some(l) => {
-                    let c = self.resident[r.tile as usize].map(|res| res.chunk);
-                    if let Some(c) = c {
-                        self.chunks[c].drawn = Some(frame);
+                    if let Some(res) = self.resident[r.tile as usize].as_mut() {
+                        self.chunks[res.chunk].drawn = Some(frame);
+                        if res.speculative.is_some_and(|s| l >= s.from) {
+                            res.speculative = None;
+                            plan.stats.prefetch_hits += 1;
+                        }
                     }
                     if l < wanted {
                         plan.stats.tiles_coarser += 1;
@@ -406,21 +435,164 @@ impl Manager {
             plan.stats.uploads_deferred_bytes += self.missing_bytes(r.tile, wanted);
             plan.grants.push(grant);
         }
+        self.summarise(&mut plan);
+        plan
+    }
+
+    /// Speculative uploads after this frame's [`plan_frame`](Self::plan_frame) (paper,
+    /// section 6): `candidates` are tiles predicted to become visible, soonest first, each with
+    /// the level it is predicted to want. Runs only while at least
+    /// [`Config::prefetch_free`] of the chunks are free and the frame's upload budget has
+    /// room, and stops at either limit. It never evicts (chunks come from the free lists) and
+    /// never changes what this frame draws: a tile drawn this frame gets only blocks beyond
+    /// its resident ones, within its chunk (nothing it draws reads them); other tiles get a
+    /// chunk and the finest level up to the predicted one that the budget allows. Progressive
+    /// scheme only.
+    pub fn prefetch(&mut self, plan: &mut FramePlan, candidates: &[Request]) {
+        if self.config.scheme != Scheme::Progressive || candidates.is_empty() {
+            return;
+        }
+        let min_free = (self.config.prefetch_free * self.chunks.len() as f64).ceil() as usize;
+        let spent: u64 = plan.uploads.iter().map(|u| u.bytes).sum();
+        let mut left = self.config.upload_budget.saturating_sub(spent);
+        let requested: std::collections::HashSet<TileId> =
+            plan.grants.iter().map(|g| g.tile).collect();
+        self.speculating = true;
+        for r in candidates {
+            let free = self.chunks.iter().filter(|c| c.owner.is_none()).count();
+            if left == 0 || free < min_free.max(1) {
+                break;
+            }
+            let Some(cost) = self.tiles.get(r.tile as usize) else {
+                continue;
+            };
+            let wanted = r.wanted.min(cost.finest());
+            let before = plan.uploads.len();
+            if requested.contains(&r.tile) {
+                self.prefetch_blocks(r.tile, wanted, left, plan);
+            } else {
+                // Taking a chunk needs one free beyond the reserve.
+                self.prefetch_level(r.tile, wanted, left, free > min_free, plan);
+            }
+            let sent = bytes_since(plan, before);
+            left = left.saturating_sub(sent);
+            plan.stats.prefetch_bytes += sent;
+        }
+        self.speculating = false;
+        self.summarise(plan);
+    }
+
+    /// Blocks beyond those resident, up to `wanted` and the chunk's capacity, for a tile drawn
+    /// this frame (its index array stays).
+    fn prefetch_blocks(&mut self, tile: TileId, wanted: u32, left: u64, plan: &mut FramePlan) {
+        let Some(mut res) = self.resident[tile as usize] else {
+            return;
+        };
+        let (Some(b), false) = (res.blocks, res.whole) else {
+            return;
+        };
+        let t = &self.tiles[tile as usize];
+        let mut sum = 0;
+        let mut top = b;
+        for j in b + 1..=wanted.min(res.layout.capacity) {
+            if sum + t.block_bytes(j) > left {
+                break;
+            }
+            sum += t.block_bytes(j);
+            top = j;
+        }
+        if top == b {
+            return;
+        }
+        let base = self.chunks[res.chunk].offset;
+        for j in b + 1..=top {
+            self.push_block(tile, j, base, &res.layout, plan);
+        }
+        res.blocks = Some(top);
+        speculate(&mut res, b + 1, sum);
+        self.resident[tile as usize] = Some(res);
+    }
+
+    /// The finest level up to `wanted` that `left` bytes bring a tile not drawn this frame to.
+    fn prefetch_level(
+        &mut self,
+        tile: TileId,
+        wanted: u32,
+        left: u64,
+        may_take_chunk: bool,
+        plan: &mut FramePlan,
+    ) {
+        let mut res = match self.resident[tile as usize] {
+            Some(res) if res.whole || res.index.is_some_and(|i| i >= wanted) => return,
+            Some(res) => res,
+            None => {
+                if !may_take_chunk {
+                    return;
+                }
+                let t = &self.tiles[tile as usize];
+                if t.block_bytes(0) + t.levels[0].indices > left {
+                    return;
+                }
+                let Some(res) = self.admit(tile, wanted, plan) else {
+                    return;
+                };
+                self.resident[tile as usize] = Some(res);
+                res
+            }
+        };
+        let from = res.index.map_or(0, |i| i + 1);
+        let Some(mut target) = (from..=wanted)
+            .rev()
+            .find(|&g| self.step_cost(tile, &res, g) <= left)
+        else {
+            if res.index.is_none() {
+                // Admitted, but not even level 0 fits: give the chunk back.
+                self.release(res.chunk);
+                self.resident[tile as usize] = None;
+            }
+            return;
+        };
+        if target > res.layout.capacity {
+            let moved = may_take_chunk
+                && self
+                    .relocate(tile, &mut res, wanted, target, plan)
+                    .is_some();
+            if !moved {
+                target = res.layout.capacity;
+            }
+        }
+        if res.index.is_some_and(|i| target <= i) {
+            self.resident[tile as usize] = Some(res);
+            return;
+        }
+        let before = plan.uploads.len();
+        self.resident[tile as usize] = Some(res);
+        self.upload_to(tile, target, plan);
+        let sent = bytes_since(plan, before);
+        if let Some(res) = self.resident[tile as usize].as_mut() {
+            speculate(res, from, sent);
+        }
+    }
+
+    /// The frame's totals from its uploads, moves and the pool's state.
+    fn summarise(&self, plan: &mut FramePlan) {
+        let s = &mut plan.stats;
+        (s.upload_bytes_blocks, s.upload_bytes_indices) = (0, 0);
         for u in &plan.uploads {
             match u.part {
-                Part::Indices(_) => plan.stats.upload_bytes_indices += u.bytes,
-                _ => plan.stats.upload_bytes_blocks += u.bytes,
+                Part::Indices(_) => s.upload_bytes_indices += u.bytes,
+                _ => s.upload_bytes_blocks += u.bytes,
             }
         }
-        plan.stats.chunk_move_bytes = plan.moves.iter().map(|m| m.bytes).sum();
-        plan.stats.chunks_free = self.chunks.iter().filter(|c| c.owner.is_none()).count() as u64;
+        s.chunk_move_bytes = plan.moves.iter().map(|m| m.bytes).sum();
+        s.chunks_free = self.chunks.iter().filter(|c| c.owner.is_none()).count() as u64;
+        (s.resident_bytes, s.used_bytes) = (0, 0);
         for (t, res) in self.resident.iter().enumerate() {
             if let Some(res) = res {
-                plan.stats.resident_bytes += self.classes.sizes[self.chunks[res.chunk].class];
-                plan.stats.used_bytes += self.held_bytes(t, res);
+                s.resident_bytes += self.classes.sizes[self.chunks[res.chunk].class];
+                s.used_bytes += self.held_bytes(t, res);
             }
         }
-        plan
     }
 
     /// Checks the bookkeeping: every resident tile owns exactly its chunk, each chunk has at
@@ -669,6 +841,7 @@ impl Manager {
             blocks: None,
             index: None,
             whole: false,
+            speculative: None,
         })
     }
 
@@ -684,23 +857,7 @@ impl Manager {
             _ => 0,
         };
         for j in first_block..=level {
-            let l = &t.levels[j as usize];
-            plan.uploads.push(Upload {
-                tile,
-                part: Part::Positions(j),
-                dst: base + t.positions_before(j),
-                bytes: l.positions,
-                in_flight: false,
-            });
-            if l.morph > 0 {
-                plan.uploads.push(Upload {
-                    tile,
-                    part: Part::Morph(j),
-                    dst: base + res.layout.morph + t.morph_before(j),
-                    bytes: l.morph,
-                    in_flight: false,
-                });
-            }
+            self.push_block(tile, j, base, &res.layout, plan);
         }
         if res.index.is_some_and(|previous| level < previous) {
             plan.stats.upload_bytes_coarser += t.levels[level as usize].indices;
@@ -719,6 +876,28 @@ impl Manager {
         }
         res.index = Some(level);
         self.resident[tile as usize] = Some(res);
+    }
+
+    /// Records the upload of block `j`'s positions and morph rows into the chunk at `base`.
+    fn push_block(&self, tile: TileId, j: u32, base: u64, layout: &Layout, plan: &mut FramePlan) {
+        let t = &self.tiles[tile as usize];
+        let l = &t.levels[j as usize];
+        plan.uploads.push(Upload {
+            tile,
+            part: Part::Positions(j),
+            dst: base + t.positions_before(j),
+            bytes: l.positions,
+            in_flight: false,
+        });
+        if l.morph > 0 {
+            plan.uploads.push(Upload {
+                tile,
+                part: Part::Morph(j),
+                dst: base + layout.morph + t.morph_before(j),
+                bytes: l.morph,
+                in_flight: false,
+            });
+        }
     }
 
     fn upload_whole(&mut self, tile: TileId, plan: &mut FramePlan) {
@@ -816,8 +995,14 @@ impl Manager {
                 return Some(c);
             }
         }
+        if self.speculating {
+            return None;
+        }
         let victim = self.victim(first, bytes)?;
         if let Some(owner) = self.chunks[victim].owner {
+            if let Some(s) = self.resident[owner as usize].and_then(|r| r.speculative) {
+                plan.stats.prefetch_wasted_bytes += s.bytes;
+            }
             self.resident[owner as usize] = None;
         }
         self.lru.remove(victim);
@@ -871,6 +1056,15 @@ impl Manager {
             }
         }
     }
+}
+
+/// Marks `bytes` more of `res` as prefetched, from block `from` on.
+fn speculate(res: &mut Resident, from: u32, bytes: u64) {
+    let s = res
+        .speculative
+        .get_or_insert(Speculation { from, bytes: 0 });
+    s.from = s.from.min(from);
+    s.bytes += bytes;
 }
 
 /// Bytes of the uploads planned after the first `before`.

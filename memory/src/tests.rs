@@ -315,6 +315,96 @@ fn overlaps(a: (u64, u64), b: (u64, u64)) -> bool {
     a.0 < b.1 && b.0 < a.1 && a.0 < a.1 && b.0 < b.1
 }
 
+#[test]
+fn prefetched_tiles_are_hits_when_drawn_and_waste_when_evicted_unused() {
+    let t = tile(6, 60);
+    let tiles = vec![t.clone(); 4];
+    let mut m = Manager::new(tiles.clone(), config(64 << 20, 1 << 30));
+    // Frame 0 draws tile 0; tile 1 is predicted at level 3.
+    let mut p = m.plan_frame(0, None, &[req(0, 2)], true);
+    let drawn = p.stats.upload_bytes_blocks + p.stats.upload_bytes_indices;
+    m.prefetch(&mut p, &[req(1, 3), req(0, 4)]);
+    let tile1: u64 = (0..=3).map(|j| t.block_bytes(j)).sum::<u64>() + t.levels[3].indices;
+    // Tile 0 (drawn) gets blocks 3 and 4 only, as far as its chunk holds them, and no index
+    // array: it still draws level 2.
+    let capacity = m.layout_of(0).unwrap().1.capacity;
+    assert!(capacity >= 3, "the test needs room for block 3");
+    let tile0: u64 = (3..=capacity.min(4)).map(|j| t.block_bytes(j)).sum();
+    assert_eq!(p.stats.prefetch_bytes, tile1 + tile0);
+    assert_eq!(
+        p.stats.upload_bytes_blocks + p.stats.upload_bytes_indices,
+        drawn + tile1 + tile0
+    );
+    assert_eq!(m.resident_levels(0), Some((Some(capacity.min(4)), Some(2))));
+    assert_eq!(m.resident_levels(1), Some((Some(3), Some(3))));
+    m.check().unwrap();
+    // Frame 1: tile 1 appears wanting 3, tile 0 wants 3: tile 1 is a hit with no upload, and
+    // tile 0 needs only its index array.
+    let p = m.plan_frame(1, Some(0), &[req(1, 3), req(0, 3)], true);
+    assert_eq!(p.stats.prefetch_hits, 2);
+    assert_eq!(p.stats.upload_bytes_blocks, 0);
+    assert_eq!(p.stats.upload_bytes_indices, t.levels[3].indices);
+    assert_eq!(p.stats.hits, 1, "tile 1 needed nothing");
+    // Counted once.
+    let p = m.plan_frame(2, Some(1), &[req(1, 3), req(0, 3)], true);
+    assert_eq!(p.stats.prefetch_hits, 0);
+
+    // Waste: a pool that holds two tiles at level 5; tile 2 is prefetched, never drawn, and
+    // evicted when tiles 0 and 3 need the room.
+    let need = t.need(5).next_multiple_of(256);
+    let two_chunks = ClassPlan {
+        sizes: vec![need],
+        counts: vec![2],
+        votes: vec![0],
+    };
+    let c = Config {
+        prefetch_free: 0.0,
+        ..config(2 * need, 1 << 30)
+    };
+    let mut m = Manager::with_classes(tiles, c, two_chunks);
+    m.plan_frame(0, None, &[req(0, 5)], true);
+    let mut p = m.plan_frame(1, Some(0), &[req(0, 5)], true);
+    m.prefetch(&mut p, &[req(2, 5)]);
+    let sent = p.stats.prefetch_bytes;
+    assert!(sent > 0);
+    let mut wasted = 0;
+    for f in 2..6 {
+        let p = m.plan_frame(f, Some(f - 1), &[req(0, 5), req(3, 5)], true);
+        wasted += p.stats.prefetch_wasted_bytes;
+        assert_eq!(p.stats.prefetch_hits, 0);
+    }
+    assert_eq!(
+        m.resident_levels(2),
+        None,
+        "the pool holds two tiles at level 5"
+    );
+    assert_eq!(wasted, sent);
+}
+
+#[test]
+fn prefetching_stops_at_the_free_share_and_the_budget() {
+    let t = tile(6, 60);
+    let tiles = vec![t.clone(); 8];
+    let level0 = t.block_bytes(0) + t.levels[0].indices;
+    let candidates: Vec<Request> = (1..8).map(|i| req(i, 0)).collect();
+    // Room for exactly two tiles' level 0 in the budget left after drawing tile 0.
+    let mut m = Manager::new(tiles.clone(), config(64 << 20, 3 * level0));
+    let mut p = m.plan_frame(0, None, &[req(0, 0)], true);
+    m.prefetch(&mut p, &candidates);
+    assert_eq!(p.stats.prefetch_bytes, 2 * level0);
+    // A pool that must keep every chunk free: nothing.
+    let mut m = Manager::new(
+        tiles,
+        Config {
+            prefetch_free: 1.0,
+            ..config(64 << 20, 1 << 30)
+        },
+    );
+    let mut p = m.plan_frame(0, None, &[req(0, 0)], true);
+    m.prefetch(&mut p, &candidates);
+    assert_eq!(p.stats.prefetch_bytes, 0);
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(200))]
 
@@ -331,6 +421,8 @@ proptest! {
         in_flight in 1u64..4,
         weight in 0.0f64..4.0,
         victim in 0usize..3,
+        prefetch in any::<bool>(),
+        noise in proptest::collection::vec((0u32..14, 0u32..7), 0..4),
     ) {
         let tiles: Vec<TileCost> = scales.iter().map(|&s| tile(7, s)).collect();
         let n = tiles.len() as u32;
@@ -384,7 +476,48 @@ proptest! {
             // Budget: beyond it only by the recorded overshoot.
             let sent = p.stats.upload_bytes_blocks + p.stats.upload_bytes_indices;
             prop_assert!(sent <= upload + p.stats.upload_overshoot_bytes);
-            read.push(p.grants.iter().flat_map(|g| reads(&m, g)).collect());
+            let drawn: Vec<(u64, u64)> = p.grants.iter().flat_map(|g| reads(&m, g)).collect();
+            let mut p = p;
+            if prefetch {
+                // The next frame's requests (a perfect prediction) and some noise.
+                let next = frames.get(f as usize + 1).cloned().unwrap_or_default();
+                let candidates: Vec<Request> = next
+                    .iter()
+                    .chain(&noise)
+                    .map(|&(t, l)| req(t % n, l))
+                    .collect();
+                let (uploads, moves, evictions) = (p.uploads.len(), p.moves.len(), p.stats.evictions);
+                m.prefetch(&mut p, &candidates);
+                m.check().map_err(TestCaseError::fail)?;
+                prop_assert_eq!(p.stats.evictions, evictions, "prefetch evicted");
+                // What this frame draws is untouched and still there.
+                for g in &p.grants {
+                    if let Some(l) = g.level {
+                        prop_assert_eq!(m.resident_levels(g.tile).unwrap().1, Some(l));
+                        prop_assert_eq!(m.layout_of(g.tile).unwrap().0, g.vertex_offset);
+                    }
+                }
+                for u in &p.uploads[uploads..] {
+                    let w = (u.dst, u.dst + u.bytes);
+                    for r in &drawn {
+                        prop_assert!(!overlaps(w, *r), "prefetch {u:?} over this frame's {r:?}");
+                    }
+                    for r in read[flying.clone()].iter().flatten() {
+                        prop_assert!(u.in_flight || !overlaps(w, *r), "prefetch {u:?} over {r:?}");
+                    }
+                }
+                for mv in &p.moves[moves..] {
+                    let w = (mv.dst, mv.dst + mv.bytes);
+                    for r in drawn.iter().chain(read[flying.clone()].iter().flatten()) {
+                        prop_assert!(!overlaps(w, *r), "prefetch move {mv:?} over {r:?}");
+                    }
+                }
+                // Prefetching spends only what the frame left of the budget.
+                let sent_after = p.stats.upload_bytes_blocks + p.stats.upload_bytes_indices;
+                prop_assert_eq!(sent_after - sent, p.stats.prefetch_bytes);
+                prop_assert!(sent_after <= upload.max(sent));
+            }
+            read.push(drawn);
         }
     }
 }

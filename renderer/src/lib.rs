@@ -17,6 +17,7 @@ pub mod measure;
 pub mod morph;
 pub mod path;
 pub mod plan;
+pub mod predict;
 pub mod stitch;
 pub mod target;
 pub mod terrain;
