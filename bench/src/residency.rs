@@ -163,3 +163,39 @@ pub fn time_manager(costs: &[TileCost]) -> (usize, Vec<f64>, u64) {
     times.sort_by(f64::total_cmp);
     (trace.frames.len(), times, evictions)
 }
+
+/// Replays `trace` without prefetching, with the predictions it recorded, and with a perfect
+/// predictor (the next `ahead` frames' requests): tile-frames drawn coarser than wanted,
+/// missing, bytes prefetched, hits and waste, as a Markdown table.
+pub fn prefetch_table(trace: &Trace, pool: u64, upload: u64, ahead: usize) -> String {
+    use memory::sim::{replay_prefetching, Prefetching};
+    let c = memory::Config {
+        pool_bytes: pool,
+        upload_budget: upload,
+        ..memory::Config::default()
+    };
+    let runs = [
+        ("no prefetching", Prefetching::Off),
+        ("recorded predictions (ours)", Prefetching::Recorded),
+        (
+            "perfect predictor (upper bound)",
+            Prefetching::Perfect { frames: ahead },
+        ),
+    ];
+    let off = replay_prefetching(trace, c, 2, Prefetching::Off);
+    let mut out = String::from("| prefetching | tile-frames coarser | vs none | missing | uploaded MB | prefetched MB | hits | wasted MB |\n|---|---:|---:|---:|---:|---:|---:|---:|\n");
+    for (name, p) in runs {
+        let o = replay_prefetching(trace, c, 2, p);
+        out += &format!(
+            "| {name} | {} | {:.2} | {} | {:.2} | {:.2} | {} | {:.2} |\n",
+            o.coarser,
+            o.coarser as f64 / off.coarser.max(1) as f64,
+            o.missing,
+            o.bytes() as f64 / 1e6,
+            o.prefetch_bytes as f64 / 1e6,
+            o.prefetch_hits,
+            o.prefetch_wasted_bytes as f64 / 1e6
+        );
+    }
+    out
+}

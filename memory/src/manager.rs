@@ -186,6 +186,9 @@ struct Chunk {
     last_used: u64,
     /// The last frame that drew from it, if any.
     drawn: Option<u64>,
+    /// The last frame whose in-pool copies wrote into it (a tile moves once per frame: the
+    /// copies of one frame are one command, whose regions must not chain).
+    copied_in: Option<u64>,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -270,6 +273,7 @@ impl Manager {
                     owner: None,
                     last_used: 0,
                     drawn: None,
+                    copied_in: None,
                 });
                 offset += size;
             }
@@ -469,7 +473,7 @@ impl Manager {
             let wanted = r.wanted.min(cost.finest());
             let before = plan.uploads.len();
             if requested.contains(&r.tile) {
-                self.prefetch_blocks(r.tile, wanted, left, plan);
+                self.prefetch_blocks(r.tile, wanted, left, free > min_free, plan);
             } else {
                 // Taking a chunk needs one free beyond the reserve.
                 self.prefetch_level(r.tile, wanted, left, free > min_free, plan);
@@ -482,15 +486,32 @@ impl Manager {
         self.summarise(plan);
     }
 
-    /// Blocks beyond those resident, up to `wanted` and the chunk's capacity, for a tile drawn
-    /// this frame (its index array stays).
-    fn prefetch_blocks(&mut self, tile: TileId, wanted: u32, left: u64, plan: &mut FramePlan) {
+    /// Blocks beyond those resident, up to `wanted`, for a tile drawn this frame (its index
+    /// array stays). A chunk too small for `wanted` is traded for one that holds it when
+    /// `may_take_chunk`: the blocks and the drawn index array follow by in-pool copies, and
+    /// this frame still draws from the old chunk, which is not reused before it completes.
+    fn prefetch_blocks(
+        &mut self,
+        tile: TileId,
+        wanted: u32,
+        left: u64,
+        may_take_chunk: bool,
+        plan: &mut FramePlan,
+    ) {
         let Some(mut res) = self.resident[tile as usize] else {
             return;
         };
-        let (Some(b), false) = (res.blocks, res.whole) else {
+        let (Some(b), Some(index), false) = (res.blocks, res.index, res.whole) else {
             return;
         };
+        // Not twice in a frame, and not a chunk with a staged upload this frame (copies run
+        // before staged uploads: the move would carry the old index array).
+        let moved = self.chunks[res.chunk].copied_in == Some(self.frame)
+            || plan.uploads.iter().any(|u| u.tile == tile && u.in_flight);
+        if wanted > res.layout.capacity && may_take_chunk && b < wanted && !moved {
+            self.move_with_index(tile, &mut res, b, index, wanted, plan);
+            self.resident[tile as usize] = Some(res);
+        }
         let t = &self.tiles[tile as usize];
         let mut sum = 0;
         let mut top = b;
@@ -511,6 +532,59 @@ impl Manager {
         res.blocks = Some(top);
         speculate(&mut res, b + 1, sum);
         self.resident[tile as usize] = Some(res);
+    }
+
+    /// Moves a drawn tile (blocks `0..=b`, index array of `index`) into a free chunk sized for
+    /// `level`, by in-pool copies.
+    fn move_with_index(
+        &mut self,
+        tile: TileId,
+        res: &mut Resident,
+        b: u32,
+        index: u32,
+        level: u32,
+        plan: &mut FramePlan,
+    ) {
+        let Some(chunk) = self.obtain(self.needs[tile as usize][level as usize], plan) else {
+            return;
+        };
+        let t = &self.tiles[tile as usize];
+        let size = self.classes.sizes[self.chunks[chunk].class];
+        let layout = t.layout(t.capacity_in(size).unwrap_or(level).max(level));
+        let (old, new) = (self.chunks[res.chunk].offset, self.chunks[chunk].offset);
+        for (src, dst, bytes) in [
+            (old, new, t.positions_before(b + 1)),
+            (
+                old + res.layout.morph,
+                new + layout.morph,
+                t.morph_before(b + 1),
+            ),
+            (
+                old + res.layout.index,
+                new + layout.index,
+                t.levels[index as usize].indices,
+            ),
+        ] {
+            if bytes > 0 {
+                plan.moves.push(Move {
+                    tile,
+                    src,
+                    dst,
+                    bytes,
+                });
+            }
+        }
+        plan.stats.chunk_moves += 1;
+        let old_chunk = res.chunk;
+        self.own(chunk, tile);
+        // The copies run on the GPU with this frame: a later index upload into the new chunk
+        // must be ordered after them, as one into a chunk this frame draws.
+        self.chunks[chunk].drawn = Some(self.frame);
+        self.chunks[chunk].copied_in = Some(self.frame);
+        self.chunks[old_chunk].drawn = Some(self.frame);
+        self.release(old_chunk);
+        res.chunk = chunk;
+        res.layout = layout;
     }
 
     /// The finest level up to `wanted` that `left` bytes bring a tile not drawn this frame to.
@@ -554,6 +628,7 @@ impl Manager {
         };
         if target > res.layout.capacity {
             let moved = may_take_chunk
+                && self.chunks[res.chunk].copied_in != Some(self.frame)
                 && self
                     .relocate(tile, &mut res, wanted, target, plan)
                     .is_some();
@@ -812,6 +887,9 @@ impl Manager {
         plan.stats.chunk_moves += 1;
         let old_chunk = res.chunk;
         self.own(chunk, tile);
+        self.chunks[chunk].copied_in = Some(self.frame);
+        // The copies read the old chunk on the GPU this frame: it retires like a drawn one.
+        self.chunks[old_chunk].drawn = Some(self.frame);
         self.release(old_chunk);
         res.chunk = chunk;
         res.layout = layout;

@@ -433,6 +433,8 @@ proptest! {
         prop_assert!(m.pool_bytes() <= pool_kib << 10);
         // What each frame read, by frame.
         let mut read: Vec<Vec<(u64, u64)>> = Vec::new();
+        // What each frame's in-pool copies wrote, by frame (they run when the GPU gets there).
+        let mut copied: Vec<Vec<(u64, u64)>> = Vec::new();
         // Data each tile has received, per level: (blocks, index level).
         for (f, frame) in frames.iter().enumerate() {
             let f = f as u64;
@@ -490,11 +492,12 @@ proptest! {
                 m.prefetch(&mut p, &candidates);
                 m.check().map_err(TestCaseError::fail)?;
                 prop_assert_eq!(p.stats.evictions, evictions, "prefetch evicted");
-                // What this frame draws is untouched and still there.
+                // Drawn tiles keep their level (a tile may have moved to a larger chunk: this
+                // frame reads the old one, which the checks below and the later frames'
+                // checks of reads in flight keep untouched).
                 for g in &p.grants {
                     if let Some(l) = g.level {
                         prop_assert_eq!(m.resident_levels(g.tile).unwrap().1, Some(l));
-                        prop_assert_eq!(m.layout_of(g.tile).unwrap().0, g.vertex_offset);
                     }
                 }
                 for u in &p.uploads[uploads..] {
@@ -517,6 +520,34 @@ proptest! {
                 prop_assert_eq!(sent_after - sent, p.stats.prefetch_bytes);
                 prop_assert!(sent_after <= upload.max(sent));
             }
+            // CPU writes never race a copy not yet run (this frame's or one in flight).
+            let moved: Vec<(u64, u64)> = p.moves.iter().map(|mv| (mv.dst, mv.dst + mv.bytes)).collect();
+            for u in p.uploads.iter().filter(|u| !u.in_flight) {
+                let w = (u.dst, u.dst + u.bytes);
+                for c in copied[flying.clone()].iter().flatten().chain(&moved) {
+                    prop_assert!(!overlaps(w, *c), "frame {f}: upload {u:?} races the copy to {c:?}");
+                }
+            }
+            // Staged uploads run after the frame's copies: a copy must not read what one of
+            // them writes (it would carry the old bytes).
+            for mv in &p.moves {
+                for u in p.uploads.iter().filter(|u| u.in_flight) {
+                    prop_assert!(
+                        !overlaps((mv.src, mv.src + mv.bytes), (u.dst, u.dst + u.bytes)),
+                        "frame {f}: move {mv:?} reads before {u:?} writes"
+                    );
+                }
+            }
+            // One copy command: no region is both read and written.
+            for a in &p.moves {
+                for b in &p.moves {
+                    prop_assert!(
+                        !overlaps((a.src, a.src + a.bytes), (b.dst, b.dst + b.bytes)),
+                        "frame {f}: move {a:?} reads what {b:?} writes"
+                    );
+                }
+            }
+            copied.push(moved);
             read.push(drawn);
         }
     }

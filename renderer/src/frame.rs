@@ -22,6 +22,7 @@ use crate::log::FrameRecord;
 use crate::measure::State;
 use crate::morph::MAX_LEVELS;
 use crate::plan::{self, BorderMismatch, LevelRule, Plan};
+use crate::prefetch::{Predicted, PrefetchOptions, Prefetcher};
 use crate::stitch::{pulled, Stitch, MAX_RECORDS};
 use crate::target::{Target, COLOR_FORMAT, DEPTH_FORMAT};
 use crate::terrain::Terrain;
@@ -93,6 +94,7 @@ pub struct MemoryOptions {
     pub downgrade_slack: u32,
     /// How levels travel (progressive; the others are for comparison and the draw-only limit).
     pub scheme: Scheme,
+    pub prefetch: PrefetchOptions,
 }
 
 impl Default for MemoryOptions {
@@ -105,6 +107,7 @@ impl Default for MemoryOptions {
             force_staging: false,
             downgrade_slack: memory::DEFAULT_DOWNGRADE_SLACK,
             scheme: Scheme::Progressive,
+            prefetch: PrefetchOptions::default(),
         }
     }
 }
@@ -281,6 +284,8 @@ pub struct Renderer {
     fault: Option<Fault>,
     /// Frames collected by a frame that then failed; [`Renderer::finish_all`] returns them.
     collected: Vec<Finished>,
+    /// The camera predictor and the file side of prefetching.
+    prefetcher: Prefetcher,
 }
 
 /// Faults the tests inject through the `VKTERRAIN_FAULT` environment variable, to check the
@@ -343,6 +348,7 @@ impl Renderer {
             scheme: options.scheme,
             victim: Victim::Mixture,
             downgrade_slack: options.downgrade_slack,
+            prefetch_free: options.prefetch.free_share,
         };
         let fault = Fault::from_env();
         let (manager, pool) = allocate_pool(gpu, terrain, config, options.force_staging, fault)?;
@@ -395,6 +401,7 @@ impl Renderer {
                 meter: None,
                 fault,
                 collected: Vec::new(),
+                prefetcher: Prefetcher::new(options.prefetch, terrain.tiles.len()),
             }),
             (pipeline, failure) => {
                 gpu.wait_idle();
@@ -602,17 +609,34 @@ impl Renderer {
         let started = self.slot_ready.unwrap_or_else(Instant::now);
         let completed = self.completed();
         let extent = self.extent();
+        let t = Instant::now();
+        let prediction_error_m = self.prefetcher.observe(input.time_s, input.camera);
+        let predicted = if self.prefetcher.options.enabled || self.trace.is_some() {
+            self.prefetcher
+                .predict(terrain, input.camera, extent, settings.rule())
+        } else {
+            Predicted::default()
+        };
+        let cpu_prefetch_ms = ms(t);
+        let prefetch = if self.prefetcher.options.enabled {
+            predicted.requests.as_slice()
+        } else {
+            &[]
+        };
         let plan = plan::plan(
             terrain,
             &mut self.manager,
             input.camera,
             extent,
             settings.rule(),
-            self.frame,
-            completed,
-            true,
+            plan::Residency {
+                frame: self.frame,
+                completed,
+                allow_uploads: true,
+                prefetch,
+            },
         )?;
-        self.write_trace(&plan);
+        self.write_trace(&plan, &predicted.requests);
         let s = (self.frame % self.slots.len() as u64) as usize;
 
         let t = Instant::now();
@@ -707,6 +731,10 @@ impl Renderer {
         record.cpu_record_ms = cpu_record_ms;
         record.staged_bytes = slot.staging.sent();
         record.gpu_allocations = gpu.allocations() - allocations;
+        record.prediction_error_m = prediction_error_m;
+        record.cpu_prefetch_ms = cpu_prefetch_ms;
+        record.file_advised_bytes = predicted.advised_bytes;
+        record.file_released_bytes = predicted.released_bytes;
         slot.pending = Some(Pending {
             record,
             screenshot: input.screenshot,
@@ -719,21 +747,24 @@ impl Renderer {
         Ok(())
     }
 
-    fn write_trace(&mut self, plan: &Plan) {
+    /// Appends the frame's requests and predictions to the trace.
+    fn write_trace(&mut self, plan: &Plan, predicted: &[memory::Request]) {
         let Some(trace) = self.trace.as_mut() else {
             return;
         };
-        let rows: Vec<(memory::Request, u64)> = plan
-            .requests
-            .iter()
-            .map(|r| {
-                let t = self.manager.tile_cost(r.tile);
-                let bytes = (0..=r.wanted).map(|j| t.block_bytes(j)).sum::<u64>()
-                    + t.levels[r.wanted as usize].indices;
-                (*r, bytes)
-            })
-            .collect();
-        memory::trace::write_frame(trace, self.frame, &rows);
+        let rows = |requests: &[memory::Request]| -> Vec<(memory::Request, u64)> {
+            requests
+                .iter()
+                .map(|r| {
+                    let t = self.manager.tile_cost(r.tile);
+                    let bytes = (0..=r.wanted).map(|j| t.block_bytes(j)).sum::<u64>()
+                        + t.levels[r.wanted as usize].indices;
+                    (*r, bytes)
+                })
+                .collect()
+        };
+        memory::trace::write_frame(trace, self.frame, &rows(&plan.requests));
+        memory::trace::write_predicted(trace, self.frame, &rows(predicted));
     }
 
     /// Writes the plan's uploads: straight into the pool where that is safe, else into the
@@ -781,6 +812,7 @@ impl Renderer {
         }
         let mut staged = Vec::new();
         for u in &plan.uploads {
+            self.prefetcher.touched(terrain, u.tile as usize);
             let bytes = terrain.part(u.tile as usize, u.part).ok_or_else(|| {
                 FrameError::Internal(format!("tile {} has no {:?}", u.tile, u.part))
             })?;
@@ -826,9 +858,12 @@ impl Renderer {
             camera,
             extent,
             settings.rule(),
-            self.frame,
-            self.frame.checked_sub(1),
-            false,
+            plan::Residency {
+                frame: self.frame,
+                completed: self.frame.checked_sub(1),
+                allow_uploads: false,
+                prefetch: &[],
+            },
         )?;
         self.frame += 1;
         let bytes: u64 = plan
@@ -1168,9 +1203,13 @@ fn frame_record(plan: &Plan, counts: DrawCounts, levels: u32) -> FrameRecord {
         hits: st.hits,
         misses: st.misses,
         used_bytes: st.used_bytes,
+        prefetch_bytes: st.prefetch_bytes,
+        prefetch_hits: st.prefetch_hits,
+        prefetch_wasted_bytes: st.prefetch_wasted_bytes,
         tiles_per_level,
         max_error_px: f64::NAN,
         pop_px: f64::NAN,
+        prediction_error_m: f64::NAN,
         ..Default::default()
     }
 }

@@ -18,6 +18,7 @@ pub mod morph;
 pub mod path;
 pub mod plan;
 pub mod predict;
+pub mod prefetch;
 pub mod stitch;
 pub mod target;
 pub mod terrain;

@@ -7,7 +7,9 @@
 //! `gpu_allocations, upload_bytes_blocks, upload_bytes_indices, uploads_deferred_bytes,
 //! upload_overshoot_bytes, staged_bytes, tiles_coarser, tiles_missing, chunks_free,
 //! chunk_moves, chunk_move_bytes, hits, misses, used_bytes, cpu_residency_ms, gpu_draw_ms,
-//! upload_bytes_coarser, max_error_px, pop_px`,
+//! upload_bytes_coarser, max_error_px, pop_px`, then prefetching's
+//! `prefetch_bytes, prefetch_hits, prefetch_wasted_bytes, prediction_error_m, cpu_prefetch_ms,
+//! file_advised_bytes, file_released_bytes`,
 //! and last `tiles_level_0 .. tiles_level_{n-1}`.
 
 use std::io::Write;
@@ -75,10 +77,24 @@ pub struct FrameRecord {
     pub misses: u64,
     /// Bytes of tile data in the owned chunks.
     pub used_bytes: u64,
+    /// Of `upload_bytes`: sent for tiles predicted to become visible.
+    pub prefetch_bytes: u64,
+    /// Tiles drawn this frame from data prefetched for them (each prefetch counted once).
+    pub prefetch_hits: u64,
+    /// Prefetched bytes evicted this frame before anything drew them.
+    pub prefetch_wasted_bytes: u64,
+    /// The distance, metres, between where the shortest horizon (0.25 s) predicted the camera
+    /// and where it was when that time came (NaN when no prediction fell due this frame).
+    pub prediction_error_m: f64,
+    /// Predicting the camera, culling and choosing levels for it, and advising the kernel.
+    pub cpu_prefetch_ms: f64,
+    /// Bytes of the tile set newly advised `WILLNEED` (read ahead) and `DONTNEED` (released).
+    pub file_advised_bytes: u64,
+    pub file_released_bytes: u64,
     pub tiles_per_level: Vec<u64>,
 }
 
-pub const BASE_COLUMNS: [&str; 36] = [
+pub const BASE_COLUMNS: [&str; 43] = [
     "frame",
     "time_s",
     "frame_ms",
@@ -115,6 +131,13 @@ pub const BASE_COLUMNS: [&str; 36] = [
     "upload_bytes_coarser",
     "max_error_px",
     "pop_px",
+    "prefetch_bytes",
+    "prefetch_hits",
+    "prefetch_wasted_bytes",
+    "prediction_error_m",
+    "cpu_prefetch_ms",
+    "file_advised_bytes",
+    "file_released_bytes",
 ];
 
 pub fn header(levels: u32) -> String {
@@ -180,6 +203,18 @@ impl FrameRecord {
         cells.push(self.upload_bytes_coarser.to_string());
         cells.push(ms_cell(self.max_error_px));
         cells.push(ms_cell(self.pop_px));
+        cells.extend(
+            [
+                self.prefetch_bytes,
+                self.prefetch_hits,
+                self.prefetch_wasted_bytes,
+            ]
+            .map(|n| n.to_string()),
+        );
+        cells.push(ms_cell(self.prediction_error_m));
+        cells.push(ms_cell(self.cpu_prefetch_ms));
+        cells.push(self.file_advised_bytes.to_string());
+        cells.push(self.file_released_bytes.to_string());
         cells.extend(self.tiles_per_level.iter().map(|n| n.to_string()));
         cells.join(",")
     }
@@ -191,7 +226,8 @@ impl FrameRecord {
     /// The per-frame decision and recording work: cull + LOD + residency + stitch + record
     /// (writing uploads, which depends on what became visible, is counted apart).
     pub fn overhead_ms(&self) -> f64 {
-        self.cpu_cull_ms
+        self.cpu_prefetch_ms
+            + self.cpu_cull_ms
             + self.cpu_lod_ms
             + self.cpu_residency_ms
             + self.cpu_stitch_ms
@@ -270,6 +306,13 @@ pub struct Summary {
     pub tiles_coarser: u64,
     /// Tile-frames with a visible tile not drawn.
     pub tiles_missing: u64,
+    pub prefetch_mb: f64,
+    pub prefetch_hits: u64,
+    pub prefetch_wasted_mb: f64,
+    /// The shortest horizon's prediction error, metres: median and largest.
+    pub prediction_error_m_median: Option<f64>,
+    pub prediction_error_m_max: Option<f64>,
+    pub cpu_prefetch_ms_median: f64,
     pub validation_messages: u64,
 }
 
@@ -286,6 +329,7 @@ impl Summary {
         let draw = sorted(records.iter().map(|r| r.gpu_draw_ms));
         let cpu = sorted(records.iter().map(FrameRecord::cpu_ms));
         let uploads = sorted(records.iter().map(|r| r.upload_bytes as f64));
+        let predicted = sorted(records.iter().map(|r| r.prediction_error_m));
         let total_ms: f64 = ms.iter().sum();
         let tris: u64 = records
             .iter()
@@ -349,6 +393,16 @@ impl Summary {
             chunk_moves: sum(|r| r.chunk_moves),
             tiles_coarser: sum(|r| r.tiles_coarser),
             tiles_missing: sum(|r| r.tiles_missing),
+            prefetch_mb: sum(|r| r.prefetch_bytes) as f64 / 1e6,
+            prefetch_hits: sum(|r| r.prefetch_hits),
+            prefetch_wasted_mb: sum(|r| r.prefetch_wasted_bytes) as f64 / 1e6,
+            prediction_error_m_median: (!predicted.is_empty())
+                .then(|| percentile(&predicted, 50.0)),
+            prediction_error_m_max: predicted.last().copied(),
+            cpu_prefetch_ms_median: percentile(
+                &sorted(records.iter().map(|r| r.cpu_prefetch_ms)),
+                50.0,
+            ),
             validation_messages: run.validation_messages,
         }
     }

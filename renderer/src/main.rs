@@ -15,6 +15,7 @@ use renderer::headless::{fly, Flight, FlightResult};
 use renderer::log::{write_csv, RunInfo, Summary};
 use renderer::measure::ErrorMeter;
 use renderer::path::CameraPath;
+use renderer::prefetch::PrefetchOptions;
 use renderer::terrain::Terrain;
 use renderer::vulkan::{Gpu, GpuOptions};
 use renderer::window::{self, WindowOptions};
@@ -164,6 +165,28 @@ struct Cli {
     /// Write the path flown (CSV keyframes) here.
     #[arg(long)]
     record: Option<PathBuf>,
+    /// Do not upload tiles predicted to become visible (the camera is predicted from the
+    /// poses flown, 0.25, 0.5 and 1 s ahead); nor read them ahead from the file.
+    #[arg(long)]
+    no_prefetch: bool,
+    /// CPU time per frame for predicting the camera and culling and choosing levels for it.
+    #[arg(long, default_value_t = 2.0, value_name = "MS")]
+    prefetch_ms: f64,
+    /// Prefetch only while at least this share (0..1) of the GPU pool's chunks is free, and
+    /// never take it below that.
+    #[arg(long, default_value_t = memory::DEFAULT_PREFETCH_FREE, value_name = "SHARE")]
+    prefetch_free: f64,
+    /// Do not advise the kernel to read predicted tiles ahead of use (madvise WILLNEED).
+    #[arg(long)]
+    no_madvise: bool,
+    /// When the tile set file is larger than this, let the kernel drop tiles far behind the
+    /// camera from memory (madvise DONTNEED) once this run has paged in more than this.
+    #[arg(long, value_name = "MB")]
+    file_cache_mb: Option<u64>,
+    /// Benchmark: drop the tile set from the page cache after opening it (which reads it
+    /// whole, to validate it), so the flight reads tiles from disk as a first run would.
+    #[arg(long)]
+    cold_file_cache: bool,
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -339,6 +362,30 @@ fn run(cli: Cli) -> Result<ExitCode> {
     if !(cli.evict_weight.is_finite() && cli.evict_weight >= 0.0) {
         bail!("--evict-weight must be zero or positive");
     }
+    if !(cli.prefetch_ms.is_finite() && cli.prefetch_ms >= 0.0) {
+        bail!("--prefetch-ms must be zero or a positive number of milliseconds");
+    }
+    if !(0.0..=1.0).contains(&cli.prefetch_free) {
+        bail!("--prefetch-free must be a share between 0 and 1");
+    }
+    let prefetch = PrefetchOptions {
+        enabled: !cli.no_prefetch,
+        free_share: cli.prefetch_free,
+        cpu_ms: cli.prefetch_ms,
+        madvise: !cli.no_prefetch && !cli.no_madvise,
+        file_cache_bytes: cli.file_cache_mb.map(|mb| mb.saturating_mul(1 << 20)),
+    };
+    if cli.cold_file_cache {
+        let left = terrain.set.drop_page_cache().with_context(|| {
+            format!("{}: cannot drop from the page cache", cli.tileset.display())
+        })?;
+        eprintln!(
+            "vkterrain: {}: {} of {} bytes still in the page cache",
+            cli.tileset.display(),
+            left,
+            terrain.set.file_len()
+        );
+    }
     let memory = MemoryOptions {
         gpu_budget_bytes: cli
             .gpu_budget_mb
@@ -355,6 +402,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
         } else {
             cli.upload_scheme.into()
         },
+        prefetch,
     };
     let gpu_options = GpuOptions {
         validation: cli.validation,

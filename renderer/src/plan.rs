@@ -78,18 +78,35 @@ pub struct BorderMismatch {
     pub b: (u32, u32),
 }
 
-/// Plans frame `frame`; `completed` is the newest frame the GPU has finished.
-#[allow(clippy::too_many_arguments)]
+/// The memory manager's side of one frame.
+#[derive(Clone, Copy, Debug)]
+pub struct Residency<'a> {
+    /// The frame's number (the manager's clock).
+    pub frame: u64,
+    /// The newest frame the GPU has finished.
+    pub completed: Option<u64>,
+    /// False: draw what is resident only (pre-recorded frames).
+    pub allow_uploads: bool,
+    /// Tiles predicted to become visible, soonest first, to upload with what the frame leaves
+    /// of its budget (empty: no prefetching).
+    pub prefetch: &'a [Request],
+}
+
+/// Plans one frame of `camera` at `extent` pixels.
 pub fn plan(
     terrain: &Terrain,
     manager: &mut Manager,
     camera: &Camera,
     extent: (u32, u32),
     rule: LevelRule,
-    frame: u64,
-    completed: Option<u64>,
-    allow_uploads: bool,
+    residency: Residency,
 ) -> Result<Plan, BorderMismatch> {
+    let Residency {
+        frame,
+        completed,
+        allow_uploads,
+        prefetch,
+    } = residency;
     let view = camera.view(extent.0, extent.1);
 
     let t = Instant::now();
@@ -155,7 +172,10 @@ pub fn plan(
     let cpu_lod_ms = ms(t);
 
     let t = Instant::now();
-    let residency = manager.plan_frame(frame, completed, &requests, allow_uploads);
+    let mut residency = manager.plan_frame(frame, completed, &requests, allow_uploads);
+    if allow_uploads {
+        manager.prefetch(&mut residency, prefetch);
+    }
     let draws: Vec<Draw> = residency
         .grants
         .iter()
@@ -216,6 +236,25 @@ pub fn visible_tiles(terrain: &Terrain, view: &View, camera: DVec3) -> Vec<usize
         .collect();
     visible.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
     visible.into_iter().map(|(_, i)| i).collect()
+}
+
+/// The level tile `i` will want when seen from a predicted camera: as [`wanted_level`], and
+/// for geomorphing the ceiling of its own continuous level (its neighbours' corners, which may
+/// raise it, are not predicted).
+pub fn predicted_level(
+    terrain: &Terrain,
+    i: usize,
+    view: &View,
+    camera: DVec3,
+    rule: LevelRule,
+) -> u32 {
+    match rule {
+        LevelRule::Morph(tau, bound) => {
+            let l = lod::continuous_level(view, camera, &terrain.tiles[i], tau, bound);
+            (l.ceil().max(0.0) as u32).min(terrain.levels - 1)
+        }
+        _ => wanted_level(terrain, i, view, camera, rule),
+    }
 }
 
 fn wanted_level(terrain: &Terrain, i: usize, view: &View, camera: DVec3, rule: LevelRule) -> u32 {

@@ -196,7 +196,7 @@ impl Predictor {
         // Normal equations of c0 + c1 t + c2 t^2, by Cramer's rule.
         let m = [[s[0], s[1], s[2]], [s[1], s[2], s[3]], [s[2], s[3], s[4]]];
         let det = det3(m);
-        if !(det.abs() > 1e-12 * s[4] * s[4]) {
+        if det.abs() <= 1e-12 * s[4] * s[4] || det.is_nan() {
             return line;
         }
         let solve = |col: usize| {

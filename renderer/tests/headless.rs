@@ -875,3 +875,100 @@ fn both_morph_shaders_draw_the_same_terrain() {
     let moved: usize = fd.iter().zip(&discrete).map(|(a, b)| differing(a, b)).sum();
     assert!(moved > 1000, "geomorphing changed only {moved} pixels");
 }
+
+/// Prefetching under an upload budget small enough that tiles arrive late: predicted tiles are
+/// uploaded (and drawn tiles moved to larger chunks ahead of need) while the orbit stays free
+/// of cracks and silhouette errors against brute force, with the validation layer silent.
+#[test]
+fn prefetching_under_a_tight_budget_stays_crack_free() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = common::puget(dir.path());
+    let extra = ["--upload-budget-mb", "0.5", "--prefetch-free", "0"];
+    let s = compare_under_budget(&set, "orbit", 40, 1.0, &extra);
+    assert!(
+        s["tiles_coarser"].as_u64() > Some(0),
+        "tiles must arrive late: {s}"
+    );
+    assert!(s["prefetch_mb"].as_f64() > Some(0.0), "{s}");
+    assert!(s["prefetch_hits"].as_u64() > Some(0), "{s}");
+}
+
+/// The predictor sees only the poses flown: two paths that share their first keyframes and
+/// then part give identical predictions (the trace's `predicted` rows) over the shared part,
+/// and different ones after (the control: the rows do follow the path).
+#[test]
+fn predictions_never_read_the_path_ahead() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = common::puget(dir.path());
+    let a = dir.path().join("a.csv");
+    let o = vkterrain(&[s(&set), "--headless", "--frames", "1", "--record", s(&a)]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = std::fs::read_to_string(&a).expect("path");
+    let keys: Vec<&str> = text.lines().skip(1).collect();
+    // Path b turns hard left over its last four keyframes.
+    let cut = keys.len() - 4;
+    let shared_until: f64 = keys[cut - 2].split(',').next().unwrap().parse().unwrap();
+    let mut b = String::from(text.lines().next().unwrap());
+    for (k, line) in keys.iter().enumerate() {
+        let mut v: Vec<f64> = line.split(',').map(|x| x.parse().unwrap()).collect();
+        if k >= cut {
+            v[2] += 8000.0 * (k - cut + 1) as f64;
+            v[4] += 60.0;
+        }
+        let row: Vec<String> = v.iter().map(|x| x.to_string()).collect();
+        b += &format!("\n{}", row.join(","));
+    }
+    let b_path = dir.path().join("b.csv");
+    std::fs::write(&b_path, b).expect("write path");
+    let predicted = |path: &Path, name: &str| -> Vec<(f64, String)> {
+        let trace = dir.path().join(name);
+        let log = dir.path().join(format!("{name}.csv"));
+        let o = vkterrain(&[
+            s(&set),
+            "--headless",
+            "--validation",
+            "--size",
+            "256x192",
+            "--frames",
+            "60",
+            "--path",
+            s(path),
+            "--prefetch-ms",
+            "1000",
+            "--trace",
+            s(&trace),
+            "--log",
+            s(&log),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let times: Vec<f64> = std::fs::read_to_string(&log)
+            .expect("log")
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').nth(1).unwrap().parse().unwrap())
+            .collect();
+        std::fs::read_to_string(&trace)
+            .expect("trace")
+            .lines()
+            .filter(|l| l.split(',').count() == 5 && l.ends_with(",1"))
+            .map(|l| {
+                let frame: usize = l.split(',').next().unwrap().parse().unwrap();
+                (times[frame], l.to_string())
+            })
+            .collect()
+    };
+    let (pa, pb) = (predicted(&a, "a.trace"), predicted(&b_path, "b.trace"));
+    let before = |rows: &[(f64, String)]| -> Vec<String> {
+        rows.iter()
+            .filter(|(t, _)| *t < shared_until)
+            .map(|(_, r)| r.clone())
+            .collect()
+    };
+    assert!(!before(&pa).is_empty());
+    assert_eq!(
+        before(&pa),
+        before(&pb),
+        "predictions differ before the paths part"
+    );
+    assert_ne!(pa, pb, "predictions after the paths part must differ");
+}

@@ -8,7 +8,7 @@ use glam::DVec3;
 use memory::{Config, Manager};
 use renderer::camera::Camera;
 use renderer::path::CameraPath;
-use renderer::plan::{plan, stitch_granted, visible_tiles, Draw, LevelRule};
+use renderer::plan::{plan, stitch_granted, visible_tiles, Draw, LevelRule, Residency};
 use renderer::terrain::Terrain;
 
 const EXTENT: (u32, u32) = (640, 480);
@@ -118,9 +118,12 @@ fn tight_budget_draws_what_is_resident_and_stitches_granted_levels() {
             &camera,
             EXTENT,
             LevelRule::Tau(1.0, renderer::lod::Bound::Guaranteed),
-            f,
-            f.checked_sub(2),
-            true,
+            Residency {
+                frame: f,
+                completed: f.checked_sub(2),
+                allow_uploads: true,
+                prefetch: &[],
+            },
         )
         .expect("plan");
         manager.check().unwrap_or_else(|e| panic!("frame {f}: {e}"));

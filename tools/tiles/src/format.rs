@@ -642,6 +642,86 @@ impl TileSet {
             .then(|| self.entry(ty as usize * self.header.tiles_x as usize + tx as usize))
     }
 
+    /// Byte range of tile `(tx, ty)` in the file.
+    pub fn blob_range(&self, tx: u32, ty: u32) -> Option<std::ops::Range<u64>> {
+        let e = self.dir_entry(tx, ty)?;
+        Some(e.offset..e.offset.checked_add(e.len)?)
+    }
+
+    /// Asks the kernel to read `range` of the file ahead (`madvise(MADV_WILLNEED)`), so a
+    /// later read does not wait for the disk. Returns at once; the read goes on meanwhile.
+    pub fn will_need(&self, range: std::ops::Range<u64>) -> std::io::Result<()> {
+        let (offset, len) = self.clamp(range);
+        if len == 0 {
+            return Ok(());
+        }
+        self.map
+            .advise_range(memmap2::Advice::WillNeed, offset, len)
+    }
+
+    /// Lets the kernel drop `range` of the mapping from this process
+    /// (`madvise(MADV_DONTNEED)`); the next read pages it in again from the file.
+    pub fn dont_need(&self, range: std::ops::Range<u64>) -> std::io::Result<()> {
+        let (offset, len) = self.clamp(range);
+        if len == 0 {
+            return Ok(());
+        }
+        // SAFETY: the map is a read-only, shared mapping of a file: dropping its pages loses
+        // nothing (they are read again from the file), and no slice of the range is held across
+        // this call by the renderer (uploads copy out of the map within a frame).
+        unsafe {
+            self.map
+                .unchecked_advise_range(memmap2::UncheckedAdvice::DontNeed, offset, len)
+        }
+    }
+
+    /// Drops the whole file from the page cache (this mapping's pages, then the kernel's
+    /// cached copy, `posix_fadvise(POSIX_FADV_DONTNEED)`): for measuring a first flight from
+    /// disk. Returns the bytes still cached afterwards.
+    pub fn drop_page_cache(&self) -> std::io::Result<u64> {
+        self.dont_need(0..self.file_len())?;
+        let file = File::open(&self.path)?;
+        use std::os::fd::AsRawFd;
+        // SAFETY: a plain system call on an open descriptor; it only advises the kernel.
+        let r = unsafe { libc::posix_fadvise(file.as_raw_fd(), 0, 0, libc::POSIX_FADV_DONTNEED) };
+        if r != 0 {
+            return Err(std::io::Error::from_raw_os_error(r));
+        }
+        self.cached_bytes()
+    }
+
+    /// Bytes of the file in the page cache now (`mincore` over the mapping).
+    pub fn cached_bytes(&self) -> std::io::Result<u64> {
+        let len = self.map.len();
+        if len == 0 {
+            return Ok(0);
+        }
+        // SAFETY: sysconf has no preconditions.
+        let page = unsafe { libc::sysconf(libc::_SC_PAGESIZE) }.max(1) as usize;
+        let mut pages = vec![0u8; len.div_ceil(page)];
+        // SAFETY: the address and length are this live mapping's (page-aligned start), and
+        // `pages` has one byte per page of it, as mincore requires.
+        let r = unsafe {
+            libc::mincore(
+                self.map.as_ptr() as *mut libc::c_void,
+                len,
+                pages.as_mut_ptr(),
+            )
+        };
+        if r != 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+        let resident = pages.iter().filter(|&&p| p & 1 != 0).count();
+        Ok((resident * page).min(len) as u64)
+    }
+
+    fn clamp(&self, range: std::ops::Range<u64>) -> (usize, usize) {
+        let len = self.map.len() as u64;
+        let start = range.start.min(len);
+        let end = range.end.clamp(start, len);
+        (start as usize, (end - start) as usize)
+    }
+
     /// Tile `(tx, ty)`'s stored bytes, not re-checked: for readers that validated the tile once
     /// with [`tile`](Self::tile) and then fetch parts of it often (the renderer's uploads).
     pub fn blob(&self, tx: u32, ty: u32) -> Option<&[u8]> {
