@@ -1,0 +1,50 @@
+#!/usr/bin/env bash
+# Prefetching (issue 10): tile-frames drawn coarser than wanted with and without prefetching
+# under a tight per-frame upload budget, p99 frame time, bytes prefetched and wasted; the same
+# flights' traces replayed by the simulator with our recorded predictions and with a perfect
+# predictor; and a first flight from a cold page cache with and without madvise.
+# Usage: bench/prefetch.sh TILESET [BUDGET_MB] [FRAMES]   (after cargo build --release)
+set -euo pipefail
+set_file=$1; budget=${2:-1}; frames=${3:-120}
+bin=$(dirname "$0")/../target/release
+out=$(mktemp -d)
+common=(--headless --size 1024x768 --frames "$frames" --tau 1 --upload-budget-mb "$budget")
+echo "| path | prefetch | tile-frames coarser | p99 frame ms | prefetched MB | hits | wasted MB | prediction error m (median) |"
+echo "|---|---|---:|---:|---:|---:|---:|---:|"
+for path in orbit flyover; do
+  for mode in on off; do
+    extra=(); [ "$mode" = off ] && extra=(--no-prefetch)
+    "$bin/vkterrain" "$set_file" "${common[@]}" --path "$path" "${extra[@]}" \
+      --trace "$out/$path.trace" --log "$out/$path-$mode.csv" > "$out/$path-$mode.json" 2>/dev/null
+    python3 - "$out/$path-$mode.json" "$path" "$mode" <<'PY'
+import json, sys
+s = json.load(open(sys.argv[1]))
+print(f"| {sys.argv[2]} | {sys.argv[3]} | {s['tiles_coarser']} | {s['frame_ms_p99']:.1f} | {s['prefetch_mb']:.2f} | {s['prefetch_hits']} | {s['prefetch_wasted_mb']:.2f} | {s['prediction_error_m_median'] or float('nan'):.0f} |")
+PY
+  done
+done
+echo
+for path in orbit flyover; do
+  echo "**Simulator, $path** (the trace of the run without prefetching, pool as large as the set)"
+  echo
+  "$bin/memsim" "$out/$path.trace" --pool-mb 100000 --upload-budget-mb "$budget" | sed -n '/^| prefetching/,$p'
+  echo
+done
+echo "**Cold page cache** (the tile set dropped from the page cache after opening: madvise(DONTNEED) on the mapping, then posix_fadvise(DONTNEED) on the file; two runs each, alternating)"
+echo
+echo "| run | madvise | bytes still cached at start | frame 0 ms | p99 frame ms |"
+echo "|---|---|---:|---:|---:|"
+for round in 1 2; do
+  for mode in on off; do
+    extra=(); [ "$mode" = off ] && extra=(--no-madvise)
+    "$bin/vkterrain" "$set_file" "${common[@]}" --path flyover --cold-file-cache "${extra[@]}" \
+      --log "$out/cold.csv" > "$out/cold.json" 2> "$out/cold.err"
+    left=$(grep -o '[0-9]* of' "$out/cold.err" | head -1 | cut -d' ' -f1)
+    python3 - "$out/cold.json" "$out/cold.csv" "$round" "$mode" "$left" <<'PY'
+import json, sys, csv
+s = json.load(open(sys.argv[1])); rows = list(csv.DictReader(open(sys.argv[2])))
+print(f"| {sys.argv[3]} | {sys.argv[4]} | {sys.argv[5]} | {float(rows[0]['frame_ms']):.1f} | {s['frame_ms_p99']:.1f} |")
+PY
+  done
+done
+rm -rf "$out"
