@@ -575,11 +575,17 @@ impl Manager {
             }
         }
         plan.stats.chunk_moves += 1;
-        let old_chunk = res.chunk;
-        self.own(chunk, tile);
+        self.swap_chunk(tile, res, chunk, layout);
         // The copies run on the GPU with this frame: a later index upload into the new chunk
         // must be ordered after them, as one into a chunk this frame draws.
         self.chunks[chunk].drawn = Some(self.frame);
+    }
+
+    /// Hands `tile` from its chunk to `chunk`, filled by this frame's in-pool copies: the old
+    /// chunk is read by them on the GPU, so it retires like a drawn one.
+    fn swap_chunk(&mut self, tile: TileId, res: &mut Resident, chunk: usize, layout: Layout) {
+        let old_chunk = res.chunk;
+        self.own(chunk, tile);
         self.chunks[chunk].copied_in = Some(self.frame);
         self.chunks[old_chunk].drawn = Some(self.frame);
         self.release(old_chunk);
@@ -885,14 +891,7 @@ impl Manager {
             }
         }
         plan.stats.chunk_moves += 1;
-        let old_chunk = res.chunk;
-        self.own(chunk, tile);
-        self.chunks[chunk].copied_in = Some(self.frame);
-        // The copies read the old chunk on the GPU this frame: it retires like a drawn one.
-        self.chunks[old_chunk].drawn = Some(self.frame);
-        self.release(old_chunk);
-        res.chunk = chunk;
-        res.layout = layout;
+        self.swap_chunk(tile, res, chunk, layout);
         // The index array is not moved: the refinement that caused the move replaces it.
         res.index = None;
         Some(())
