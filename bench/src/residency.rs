@@ -183,13 +183,23 @@ pub fn prefetch_table(trace: &Trace, pool: u64, upload: u64, ahead: usize) -> St
         ),
     ];
     let off = replay_prefetching(trace, c, 2, Prefetching::Off);
-    let mut out = String::from("| prefetching | tile-frames coarser | vs none | missing | uploaded MB | prefetched MB | hits | wasted MB |\n|---|---:|---:|---:|---:|---:|---:|---:|\n");
+    let mut out = String::from("| prefetching | tile-frames coarser | vs none | after the cold start | vs none | cold-start frames | missing | uploaded MB | prefetched MB | hits | wasted MB |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+    let ratio = |a: u64, b: u64| {
+        if b == 0 {
+            "-".to_string()
+        } else {
+            format!("{:.2}", a as f64 / b as f64)
+        }
+    };
     for (name, p) in runs {
         let o = replay_prefetching(trace, c, 2, p);
         out += &format!(
-            "| {name} | {} | {:.2} | {} | {:.2} | {:.2} | {} | {:.2} |\n",
+            "| {name} | {} | {} | {} | {} | {} | {} | {:.2} | {:.2} | {} | {:.2} |\n",
             o.coarser,
-            o.coarser as f64 / off.coarser.max(1) as f64,
+            ratio(o.coarser, off.coarser),
+            o.coarser_warm,
+            ratio(o.coarser_warm, off.coarser_warm),
+            o.warmup_frames,
             o.missing,
             o.bytes() as f64 / 1e6,
             o.prefetch_bytes as f64 / 1e6,

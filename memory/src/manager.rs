@@ -3,7 +3,7 @@
 //! requests (visible tiles front to back with their wanted levels) and returns a [`FramePlan`].
 
 use crate::classes::ClassPlan;
-use crate::cost::{Layout, TileCost};
+use crate::cost::{align, Layout, TileCost};
 use crate::lru::LruLists;
 
 pub type TileId = u32;
@@ -162,9 +162,10 @@ pub struct Stats {
     pub used_bytes: u64,
     /// Of the uploads: bytes sent speculatively by [`Manager::prefetch`].
     pub prefetch_bytes: u64,
-    /// Tiles drawn this frame using data prefetched for them (counted once per prefetch).
+    /// Prefetches drawn this frame for the first time: a tile's prefetched blocks (once per
+    /// prefetch) and its spare index array count apart.
     pub prefetch_hits: u64,
-    /// Prefetched bytes evicted this frame before anything drew them.
+    /// Prefetched bytes evicted or overwritten this frame before anything drew them.
     pub prefetch_wasted_bytes: u64,
 }
 
@@ -197,8 +198,15 @@ struct Resident {
     layout: Layout,
     /// Blocks `0..=b` are in the chunk.
     blocks: Option<u32>,
-    /// The index array in the chunk.
+    /// The level of the index array drawn.
     index: Option<u32>,
+    /// Where in the chunk the drawn index array starts (the index region's start unless it was
+    /// a spare).
+    index_at: u64,
+    /// A second index array, prefetched and not drawn yet: its level and where it starts in
+    /// the chunk. It lies in the index region (which runs to the chunk's end) apart from the
+    /// drawn one, so the next level's array travels ahead of need while this one is drawn.
+    spare: Option<(u32, u64)>,
     /// WholeTile: every level's index array is there.
     whole: bool,
     /// Data prefetched and not drawn yet.
@@ -461,6 +469,9 @@ impl Manager {
         let mut left = self.config.upload_budget.saturating_sub(spent);
         let requested: std::collections::HashSet<TileId> =
             plan.grants.iter().map(|g| g.tile).collect();
+        // Tiles given a spare index array by this call: a later horizon wanting a finer level
+        // gets its blocks but does not replace the spare the sooner horizon needs.
+        let mut spared = std::collections::HashSet::new();
         self.speculating = true;
         for r in candidates {
             let free = self.chunks.iter().filter(|c| c.owner.is_none()).count();
@@ -473,7 +484,10 @@ impl Manager {
             let wanted = r.wanted.min(cost.finest());
             let before = plan.uploads.len();
             if requested.contains(&r.tile) {
-                self.prefetch_blocks(r.tile, wanted, left, free > min_free, plan);
+                let spare = !spared.contains(&r.tile);
+                if self.prefetch_blocks(r.tile, wanted, left, free > min_free, spare, plan) {
+                    spared.insert(r.tile);
+                }
             } else {
                 // Taking a chunk needs one free beyond the reserve.
                 self.prefetch_level(r.tile, wanted, left, free > min_free, plan);
@@ -486,31 +500,44 @@ impl Manager {
         self.summarise(plan);
     }
 
-    /// Blocks beyond those resident, up to `wanted`, for a tile drawn this frame (its index
-    /// array stays). A chunk too small for `wanted` is traded for one that holds it when
-    /// `may_take_chunk`: the blocks and the drawn index array follow by in-pool copies, and
-    /// this frame still draws from the old chunk, which is not reused before it completes.
+    /// Blocks beyond those resident, up to `wanted`, for a tile drawn this frame, then the
+    /// index array of the finest level they complete as a spare beside the drawn one (which
+    /// stays). A chunk too small for `wanted`, or without room for the spare, is traded for a
+    /// larger one when `may_take_chunk`: the blocks and the drawn index array follow by in-pool
+    /// copies, and this frame still draws from the old chunk, which is not reused before it
+    /// completes. Without `may_spare` no spare is sent (nor a chunk taken for one). Returns
+    /// whether a spare was sent.
     fn prefetch_blocks(
         &mut self,
         tile: TileId,
         wanted: u32,
         left: u64,
         may_take_chunk: bool,
+        may_spare: bool,
         plan: &mut FramePlan,
-    ) {
+    ) -> bool {
         let Some(mut res) = self.resident[tile as usize] else {
-            return;
+            return false;
         };
         let (Some(b), Some(index), false) = (res.blocks, res.index, res.whole) else {
-            return;
+            return false;
         };
         // Not twice in a frame, and not a chunk with a staged upload this frame (copies run
         // before staged uploads: the move would carry the old index array).
         let moved = self.chunks[res.chunk].copied_in == Some(self.frame)
             || plan.uploads.iter().any(|u| u.tile == tile && u.in_flight);
-        if wanted > res.layout.capacity && may_take_chunk && b < wanted && !moved {
+        let spare_bytes = self.tiles[tile as usize].levels[wanted as usize].indices;
+        let outgrown = wanted > res.layout.capacity && b < wanted;
+        // A spare between the drawn level and the one wanted stays: it is the next step, and
+        // replacing it by a finer one would leave that step to the frame that needs it.
+        let ahead =
+            |res: &Resident, level: u32| res.spare.is_some_and(|(s, _)| s > index && s <= level);
+        let no_room = may_spare
+            && wanted > index
+            && !ahead(&res, wanted)
+            && self.spare_slot(tile, &res, spare_bytes).is_none();
+        if (outgrown || no_room) && may_take_chunk && !moved {
             self.move_with_index(tile, &mut res, b, index, wanted, plan);
-            self.resident[tile as usize] = Some(res);
         }
         let t = &self.tiles[tile as usize];
         let mut sum = 0;
@@ -522,16 +549,34 @@ impl Manager {
             sum += t.block_bytes(j);
             top = j;
         }
-        if top == b {
-            return;
-        }
         let base = self.chunks[res.chunk].offset;
         for j in b + 1..=top {
             self.push_block(tile, j, base, &res.layout, plan);
         }
-        res.blocks = Some(top);
-        speculate(&mut res, b + 1, sum);
+        if top > b {
+            res.blocks = Some(top);
+            speculate(&mut res, b + 1, sum);
+        }
+        // The spare: the finest level whose blocks are all there now.
+        let level = top.min(wanted);
+        let bytes = t.levels[level as usize].indices;
+        let mut sent = false;
+        if may_spare && level > index && !ahead(&res, level) && sum + bytes <= left {
+            if let Some(at) = self.spare_slot(tile, &res, bytes) {
+                sent = true;
+                self.drop_spare(tile, &mut res, plan);
+                plan.uploads.push(Upload {
+                    tile,
+                    part: Part::Indices(level),
+                    dst: base + at,
+                    bytes,
+                    in_flight: self.read_in_flight(res.chunk),
+                });
+                res.spare = Some((level, at));
+            }
+        }
         self.resident[tile as usize] = Some(res);
+        sent
     }
 
     /// Moves a drawn tile (blocks `0..=b`, index array of `index`) into a free chunk sized for
@@ -545,7 +590,16 @@ impl Manager {
         level: u32,
         plan: &mut FramePlan,
     ) {
-        let Some(chunk) = self.obtain(self.needs[tile as usize][level as usize], plan) else {
+        let t = &self.tiles[tile as usize];
+        // Room for the drawn array at the index region's start and `level`'s at the end.
+        let need = self.needs[tile as usize][level as usize];
+        let room = t.layout(level).index
+            + align(t.levels[index as usize].indices, 4)
+            + t.levels[level as usize].indices;
+        let Some(chunk) = self
+            .obtain(room.max(need), plan)
+            .or_else(|| self.obtain(need, plan))
+        else {
             return;
         };
         let t = &self.tiles[tile as usize];
@@ -560,7 +614,7 @@ impl Manager {
                 t.morph_before(b + 1),
             ),
             (
-                old + res.layout.index,
+                old + res.index_at,
                 new + layout.index,
                 t.levels[index as usize].indices,
             ),
@@ -575,7 +629,7 @@ impl Manager {
             }
         }
         plan.stats.chunk_moves += 1;
-        self.swap_chunk(tile, res, chunk, layout);
+        self.swap_chunk(tile, res, chunk, layout, plan);
         // The copies run on the GPU with this frame: a later index upload into the new chunk
         // must be ordered after them, as one into a chunk this frame draws.
         self.chunks[chunk].drawn = Some(self.frame);
@@ -583,8 +637,17 @@ impl Manager {
 
     /// Hands `tile` from its chunk to `chunk`, filled by this frame's in-pool copies: the old
     /// chunk is read by them on the GPU, so it retires like a drawn one.
-    fn swap_chunk(&mut self, tile: TileId, res: &mut Resident, chunk: usize, layout: Layout) {
+    fn swap_chunk(
+        &mut self,
+        tile: TileId,
+        res: &mut Resident,
+        chunk: usize,
+        layout: Layout,
+        plan: &mut FramePlan,
+    ) {
         let old_chunk = res.chunk;
+        self.drop_spare(tile, res, plan);
+        res.index_at = layout.index;
         self.own(chunk, tile);
         self.chunks[chunk].copied_in = Some(self.frame);
         self.chunks[old_chunk].drawn = Some(self.frame);
@@ -701,6 +764,31 @@ impl Manager {
                     return Err(format!("tile {t}: index level {i} without its blocks"));
                 }
             }
+            // Index arrays: inside the index region, 4-aligned, the spare apart from the drawn.
+            let size = self.classes.sizes[c.class];
+            let cost = &self.tiles[t];
+            let array = |level: u32, at: u64| (at, at + cost.levels[level as usize].indices);
+            let drawn = res.index.map(|i| array(i, res.index_at));
+            let spare = res.spare.map(|(s, at)| array(s, at));
+            for (start, end) in drawn.iter().chain(&spare) {
+                if *start < res.layout.index || *end > size || start % 4 != 0 {
+                    return Err(format!(
+                        "tile {t}: index array at {start}..{end} out of place"
+                    ));
+                }
+            }
+            if let (Some(d), Some(s)) = (drawn, spare) {
+                if d.0 < s.1 && s.0 < d.1 {
+                    return Err(format!("tile {t}: spare index array over the drawn one"));
+                }
+            }
+            if let Some((s, _)) = res.spare {
+                if res.blocks.is_none_or(|b| b < s) || s > res.layout.capacity {
+                    return Err(format!(
+                        "tile {t}: spare index level {s} without its blocks"
+                    ));
+                }
+            }
         }
         for (i, c) in self.chunks.iter().enumerate() {
             if c.owner.is_some() != owners[i].is_some() {
@@ -747,7 +835,43 @@ impl Manager {
         let blocks: u64 = res
             .blocks
             .map_or(0, |b| (0..=b).map(|j| t.block_bytes(j)).sum());
-        blocks + res.index.map_or(0, |i| t.levels[i as usize].indices)
+        blocks
+            + res.index.map_or(0, |i| t.levels[i as usize].indices)
+            + self.spare_bytes(tile as TileId, res)
+    }
+
+    /// Bytes of `res`'s spare index array (0 without one).
+    fn spare_bytes(&self, tile: TileId, res: &Resident) -> u64 {
+        res.spare.map_or(0, |(s, _)| {
+            self.tiles[tile as usize].levels[s as usize].indices
+        })
+    }
+
+    /// Drops `res`'s spare index array, unused: its bytes were wasted.
+    fn drop_spare(&self, tile: TileId, res: &mut Resident, plan: &mut FramePlan) {
+        plan.stats.prefetch_wasted_bytes += self.spare_bytes(tile, res);
+        res.spare = None;
+    }
+
+    /// Where in `res`'s chunk an index array of `bytes` can go without touching the drawn one
+    /// (nor the blocks): the chunk's end if there is room after the drawn array, else the
+    /// index region's start if there is room before it. Ping-pong between the two ends lets
+    /// a region as large as two consecutive arrays hold both.
+    fn spare_slot(&self, tile: TileId, res: &Resident, bytes: u64) -> Option<u64> {
+        let index = res.index?;
+        let end = self.classes.sizes[self.chunks[res.chunk].class];
+        let drawn = (
+            res.index_at,
+            res.index_at + self.tiles[tile as usize].levels[index as usize].indices,
+        );
+        let at_end = end.checked_sub(bytes)? / 4 * 4;
+        if at_end >= drawn.1 && at_end >= res.layout.index {
+            Some(at_end)
+        } else if res.layout.index + bytes <= drawn.0 {
+            Some(res.layout.index)
+        } else {
+            None
+        }
     }
 
     /// Bytes `tile` still lacks to be drawn at `wanted`.
@@ -792,7 +916,7 @@ impl Manager {
             level: Some(level),
             vertex_offset: chunk.offset,
             morph_offset: chunk.offset + res.layout.morph,
-            index_offset: chunk.offset + res.layout.index + index_before,
+            index_offset: chunk.offset + res.index_at + index_before,
             index_width: self.tiles[tile as usize].levels[level as usize].index_width,
         }
     }
@@ -808,7 +932,11 @@ impl Manager {
             _ => 0,
         };
         let blocks: u64 = (first_block..=level).map(|j| t.block_bytes(j)).sum();
-        blocks + t.levels[level as usize].indices
+        let index = match res.spare {
+            Some((s, _)) if s == level => 0,
+            _ => t.levels[level as usize].indices,
+        };
+        blocks + index
     }
 
     fn refine(&mut self, r: Request, spent: u64, plan: &mut FramePlan) {
@@ -891,7 +1019,7 @@ impl Manager {
             }
         }
         plan.stats.chunk_moves += 1;
-        self.swap_chunk(tile, res, chunk, layout);
+        self.swap_chunk(tile, res, chunk, layout, plan);
         // The index array is not moved: the refinement that caused the move replaces it.
         res.index = None;
         Some(())
@@ -917,6 +1045,8 @@ impl Manager {
             layout,
             blocks: None,
             index: None,
+            index_at: layout.index,
+            spare: None,
             whole: false,
             speculative: None,
         })
@@ -936,23 +1066,45 @@ impl Manager {
         for j in first_block..=level {
             self.push_block(tile, j, base, &res.layout, plan);
         }
-        if res.index.is_some_and(|previous| level < previous) {
-            plan.stats.upload_bytes_coarser += t.levels[level as usize].indices;
+        let bytes = t.levels[level as usize].indices;
+        if let Some((_, at)) = res.spare.filter(|&(s, _)| s == level) {
+            // Sent ahead by a prefetch: draw it.
+            res.index_at = at;
+            res.spare = None;
+            plan.stats.prefetch_hits += 1;
+        } else {
+            if res.index.is_some_and(|previous| level < previous) {
+                plan.stats.upload_bytes_coarser += bytes;
+            }
+            plan.uploads.push(Upload {
+                tile,
+                part: Part::Indices(level),
+                dst: base + res.layout.index,
+                bytes,
+                in_flight: self.read_in_flight(res.chunk),
+            });
+            res.index_at = res.layout.index;
+            if res
+                .spare
+                .is_some_and(|(_, at)| at < res.layout.index + bytes)
+            {
+                self.drop_spare(tile, &mut res, plan);
+            }
         }
-        let drawn = self.chunks[res.chunk].drawn;
-        plan.uploads.push(Upload {
-            tile,
-            part: Part::Indices(level),
-            dst: base + res.layout.index,
-            bytes: t.levels[level as usize].indices,
-            in_flight: drawn.is_some_and(|d| self.completed.is_none_or(|c| d > c)),
-        });
         res.blocks = Some(res.blocks.map_or(level, |b| b.max(level)));
         if self.config.scheme == Scheme::PerLevel {
             res.blocks = Some(level);
         }
         res.index = Some(level);
         self.resident[tile as usize] = Some(res);
+    }
+
+    /// Whether a frame not known to have completed drew from `chunk` (a write there must be
+    /// ordered after it on the GPU).
+    fn read_in_flight(&self, chunk: usize) -> bool {
+        self.chunks[chunk]
+            .drawn
+            .is_some_and(|d| self.completed.is_none_or(|c| d > c))
     }
 
     /// Records the upload of block `j`'s positions and morph rows into the chunk at `base`.
@@ -1077,8 +1229,9 @@ impl Manager {
         }
         let victim = self.victim(first, bytes)?;
         if let Some(owner) = self.chunks[victim].owner {
-            if let Some(s) = self.resident[owner as usize].and_then(|r| r.speculative) {
-                plan.stats.prefetch_wasted_bytes += s.bytes;
+            if let Some(res) = self.resident[owner as usize] {
+                plan.stats.prefetch_wasted_bytes +=
+                    res.speculative.map_or(0, |s| s.bytes) + self.spare_bytes(owner, &res);
             }
             self.resident[owner as usize] = None;
         }

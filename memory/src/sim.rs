@@ -15,6 +15,11 @@ pub struct Outcome {
     pub misses: u64,
     /// Tile-frames drawn below the wanted level.
     pub coarser: u64,
+    /// The cold start: frames before the first one that draws every tile at its wanted level.
+    pub warmup_frames: u64,
+    /// Of `coarser`: those after the cold start (what prefetching can help with; before the
+    /// first frame there is no history to predict from).
+    pub coarser_warm: u64,
     /// Tile-frames not drawn at all.
     pub missing: u64,
     pub bytes_blocks: u64,
@@ -72,6 +77,7 @@ pub fn replay_prefetching(
         pool_bytes: m.pool_bytes(),
         ..Default::default()
     };
+    let mut per_frame = Vec::with_capacity(trace.frames.len());
     for (f, requests) in trace.frames.iter().enumerate() {
         let f = f as u64;
         let mut p = m.plan_frame(f, f.checked_sub(frames_in_flight.max(1)), requests, true);
@@ -104,6 +110,7 @@ pub fn replay_prefetching(
         o.hits += s.hits;
         o.misses += s.misses;
         o.coarser += s.tiles_coarser;
+        per_frame.push((s.tiles_coarser, s.tiles_missing));
         o.missing += s.tiles_missing;
         o.bytes_blocks += s.upload_bytes_blocks;
         o.bytes_indices += s.upload_bytes_indices;
@@ -116,7 +123,20 @@ pub fn replay_prefetching(
             .max_frame_bytes
             .max(s.upload_bytes_blocks + s.upload_bytes_indices);
     }
+    (o.warmup_frames, o.coarser_warm) = cold_start(&per_frame);
     o
+}
+
+/// Splits a flight's tile-frames drawn coarser than wanted at the end of its cold start, from
+/// each frame's (tiles coarser, tiles missing): the number of frames before the first one
+/// that draws every visible tile at its wanted level, and the tile-frames coarser after it.
+pub fn cold_start(per_frame: &[(u64, u64)]) -> (u64, u64) {
+    let warmup = per_frame
+        .iter()
+        .position(|&(coarser, missing)| coarser == 0 && missing == 0)
+        .unwrap_or(per_frame.len());
+    let after = per_frame[warmup..].iter().map(|&(c, _)| c).sum();
+    (warmup as u64, after)
 }
 
 /// A synthetic flight for timing the manager: `tiles` tiles (the costs of `costs` repeated),
@@ -186,6 +206,17 @@ mod tests {
             frames,
             predicted: Vec::new(),
         }
+    }
+
+    #[test]
+    fn the_cold_start_ends_at_the_first_frame_with_every_tile_at_its_level() {
+        // Coarser, then missing, then all there; later lateness counts after the cold start.
+        assert_eq!(
+            cold_start(&[(3, 0), (0, 1), (0, 0), (2, 0), (0, 0), (1, 0)]),
+            (2, 3)
+        );
+        assert_eq!(cold_start(&[(1, 0), (4, 0)]), (2, 0));
+        assert_eq!(cold_start(&[]), (0, 0));
     }
 
     #[test]

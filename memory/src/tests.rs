@@ -320,31 +320,42 @@ fn prefetched_tiles_are_hits_when_drawn_and_waste_when_evicted_unused() {
     let t = tile(6, 60);
     let tiles = vec![t.clone(); 4];
     let mut m = Manager::new(tiles.clone(), config(64 << 20, 1 << 30));
-    // Frame 0 draws tile 0; tile 1 is predicted at level 3.
+    // Frame 0 draws tile 0 at level 2; tile 1 is predicted at level 3, and so is tile 0.
     let mut p = m.plan_frame(0, None, &[req(0, 2)], true);
     let drawn = p.stats.upload_bytes_blocks + p.stats.upload_bytes_indices;
-    m.prefetch(&mut p, &[req(1, 3), req(0, 4)]);
+    let reads0 = reads(&m, &p.grants[0]);
+    m.prefetch(&mut p, &[req(1, 3), req(0, 3)]);
     let tile1: u64 = (0..=3).map(|j| t.block_bytes(j)).sum::<u64>() + t.levels[3].indices;
-    // Tile 0 (drawn) gets blocks 3 and 4 only, as far as its chunk holds them, and no index
-    // array: it still draws level 2.
-    let capacity = m.layout_of(0).unwrap().1.capacity;
-    assert!(capacity >= 3, "the test needs room for block 3");
-    let tile0: u64 = (3..=capacity.min(4)).map(|j| t.block_bytes(j)).sum();
+    // Tile 0 (drawn) gets block 3 and level 3's index array as a spare beside level 2's, which
+    // this frame still draws.
+    let tile0 = t.block_bytes(3) + t.levels[3].indices;
     assert_eq!(p.stats.prefetch_bytes, tile1 + tile0);
     assert_eq!(
         p.stats.upload_bytes_blocks + p.stats.upload_bytes_indices,
         drawn + tile1 + tile0
     );
-    assert_eq!(m.resident_levels(0), Some((Some(capacity.min(4)), Some(2))));
+    assert_eq!(m.resident_levels(0), Some((Some(3), Some(2))));
     assert_eq!(m.resident_levels(1), Some((Some(3), Some(3))));
+    let spare = *p
+        .uploads
+        .iter()
+        .find(|u| u.tile == 0 && u.part == Part::Indices(3))
+        .expect("the spare is sent");
+    for r in &reads0 {
+        assert!(!overlaps((spare.dst, spare.dst + spare.bytes), *r));
+    }
     m.check().unwrap();
-    // Frame 1: tile 1 appears wanting 3, tile 0 wants 3: tile 1 is a hit with no upload, and
-    // tile 0 needs only its index array.
+    // Frame 1: both want 3 and need nothing; tile 0 draws the spare where it was sent. Three
+    // prefetches pay off: tile 1's level, tile 0's block and tile 0's index array.
     let p = m.plan_frame(1, Some(0), &[req(1, 3), req(0, 3)], true);
-    assert_eq!(p.stats.prefetch_hits, 2);
-    assert_eq!(p.stats.upload_bytes_blocks, 0);
-    assert_eq!(p.stats.upload_bytes_indices, t.levels[3].indices);
-    assert_eq!(p.stats.hits, 1, "tile 1 needed nothing");
+    assert_eq!(p.stats.prefetch_hits, 3);
+    assert_eq!(
+        p.stats.upload_bytes_blocks + p.stats.upload_bytes_indices,
+        0
+    );
+    assert_eq!(p.stats.hits, 2);
+    assert_eq!(p.grants[1].index_offset, spare.dst);
+    m.check().unwrap();
     // Counted once.
     let p = m.plan_frame(2, Some(1), &[req(1, 3), req(0, 3)], true);
     assert_eq!(p.stats.prefetch_hits, 0);
@@ -379,6 +390,54 @@ fn prefetched_tiles_are_hits_when_drawn_and_waste_when_evicted_unused() {
         "the pool holds two tiles at level 5"
     );
     assert_eq!(wasted, sent);
+}
+
+/// A tile refined a level a frame, each predicted a frame ahead: once the first array is there,
+/// no frame sends anything for the level it draws (the index arrays alternate between the two
+/// ends of the index region, moving to larger chunks as the tile outgrows its own), and a spare
+/// replaced before it is drawn counts as waste.
+#[test]
+fn spare_index_arrays_make_each_refinement_arrive_ahead_of_need() {
+    let t = tile(7, 60);
+    let mut m = Manager::new(vec![t.clone(); 2], config(64 << 20, 1 << 30));
+    let mut sent_ahead = 0;
+    for f in 0..7u32 {
+        let mut p = m.plan_frame(
+            u64::from(f),
+            u64::from(f).checked_sub(2),
+            &[req(0, f)],
+            true,
+        );
+        assert_eq!(p.grants[0].level, Some(f));
+        let now = p.stats.upload_bytes_blocks + p.stats.upload_bytes_indices;
+        if f > 0 {
+            assert_eq!(now, 0, "frame {f} waited for its level");
+        }
+        m.prefetch(&mut p, &[req(0, f + 1)]);
+        sent_ahead += p.stats.prefetch_bytes;
+        assert_eq!(p.stats.prefetch_wasted_bytes, 0);
+        m.check().unwrap();
+    }
+    let every_level: u64 = (0..7)
+        .map(|j| t.block_bytes(j) + t.levels[j as usize].indices)
+        .sum();
+    assert_eq!(
+        sent_ahead,
+        every_level - t.block_bytes(0) - t.levels[0].indices
+    );
+    // Tile 1 drawn at 2 with a spare for 3; then predicted at 4: the spare for 3 is replaced
+    // unused.
+    let mut p = m.plan_frame(7, Some(5), &[req(1, 2)], true);
+    m.prefetch(&mut p, &[req(1, 3)]);
+    assert_eq!(m.resident_levels(1), Some((Some(3), Some(2))));
+    let mut p = m.plan_frame(8, Some(6), &[req(1, 2)], true);
+    m.prefetch(&mut p, &[req(1, 4)]);
+    assert_eq!(p.stats.prefetch_wasted_bytes, t.levels[3].indices);
+    assert_eq!(
+        p.stats.prefetch_bytes,
+        t.block_bytes(4) + t.levels[4].indices
+    );
+    m.check().unwrap();
 }
 
 #[test]

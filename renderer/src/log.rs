@@ -306,6 +306,11 @@ pub struct Summary {
     pub tiles_coarser: u64,
     /// Tile-frames with a visible tile not drawn.
     pub tiles_missing: u64,
+    /// The cold start: frames before the first that draws every visible tile at its wanted
+    /// level (nothing to predict from yet).
+    pub warmup_frames: u64,
+    /// Of `tiles_coarser`: those after the cold start.
+    pub tiles_coarser_warm: u64,
     pub prefetch_mb: f64,
     pub prefetch_hits: u64,
     pub prefetch_wasted_mb: f64,
@@ -337,6 +342,11 @@ impl Summary {
             .sum();
         let sum = |f: fn(&FrameRecord) -> u64| records.iter().map(f).sum::<u64>();
         let median = percentile(&ms, 50.0);
+        let per_frame: Vec<(u64, u64)> = records
+            .iter()
+            .map(|r| (r.tiles_coarser, r.tiles_missing))
+            .collect();
+        let (warmup_frames, tiles_coarser_warm) = memory::sim::cold_start(&per_frame);
         Summary {
             frames: records.len(),
             device: run.device.clone(),
@@ -393,6 +403,8 @@ impl Summary {
             chunk_moves: sum(|r| r.chunk_moves),
             tiles_coarser: sum(|r| r.tiles_coarser),
             tiles_missing: sum(|r| r.tiles_missing),
+            warmup_frames,
+            tiles_coarser_warm,
             prefetch_mb: sum(|r| r.prefetch_bytes) as f64 / 1e6,
             prefetch_hits: sum(|r| r.prefetch_hits),
             prefetch_wasted_mb: sum(|r| r.prefetch_wasted_bytes) as f64 / 1e6,

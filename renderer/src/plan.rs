@@ -115,60 +115,7 @@ pub fn plan(
 
     let t = Instant::now();
     let morphing = matches!(rule, LevelRule::Morph(..));
-    let mut corner_grid = Vec::new();
-    let requests: Vec<Request> = if let LevelRule::Morph(tau, bound) = rule {
-        // The visible tiles and their neighbours: a tile leaving the view keeps shaping its
-        // visible neighbours' corners until it is no longer next to any, so no corner jumps.
-        let mut near: Vec<usize> = visible
-            .iter()
-            .flat_map(|&i| {
-                let t = &terrain.tiles[i];
-                (0..9).filter_map(move |n| {
-                    let (x, y) = (
-                        (t.tx + n % 3).checked_sub(1)?,
-                        (t.ty + n / 3).checked_sub(1)?,
-                    );
-                    terrain.tile_index(x, y)
-                })
-            })
-            .collect();
-        near.sort_unstable();
-        near.dedup();
-        let levels: HashMap<usize, f32> = near
-            .iter()
-            .map(|&i| {
-                let l =
-                    lod::continuous_level(&view, camera.position, &terrain.tiles[i], tau, bound);
-                (i, l as f32)
-            })
-            .collect();
-        corner_grid = morph::corner_levels(terrain.tiles_x, terrain.tiles_y, |tx, ty| {
-            terrain
-                .tile_index(tx, ty)
-                .and_then(|i| levels.get(&i).copied())
-        });
-        let finest = terrain.levels - 1;
-        visible
-            .iter()
-            .map(|&i| {
-                let t = &terrain.tiles[i];
-                let c = morph::tile_corners(&corner_grid, terrain.tiles_x, t.tx, t.ty);
-                let top = c.iter().fold(0.0f32, |a, &b| a.max(b));
-                Request {
-                    tile: i as u32,
-                    wanted: (top.ceil() as u32).min(finest),
-                }
-            })
-            .collect()
-    } else {
-        visible
-            .iter()
-            .map(|&i| Request {
-                tile: i as u32,
-                wanted: wanted_level(terrain, i, &view, camera.position, rule),
-            })
-            .collect()
-    };
+    let (requests, corner_grid) = wanted_levels(terrain, &view, camera.position, &visible, rule);
     let cpu_lod_ms = ms(t);
 
     let t = Instant::now();
@@ -238,23 +185,70 @@ pub fn visible_tiles(terrain: &Terrain, view: &View, camera: DVec3) -> Vec<usize
     visible.into_iter().map(|(_, i)| i).collect()
 }
 
-/// The level tile `i` will want when seen from a predicted camera: as [`wanted_level`], and
-/// for geomorphing the ceiling of its own continuous level (its neighbours' corners, which may
-/// raise it, are not predicted).
-pub fn predicted_level(
+/// The level each of `visible` (front to back) wants from `camera`, as requests in the same
+/// order, and for geomorphing the grid of corner levels they came from (empty otherwise).
+/// Used for the frame and for predicted cameras alike, so a prediction wants what the frame
+/// will.
+pub fn wanted_levels(
     terrain: &Terrain,
-    i: usize,
     view: &View,
     camera: DVec3,
+    visible: &[usize],
     rule: LevelRule,
-) -> u32 {
-    match rule {
-        LevelRule::Morph(tau, bound) => {
+) -> (Vec<Request>, Vec<f32>) {
+    let LevelRule::Morph(tau, bound) = rule else {
+        let requests = visible
+            .iter()
+            .map(|&i| Request {
+                tile: i as u32,
+                wanted: wanted_level(terrain, i, view, camera, rule),
+            })
+            .collect();
+        return (requests, Vec::new());
+    };
+    // The visible tiles and their neighbours: a tile leaving the view keeps shaping its
+    // visible neighbours' corners until it is no longer next to any, so no corner jumps.
+    let mut near: Vec<usize> = visible
+        .iter()
+        .flat_map(|&i| {
+            let t = &terrain.tiles[i];
+            (0..9).filter_map(move |n| {
+                let (x, y) = (
+                    (t.tx + n % 3).checked_sub(1)?,
+                    (t.ty + n / 3).checked_sub(1)?,
+                );
+                terrain.tile_index(x, y)
+            })
+        })
+        .collect();
+    near.sort_unstable();
+    near.dedup();
+    let levels: HashMap<usize, f32> = near
+        .iter()
+        .map(|&i| {
             let l = lod::continuous_level(view, camera, &terrain.tiles[i], tau, bound);
-            (l.ceil().max(0.0) as u32).min(terrain.levels - 1)
-        }
-        _ => wanted_level(terrain, i, view, camera, rule),
-    }
+            (i, l as f32)
+        })
+        .collect();
+    let corner_grid = morph::corner_levels(terrain.tiles_x, terrain.tiles_y, |tx, ty| {
+        terrain
+            .tile_index(tx, ty)
+            .and_then(|i| levels.get(&i).copied())
+    });
+    let finest = terrain.levels - 1;
+    let requests = visible
+        .iter()
+        .map(|&i| {
+            let t = &terrain.tiles[i];
+            let c = morph::tile_corners(&corner_grid, terrain.tiles_x, t.tx, t.ty);
+            let top = c.iter().fold(0.0f32, |a, &b| a.max(b));
+            Request {
+                tile: i as u32,
+                wanted: (top.ceil() as u32).min(finest),
+            }
+        })
+        .collect();
+    (requests, corner_grid)
 }
 
 fn wanted_level(terrain: &Terrain, i: usize, view: &View, camera: DVec3, rule: LevelRule) -> u32 {

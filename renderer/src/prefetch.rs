@@ -106,16 +106,16 @@ impl Prefetcher {
             };
             out.horizons += 1;
             let view = predicted.view(extent.0, extent.1);
-            for i in plan::visible_tiles(terrain, &view, predicted.position) {
-                let level = plan::predicted_level(terrain, i, &view, predicted.position, rule);
-                if listed[i].is_some_and(|l| l >= level) {
+            let visible = plan::visible_tiles(terrain, &view, predicted.position);
+            let (wanted, _) =
+                plan::wanted_levels(terrain, &view, predicted.position, &visible, rule);
+            for r in wanted {
+                let i = r.tile as usize;
+                if listed[i].is_some_and(|l| l >= r.wanted) {
                     continue;
                 }
-                listed[i] = Some(level);
-                out.requests.push(Request {
-                    tile: i as u32,
-                    wanted: level,
-                });
+                listed[i] = Some(r.wanted);
+                out.requests.push(r);
             }
         }
         if self.options.madvise {
