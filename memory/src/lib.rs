@@ -14,16 +14,21 @@
 //! A chunk sized for capacity level `c` is laid out as
 //!
 //! ```text
-//! | positions: block 0 | block 1 | ... | block c | morph: block 1 | ... | block c | index array |
-//! ^ chunk offset (256-aligned)          ^ P(c)                              ^ align4(P(c) + M(c))
+//! | positions: block 0 | ... | block c | morph: block 1 | ... | block c | index region .......... |
+//! ^ chunk offset (256-aligned)          ^ P(c)                   ^ align4(P(c) + M(c))   chunk end ^
 //! ```
 //!
 //! Positions of blocks `0..=c` are contiguous and in block order, so the index array of any
 //! level `l <= c` addresses them with one `vertexOffset` (the chunk offset / 4). Block `j`'s
 //! morph offsets (`j` rows of `block_len` bytes, one per coarser level, as in the file) follow
-//! the positions, each block padded to 4 bytes. One index array is resident at a time, the one
-//! of the level drawn; its region is as large as the largest index array of levels `0..=c`.
-//! Refining in place appends blocks and rewrites the index region; nothing else moves.
+//! the positions, each block padded to 4 bytes. The index region runs to the chunk's end and is
+//! at least as large as the largest index array of levels `0..=c`. It holds the index array of
+//! the level drawn and, when prefetching has sent it and there is room, a *spare*: the array of
+//! a finer level whose blocks are resident, placed apart from the drawn one (at the region's
+//! end, or at its start when the drawn array sits at the end), so it is written while the other
+//! is read. The frame that wants the spare's level draws it where it is and sends nothing; the
+//! two alternate between the region's ends as the tile refines. A refinement without a spare
+//! appends blocks and writes its index array at the region's start; nothing else moves.
 //! A tile refined past its chunk's capacity moves to a larger chunk: its blocks are copied
 //! inside device memory and the new level's blocks and index array are uploaded.
 //!

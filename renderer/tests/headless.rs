@@ -893,6 +893,53 @@ fn prefetching_under_a_tight_budget_stays_crack_free() {
     assert!(s["prefetch_hits"].as_u64() > Some(0), "{s}");
 }
 
+/// The measure prefetching exists for: on the Puget orbit under 1 MiB a frame, tiles arrive late
+/// after the cold start without prefetching (the control), and with it (our predictor, and the
+/// next level's index array sent ahead as a spare) far fewer do, validation silent. The CPU
+/// limit is lifted so a loaded machine cannot change what is predicted.
+#[test]
+fn prefetching_draws_fewer_tiles_coarser_after_the_cold_start() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = common::puget(dir.path());
+    let run = |extra: &[&str]| -> serde_json::Value {
+        let mut args = vec![
+            s(&set),
+            "--headless",
+            "--validation",
+            "--path",
+            "orbit",
+            "--frames",
+            "120",
+            "--size",
+            "1024x768",
+            "--tau",
+            "1",
+            "--upload-budget-mb",
+            "1",
+            "--prefetch-ms",
+            "1000",
+        ];
+        args.extend(extra);
+        let o = vkterrain(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{err}");
+        assert!(!err.contains("validation"), "validation messages: {err}");
+        serde_json::from_slice(&o.stdout).expect("summary")
+    };
+    let on = run(&[]);
+    let off = run(&["--no-prefetch"]);
+    let warm = |v: &serde_json::Value| v["tiles_coarser_warm"].as_u64().expect("count");
+    assert_eq!(on["warmup_frames"], off["warmup_frames"], "{on}\n{off}");
+    assert!(warm(&off) >= 10, "the budget must make tiles late: {off}");
+    assert!(
+        warm(&on) * 2 < warm(&off),
+        "prefetching: {} late tile-frames, without: {}",
+        warm(&on),
+        warm(&off)
+    );
+    assert!(on["prefetch_hits"].as_u64() > Some(0), "{on}");
+}
+
 /// The predictor sees only the poses flown: two paths that share their first keyframes and
 /// then part give identical predictions (the trace's `predicted` rows) over the shared part,
 /// and different ones after (the control: the rows do follow the path).
