@@ -1068,10 +1068,12 @@ impl Manager {
         }
         let bytes = t.levels[level as usize].indices;
         if let Some((_, at)) = res.spare.filter(|&(s, _)| s == level) {
-            // Sent ahead by a prefetch: draw it.
+            // Sent ahead by a prefetch: draw it (a hit when a frame does, not another prefetch).
             res.index_at = at;
             res.spare = None;
-            plan.stats.prefetch_hits += 1;
+            if !self.speculating {
+                plan.stats.prefetch_hits += 1;
+            }
         } else {
             if res.index.is_some_and(|previous| level < previous) {
                 plan.stats.upload_bytes_coarser += bytes;
