@@ -157,66 +157,59 @@ fn ms_cell(v: f64) -> String {
 
 impl FrameRecord {
     pub fn csv_row(&self) -> String {
-        let mut cells: Vec<String> = vec![self.frame.to_string()];
-        cells.extend(
-            [
-                self.time_s,
-                self.frame_ms,
-                self.cpu_cull_ms,
-                self.cpu_lod_ms,
-                self.cpu_stitch_ms,
-                self.cpu_upload_ms,
-                self.cpu_record_ms,
-                self.gpu_ms,
-            ]
-            .map(ms_cell),
-        );
-        cells.extend(
-            [
-                self.tiles_visible,
-                self.tiles_drawn,
-                self.triangles,
-                self.vertices,
-                self.stitch_triangles,
-                self.upload_bytes,
-                self.resident_bytes,
-                self.evictions,
-                self.gpu_allocations,
-                self.upload_bytes_blocks,
-                self.upload_bytes_indices,
-                self.uploads_deferred_bytes,
-                self.upload_overshoot_bytes,
-                self.staged_bytes,
-                self.tiles_coarser,
-                self.tiles_missing,
-                self.chunks_free,
-                self.chunk_moves,
-                self.chunk_move_bytes,
-                self.hits,
-                self.misses,
-                self.used_bytes,
-            ]
-            .map(|n| n.to_string()),
-        );
-        cells.push(ms_cell(self.cpu_residency_ms));
-        cells.push(ms_cell(self.gpu_draw_ms));
-        cells.push(self.upload_bytes_coarser.to_string());
-        cells.push(ms_cell(self.max_error_px));
-        cells.push(ms_cell(self.pop_px));
-        cells.extend(
-            [
-                self.prefetch_bytes,
-                self.prefetch_hits,
-                self.prefetch_wasted_bytes,
-            ]
-            .map(|n| n.to_string()),
-        );
-        cells.push(ms_cell(self.prediction_error_m));
-        cells.push(ms_cell(self.cpu_prefetch_ms));
-        cells.push(self.file_advised_bytes.to_string());
-        cells.push(self.file_released_bytes.to_string());
-        cells.extend(self.tiles_per_level.iter().map(|n| n.to_string()));
-        cells.join(",")
+        let n = |v: u64| v.to_string();
+        // In the header's order.
+        let cells = [
+            n(self.frame),
+            ms_cell(self.time_s),
+            ms_cell(self.frame_ms),
+            ms_cell(self.cpu_cull_ms),
+            ms_cell(self.cpu_lod_ms),
+            ms_cell(self.cpu_stitch_ms),
+            ms_cell(self.cpu_upload_ms),
+            ms_cell(self.cpu_record_ms),
+            ms_cell(self.gpu_ms),
+            n(self.tiles_visible),
+            n(self.tiles_drawn),
+            n(self.triangles),
+            n(self.vertices),
+            n(self.stitch_triangles),
+            n(self.upload_bytes),
+            n(self.resident_bytes),
+            n(self.evictions),
+            n(self.gpu_allocations),
+            n(self.upload_bytes_blocks),
+            n(self.upload_bytes_indices),
+            n(self.uploads_deferred_bytes),
+            n(self.upload_overshoot_bytes),
+            n(self.staged_bytes),
+            n(self.tiles_coarser),
+            n(self.tiles_missing),
+            n(self.chunks_free),
+            n(self.chunk_moves),
+            n(self.chunk_move_bytes),
+            n(self.hits),
+            n(self.misses),
+            n(self.used_bytes),
+            ms_cell(self.cpu_residency_ms),
+            ms_cell(self.gpu_draw_ms),
+            n(self.upload_bytes_coarser),
+            ms_cell(self.max_error_px),
+            ms_cell(self.pop_px),
+            n(self.prefetch_bytes),
+            n(self.prefetch_hits),
+            n(self.prefetch_wasted_bytes),
+            ms_cell(self.prediction_error_m),
+            ms_cell(self.cpu_prefetch_ms),
+            n(self.file_advised_bytes),
+            n(self.file_released_bytes),
+        ];
+        let levels = self.tiles_per_level.iter().map(|&v| n(v));
+        cells
+            .into_iter()
+            .chain(levels)
+            .collect::<Vec<_>>()
+            .join(",")
     }
 
     pub fn cpu_ms(&self) -> f64 {
