@@ -241,6 +241,8 @@ pub struct Manager {
     oracle: Option<Box<dyn Fn(TileId, u64) -> u64>>,
     /// Prefetching: chunks come from the free lists only, never from a victim.
     speculating: bool,
+    /// Chunks with an owner (kept as they change hands: prefetching asks once per candidate).
+    owned: usize,
 }
 
 impl Manager {
@@ -305,6 +307,7 @@ impl Manager {
             completed: None,
             oracle: None,
             speculating: false,
+            owned: 0,
         }
     }
 
@@ -474,7 +477,7 @@ impl Manager {
         let mut spared = std::collections::HashSet::new();
         self.speculating = true;
         for r in candidates {
-            let free = self.chunks.iter().filter(|c| c.owner.is_none()).count();
+            let free = self.chunks.len() - self.owned;
             if left == 0 || free < min_free.max(1) {
                 break;
             }
@@ -729,7 +732,7 @@ impl Manager {
             }
         }
         s.chunk_move_bytes = plan.moves.iter().map(|m| m.bytes).sum();
-        s.chunks_free = self.chunks.iter().filter(|c| c.owner.is_none()).count() as u64;
+        s.chunks_free = (self.chunks.len() - self.owned) as u64;
         (s.resident_bytes, s.used_bytes) = (0, 0);
         for (t, res) in self.resident.iter().enumerate() {
             if let Some(res) = res {
@@ -789,6 +792,10 @@ impl Manager {
                     ));
                 }
             }
+        }
+        let owned = self.chunks.iter().filter(|c| c.owner.is_some()).count();
+        if owned != self.owned {
+            return Err(format!("{owned} chunks owned, counted {}", self.owned));
         }
         for (i, c) in self.chunks.iter().enumerate() {
             if c.owner.is_some() != owners[i].is_some() {
@@ -1203,13 +1210,16 @@ impl Manager {
         c.last_used = self.frame;
         c.drawn = None;
         self.lru.push_back(c.class, chunk);
+        self.owned += 1;
     }
 
     /// Gives a chunk up; it is reused once every frame that may read it has completed.
     fn release(&mut self, chunk: usize) {
         let c = self.chunks[chunk];
         self.lru.remove(chunk);
-        self.chunks[chunk].owner = None;
+        if self.chunks[chunk].owner.take().is_some() {
+            self.owned -= 1;
+        }
         if c.drawn.is_none() && c.last_used == self.frame {
             // Never drawn (taken this frame and given back): nobody reads it.
             self.free[c.class].push(chunk);
@@ -1238,7 +1248,9 @@ impl Manager {
             self.resident[owner as usize] = None;
         }
         self.lru.remove(victim);
-        self.chunks[victim].owner = None;
+        if self.chunks[victim].owner.take().is_some() {
+            self.owned -= 1;
+        }
         plan.stats.evictions += 1;
         Some(victim)
     }
