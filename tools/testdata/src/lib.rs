@@ -36,3 +36,17 @@ pub fn sample() -> PathBuf {
     assert!(p.is_file(), "bundled sample missing: {}", p.display());
     p
 }
+
+/// The bundled sample's photo texture (1024 x 1024 RGB over the 1025 x 1025 heights).
+pub fn sample_texture() -> PathBuf {
+    let p = PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../sample/ps_texture_1k.png"
+    ));
+    assert!(
+        p.is_file(),
+        "bundled sample texture missing: {}",
+        p.display()
+    );
+    p
+}

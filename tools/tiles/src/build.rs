@@ -14,6 +14,7 @@ use crate::grid::{tile_samples, Grid};
 use crate::mesh::{lattice, plane, triangle_spans, Mesher, Quad, TILE_CELLS, TILE_SIZE};
 use crate::pack::{morph_offset, morph_unit, pack};
 use crate::quantise::{lattice_step, Quantiser};
+use crate::texture::{self, MipEntry, Prepared, Source, Texturing};
 use crate::BuildError;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -665,11 +666,31 @@ pub struct BuildSummary {
     /// them (0 and 0 with independent sides); the written tiles are one more pass.
     pub agreement_passes: u32,
     pub agreement_meshes: u64,
+    /// Per texture mip, summed over tiles (empty without textures).
+    pub texture_mips: Vec<MipStats>,
+    /// Thread-seconds spent making textures (filtering, compressing), over all workers.
+    pub texture_seconds: f64,
+}
+
+/// One texture mip's totals over the tiles of a build.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct MipStats {
+    pub size: u32,
+    pub bytes: u64,
+    pub squared_error: f64,
+    pub texels: u64,
+}
+
+impl MipStats {
+    /// PSNR of the BC1 mips against the filtered ones, dB.
+    pub fn psnr(&self) -> f64 {
+        texture::psnr(self.squared_error, self.texels)
+    }
 }
 
 /// Builds all tiles in parallel and streams them into `out` (temporary file, then rename).
 /// At most a few tiles per worker are in flight, so memory does not grow with the tile count.
-/// `progress` is called once per finished tile.
+/// `progress` is called once per finished tile. No textures: see [`build_tileset_textured`].
 pub fn build_tileset(
     grid: &Grid,
     params: &BuildParams,
@@ -677,7 +698,26 @@ pub fn build_tileset(
     out: &Path,
     progress: &(dyn Fn() + Sync),
 ) -> Result<BuildSummary, BuildError> {
+    build_tileset_textured(grid, params, None, meta, out, progress)
+}
+
+/// [`build_tileset`], with a texture tile beside each geometry tile when `texturing` says so.
+pub fn build_tileset_textured(
+    grid: &Grid,
+    params: &BuildParams,
+    texturing: Option<&Texturing>,
+    meta: &TileSetMeta,
+    out: &Path,
+    progress: &(dyn Fn() + Sync),
+) -> Result<BuildSummary, BuildError> {
     params.validate()?;
+    if let Some(Texturing {
+        source: Source::Relief(r),
+        ..
+    }) = texturing
+    {
+        r.validate().map_err(BuildError::Params)?;
+    }
     let (tiles_x, tiles_y) = tile_count(grid.width, grid.height).map_err(BuildError::Params)?;
     if grid.heights.len() != grid.width * grid.height {
         return Err(BuildError::Params(
@@ -734,18 +774,41 @@ pub fn build_tileset(
         },
         ..header
     };
+    let header = match texturing {
+        Some(t) => FileHeader {
+            texture_format: texture::FORMAT_BC1,
+            texture_interior: t.layout.interior,
+            texture_gutter: t.layout.gutter,
+            texture_mips: t.layout.mips,
+            texture_source: t.source_code(),
+            ..header
+        },
+        None => header,
+    };
+    let prepared = texturing.map(|t| (Prepared::new(grid, &t.source), t.layout));
     let mut writer = TileSetWriter::create(out, header)?;
     let mut summary = BuildSummary {
         levels: vec![LevelStats::default(); params.levels as usize],
         agreement_passes,
         agreement_meshes,
+        texture_mips: texturing
+            .map(|t| {
+                (0..t.layout.mips)
+                    .map(|m| MipStats {
+                        size: t.layout.mip_size(m),
+                        ..MipStats::default()
+                    })
+                    .collect()
+            })
+            .unwrap_or_default(),
         ..Default::default()
     };
     let jobs: Vec<(u32, u32)> = (0..tiles_y)
         .flat_map(|ty| (0..tiles_x).map(move |tx| (tx, ty)))
         .collect();
     let in_flight = 2 * rayon::current_num_threads();
-    let (send, receive) = sync_channel::<Result<BuiltTile, BuildError>>(in_flight);
+    type Textured = (BuiltTile, Option<(Vec<u8>, Vec<MipEntry>, f64)>);
+    let (send, receive) = sync_channel::<Result<Textured, BuildError>>(in_flight);
     std::thread::scope(|scope| -> Result<(), BuildError> {
         scope.spawn(move || {
             // A failed send means the writer stopped (an error): stop building too.
@@ -766,12 +829,29 @@ pub fn build_tileset(
                     }
                     None => build_tile(grid, tx, ty, params, step, &alone),
                 };
-                send.send(built).map_err(|_| ())
+                let textured = built.map(|b| {
+                    let texture = prepared.as_ref().map(|(source, layout)| {
+                        let start = std::time::Instant::now();
+                        let (blob, mips) = texture::build_blob(grid, source, layout, (tx, ty));
+                        (blob, mips, start.elapsed().as_secs_f64())
+                    });
+                    (b, texture)
+                });
+                send.send(textured).map_err(|_| ())
             });
         });
         for built in receive {
-            let built = built?;
+            let (built, texture) = built?;
             writer.add_tile(built.tx, built.ty, &built.blob)?;
+            if let Some((blob, mips, seconds)) = texture {
+                writer.add_texture(built.tx, built.ty, &blob)?;
+                summary.texture_seconds += seconds;
+                for (sum, m) in summary.texture_mips.iter_mut().zip(&mips) {
+                    sum.bytes += u64::from(m.len);
+                    sum.squared_error += m.squared_error;
+                    sum.texels += m.texels;
+                }
+            }
             summary.tiles += 1;
             for (sum, l) in summary.levels.iter_mut().zip(&built.levels) {
                 sum.vertices += l.vertices;

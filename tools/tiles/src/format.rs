@@ -6,13 +6,18 @@
 //! ```text
 //! FileHeader      256 bytes   magic "VKTILES\0", version, grid, spacing, levels, crc of header+directory
 //! DirEntry * T    40 bytes    per tile (row-major by tile): offset, length, crc32 of the tile blob,
-//!                             room for the tile's texture (offset, length; 0 = none yet)
+//!                             offset and length of the tile's texture blob (0 = none)
 //! tile blobs      ...         TileHeader, LevelEntry * levels, then per level i:
 //!                               block i positions   block_len * u32 (packed vertex, see `pack`)
 //!                               block i morph       i * block_len * i8, level-major (see `pack`)
 //!                               level i indices     index_count * u16|u32, restart = all ones
 //!                               level i border      4 lists of u32 vertex indices (N, E, S, W)
+//! texture blobs   ...         version 2, when `texture_format` is BC1: per tile a
+//!                             `TextureHeader`, `MipEntry * mips`, each mip's BC1 blocks
+//!                             (see [`crate::texture`] for the layout and the texel mapping)
 //! ```
+//!
+//! Version 1 files (no texture fields) are still read, as tile sets without textures.
 //!
 //! Writing goes to a hidden temporary file in the destination folder which is renamed over the
 //! destination only after everything, header last, is written and synced: an interrupted build
@@ -29,10 +34,13 @@ use bytemuck::{Pod, Zeroable};
 
 use crate::mesh::TILE_CELLS;
 use crate::quantise::Quantiser;
+use crate::texture;
 
 pub const MAGIC: [u8; 8] = *b"VKTILES\0";
 pub const TILE_MAGIC: [u8; 4] = *b"TILE";
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
+/// The oldest version this reader reads: version 1 had no textures and zeros in their fields.
+pub const OLDEST_VERSION: u32 = 1;
 
 /// `FileHeader::flags`: every two neighbouring tiles have the same vertices on their shared
 /// side at every level, with the same heights and the same morph offsets (every tile uses the
@@ -71,7 +79,7 @@ pub struct FileHeader {
     pub voids_filled: u64,
     pub directory_offset: u64,
     pub directory_entry_len: u32,
-    /// 0 = no texture tiles (reserved for BC1 texture tiles).
+    /// [`texture::FORMAT_NONE`] or [`texture::FORMAT_BC1`] (version 2).
     pub texture_format: u32,
     /// Where the heights came from, UTF-8, zero-padded.
     pub description: [u8; 128],
@@ -79,7 +87,13 @@ pub struct FileHeader {
     pub height_step: f32,
     /// [`FLAG_SHARED_SIDES`], or 0.
     pub flags: u32,
-    pub reserved: [u32; 5],
+    /// Texture layout: texels across a tile's interior (the gutter and mips follow from it,
+    /// see [`texture::Layout`]) and what the texture shows (`texture::SOURCE_*`). Version 2.
+    pub texture_interior: u32,
+    pub texture_gutter: u32,
+    pub texture_mips: u32,
+    pub texture_source: u32,
+    pub reserved: u32,
     /// crc32 of this header (with this field zero) followed by the directory.
     pub header_crc: u32,
 }
@@ -307,6 +321,19 @@ impl TileSetWriter {
         Ok(())
     }
 
+    /// Appends tile `(tx, ty)`'s texture blob (after its tile, in any order).
+    pub fn add_texture(&mut self, tx: u32, ty: u32, blob: &[u8]) -> Result<(), FormatError> {
+        let slot = ty as usize * self.header.tiles_x as usize + tx as usize;
+        let pad = align_up(self.pos, 16) - self.pos;
+        self.write(&[0u8; 16][..pad as usize])?;
+        self.pos += pad;
+        self.directory[slot].texture_offset = self.pos;
+        self.directory[slot].texture_len = blob.len() as u64;
+        self.write(blob)?;
+        self.pos += blob.len() as u64;
+        Ok(())
+    }
+
     /// Writes directory and header, syncs, and renames the file into place.
     pub fn finish(mut self) -> Result<(), FormatError> {
         if let Some(missing) = self.written.iter().position(|w| !w) {
@@ -471,6 +498,30 @@ pub struct TileSet {
     path: PathBuf,
     map: memmap2::Mmap,
     header: FileHeader,
+    /// Every tile's texture layout, when the set has textures.
+    texture: Option<texture::Layout>,
+}
+
+/// The texture layout a header declares (None: no textures); what is wrong with it, if
+/// anything. Version 1 had no textures, whatever its (then reserved) fields hold.
+fn texture_layout(h: &FileHeader) -> Result<Option<texture::Layout>, String> {
+    if h.version < 2 || h.texture_format == texture::FORMAT_NONE {
+        return Ok(None);
+    }
+    if h.texture_format != texture::FORMAT_BC1 {
+        return Err(format!("texture format {} is not known", h.texture_format));
+    }
+    let layout = texture::Layout::new(h.texture_interior).map_err(|e| format!("texture: {e}"))?;
+    if (layout.gutter, layout.mips) != (h.texture_gutter, h.texture_mips) {
+        return Err(format!(
+            "texture gutter {} and {} mips do not match its {}-texel interior",
+            h.texture_gutter, h.texture_mips, h.texture_interior
+        ));
+    }
+    if !(texture::SOURCE_PHOTO..=texture::SOURCE_TINTED_RELIEF).contains(&h.texture_source) {
+        return Err(format!("texture source {} is not known", h.texture_source));
+    }
+    Ok(Some(layout))
 }
 
 impl std::fmt::Debug for TileSet {
@@ -511,9 +562,9 @@ impl TileSet {
         if header.magic != MAGIC {
             return Err(invalid("not a vkterrain tile set (bad magic)".into()));
         }
-        if header.version != VERSION {
+        if !(OLDEST_VERSION..=VERSION).contains(&header.version) {
             return Err(invalid(format!(
-                "format version {} is not supported (this reader reads {VERSION})",
+                "format version {} is not supported (this reader reads {OLDEST_VERSION}..={VERSION})",
                 header.version
             )));
         }
@@ -572,13 +623,32 @@ impl TileSet {
         if header_crc(&header, directory) != header.header_crc {
             return Err(invalid("header checksum mismatch (corrupted file)".into()));
         }
+        let texture = texture_layout(&header).map_err(invalid)?;
         let set = TileSet {
             path: path.to_path_buf(),
             map,
             header,
+            texture,
         };
         for i in 0..(tx * ty) as usize {
             let e = set.entry(i);
+            if let Some(layout) = &set.texture {
+                if !e.texture_offset.is_multiple_of(16)
+                    || e.texture_offset < dir_end
+                    || (e.texture_len as usize) < layout.bytes()
+                    || e.texture_offset
+                        .checked_add(e.texture_len)
+                        .is_none_or(|end| end > set.map.len() as u64)
+                {
+                    return Err(invalid(format!(
+                        "texture of tile {},{} lies outside the file (offset {}, length {}; truncated?)",
+                        i as u32 % tx,
+                        i as u32 / tx,
+                        e.texture_offset,
+                        e.texture_len
+                    )));
+                }
+            }
             if !e.offset.is_multiple_of(16)
                 || e.offset < dir_end
                 || e.offset
@@ -720,6 +790,37 @@ impl TileSet {
         let start = range.start.min(len);
         let end = range.end.clamp(start, len);
         (start as usize, (end - start) as usize)
+    }
+
+    /// The layout every tile's texture has, when the set has textures.
+    pub fn texture_layout(&self) -> Option<texture::Layout> {
+        self.texture
+    }
+
+    /// Tile `(tx, ty)`'s texture, checksum and structure validated (None: the set has none).
+    pub fn texture(
+        &self,
+        tx: u32,
+        ty: u32,
+    ) -> Result<Option<texture::TileTexture<'_>>, FormatError> {
+        let Some(layout) = &self.texture else {
+            return Ok(None);
+        };
+        let invalid = |what: String| FormatError::Invalid {
+            path: self.path.clone(),
+            what: format!("tile {tx},{ty}: {what}"),
+        };
+        let e = self.dir_entry(tx, ty).ok_or_else(|| {
+            invalid(format!(
+                "outside the {}x{} tiles",
+                self.header.tiles_x, self.header.tiles_y
+            ))
+        })?;
+        let blob =
+            &self.map[e.texture_offset as usize..(e.texture_offset + e.texture_len) as usize];
+        texture::parse_blob(blob, layout, (tx, ty))
+            .map(Some)
+            .map_err(invalid)
     }
 
     /// Tile `(tx, ty)`'s stored bytes, not re-checked: for readers that validated the tile once

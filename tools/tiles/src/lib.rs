@@ -20,9 +20,12 @@ pub mod grid;
 pub mod mesh;
 pub mod pack;
 pub mod quantise;
+pub mod texture;
 pub mod verify;
 
-pub use build::{build_tile, build_tileset, BuildParams, BuildSummary, TileSetMeta};
+pub use build::{
+    build_tile, build_tileset, build_tileset_textured, BuildParams, BuildSummary, TileSetMeta,
+};
 pub use format::{FormatError, TileSet};
 pub use grid::Grid;
 

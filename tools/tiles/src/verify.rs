@@ -69,6 +69,10 @@ pub fn verify(set: &TileSet, source: Option<&Grid>) -> VerifyReport {
                 }
                 Err(e) => report.problems.push(e.to_string()),
             }
+            // The texture: checksum, layout and every mip's size (None: the set has none).
+            if let Err(e) = set.texture(tx, ty) {
+                report.problems.push(e.to_string());
+            }
         }
     }
     report

@@ -1,4 +1,5 @@
-//! `tiletool export`: one level of one tile as a Wavefront OBJ, for MeshLab or Blender.
+//! `tiletool export`: one level of one tile as a Wavefront OBJ, for MeshLab or Blender; or
+//! one mip of its texture as a PNG.
 //!
 //! x is the source column, y the source row (both of the whole grid), z the stored elevation in
 //! metres (after quantisation). Fans are expanded to triangles, wound counter-clockwise seen
@@ -55,6 +56,18 @@ pub fn run(file: &Path, (tx, ty): (u32, u32), level: u32, output: &Path) -> Resu
             let _ = writeln!(obj, "f {} {} {}", fan[0] + 1, w[0] + 1, w[1] + 1);
         }
     }
+    write_atomically(output, obj.as_bytes())?;
+    println!(
+        "{}: {} vertices, {} triangles",
+        output.display(),
+        used,
+        l.entry.triangle_count
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Writes `bytes` to a temporary file beside `output` and renames it into place.
+fn write_atomically(output: &Path, bytes: &[u8]) -> Result<()> {
     let tmp = output.with_file_name(format!(
         ".{}.tmp.{}",
         output
@@ -63,16 +76,48 @@ pub fn run(file: &Path, (tx, ty): (u32, u32), level: u32, output: &Path) -> Resu
             .unwrap_or_default(),
         std::process::id()
     ));
-    std::fs::write(&tmp, obj).with_context(|| format!("{}: cannot write", output.display()))?;
+    std::fs::write(&tmp, bytes).with_context(|| format!("{}: cannot write", output.display()))?;
     if let Err(e) = std::fs::rename(&tmp, output) {
         let _ = std::fs::remove_file(&tmp);
         bail!("{}: cannot write: {e}", output.display());
     }
+    Ok(())
+}
+
+/// Mip `mip` of tile `(tx, ty)`'s texture, BC1-decoded, as a PNG (gutter included).
+pub fn texture(file: &Path, (tx, ty): (u32, u32), mip: u32, output: &Path) -> Result<ExitCode> {
+    let set = tiles::TileSet::open(file)?;
+    let h = set.header();
+    if tx >= h.tiles_x || ty >= h.tiles_y {
+        bail!(
+            "{}: tile {tx},{ty} is outside the {}x{} tiles",
+            file.display(),
+            h.tiles_x,
+            h.tiles_y
+        );
+    }
+    let Some(texture) = set.texture(tx, ty)? else {
+        bail!("{}: the tile set has no textures", file.display());
+    };
+    let Some((entry, blocks)) = texture.mips.get(mip as usize) else {
+        bail!(
+            "{}: texture mip {mip} does not exist (mips 0..={})",
+            file.display(),
+            texture.mips.len() - 1
+        );
+    };
+    let (w, h) = (entry.width, entry.height);
+    let rgba = tiles::texture::decode_bc1(blocks, w as usize, h as usize);
+    let image = image::RgbaImage::from_raw(w, h, rgba).context("decoded size")?;
+    let mut png = Vec::new();
+    image
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .with_context(|| format!("{}: cannot encode", output.display()))?;
+    write_atomically(output, &png)?;
     println!(
-        "{}: {} vertices, {} triangles",
+        "{}: {w}x{h} texels, PSNR {:.2} dB against the filtered mip",
         output.display(),
-        used,
-        l.entry.triangle_count
+        entry.psnr()
     );
     Ok(ExitCode::SUCCESS)
 }

@@ -22,6 +22,35 @@ struct LevelInfo {
     limited_worst_tile: Option<(u32, u32)>,
 }
 
+#[derive(Serialize, Default, Clone)]
+struct MipInfo {
+    mip: u32,
+    size: u32,
+    bytes: u64,
+    /// Of the BC1-decoded mips against the filtered mips they were compressed from.
+    psnr_db: f64,
+    #[serde(skip)]
+    squared_error: f64,
+    #[serde(skip)]
+    texels: u64,
+}
+
+#[derive(Serialize)]
+struct TextureInfo {
+    format: &'static str,
+    /// photo, relief or tinted relief.
+    source: &'static str,
+    /// How the texture lies on the heights.
+    placement: &'static str,
+    interior_texels: u32,
+    gutter_texels: u32,
+    layer_texels: u32,
+    /// Mips whose texel grid lines up with the tiles (seam-free filtering).
+    aligned_mips: u32,
+    bytes: u64,
+    mips: Vec<MipInfo>,
+}
+
 #[derive(Serialize)]
 struct Info {
     file: String,
@@ -40,6 +69,7 @@ struct Info {
     tile_size: u32,
     base_error_m: f64,
     levels: Vec<LevelInfo>,
+    texture: Option<TextureInfo>,
 }
 
 pub fn run(file: &Path, json: bool) -> Result<ExitCode> {
@@ -75,6 +105,51 @@ pub fn run(file: &Path, json: bool) -> Result<ExitCode> {
             }
         }
     }
+    let texture = match set.texture_layout() {
+        None => None,
+        Some(layout) => {
+            use tiles::texture::{SOURCE_PHOTO, SOURCE_RELIEF};
+            let mut mips: Vec<MipInfo> = (0..layout.mips)
+                .map(|m| MipInfo {
+                    mip: m,
+                    size: layout.mip_size(m),
+                    ..Default::default()
+                })
+                .collect();
+            for ty in 0..h.tiles_y {
+                for tx in 0..h.tiles_x {
+                    let t = set.texture(tx, ty)?.expect("the set has textures");
+                    for (sum, (e, bytes)) in mips.iter_mut().zip(&t.mips) {
+                        sum.bytes += bytes.len() as u64;
+                        sum.squared_error += e.squared_error;
+                        sum.texels += e.texels;
+                    }
+                }
+            }
+            for m in &mut mips {
+                m.psnr_db = tiles::texture::psnr(m.squared_error, m.texels);
+            }
+            let (source, placement) = match h.texture_source {
+                SOURCE_PHOTO => (
+                    "photo",
+                    "spans the height grid exactly (first to last column and row)",
+                ),
+                SOURCE_RELIEF => ("relief", "computed from the heights"),
+                _ => ("tinted relief", "computed from the heights"),
+            };
+            Some(TextureInfo {
+                format: "BC1",
+                source,
+                placement,
+                interior_texels: layout.interior,
+                gutter_texels: layout.gutter,
+                layer_texels: layout.size,
+                aligned_mips: layout.aligned_mips(),
+                bytes: mips.iter().map(|m| m.bytes).sum(),
+                mips,
+            })
+        }
+    };
     let info = Info {
         file: file.display().to_string(),
         file_bytes: set.file_len(),
@@ -92,6 +167,7 @@ pub fn run(file: &Path, json: bool) -> Result<ExitCode> {
         tile_size: h.tile_size,
         base_error_m: h.base_error,
         levels,
+        texture,
     };
     if json {
         println!("{}", serde_json::to_string_pretty(&info)?);
@@ -124,6 +200,26 @@ pub fn run(file: &Path, json: bool) -> Result<ExitCode> {
             "  {:>5} {:>11} {:>13.3} {:>12} {:>12} {:>12}",
             l.level, l.error_bound_m, l.max_error_m, l.vertices, l.triangles, l.bytes
         );
+    }
+    match &info.texture {
+        None => println!("  texture   none (the renderer lights the terrain itself)"),
+        Some(t) => {
+            println!(
+                "  texture   {} {}, {}: {} texels per tile + {}-texel gutters = {} per layer, {} mips ({} aligned), {:.1} MB",
+                t.format, t.source, t.placement, t.interior_texels, t.gutter_texels, t.layer_texels,
+                t.mips.len(), t.aligned_mips, t.bytes as f64 / 1e6
+            );
+            println!("    mip      texels   PSNR (dB)        bytes");
+            for m in &t.mips {
+                println!(
+                    "  {:>5} {:>11} {:>11.2} {:>12}",
+                    m.mip,
+                    format!("{0}x{0}", m.size),
+                    m.psnr_db,
+                    m.bytes
+                );
+            }
+        }
     }
     let limited: Vec<&LevelInfo> = info.levels.iter().filter(|l| l.limited_tiles > 0).collect();
     if !limited.is_empty() {

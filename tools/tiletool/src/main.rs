@@ -11,6 +11,7 @@
 
 mod export;
 mod info;
+mod photo;
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -57,6 +58,8 @@ enum Command {
         /// Replace the output even if it exists and is not a tile set.
         #[arg(long)]
         force: bool,
+        #[command(flatten)]
+        texture: TextureArgs,
     },
     /// Print a tile set's grid, levels and measured errors.
     Info {
@@ -73,17 +76,91 @@ enum Command {
         #[command(flatten)]
         read: ReadArgs,
     },
-    /// Write one level of one tile as a Wavefront OBJ mesh.
+    /// Write one level of one tile as a Wavefront OBJ mesh, or one mip of its texture as PNG.
     Export {
         file: PathBuf,
         /// Tile column and row, e.g. 2,3.
         #[arg(long, value_parser = parse_pair)]
         tile: (u32, u32),
+        /// Level of detail to write as OBJ.
+        #[arg(
+            long,
+            required_unless_present = "texture_mip",
+            conflicts_with = "texture_mip"
+        )]
+        level: Option<u32>,
+        /// Texture mip to write as PNG instead (the decoded BC1 layer, gutter included).
         #[arg(long)]
-        level: u32,
+        texture_mip: Option<u32>,
         #[arg(short, long)]
         output: PathBuf,
     },
+}
+
+/// What the terrain is textured with (default: a pre-lit shaded relief of the heights).
+#[derive(Args, Clone)]
+struct TextureArgs {
+    /// Photo texture draped over the heights: PNG, JPEG or RGB GeoTIFF of any resolution,
+    /// taken to span the height grid exactly (first to last column and row).
+    #[arg(long, conflicts_with = "no_texture")]
+    texture: Option<PathBuf>,
+    /// No texture tiles: the renderer lights the terrain itself (as before format v2).
+    #[arg(long)]
+    no_texture: bool,
+    /// Texels per grid cell along each axis, rounded per tile to a power of two
+    /// [default: the photo's own density; 2 for the relief, i.e. 4 per sample as in the paper]
+    #[arg(long)]
+    texels_per_sample: Option<f64>,
+    /// Sun of the shaded relief: degrees clockwise from north.
+    #[arg(long, default_value_t = 315.0, allow_negative_numbers = true)]
+    sun_azimuth: f64,
+    /// Sun of the shaded relief: degrees above the horizon.
+    #[arg(long, default_value_t = 45.0, allow_negative_numbers = true)]
+    sun_elevation: f64,
+    /// Colour the shaded relief by height (hypsometric tint).
+    #[arg(long, conflicts_with = "texture")]
+    tint: bool,
+}
+
+impl TextureArgs {
+    /// The texturing to build with, reading the photo if there is one.
+    fn texturing(&self, grid: &dem::HeightGrid) -> Result<Option<tiles::texture::Texturing>> {
+        use tiles::texture::{interior_for, Layout, Source, Texturing};
+        if self.no_texture {
+            return Ok(None);
+        }
+        if let Some(t) = self.texels_per_sample {
+            if !(t.is_finite() && t > 0.0) {
+                bail!("--texels-per-sample {t} must be a positive number");
+            }
+        }
+        let (source, density) = match &self.texture {
+            Some(path) => {
+                let photo = photo::read(path)?;
+                let view = tiles::Grid {
+                    width: grid.width,
+                    height: grid.height,
+                    heights: &grid.heights,
+                    spacing_x: grid.spacing_x,
+                    spacing_y: grid.spacing_y,
+                };
+                let density = photo.pixels_per_cell(&view);
+                (Source::Photo(photo), density)
+            }
+            None => {
+                let relief = tiles::texture::relief::Relief {
+                    azimuth_deg: self.sun_azimuth,
+                    elevation_deg: self.sun_elevation,
+                    tint: self.tint,
+                };
+                relief.validate().map_err(|e| anyhow::anyhow!(e))?;
+                (Source::Relief(relief), 2.0)
+            }
+        };
+        let layout = Layout::new(interior_for(self.texels_per_sample.unwrap_or(density)))
+            .map_err(|e| anyhow::anyhow!(e))?;
+        Ok(Some(Texturing { source, layout }))
+    }
 }
 
 #[derive(Args)]
@@ -191,6 +268,7 @@ fn main() -> ExitCode {
             independent_sides,
             quiet,
             force,
+            texture,
         } => check_output(&output, &input.inputs, force).and_then(|()| {
             remove_on_signal(&output)?;
             build(
@@ -201,6 +279,7 @@ fn main() -> ExitCode {
                     base_error,
                     shared_sides: !independent_sides,
                 },
+                &texture,
                 quiet,
             )
         }),
@@ -210,8 +289,13 @@ fn main() -> ExitCode {
             file,
             tile,
             level,
+            texture_mip,
             output,
-        } => export::run(&file, tile, level, &output),
+        } => match (level, texture_mip) {
+            (Some(level), _) => export::run(&file, tile, level, &output),
+            (None, Some(mip)) => export::texture(&file, tile, mip, &output),
+            (None, None) => Err(anyhow::anyhow!("give --level or --texture-mip")),
+        },
     };
     match result {
         Ok(code) => code,
@@ -269,6 +353,7 @@ fn build(
     input: &InputArgs,
     output: &Path,
     params: tiles::BuildParams,
+    texture: &TextureArgs,
     quiet: bool,
 ) -> Result<ExitCode> {
     params.validate()?;
@@ -277,6 +362,7 @@ fn build(
     }
     let start = Instant::now();
     let grid = read_dem(&input.inputs, &input.read)?;
+    let texturing = texture.texturing(&grid)?;
     let decoded = start.elapsed();
     let (tiles_x, tiles_y) = tiles::format::tile_count(grid.width, grid.height)
         .map_err(|e| anyhow::anyhow!("{}: {e}", input.inputs[0].display()))?;
@@ -307,7 +393,14 @@ fn build(
         spacing_x: grid.spacing_x,
         spacing_y: grid.spacing_y,
     };
-    let summary = tiles::build_tileset(&view, &params, &meta, output, &progress)?;
+    let summary = tiles::build_tileset_textured(
+        &view,
+        &params,
+        texturing.as_ref(),
+        &meta,
+        output,
+        &progress,
+    )?;
     bar.finish_and_clear();
     let total = start.elapsed();
     if !quiet {
@@ -358,6 +451,9 @@ fn build(
                 l.bytes
             );
         }
+        if let Some(t) = &texturing {
+            print_texture(t, &summary, tiles_x * tiles_y);
+        }
         let secs = total.as_secs_f64();
         println!(
             "  file      {:.1} MB; {:.2} s (decode {:.2} s), {:.0} M samples/min{}",
@@ -371,6 +467,51 @@ fn build(
         );
     }
     Ok(ExitCode::SUCCESS)
+}
+
+fn print_texture(t: &tiles::texture::Texturing, summary: &tiles::BuildSummary, tiles: u32) {
+    use tiles::texture::Source;
+    let l = &t.layout;
+    let what = match &t.source {
+        Source::Photo(p) => format!(
+            "photo {}x{} px, taken to span the height grid exactly (not aligned by georeferencing)",
+            p.width, p.height
+        ),
+        Source::Relief(r) => format!(
+            "shaded relief{}, sun at azimuth {} and elevation {} degrees",
+            if r.tint { " with hypsometric tint" } else { "" },
+            r.azimuth_deg,
+            r.elevation_deg
+        ),
+    };
+    println!("  texture   {what}");
+    println!(
+        "            BC1, {} texels per tile + {}-texel gutters = {} per layer, {} mips ({} aligned with the tiles)",
+        l.interior,
+        l.gutter,
+        l.size,
+        l.mips,
+        l.aligned_mips()
+    );
+    println!("    mip      texels   PSNR (dB)        bytes");
+    for (m, s) in summary.texture_mips.iter().enumerate() {
+        println!(
+            "  {m:>5} {:>11} {:>11.2} {:>12}",
+            format!("{0}x{0}", s.size),
+            s.psnr(),
+            s.bytes
+        );
+    }
+    // Source texels: the photo's pixels, or the relief texels the tiles' interiors hold.
+    let source_texels = match &t.source {
+        Source::Photo(p) => (p.width * p.height) as f64,
+        Source::Relief(_) => f64::from(tiles) * f64::from(l.interior).powi(2),
+    };
+    println!(
+        "            {:.1} s of thread time: {:.0} M source texels per minute per core",
+        summary.texture_seconds,
+        source_texels / summary.texture_seconds.max(1e-9) * 60.0 / 1e6
+    );
 }
 
 /// Peak resident memory of this process (Linux), bytes.

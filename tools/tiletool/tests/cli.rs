@@ -716,3 +716,223 @@ fn shared_sides_verify_and_a_forged_claim_is_caught() {
         "{all}"
     );
 }
+
+/// Builds the sample into `dir/name` with `extra` flags; returns the file and `info --json`.
+fn build_sample(dir: &Path, name: &str, extra: &[&str]) -> (PathBuf, serde_json::Value) {
+    let out = dir.join(name);
+    let src = sample();
+    let mut args = vec![
+        "build",
+        s(&src),
+        "-o",
+        s(&out),
+        "--spacing",
+        "160",
+        "--vertical-scale",
+        "0.1",
+        "--quiet",
+    ];
+    args.extend(extra);
+    let o = tiletool(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = tiletool(&["info", s(&out), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    (out, serde_json::from_slice(&o.stdout).expect("json"))
+}
+
+/// PSNR (dB) over pairs of RGB pixels.
+fn psnr(pairs: impl Iterator<Item = ([u8; 3], [u8; 3])>) -> f64 {
+    let (mut sum, mut n) = (0.0f64, 0u64);
+    for (a, b) in pairs {
+        for k in 0..3 {
+            let d = f64::from(a[k]) - f64::from(b[k]);
+            sum += d * d;
+        }
+        n += 3;
+    }
+    10.0 * (255.0f64.powi(2) / (sum / n as f64)).log10()
+}
+
+/// BC1 floors, documented in bench/README.md: every mip at least this PSNR against the
+/// filtered mip it was compressed from, on the Puget photo and on a shaded relief.
+const PSNR_FLOOR_DB: f64 = 27.0;
+
+#[test]
+fn texture_mips_meet_the_psnr_floor_on_the_photo_and_the_relief() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let tex = testdata::sample_texture();
+    for (name, extra) in [
+        ("photo.vkt", vec!["--texture", s(&tex)]),
+        ("relief.vkt", vec![]),
+        ("tint.vkt", vec!["--tint"]),
+    ] {
+        let (_, info) = build_sample(dir.path(), name, &extra);
+        assert_eq!(info["format_version"], 2);
+        let t = &info["texture"];
+        assert_eq!(t["format"], "BC1", "{name}: {t}");
+        let mips = t["mips"].as_array().expect("mips");
+        assert!(mips.len() >= 7, "{name}: {} mips", mips.len());
+        for m in mips {
+            let db = m["psnr_db"].as_f64().expect("psnr");
+            assert!(
+                db >= PSNR_FLOOR_DB,
+                "{name}: mip {} at {db:.2} dB",
+                m["mip"]
+            );
+        }
+        // The photo keeps its own density (1024 px over 1024 cells: 256 per tile); the relief
+        // gets 2 texels per cell.
+        let want = if name == "photo.vkt" { 256 } else { 512 };
+        assert_eq!(t["interior_texels"], want, "{name}");
+    }
+}
+
+#[test]
+fn the_photo_lands_on_the_tiles_texel_for_texel() {
+    // Independently of the builder's own PSNR: decode tile 1,2's mip 0 from the file and
+    // compare its interior with the photo's pixels where the mapping puts them (at the
+    // photo's own density, interior texel i of tile tx is photo column 256 tx + i). The
+    // control: the same comparison one pixel off must be far worse, so a misplaced texture
+    // cannot pass.
+    let dir = tempfile::tempdir().expect("temp dir");
+    let tex = testdata::sample_texture();
+    let (vkt, info) = build_sample(dir.path(), "photo.vkt", &["--texture", s(&tex)]);
+    let g = info["texture"]["gutter_texels"].as_u64().expect("gutter") as u32;
+    let png = dir.path().join("mip0.png");
+    let o = tiletool(&[
+        "export",
+        s(&vkt),
+        "--tile",
+        "1,2",
+        "--texture-mip",
+        "0",
+        "-o",
+        s(&png),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let layer = image::open(&png).expect("png").to_rgb8();
+    let photo = image::open(&tex).expect("photo").to_rgb8();
+    let compare = |shift: i64| {
+        psnr(
+            (0..256u32)
+                .flat_map(|y| (0..256u32).map(move |x| (x, y)))
+                .map(|(x, y)| {
+                    let t = layer.get_pixel(g + x, g + y).0;
+                    let px = (256 + i64::from(x) + shift).clamp(0, 1023) as u32;
+                    let p = photo.get_pixel(px, 512 + y).0;
+                    (t, p)
+                }),
+        )
+    };
+    let (aligned, shifted) = (compare(0), compare(1));
+    assert!(aligned >= PSNR_FLOOR_DB, "aligned: {aligned:.2} dB");
+    assert!(
+        shifted < aligned - 3.0,
+        "one pixel off is not worse: {shifted:.2} vs {aligned:.2} dB"
+    );
+    // The gutter holds the neighbour's texels: tile 1,2's right gutter is tile 2,2's left
+    // interior, i.e. photo columns 512..512+g.
+    let gutter = psnr(
+        (0..256u32)
+            .flat_map(|y| (0..g).map(move |k| (k, y)))
+            .map(|(k, y)| {
+                let t = layer.get_pixel(g + 256 + k, g + y).0;
+                (t, photo.get_pixel(512 + k, 512 + y).0)
+            }),
+    );
+    assert!(gutter >= PSNR_FLOOR_DB, "gutter: {gutter:.2} dB");
+}
+
+#[test]
+fn version_1_files_still_read_without_textures() {
+    // A file written by the version 1 builder, kept in the fuzz corpus.
+    let old = PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../fuzz/corpus/vkt/srtm-270x40.vkt"
+    ));
+    let o = tiletool(&["info", s(&old), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let info: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    assert_eq!(info["format_version"], 1);
+    assert!(info["texture"].is_null());
+    let o = tiletool(&["verify", s(&old)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+#[test]
+fn bad_textures_fail_with_one_line_and_no_output() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let d = dir.path();
+    let src = sample();
+    let flags = ["--spacing", "160"];
+    let not_a_picture = write(d, "notes.png", b"this is not a picture at all");
+    let mut extra = flags.to_vec();
+    extra.extend(["--texture", s(&not_a_picture)]);
+    build_fails(&[&src], &extra, "notes.png");
+    let empty = write(d, "empty.jpg", b"");
+    let mut extra = flags.to_vec();
+    extra.extend(["--texture", s(&empty)]);
+    build_fails(&[&src], &extra, "empty.jpg");
+    let missing = d.join("missing.png");
+    let mut extra = flags.to_vec();
+    extra.extend(["--texture", s(&missing)]);
+    build_fails(&[&src], &extra, "missing.png");
+    let tiny = write(d, "tiny.png", &{
+        let mut png = Vec::new();
+        image::RgbImage::new(1, 1)
+            .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+            .expect("png");
+        png
+    });
+    let mut extra = flags.to_vec();
+    extra.extend(["--texture", s(&tiny)]);
+    build_fails(&[&src], &extra, "tiny.png");
+    for (flag, value) in [("--texels-per-sample", "0"), ("--sun-elevation", "-5")] {
+        let mut extra = flags.to_vec();
+        extra.extend([flag, value]);
+        build_fails(&[&src], &extra, flag);
+    }
+    let rgb = write(d, "rgb.tif", &rgb_tiff());
+    let mut extra = flags.to_vec();
+    extra.extend(["--texture", s(&rgb)]);
+    let out = d.join("tiff-textured.vkt");
+    let mut args = vec!["build", s(&src), "-o", s(&out), "--quiet"];
+    args.extend(&extra);
+    let o = tiletool(&args);
+    assert!(
+        o.status.success(),
+        "an RGB TIFF is a texture: {}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn a_corrupted_texture_is_caught_by_verify_and_export() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let tex = testdata::sample_texture();
+    let (vkt, _) = build_sample(dir.path(), "photo.vkt", &["--texture", s(&tex)]);
+    let mut bytes = std::fs::read(&vkt).expect("read");
+    // Tile 3,3's directory entry (256-byte header, 40-byte entries, row-major) says where its
+    // texture lies: offset at byte 24 of the entry, length at 32. Flip a bit in its middle.
+    let entry = 256 + (3 * 4 + 3) * 40;
+    let word = |at: usize| u64::from_le_bytes(bytes[at..at + 8].try_into().expect("8 bytes"));
+    let (offset, len) = (word(entry + 24) as usize, word(entry + 32) as usize);
+    assert!(len > 0 && offset + len <= bytes.len());
+    bytes[offset + len / 2] ^= 0x10;
+    let bad = write(dir.path(), "bad.vkt", &bytes);
+    let o = tiletool(&["verify", s(&bad)]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("texture checksum"), "{}", stderr(&o));
+    let png = dir.path().join("t.png");
+    let o = tiletool(&[
+        "export",
+        s(&bad),
+        "--tile",
+        "3,3",
+        "--texture-mip",
+        "0",
+        "-o",
+        s(&png),
+    ]);
+    assert_one_line_error(&o, "bad.vkt");
+}
