@@ -118,6 +118,12 @@ fn run_vkt(p: &Path) {
                     let _ = tiles::verify::tile_problems(&set, &tile);
                     let _ = tile.vertices();
                 }
+                if let Ok(Some(texture)) = set.texture(tx, ty) {
+                    for (e, blocks) in &texture.mips {
+                        let _ =
+                            tiles::texture::decode_bc1(blocks, e.width as usize, e.height as usize);
+                    }
+                }
             }
         }
     }

@@ -62,6 +62,7 @@ pub mod cost;
 mod lru;
 pub mod manager;
 pub mod sim;
+pub mod textures;
 pub mod trace;
 
 pub use classes::ClassPlan;
@@ -69,6 +70,9 @@ pub use cost::{Layout, LevelCost, TileCost};
 pub use manager::{
     Config, FramePlan, Grant, Manager, Move, Part, Request, Scheme, Stats, TileId, Upload, Victim,
     DEFAULT_DOWNGRADE_SLACK, DEFAULT_PREFETCH_FREE, DEFAULT_UPLOAD_BUDGET, DEFAULT_WEIGHT,
+};
+pub use textures::{
+    TextureConfig, TextureGrant, TextureRequest, TextureSlots, TextureStats, TextureUpload,
 };
 
 #[cfg(test)]
