@@ -507,10 +507,13 @@ fn print_texture(t: &tiles::texture::Texturing, summary: &tiles::BuildSummary, t
         Source::Photo(p) => (p.width * p.height) as f64,
         Source::Relief(_) => f64::from(tiles) * f64::from(l.interior).powi(2),
     };
+    let made = f64::from(tiles) * f64::from(l.interior).powi(2);
+    let per_core = |texels: f64| texels / summary.texture_seconds.max(1e-9) * 60.0 / 1e6;
     println!(
-        "            {:.1} s of thread time: {:.0} M source texels per minute per core",
+        "            {:.1} s of thread time: {:.0} M source texels per minute per core ({:.0} M tile texels made)",
         summary.texture_seconds,
-        source_texels / summary.texture_seconds.max(1e-9) * 60.0 / 1e6
+        per_core(source_texels),
+        per_core(made)
     );
 }
 
