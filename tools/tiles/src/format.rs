@@ -792,6 +792,28 @@ impl TileSet {
         (start as usize, (end - start) as usize)
     }
 
+    /// An error about tile `(tx, ty)` of this file.
+    fn tile_error(&self, tx: u32, ty: u32, what: String) -> FormatError {
+        FormatError::Invalid {
+            path: self.path.clone(),
+            what: format!("tile {tx},{ty}: {what}"),
+        }
+    }
+
+    /// Tile `(tx, ty)`'s directory entry, or an error when the tile is outside the set.
+    fn checked_entry(&self, tx: u32, ty: u32) -> Result<DirEntry, FormatError> {
+        self.dir_entry(tx, ty).ok_or_else(|| {
+            self.tile_error(
+                tx,
+                ty,
+                format!(
+                    "outside the {}x{} tiles",
+                    self.header.tiles_x, self.header.tiles_y
+                ),
+            )
+        })
+    }
+
     /// The layout every tile's texture has, when the set has textures.
     pub fn texture_layout(&self) -> Option<texture::Layout> {
         self.texture
@@ -806,16 +828,8 @@ impl TileSet {
         let Some(layout) = &self.texture else {
             return Ok(None);
         };
-        let invalid = |what: String| FormatError::Invalid {
-            path: self.path.clone(),
-            what: format!("tile {tx},{ty}: {what}"),
-        };
-        let e = self.dir_entry(tx, ty).ok_or_else(|| {
-            invalid(format!(
-                "outside the {}x{} tiles",
-                self.header.tiles_x, self.header.tiles_y
-            ))
-        })?;
+        let invalid = |what: String| self.tile_error(tx, ty, what);
+        let e = self.checked_entry(tx, ty)?;
         let blob =
             &self.map[e.texture_offset as usize..(e.texture_offset + e.texture_len) as usize];
         texture::parse_blob(blob, layout, (tx, ty))
@@ -833,16 +847,8 @@ impl TileSet {
 
     /// Tile `(tx, ty)`, checksum and structure validated.
     pub fn tile(&self, tx: u32, ty: u32) -> Result<Tile<'_>, FormatError> {
-        let invalid = |what: String| FormatError::Invalid {
-            path: self.path.clone(),
-            what: format!("tile {tx},{ty}: {what}"),
-        };
-        let e = self.dir_entry(tx, ty).ok_or_else(|| {
-            invalid(format!(
-                "outside the {}x{} tiles",
-                self.header.tiles_x, self.header.tiles_y
-            ))
-        })?;
+        let invalid = |what: String| self.tile_error(tx, ty, what);
+        let e = self.checked_entry(tx, ty)?;
         let blob = &self.map[e.offset as usize..(e.offset + e.len) as usize];
         if crc32fast::hash(blob) != e.crc {
             return Err(invalid("checksum mismatch (corrupted file)".into()));

@@ -13,16 +13,8 @@ use std::process::ExitCode;
 use anyhow::{bail, Context, Result};
 
 pub fn run(file: &Path, (tx, ty): (u32, u32), level: u32, output: &Path) -> Result<ExitCode> {
-    let set = tiles::TileSet::open(file)?;
+    let set = open_at(file, (tx, ty))?;
     let h = set.header();
-    if tx >= h.tiles_x || ty >= h.tiles_y {
-        bail!(
-            "{}: tile {tx},{ty} is outside the {}x{} tiles",
-            file.display(),
-            h.tiles_x,
-            h.tiles_y
-        );
-    }
     if level >= h.levels {
         bail!(
             "{}: level {level} does not exist (levels 0..={})",
@@ -66,6 +58,21 @@ pub fn run(file: &Path, (tx, ty): (u32, u32), level: u32, output: &Path) -> Resu
     Ok(ExitCode::SUCCESS)
 }
 
+/// Opens `file`, refusing a tile `(tx, ty)` outside it.
+fn open_at(file: &Path, (tx, ty): (u32, u32)) -> Result<tiles::TileSet> {
+    let set = tiles::TileSet::open(file)?;
+    let h = set.header();
+    if tx >= h.tiles_x || ty >= h.tiles_y {
+        bail!(
+            "{}: tile {tx},{ty} is outside the {}x{} tiles",
+            file.display(),
+            h.tiles_x,
+            h.tiles_y
+        );
+    }
+    Ok(set)
+}
+
 /// Writes `bytes` to a temporary file beside `output` and renames it into place.
 fn write_atomically(output: &Path, bytes: &[u8]) -> Result<()> {
     let tmp = output.with_file_name(format!(
@@ -86,16 +93,7 @@ fn write_atomically(output: &Path, bytes: &[u8]) -> Result<()> {
 
 /// Mip `mip` of tile `(tx, ty)`'s texture, BC1-decoded, as a PNG (gutter included).
 pub fn texture(file: &Path, (tx, ty): (u32, u32), mip: u32, output: &Path) -> Result<ExitCode> {
-    let set = tiles::TileSet::open(file)?;
-    let h = set.header();
-    if tx >= h.tiles_x || ty >= h.tiles_y {
-        bail!(
-            "{}: tile {tx},{ty} is outside the {}x{} tiles",
-            file.display(),
-            h.tiles_x,
-            h.tiles_y
-        );
-    }
+    let set = open_at(file, (tx, ty))?;
     let Some(texture) = set.texture(tx, ty)? else {
         bail!("{}: the tile set has no textures", file.display());
     };

@@ -137,14 +137,7 @@ impl TextureArgs {
         let (source, density) = match &self.texture {
             Some(path) => {
                 let photo = photo::read(path)?;
-                let view = tiles::Grid {
-                    width: grid.width,
-                    height: grid.height,
-                    heights: &grid.heights,
-                    spacing_x: grid.spacing_x,
-                    spacing_y: grid.spacing_y,
-                };
-                let density = photo.pixels_per_cell(&view);
+                let density = photo.pixels_per_cell(&view(grid));
                 (Source::Photo(photo), density)
             }
             None => {
@@ -306,6 +299,17 @@ fn main() -> ExitCode {
     }
 }
 
+/// The tile builder's view of a decoded height grid.
+fn view(grid: &dem::HeightGrid) -> tiles::Grid<'_> {
+    tiles::Grid {
+        width: grid.width,
+        height: grid.height,
+        heights: &grid.heights,
+        spacing_x: grid.spacing_x,
+        spacing_y: grid.spacing_y,
+    }
+}
+
 fn read_dem(inputs: &[PathBuf], read: &ReadArgs) -> Result<dem::HeightGrid> {
     Ok(dem::read(inputs, &read.options())?)
 }
@@ -386,13 +390,7 @@ fn build(
         description: grid.description.clone(),
         voids_filled: grid.voids_filled,
     };
-    let view = tiles::Grid {
-        width: grid.width,
-        height: grid.height,
-        heights: &grid.heights,
-        spacing_x: grid.spacing_x,
-        spacing_y: grid.spacing_y,
-    };
+    let view = view(&grid);
     let summary = tiles::build_tileset_textured(
         &view,
         &params,
@@ -532,13 +530,7 @@ fn verify(file: &Path, source: &[PathBuf], read: &ReadArgs) -> Result<ExitCode> 
     } else {
         Some(read_dem(source, read)?)
     };
-    let view = grid.as_ref().map(|g| tiles::Grid {
-        width: g.width,
-        height: g.height,
-        heights: &g.heights,
-        spacing_x: g.spacing_x,
-        spacing_y: g.spacing_y,
-    });
+    let view = grid.as_ref().map(view);
     let report = tiles::verify::verify(&set, view.as_ref());
     for p in report.problems.iter().take(50) {
         eprintln!("{p}");

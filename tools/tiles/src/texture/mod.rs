@@ -568,16 +568,20 @@ mod tests {
         )
     }
 
+    fn grid_of(heights: &[f32]) -> Grid<'_> {
+        Grid {
+            width: 3 * 256 + 1,
+            height: 2 * 256 + 1,
+            heights,
+            spacing_x: 10.0,
+            spacing_y: 10.0,
+        }
+    }
+
     #[test]
     fn gutters_hold_the_neighbours_texels_at_every_aligned_mip() {
         let (heights, photo) = photo_grid();
-        let grid = Grid {
-            width: 3 * 256 + 1,
-            height: 2 * 256 + 1,
-            heights: &heights,
-            spacing_x: 10.0,
-            spacing_y: 10.0,
-        };
+        let grid = grid_of(&heights);
         let layout = Layout::new(128).unwrap();
         let source = Prepared::Photo(&photo);
         let left = mip_chain(&grid, &source, &layout, (0, 1));
@@ -586,8 +590,9 @@ mod tests {
             let (a, b) = (&left[m as usize], &right[m as usize]);
             let s = layout.mip_size(m) as usize;
             let interior = (layout.interior >> m) as usize;
-            let g = (s - interior) / 2; // whole texels of gutter at this mip
-                                        // Left tile's columns interior..interior+2g are the right tile's 0..2g.
+            // Whole texels of gutter at this mip: the left tile's columns
+            // interior..interior+2g are the right tile's 0..2g.
+            let g = (s - interior) / 2;
             let mut worst = 0.0f32;
             for y in 0..s {
                 for k in 0..2 * g {
@@ -604,13 +609,7 @@ mod tests {
     #[test]
     fn the_photo_at_its_own_density_is_copied_texel_for_texel() {
         let (heights, photo) = photo_grid();
-        let grid = Grid {
-            width: 3 * 256 + 1,
-            height: 2 * 256 + 1,
-            heights: &heights,
-            spacing_x: 10.0,
-            spacing_y: 10.0,
-        };
+        let grid = grid_of(&heights);
         let layout = Layout::new(256).unwrap();
         let mips = mip_chain(&grid, &Prepared::Photo(&photo), &layout, (1, 0));
         let g = layout.gutter as usize;
@@ -626,13 +625,7 @@ mod tests {
     #[test]
     fn blobs_round_trip_and_refuse_damage() {
         let (heights, photo) = photo_grid();
-        let grid = Grid {
-            width: 3 * 256 + 1,
-            height: 2 * 256 + 1,
-            heights: &heights,
-            spacing_x: 10.0,
-            spacing_y: 10.0,
-        };
+        let grid = grid_of(&heights);
         let layout = Layout::new(64).unwrap();
         let (blob, entries) = build_blob(&grid, &Prepared::Photo(&photo), &layout, (2, 1));
         let t = parse_blob(&blob, &layout, (2, 1)).unwrap();
