@@ -5,7 +5,7 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 /// (constant, file, stage, macro defined for this build).
-const SHADERS: [(&str, &str, shaderc::ShaderKind, Option<&str>); 3] = [
+const SHADERS: [(&str, &str, shaderc::ShaderKind, Option<&str>); 4] = [
     (
         "TERRAIN_VERT",
         "terrain.vert",
@@ -23,6 +23,12 @@ const SHADERS: [(&str, &str, shaderc::ShaderKind, Option<&str>); 3] = [
         "terrain.frag",
         shaderc::ShaderKind::Fragment,
         None,
+    ),
+    (
+        "TERRAIN_FRAG_MIN_LOD",
+        "terrain.frag",
+        shaderc::ShaderKind::Fragment,
+        Some("MIN_LOD"),
     ),
 ];
 

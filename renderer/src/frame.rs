@@ -3,6 +3,12 @@
 //! records the transfers, the terrain pass (one indexed fan draw per tile straight from the
 //! pool, then the stitches), the read-back and the window blit, and submits.
 //!
+//! Textures: when the tile set has texture tiles, a fixed array of texture slots (one layer
+//! each) is allocated beside the pool; each frame the drawn tiles ask for the mips their
+//! footprint needs, the memory manager's [`TextureSlots`] grants layers and schedules mips
+//! with the bytes the geometry left in the frame's budget, and the copies go through the
+//! staging ring before the pass.
+//!
 //! Frames in flight: each of `frames_in_flight` slots owns a command buffer, a fence,
 //! timestamp queries, a stitch buffer, a staging slot, a render target and the semaphore a
 //! window image is acquired with. Starting a frame waits only for its slot's previous frame;
@@ -15,13 +21,14 @@ use std::time::Instant;
 use ash::vk;
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
+use memory::textures::{TextureConfig, TextureSlots};
 use memory::{Config, Manager, Scheme, Victim};
 
 use crate::camera::Camera;
 use crate::log::FrameRecord;
 use crate::measure::State;
 use crate::morph::MAX_LEVELS;
-use crate::plan::{self, BorderMismatch, LevelRule, Plan};
+use crate::plan::{self, BorderMismatch, LevelRule, Plan, TexturePlan};
 use crate::prefetch::{Predicted, PrefetchOptions, Prefetcher};
 use crate::stitch::{pulled, Stitch, MAX_RECORDS};
 use crate::target::{Target, COLOR_FORMAT, DEPTH_FORMAT};
@@ -30,6 +37,7 @@ use crate::vulkan::buffer::BufferDesc;
 use crate::vulkan::pipeline::{TerrainPipeline, TerrainSets};
 use crate::vulkan::pool::{self, Staging, TilePool};
 use crate::vulkan::sync::{self, Commands};
+use crate::vulkan::texture::{self, TextureArray, TextureDesc};
 use crate::vulkan::timestamps::Timestamps;
 use crate::vulkan::{Buffer, Gpu, VkError, VkResult};
 
@@ -42,7 +50,9 @@ pub struct Settings {
     pub forced_level: Option<u32>,
     /// Draw every visible tile at its finest level (the baseline).
     pub brute_force: bool,
-    pub level_colours: bool,
+    pub shading: Shading,
+    /// Samples the `Tiles` shading's grid is moved by (0: the tiles; tests use other lines).
+    pub tile_grid_offset: f32,
     pub wireframe: bool,
     pub sky: [f32; 3],
     /// Diagnostic: leave the seams open, to see (and test) what stitching closes.
@@ -52,6 +62,40 @@ pub struct Settings {
     /// Continuous levels, heights blended between levels (off: `--no-geomorph`).
     pub geomorph: bool,
     pub morph_shader: MorphShader,
+}
+
+/// How the terrain is coloured.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Shading {
+    /// The tile set's texture tiles: a photo, or the shaded relief tiletool bakes without
+    /// one (tiles without a texture slot fall back to `Tint`).
+    Photo,
+    /// Grey, lit by each triangle's own normal: the mesh as the level of detail made it.
+    Relief,
+    /// A hypsometric tint lit by each triangle's normal (the shading without textures).
+    #[default]
+    Tint,
+    /// Level colours (coarse blue to fine red) over the tint.
+    Level,
+    /// One flat colour per tile, neighbours always different (a diagnostic: where the tile
+    /// borders fall on screen). The grid may be moved by `Settings::tile_grid_offset`.
+    Tiles,
+}
+
+impl Shading {
+    pub const ALL: [Shading; 5] = [
+        Shading::Photo,
+        Shading::Relief,
+        Shading::Tint,
+        Shading::Level,
+        Shading::Tiles,
+    ];
+
+    /// The next mode in [`Shading::ALL`] (the window's key).
+    pub fn next(self) -> Shading {
+        let i = Shading::ALL.iter().position(|&s| s == self).unwrap_or(0);
+        Shading::ALL[(i + 1) % Shading::ALL.len()]
+    }
 }
 
 /// Which vertex shader blends the levels.
@@ -95,6 +139,12 @@ pub struct MemoryOptions {
     /// How levels travel (progressive; the others are for comparison and the draw-only limit).
     pub scheme: Scheme,
     pub prefetch: PrefetchOptions,
+    /// Allocate texture slots when the tile set has textures (false: geometry only).
+    pub textures: bool,
+    /// The share of `gpu_budget_bytes` the texture slots may take.
+    pub texture_share: f64,
+    /// Anisotropic filtering of the textures, up to the device's limit (1: off).
+    pub anisotropy: f32,
 }
 
 impl Default for MemoryOptions {
@@ -108,9 +158,15 @@ impl Default for MemoryOptions {
             downgrade_slack: memory::DEFAULT_DOWNGRADE_SLACK,
             scheme: Scheme::Progressive,
             prefetch: PrefetchOptions::default(),
+            textures: true,
+            texture_share: DEFAULT_TEXTURE_SHARE,
+            anisotropy: 16.0,
         }
     }
 }
+
+/// The share of the GPU budget texture slots take by default.
+pub const DEFAULT_TEXTURE_SHARE: f64 = 0.25;
 
 /// Where a windowed frame goes: the acquired swapchain image, copied into after rendering.
 #[derive(Clone, Copy, Debug)]
@@ -160,6 +216,9 @@ struct FrameConstants {
     height_step: f32,
     flags: u32,
     pad: u32,
+    /// Texture coordinate of tile-local sample coordinate `s`: `x + s * y` (the texture
+    /// layout's `(g + s * T / 256) / S`); `z`: `S`, texels across a layer.
+    texture_map: [f32; 4],
 }
 
 const _: () = assert!(
@@ -169,6 +228,9 @@ const _: () = assert!(
 /// `FrameConstants::flags`.
 const FLAG_GEOMORPH: u32 = 1;
 const FLAG_LEVEL_COLOURS: u32 = 2;
+const FLAG_TEXTURE: u32 = 4;
+const FLAG_RELIEF: u32 = 8;
+const FLAG_TILES: u32 = 16;
 
 /// One drawn tile as the vertex shader reads it (`TileRecord` in `terrain.vert`, std430).
 #[repr(C)]
@@ -186,11 +248,15 @@ struct TileRecord {
     level: u32,
     /// Pool byte of block 0's morph rows.
     morph: u32,
-    pad0: [u32; 2],
+    /// The tile's texture layer (u32::MAX: none) and finest resident mip.
+    texture_layer: u32,
+    texture_finest: f32,
     block_start: [u32; 9],
     block_len: [u32; 9],
     morph_start: [u32; 9],
-    pad1: u32,
+    /// Samples the texture is moved by (0; `VKTERRAIN_FAULT=texture-seam` moves every other
+    /// tile's, the seam test's negative control).
+    texture_shift: f32,
 }
 
 const RECORD_BYTES: u64 = std::mem::size_of::<TileRecord>() as u64;
@@ -268,6 +334,10 @@ pub struct Renderer {
     slots: Vec<Slot>,
     pool: TilePool,
     manager: Manager,
+    /// One layer per texture slot (a one-texel placeholder when there are none).
+    textures: TextureArray,
+    /// Which tile each layer holds (None: the frames draw without textures).
+    texture_slots: Option<TextureSlots>,
     options: MemoryOptions,
     /// The next frame's number (the manager's clock).
     frame: u64,
@@ -303,6 +373,12 @@ pub enum Fault {
     /// `truncate-at-N`: before frame N the tile set file is cut to half its length, as another
     /// process rewriting it would.
     TruncateAt(u64),
+    /// `texture-seam`: every other tile (by tile column plus row) samples its texture moved by
+    /// 4 samples, a misregistration that shows at tile borders (the seam test's control).
+    TextureSeam,
+    /// `texture-no-clamp`: the shader is told every tile has all its mips, so tiles whose fine
+    /// mips are not resident sample memory nothing was copied to (the clamp test's control).
+    TextureNoClamp,
 }
 
 impl Fault {
@@ -310,6 +386,8 @@ impl Fault {
         let v = std::env::var("VKTERRAIN_FAULT").ok()?;
         match v.as_str() {
             "validation" => Some(Fault::Validation),
+            "texture-seam" => Some(Fault::TextureSeam),
+            "texture-no-clamp" => Some(Fault::TextureNoClamp),
             _ => {
                 let number = |prefix: &str| v.strip_prefix(prefix).and_then(|n| n.parse().ok());
                 number("device-lost-at-")
@@ -340,8 +418,12 @@ impl Renderer {
     ) -> VkResult<Renderer> {
         // The shader reads the pool as one storage buffer.
         let readable = u64::from(gpu.properties.limits.max_storage_buffer_range);
+        let slot_config = texture_config(gpu, terrain, &options);
+        let texture_bytes = slot_config
+            .as_ref()
+            .map_or(0, |c| c.slots as u64 * c.slot_bytes());
         let config = Config {
-            pool_bytes: options.gpu_budget_bytes.min(readable),
+            pool_bytes: (options.gpu_budget_bytes - texture_bytes).min(readable),
             upload_budget: options.upload_budget,
             weight: options.weight,
             class_ratio: 2.0,
@@ -352,16 +434,41 @@ impl Renderer {
         };
         let fault = Fault::from_env();
         let (manager, pool) = allocate_pool(gpu, terrain, config, options.force_staging, fault)?;
+        let textures = match (&slot_config, terrain.texture) {
+            (Some(c), Some(layout)) => TextureArray::new(
+                gpu,
+                TextureDesc {
+                    format: vk::Format::BC1_RGB_UNORM_BLOCK,
+                    size: layout.size,
+                    mips: layout.mips,
+                    layers: c.slots as u32,
+                    anisotropy: options.anisotropy.clamp(1.0, gpu.max_anisotropy),
+                },
+                "texture slots",
+            ),
+            _ => TextureArray::placeholder(gpu),
+        };
+        let textures = match textures {
+            Ok(t) => t,
+            Err(e) => {
+                pool.destroy(gpu);
+                return Err(e);
+            }
+        };
         let sizes = SlotSizes {
             stitch: stitch_bound(terrain),
             records: RECORD_BYTES * terrain.tiles.len().clamp(1, MAX_RECORDS) as u64,
-            staging: staging_bound(&manager, options.upload_budget),
+            staging: staging_bound(&manager, options.upload_budget)
+                + slot_config
+                    .as_ref()
+                    .map_or(0, |c| texture_staging_bound(c, options.upload_budget)),
             extent,
         };
         let commands = match Commands::new(gpu, "frame commands") {
             Ok(c) => c,
             Err(e) => {
                 pool.destroy(gpu);
+                textures.destroy(gpu);
                 return Err(e);
             }
         };
@@ -380,7 +487,14 @@ impl Renderer {
         let mut sets = None;
         if let (Ok(p), None) = (&pipeline, &failure) {
             let records: Vec<&Buffer> = slots.iter().map(|s| &s.records).collect();
-            match TerrainSets::new(gpu, p, &pool.buffer, &records, "frame descriptor sets") {
+            match TerrainSets::new(
+                gpu,
+                p,
+                &pool.buffer,
+                &records,
+                &textures,
+                "frame descriptor sets",
+            ) {
                 Ok(s) => sets = Some(s),
                 Err(e) => failure = Some(e.to_string()),
             }
@@ -393,6 +507,8 @@ impl Renderer {
                 slots,
                 pool,
                 manager,
+                textures,
+                texture_slots: slot_config.map(TextureSlots::new),
                 options,
                 frame: 0,
                 slot_ready: None,
@@ -413,6 +529,7 @@ impl Renderer {
                 }
                 commands.destroy(gpu);
                 pool.destroy(gpu);
+                textures.destroy(gpu);
                 Err(VkError::Unsupported(failure.unwrap_or_default()))
             }
         }
@@ -424,6 +541,18 @@ impl Renderer {
 
     pub fn pool(&self) -> &TilePool {
         &self.pool
+    }
+
+    /// The texture slots (None: the frames draw without textures).
+    pub fn texture_slots(&self) -> Option<&TextureSlots> {
+        self.texture_slots.as_ref()
+    }
+
+    /// Device memory of the texture slots' array.
+    pub fn texture_bytes(&self) -> u64 {
+        self.texture_slots
+            .as_ref()
+            .map_or(0, |_| self.textures.bytes())
     }
 
     pub fn options(&self) -> &MemoryOptions {
@@ -560,6 +689,9 @@ impl Renderer {
         self.finish_all(gpu)?;
         let config = *self.manager.config();
         self.manager = Manager::new(terrain_costs(&self.manager), config);
+        if let Some(slots) = &mut self.texture_slots {
+            *slots = TextureSlots::new(slots.config().clone());
+        }
         Ok(())
     }
 
@@ -638,16 +770,32 @@ impl Renderer {
         )?;
         self.write_trace(&plan, &predicted.requests);
         let s = (self.frame % self.slots.len() as u64) as usize;
+        let geometry_bytes = plan.stats.upload_bytes_blocks + plan.stats.upload_bytes_indices;
+        let textures = self.plan_textures(
+            terrain,
+            &plan,
+            input.camera,
+            settings,
+            Some(self.options.upload_budget.saturating_sub(geometry_bytes)),
+        );
 
         let t = Instant::now();
         self.slots[s].staging.reset();
         let (moves, staged) = self.write_uploads(terrain, &plan, s)?;
+        let staged_geometry = self.slots[s].staging.sent();
+        let texture_copies = self.write_texture_uploads(terrain, &textures, s)?;
         let cpu_upload_ms = ms(t);
 
         let t = Instant::now();
         let slot = &mut self.slots[s];
         let stitch_ranges = write_stitches(&mut slot.stitch, &plan.stitches)?;
-        write_records(&mut slot.records, terrain, input.camera, &plan)?;
+        write_records(
+            &mut slot.records,
+            terrain,
+            input.camera,
+            (&plan, &textures),
+            self.fault,
+        )?;
         let set = self
             .sets
             .as_ref()
@@ -656,6 +804,13 @@ impl Renderer {
         sync::begin(gpu, cmd, true)?;
         slot.timestamps.begin(gpu, cmd);
         pool::record_transfers(gpu, cmd, &self.pool, &slot.staging, &moves, &staged);
+        texture::record_uploads(
+            gpu,
+            cmd,
+            &self.textures,
+            slot.staging.raw(),
+            &texture_copies,
+        );
         slot.timestamps.pass_begin(gpu, cmd);
         let pass = Pass {
             gpu,
@@ -668,6 +823,7 @@ impl Renderer {
             terrain,
             camera: input.camera,
             settings,
+            textured: self.texture_slots.is_some(),
             plan: &plan,
             stitch_ranges: &stitch_ranges,
         };
@@ -703,7 +859,7 @@ impl Renderer {
             input.present.map(|p| p.acquired),
             input.present.map(|p| p.done),
         )?;
-        let mut record = frame_record(&plan, counts, terrain.levels);
+        let mut record = frame_record(&plan, &textures, counts, terrain.levels);
         if let Some((meter, every)) = &mut self.meter {
             if input.label.is_multiple_of(*every) {
                 let morphing = matches!(settings.rule(), LevelRule::Morph(..));
@@ -729,7 +885,7 @@ impl Renderer {
         record.time_s = input.time_s;
         record.cpu_upload_ms = cpu_upload_ms;
         record.cpu_record_ms = cpu_record_ms;
-        record.staged_bytes = slot.staging.sent();
+        record.staged_bytes = staged_geometry;
         record.gpu_allocations = gpu.allocations() - allocations;
         record.prediction_error_m = prediction_error_m;
         record.cpu_prefetch_ms = cpu_prefetch_ms;
@@ -745,6 +901,54 @@ impl Renderer {
         self.frame += 1;
         self.slot_ready = None;
         Ok(())
+    }
+
+    /// The frame's textures: placed and uploaded within `budget` (None: what is resident).
+    /// Nothing when there are no slots or the shading does not sample them.
+    fn plan_textures(
+        &mut self,
+        terrain: &Terrain,
+        plan: &Plan,
+        camera: &Camera,
+        settings: &Settings,
+        budget: Option<u64>,
+    ) -> TexturePlan {
+        let residency = (self.frame, self.completed());
+        match &mut self.texture_slots {
+            Some(slots) if settings.shading == Shading::Photo => {
+                plan::plan_textures(terrain, slots, plan, camera.position, residency, budget)
+            }
+            _ => TexturePlan {
+                draws: vec![None; plan.draws.len()],
+                ..TexturePlan::default()
+            },
+        }
+    }
+
+    /// Writes the frame's texture mips into the slot's staging memory; returns the copies.
+    fn write_texture_uploads(
+        &mut self,
+        terrain: &Terrain,
+        textures: &TexturePlan,
+        s: usize,
+    ) -> Result<Vec<vk::BufferImageCopy>, FrameError> {
+        let mut copies = Vec::with_capacity(textures.uploads.len());
+        for u in &textures.uploads {
+            let bytes = terrain.texture_mip(u.tile as usize, u.mip).ok_or_else(|| {
+                FrameError::Internal(format!("tile {} has no texture mip {}", u.tile, u.mip))
+            })?;
+            let staging = &mut self.slots[s].staging;
+            let at = staging.push_aligned(bytes, TEXTURE_ALIGN).ok_or_else(|| {
+                FrameError::Internal(format!(
+                    "staging ring full ({} bytes) uploading tile {}'s texture",
+                    staging.used(),
+                    u.tile
+                ))
+            })?;
+            let texels = self.textures.desc.size >> u.mip;
+            copies.push(texture::copy_region(at, u.slot, u.mip, texels.max(1)));
+        }
+        Ok(copies)
     }
 
     /// Appends the frame's requests and predictions to the trace.
@@ -865,6 +1069,7 @@ impl Renderer {
                 prefetch: &[],
             },
         )?;
+        let textures = self.plan_textures(terrain, &plan, camera, settings, None);
         self.frame += 1;
         let bytes: u64 = plan
             .stitches
@@ -893,12 +1098,13 @@ impl Renderer {
                 BufferDesc::upload(record_bytes, usage),
                 "static tile records",
             )?);
-            write_records(records, terrain, camera, &plan)?;
+            write_records(records, terrain, camera, (&plan, &textures), None)?;
             let sets = frame.sets.insert(TerrainSets::new(
                 gpu,
                 &self.pipeline,
                 &self.pool.buffer,
                 &[records],
+                &self.textures,
                 "static frame descriptor set",
             )?);
             let set = sets.sets[0];
@@ -920,6 +1126,7 @@ impl Renderer {
                 terrain,
                 camera,
                 settings,
+                textured: self.texture_slots.is_some(),
                 plan: &plan,
                 stitch_ranges: &ranges,
             }
@@ -931,7 +1138,7 @@ impl Renderer {
         })();
         match result {
             Ok(counts) => {
-                frame.record = frame_record(&plan, counts, terrain.levels);
+                frame.record = frame_record(&plan, &textures, counts, terrain.levels);
                 Ok(frame)
             }
             Err(e) => {
@@ -977,6 +1184,7 @@ impl Renderer {
             s.destroy(gpu);
         }
         self.pool.destroy(gpu);
+        self.textures.destroy(gpu);
         self.pipeline.destroy(gpu);
         self.commands.destroy(gpu);
     }
@@ -1068,6 +1276,60 @@ fn staging_bound(manager: &Manager, upload_budget: u64) -> u64 {
     upload_budget.min(everything) + presence + step + padding
 }
 
+/// The texture slots `terrain` gets under `options`: as many layers of its texture layout as
+/// the budget's texture share holds, at most one per tile and the device's layer limit. None
+/// when the set has no textures, they are not wanted, or the device cannot sample BC1.
+fn texture_config(gpu: &Gpu, terrain: &Terrain, options: &MemoryOptions) -> Option<TextureConfig> {
+    let layout = terrain.texture?;
+    if !options.textures {
+        return None;
+    }
+    if !gpu.bc_textures {
+        eprintln!("vkterrain: note: the device cannot sample BC1 textures; drawing without the tile set's textures");
+        return None;
+    }
+    let slot_bytes = layout.bytes() as u64;
+    let share = (options.gpu_budget_bytes as f64 * options.texture_share.clamp(0.0, 1.0)) as u64;
+    let slots = (share / slot_bytes)
+        .min(terrain.tiles.len() as u64)
+        .min(u64::from(gpu.properties.limits.max_image_array_layers));
+    if slots == 0 {
+        eprintln!(
+            "vkterrain: note: {:.1} MB of the GPU budget holds no {:.2} MB texture slot; drawing without textures",
+            share as f64 / 1e6,
+            slot_bytes as f64 / 1e6
+        );
+        return None;
+    }
+    Some(TextureConfig {
+        slots: slots as usize,
+        mip_bytes: (0..layout.mips)
+            .map(|m| layout.mip_bytes(m) as u64)
+            .collect(),
+        mip_texels: (0..layout.mips).map(|m| layout.mip_size(m)).collect(),
+    })
+}
+
+/// Staging bytes the textures of one frame can need: the budget (what geometry leaves of it,
+/// never more than every slot's whole chain), every slot's base mips (sent over the budget),
+/// and the copies' alignment.
+fn texture_staging_bound(config: &TextureConfig, upload_budget: u64) -> u64 {
+    let slots = config.slots as u64;
+    let base: u64 = config
+        .mip_texels
+        .iter()
+        .zip(&config.mip_bytes)
+        .filter(|(&t, _)| t <= memory::textures::BASE_MIP_TEXELS)
+        .map(|(_, &b)| b)
+        .sum();
+    let padding = TEXTURE_ALIGN * slots * u64::from(config.mips());
+    upload_budget.min(slots * config.slot_bytes()) + slots * base + padding
+}
+
+/// Alignment of texture copies in the staging buffer (a multiple of the BC1 block's 8 bytes
+/// and of 4).
+const TEXTURE_ALIGN: u64 = 16;
+
 /// Writes this frame's stitches (their pulled indices) into `buffer`; returns per stitch
 /// (first index, index count).
 fn write_stitches(
@@ -1107,7 +1369,8 @@ fn write_records(
     buffer: &mut Buffer,
     terrain: &Terrain,
     camera: &Camera,
-    plan: &Plan,
+    (plan, textures): (&Plan, &TexturePlan),
+    fault: Option<Fault>,
 ) -> Result<(), FrameError> {
     if plan.draws.len() > MAX_RECORDS {
         return Err(FrameError::Internal(format!(
@@ -1120,9 +1383,19 @@ fn write_records(
     let records: Vec<TileRecord> = plan
         .draws
         .iter()
-        .map(|d| {
+        .zip(&textures.draws)
+        .map(|(d, texture)| {
             let info = &terrain.tiles[d.tile];
             let mut r = TileRecord::zeroed();
+            (r.texture_layer, r.texture_finest) = match texture {
+                Some(t) => (t.layer, t.finest as f32),
+                None => (u32::MAX, 0.0),
+            };
+            match fault {
+                Some(Fault::TextureSeam) if (info.tx + info.ty) % 2 == 1 => r.texture_shift = 4.0,
+                Some(Fault::TextureNoClamp) => r.texture_finest = 0.0,
+                _ => {}
+            }
             r.tile_offset = [
                 ((f64::from(info.tx) - cam_tile.0) * cells) as i32,
                 ((f64::from(info.ty) - cam_tile.1) * cells) as i32,
@@ -1169,7 +1442,12 @@ struct DrawCounts {
 }
 
 /// The frame's record from its plan (times and GPU results are added later).
-fn frame_record(plan: &Plan, counts: DrawCounts, levels: u32) -> FrameRecord {
+fn frame_record(
+    plan: &Plan,
+    textures: &TexturePlan,
+    counts: DrawCounts,
+    levels: u32,
+) -> FrameRecord {
     let st = &plan.stats;
     let mut tiles_per_level = vec![0; levels as usize];
     for d in &plan.draws {
@@ -1206,6 +1484,9 @@ fn frame_record(plan: &Plan, counts: DrawCounts, levels: u32) -> FrameRecord {
         prefetch_bytes: st.prefetch_bytes,
         prefetch_hits: st.prefetch_hits,
         prefetch_wasted_bytes: st.prefetch_wasted_bytes,
+        upload_bytes_textures: textures.stats.upload_bytes,
+        texture_slots_free: u64::from(textures.stats.slots_free),
+        tiles_texture_coarser: u64::from(textures.stats.coarser + textures.stats.without_slot),
         tiles_per_level,
         max_error_px: f64::NAN,
         pop_px: f64::NAN,
@@ -1229,6 +1510,8 @@ struct Pass<'a> {
     terrain: &'a Terrain,
     camera: &'a Camera,
     settings: &'a Settings,
+    /// The renderer has texture slots (the shading may sample them).
+    textured: bool,
     plan: &'a Plan,
     stitch_ranges: &'a [(u32, u32)],
 }
@@ -1305,9 +1588,25 @@ impl Pass<'_> {
         if matches!(self.settings.rule(), LevelRule::Morph(..)) {
             flags |= FLAG_GEOMORPH;
         }
-        if self.settings.level_colours {
-            flags |= FLAG_LEVEL_COLOURS;
+        match self.settings.shading {
+            Shading::Photo if self.textured => flags |= FLAG_TEXTURE,
+            Shading::Photo | Shading::Tint => {}
+            Shading::Relief => flags |= FLAG_RELIEF,
+            Shading::Level => flags |= FLAG_LEVEL_COLOURS,
+            Shading::Tiles => flags |= FLAG_TILES,
         }
+        let texture_map = match self.terrain.texture {
+            Some(l) => {
+                let size = f64::from(l.size);
+                [
+                    (f64::from(l.gutter) / size) as f32,
+                    (f64::from(l.interior) / (f64::from(tiles::mesh::TILE_CELLS) * size)) as f32,
+                    l.size as f32,
+                    self.settings.tile_grid_offset,
+                ]
+            }
+            None => [0.0, 0.0, 0.0, self.settings.tile_grid_offset],
+        };
         FrameConstants {
             view_proj: self.plan.view.view_proj.to_cols_array(),
             camera: [
@@ -1320,6 +1619,7 @@ impl Pass<'_> {
             height_step: self.terrain.height_step,
             flags,
             pad: 0,
+            texture_map,
         }
     }
 }

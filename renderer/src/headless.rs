@@ -69,6 +69,8 @@ pub struct FlightResult {
     /// The requests of every frame (with `Flight::trace`).
     pub trace: Option<String>,
     pub pool_bytes: u64,
+    /// Device memory of the texture slots.
+    pub texture_bytes: u64,
     /// Uploads went through the staging ring.
     pub staging: bool,
     /// Why the flight stopped early (the device was lost, a tile set changed under it, ...):
@@ -100,12 +102,14 @@ pub fn fly(
     }
     let trace = renderer.take_trace();
     let pool_bytes = renderer.manager().pool_bytes();
+    let texture_bytes = renderer.texture_bytes();
     let staging = !renderer.pool().direct();
     renderer.destroy(gpu);
     Ok(FlightResult {
         records,
         trace,
         pool_bytes,
+        texture_bytes,
         staging,
         error,
     })

@@ -9,7 +9,8 @@
 //! chunk_moves, chunk_move_bytes, hits, misses, used_bytes, cpu_residency_ms, gpu_draw_ms,
 //! upload_bytes_coarser, max_error_px, pop_px`, then prefetching's
 //! `prefetch_bytes, prefetch_hits, prefetch_wasted_bytes, prediction_error_m, cpu_prefetch_ms,
-//! file_advised_bytes, file_released_bytes`,
+//! file_advised_bytes, file_released_bytes`, then the textures'
+//! `upload_bytes_textures, texture_slots_free, tiles_texture_coarser`,
 //! and last `tiles_level_0 .. tiles_level_{n-1}`.
 
 use std::io::Write;
@@ -91,10 +92,16 @@ pub struct FrameRecord {
     /// Bytes of the tile set newly advised `WILLNEED` (read ahead) and `DONTNEED` (released).
     pub file_advised_bytes: u64,
     pub file_released_bytes: u64,
+    /// Texture mips sent this frame (not counted in `upload_bytes`, which is geometry).
+    pub upload_bytes_textures: u64,
+    /// Texture slots holding no tile.
+    pub texture_slots_free: u64,
+    /// Drawn tiles whose texture is coarser than their footprint wants, or missing (no slot).
+    pub tiles_texture_coarser: u64,
     pub tiles_per_level: Vec<u64>,
 }
 
-pub const BASE_COLUMNS: [&str; 43] = [
+pub const BASE_COLUMNS: [&str; 46] = [
     "frame",
     "time_s",
     "frame_ms",
@@ -138,6 +145,9 @@ pub const BASE_COLUMNS: [&str; 43] = [
     "cpu_prefetch_ms",
     "file_advised_bytes",
     "file_released_bytes",
+    "upload_bytes_textures",
+    "texture_slots_free",
+    "tiles_texture_coarser",
 ];
 
 pub fn header(levels: u32) -> String {
@@ -203,6 +213,9 @@ impl FrameRecord {
             ms_cell(self.cpu_prefetch_ms),
             n(self.file_advised_bytes),
             n(self.file_released_bytes),
+            n(self.upload_bytes_textures),
+            n(self.texture_slots_free),
+            n(self.tiles_texture_coarser),
         ];
         let levels = self.tiles_per_level.iter().map(|&v| n(v));
         cells
@@ -243,6 +256,8 @@ pub struct RunInfo {
     pub staging: bool,
     /// How levels travel: "progressive", "per-level" or "whole-tile".
     pub upload_scheme: &'static str,
+    /// Device memory of the texture slots (0: none).
+    pub texture_bytes: u64,
 }
 
 #[derive(Serialize, Debug)]
@@ -311,6 +326,11 @@ pub struct Summary {
     pub prediction_error_m_median: Option<f64>,
     pub prediction_error_m_max: Option<f64>,
     pub cpu_prefetch_ms_median: f64,
+    /// The texture slots' memory, the texture bytes sent, and the tile-frames whose texture
+    /// was coarser than wanted or missing.
+    pub texture_mb: f64,
+    pub upload_mb_textures: f64,
+    pub tiles_texture_coarser: u64,
     pub validation_messages: u64,
 }
 
@@ -408,6 +428,9 @@ impl Summary {
                 &sorted(records.iter().map(|r| r.cpu_prefetch_ms)),
                 50.0,
             ),
+            texture_mb: run.texture_bytes as f64 / 1e6,
+            upload_mb_textures: sum(|r| r.upload_bytes_textures) as f64 / 1e6,
+            tiles_texture_coarser: sum(|r| r.tiles_texture_coarser),
             validation_messages: run.validation_messages,
         }
     }

@@ -10,7 +10,7 @@ use std::process::ExitCode;
 
 use anyhow::{bail, Context, Result};
 use clap::Parser;
-use renderer::frame::{MemoryOptions, MorphShader, Settings};
+use renderer::frame::{MemoryOptions, MorphShader, Settings, Shading};
 use renderer::headless::{fly, Flight, FlightResult};
 use renderer::log::{write_csv, RunInfo, Summary};
 use renderer::measure::ErrorMeter;
@@ -136,9 +136,27 @@ struct Cli {
     /// Use the device whose name contains this.
     #[arg(long)]
     device: Option<String>,
-    /// Colour tiles by their level.
-    #[arg(long)]
+    /// How to colour the terrain: photo (the tile set's texture tiles: a photo, or the shaded
+    /// relief tiletool bakes without one), relief (grey, lit by each triangle), tint (a
+    /// hypsometric tint lit by each triangle), level (level colours) or tiles (a flat colour per
+    /// tile, to see their borders). Default: photo when the tile set has textures, else tint.
+    /// The window cycles them with T.
+    #[arg(long, value_enum)]
+    shading: Option<ShadingArg>,
+    /// With --shading tiles: move the grid by this many samples (tests: lines that are not
+    /// tile borders).
+    #[arg(long, hide = true, default_value_t = 0.0)]
+    tile_grid_offset: f32,
+    /// Colour tiles by their level (the same as --shading level).
+    #[arg(long, conflicts_with = "shading")]
     level_colours: bool,
+    /// Anisotropic texture filtering, up to N samples (1: off; clamped to the device's limit).
+    #[arg(long, default_value_t = 16, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=64))]
+    anisotropy: u32,
+    /// The share (0..1) of --gpu-budget-mb that texture slots may take; the tile pool gets
+    /// the rest.
+    #[arg(long, default_value_t = renderer::frame::DEFAULT_TEXTURE_SHARE, value_name = "SHARE")]
+    texture_share: f64,
     /// Draw triangle edges only (where the device supports it).
     #[arg(long)]
     wireframe: bool,
@@ -267,6 +285,15 @@ fn error_meter(cli: &Cli, terrain: &Terrain, sources: &[PathBuf]) -> Result<Erro
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum ShadingArg {
+    Photo,
+    Relief,
+    Tint,
+    Level,
+    Tiles,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 enum MorphShaderArg {
     ForwardDifferences,
     Branches,
@@ -331,11 +358,28 @@ fn run(cli: Cli) -> Result<ExitCode> {
         std::fs::create_dir_all(out)
             .with_context(|| format!("{}: cannot create", out.display()))?;
     }
+    let shading = match (cli.shading, cli.level_colours) {
+        (_, true) | (Some(ShadingArg::Level), _) => Shading::Level,
+        (Some(ShadingArg::Photo), _) if terrain.texture.is_none() => bail!(
+            "{}: --shading photo: the tile set has no texture tiles (build it with tiletool's --texture, or without --no-texture)",
+            cli.tileset.display()
+        ),
+        (Some(ShadingArg::Photo), _) => Shading::Photo,
+        (Some(ShadingArg::Relief), _) => Shading::Relief,
+        (Some(ShadingArg::Tint), _) => Shading::Tint,
+        (Some(ShadingArg::Tiles), _) => Shading::Tiles,
+        (None, false) if terrain.texture.is_some() => Shading::Photo,
+        (None, false) => Shading::Tint,
+    };
+    if !(0.0..=1.0).contains(&cli.texture_share) {
+        bail!("--texture-share must be a share between 0 and 1");
+    }
     let settings = Settings {
         tau: cli.tau,
         forced_level: cli.level,
         brute_force: cli.brute_force,
-        level_colours: cli.level_colours,
+        shading,
+        tile_grid_offset: cli.tile_grid_offset,
         wireframe: cli.wireframe,
         sky: cli.sky,
         no_stitch: cli.no_stitch,
@@ -403,6 +447,11 @@ fn run(cli: Cli) -> Result<ExitCode> {
             cli.upload_scheme.into()
         },
         prefetch,
+        // A window can switch to the textures at any time; a headless flight only if it uses
+        // them.
+        textures: shading == Shading::Photo || windowed,
+        texture_share: cli.texture_share,
+        anisotropy: cli.anisotropy as f32,
     };
     let gpu_options = GpuOptions {
         validation: cli.validation,
@@ -484,6 +533,7 @@ fn finish(
         brute_force: cli.brute_force,
         validation_messages: validation,
         pool_bytes: result.pool_bytes,
+        texture_bytes: result.texture_bytes,
         upload_budget: memory.upload_budget,
         frames_in_flight: memory.frames_in_flight,
         staging: result.staging,

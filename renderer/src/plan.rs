@@ -8,6 +8,7 @@ use std::collections::HashMap;
 use std::time::Instant;
 
 use glam::DVec3;
+use memory::textures::{TextureRequest, TextureSlots, TextureStats, TextureUpload};
 use memory::{Manager, Request, Stats};
 
 use crate::camera::{Camera, View};
@@ -336,6 +337,110 @@ pub fn stitch_granted(
         }
     }
     Ok(stitches)
+}
+
+/// A drawn tile's texture: the array layer (its slot) and the finest mip resident there,
+/// where the shader clamps its level of detail.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TextureDraw {
+    pub layer: u32,
+    pub finest: u32,
+}
+
+/// The texture side of a frame.
+#[derive(Clone, Debug, Default)]
+pub struct TexturePlan {
+    /// Per draw, in the plan's order (None: drawn without its texture, shaded by height).
+    pub draws: Vec<Option<TextureDraw>>,
+    pub uploads: Vec<TextureUpload>,
+    pub stats: TextureStats,
+}
+
+/// The finest texture mip a tile can show from `camera`: texels of mip `m` are
+/// `2^m * 256 * spacing / T` metres across, and a point at distance `r` inside the view is at
+/// least `r * cos(half diagonal)` deep, where a metre covers at most `focal / depth` pixels;
+/// the mip whose texels cover at least a pixel there is the finest the footprint can use.
+pub fn texture_mip_wanted(
+    terrain: &Terrain,
+    layout: &tiles::texture::Layout,
+    view: &View,
+    camera: DVec3,
+    tile: usize,
+) -> u32 {
+    let t = &terrain.tiles[tile];
+    let r = camera.clamp(t.min, t.max).distance(camera);
+    let focal = view.focal.0.max(view.focal.1);
+    let (hx, hy) = (
+        f64::from(view.width) * 0.5 / view.focal.0,
+        f64::from(view.height) * 0.5 / view.focal.1,
+    );
+    let depth = r / (1.0 + hx * hx + hy * hy).sqrt();
+    let (sx, sy) = terrain.spacing;
+    let texel = f64::from(tiles::mesh::TILE_CELLS) * sx.min(sy) / f64::from(layout.interior);
+    let ratio = depth / (texel * focal);
+    if ratio <= 1.0 || !ratio.is_finite() {
+        return 0;
+    }
+    (ratio.log2().floor() as u32).min(layout.mips - 1)
+}
+
+/// Textures for the plan's draws: each drawn tile asks for the finest mip its footprint
+/// needs, nearest first, and `slots` grants layers and schedules mips within `budget` bytes.
+/// With no budget (pre-recorded frames) nothing is placed or uploaded: tiles sample what is
+/// resident.
+pub fn plan_textures(
+    terrain: &Terrain,
+    slots: &mut TextureSlots,
+    plan: &Plan,
+    camera: DVec3,
+    residency: (u64, Option<u64>),
+    budget: Option<u64>,
+) -> TexturePlan {
+    let Some(layout) = terrain.texture else {
+        return TexturePlan {
+            draws: vec![None; plan.draws.len()],
+            ..TexturePlan::default()
+        };
+    };
+    let Some(budget) = budget else {
+        let draws = plan
+            .draws
+            .iter()
+            .map(|d| {
+                slots
+                    .resident(d.tile as u32)
+                    .map(|(layer, finest)| TextureDraw { layer, finest })
+            })
+            .collect();
+        return TexturePlan {
+            draws,
+            ..TexturePlan::default()
+        };
+    };
+    let requests: Vec<TextureRequest> = plan
+        .draws
+        .iter()
+        .map(|d| TextureRequest {
+            tile: d.tile as u32,
+            finest: texture_mip_wanted(terrain, &layout, &plan.view, camera, d.tile),
+        })
+        .collect();
+    let (frame, completed) = residency;
+    let (grants, uploads, stats) = slots.plan(frame, completed, &requests, budget);
+    let draws = grants
+        .iter()
+        .map(|g| {
+            g.slot.map(|layer| TextureDraw {
+                layer,
+                finest: g.finest,
+            })
+        })
+        .collect();
+    TexturePlan {
+        draws,
+        uploads,
+        stats,
+    }
 }
 
 fn ms(t: Instant) -> f64 {

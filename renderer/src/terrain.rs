@@ -24,6 +24,9 @@ pub struct TileInfo {
     /// The same vertices as indices into the tile's vertex array (blocks 0.. in order).
     pub border_indices: Vec<[Vec<u32>; 4]>,
     heights: [f32; HEIGHT_CELLS * HEIGHT_CELLS],
+    /// Per texture mip, finest first: its BC1 blocks' place in the tile's texture blob
+    /// (validated at open; empty when the set has no textures).
+    texture_mips: Vec<std::ops::Range<usize>>,
 }
 
 pub struct Terrain {
@@ -39,6 +42,10 @@ pub struct Terrain {
     /// geomorphing gives a shared side vertex the same height from both tiles, so stitches
     /// need no slivers between two copies of it.
     pub shared_sides: bool,
+    /// The texture tiles' layout (None: the set has none) and what they show
+    /// (`tiles::texture::SOURCE_*`).
+    pub texture: Option<tiles::texture::Layout>,
+    pub texture_source: u32,
 }
 
 impl Terrain {
@@ -88,6 +95,14 @@ impl Terrain {
                             .map(|side| side.iter().map(|&v| packed[v as usize]).collect())
                     })
                     .collect();
+                let texture_mips = match set.texture(tx, ty)? {
+                    Some(t) => t
+                        .mips
+                        .iter()
+                        .map(|(e, _)| e.offset as usize..(e.offset + e.len) as usize)
+                        .collect(),
+                    None => Vec::new(),
+                };
                 let q = tile.quantiser();
                 let mut heights = [f32::NEG_INFINITY; HEIGHT_CELLS * HEIGHT_CELLS];
                 for &p in &packed {
@@ -106,10 +121,12 @@ impl Terrain {
                     borders,
                     border_indices,
                     heights,
+                    texture_mips,
                 });
             }
         }
         check_tiles(&set, &tiles)?;
+        let texture = set.texture_layout();
         let mut terrain = Terrain {
             set,
             tiles,
@@ -119,6 +136,8 @@ impl Terrain {
             spacing: (sx, sy),
             height_step: h.height_step,
             shared_sides: false,
+            texture,
+            texture_source: h.texture_source,
         };
         // A file that claims shared sides but whose borders differ (tampered with) is drawn as
         // one without: the seams stay closed by slivers.
@@ -196,6 +215,13 @@ impl Terrain {
         };
         let start = offset as usize;
         blob.get(start..start.checked_add(usize::try_from(len).ok()?)?)
+    }
+
+    /// The BC1 blocks of texture mip `mip` of `tile` (validated when the tile set was opened).
+    pub fn texture_mip(&self, tile: usize, mip: u32) -> Option<&[u8]> {
+        let info = self.tiles.get(tile)?;
+        let range = info.texture_mips.get(mip as usize)?.clone();
+        self.set.texture_blob(info.tx, info.ty)?.get(range)
     }
 
     pub fn tile_index(&self, tx: u32, ty: u32) -> Option<usize> {

@@ -17,7 +17,7 @@ use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
 use crate::camera::Camera;
-use crate::frame::{Finished, FrameInput, MemoryOptions, Present, Renderer, Settings};
+use crate::frame::{Finished, FrameInput, MemoryOptions, Present, Renderer, Settings, Shading};
 use crate::headless::{write_png, FlightResult};
 use crate::log::FrameRecord;
 use crate::path::{CameraPath, Keyframe};
@@ -67,6 +67,7 @@ struct App<'a> {
     error: Option<String>,
     trace: Option<String>,
     pool_bytes: u64,
+    texture_bytes: u64,
     staging: bool,
 }
 
@@ -106,6 +107,7 @@ pub fn run(
         error: None,
         trace: None,
         pool_bytes: 0,
+        texture_bytes: 0,
         staging: false,
     };
     let result = event_loop.run_app(&mut app);
@@ -143,6 +145,7 @@ pub fn run(
         records: std::mem::take(&mut app.records),
         trace: app.trace.take(),
         pool_bytes: app.pool_bytes,
+        texture_bytes: app.texture_bytes,
         staging: app.staging,
         error: None,
     };
@@ -158,6 +161,7 @@ impl App<'_> {
             }
             self.trace = r.take_trace();
             self.pool_bytes = r.manager().pool_bytes();
+            self.texture_bytes = r.texture_bytes();
             self.staging = !r.pool().direct();
             r.destroy(&self.gpu);
         }
@@ -409,7 +413,14 @@ impl ApplicationHandler for App<'_> {
                     KeyCode::Escape => event_loop.exit(),
                     KeyCode::Equal | KeyCode::NumpadAdd => s.tau = (s.tau * 2.0).min(64.0),
                     KeyCode::Minus | KeyCode::NumpadSubtract => s.tau = (s.tau / 2.0).max(0.25),
-                    KeyCode::KeyL => s.level_colours = !s.level_colours,
+                    KeyCode::KeyL => {
+                        s.shading = if s.shading == Shading::Level {
+                            Shading::Tint
+                        } else {
+                            Shading::Level
+                        }
+                    }
+                    KeyCode::KeyT => s.shading = s.shading.next(),
                     KeyCode::KeyG => s.geomorph = !s.geomorph,
                     KeyCode::F12 => self.screenshot = true,
                     _ => {}

@@ -3,76 +3,11 @@
 //! silhouette within tau + 1 pixels, and clear errors for broken tile sets.
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Command;
 
 mod common;
 
-use common::{data, puget, tileset, tileset_of};
-
-const SKY: [u8; 3] = [255, 0, 255];
-
-fn vkterrain(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_vkterrain"))
-        .args(args)
-        .output()
-        .expect("vkterrain runs")
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 path")
-}
-
-/// Runs a headless flight with validation and a magenta sky; returns the screenshots' pixels.
-fn flight(
-    set: &Path,
-    out: &Path,
-    path: &str,
-    frames: u32,
-    extra: &[&str],
-) -> Vec<image::RgbaImage> {
-    let log = out.join("frames.csv");
-    let frames_s = frames.to_string();
-    let mut args = vec![
-        s(set),
-        "--headless",
-        "--validation",
-        "--path",
-        path,
-        "--frames",
-        &frames_s,
-        "--sky",
-        "1,0,1",
-        "--log",
-        s(&log),
-        "--out",
-        s(out),
-        "--screenshot-every",
-        "1",
-    ];
-    if !extra.contains(&"--size") {
-        args.extend(["--size", "256x192"]);
-    }
-    args.extend(extra);
-    let o = vkterrain(&args);
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(
-        o.status.success(),
-        "vkterrain failed ({:?}): {err}",
-        o.status.code()
-    );
-    assert!(!err.contains("validation"), "validation messages: {err}");
-    (0..frames)
-        .map(|k| {
-            image::open(out.join(format!("frame_{k:06}.png")))
-                .expect("screenshot")
-                .to_rgba8()
-        })
-        .collect()
-}
-
-fn is_sky(p: &image::Rgba<u8>) -> bool {
-    p.0[0] == SKY[0] && p.0[1] == SKY[1] && p.0[2] == SKY[2]
-}
+use common::{data, flight, is_sky, puget, s, tileset, tileset_of, vkterrain};
 
 /// Sky pixels with terrain on both sides (horizontally or vertically) in `lod`, where the
 /// brute-force image has terrain all around: holes in the surface.

@@ -1,14 +1,48 @@
 #version 450
-// Terrain shading: a hypsometric tint lit by the surface normal, which comes from the
-// heights themselves (screen-space derivatives of the interpolated position, so each
-// triangle is lit by its own slope).
+#ifdef MIN_LOD
+#extension GL_ARB_sparse_texture_clamp : require
+#endif
+// Terrain shading. Flag 16 (a diagnostic) gives each tile a flat colour. With texture tiles
+// (flag 4) the colour is the tile's texture: a photo, or a
+// relief tiletool lit from the full-resolution heights, so it needs no lighting here. Without
+// (or for a tile that has no texture slot this frame): a hypsometric tint, or grey (flag 8),
+// lit by the surface normal from the heights themselves (screen-space derivatives of the
+// interpolated position, so each triangle is lit by its own slope).
+//
+// Texture level of detail follows the pixel footprint (trilinear, anisotropic where the
+// sampler allows), clamped to the tile's finest resident mip. MIN_LOD (devices with
+// shaderResourceMinLod) clamps with the sample's MinLod operand, which holds whatever level
+// the sampler's anisotropic filtering picks. Without it the sampler is isotropic and the
+// gradients are scaled so the footprint's shorter axis spans at least 2^finest texels: the
+// level, from the longer axis, is then at least that mip. (Scaling alone does not hold under
+// anisotropic filtering: how far an anisotropic sampler lowers the level is up to the
+// implementation, and lavapipe lowers it by the full anisotropy.)
+
+layout(push_constant) uniform Frame {
+    mat4 view_proj;
+    vec4 camera;
+    float spacing_y;
+    float height_step;
+    uint flags;
+    uint pad;
+    vec4 texture_map;        // texture coordinate of tile-local sample s: x + s * y; z: texels across a layer; w: tile grid offset (samples) for the tiles shading
+} frame;
+
+layout(set = 0, binding = 2) uniform sampler2DArray textures;
 
 layout(location = 0) in vec3 relative;
 layout(location = 1) in float height;
 layout(location = 2) in float level;
 layout(location = 3) flat in uint flags;
+layout(location = 4) in vec2 sample_xy;
+layout(location = 5) flat in vec4 texture_tile;
 
 layout(location = 0) out vec4 colour;
+
+const uint LEVEL_COLOURS = 2u;
+const uint TEXTURE = 4u;
+const uint RELIEF = 8u;
+const uint TILES = 16u;
 
 vec3 ground(float h) {
     if (h <= 0.5) return vec3(0.16, 0.32, 0.50);            // water and tidal flats
@@ -37,13 +71,37 @@ vec3 level_colour(float l) {
 }
 
 void main() {
+    // Derivatives in uniform control flow, before any branch.
+    vec2 uv = frame.texture_map.x + (sample_xy - texture_tile.xy) * frame.texture_map.y;
+    vec2 du = dFdx(uv);
+    vec2 dv = dFdy(uv);
     vec3 n = normalize(cross(dFdx(relative), dFdy(relative)));
+
+    if ((flags & TEXTURE) != 0u && texture_tile.z >= 0.0) {
+        vec3 at = vec3(uv, texture_tile.z);
+#ifdef MIN_LOD
+        colour = vec4(textureGradClampARB(textures, at, du, dv, texture_tile.w).rgb, 1.0);
+#else
+        float shorter = min(length(du), length(dv)) * frame.texture_map.z;
+        float k = max(exp2(texture_tile.w + 0.01) / max(shorter, 1e-6), 1.0);
+        colour = vec4(textureGrad(textures, at, du * k, dv * k).rgb, 1.0);
+#endif
+        return;
+    }
+    if ((flags & TILES) != 0u) {
+        // The tile's column and row from the fragment's sample position (texture_map.w moves
+        // the grid, for tests: lines that are not tile borders): neighbours differ in red or
+        // green.
+        ivec2 t = ivec2(floor((sample_xy - frame.texture_map.w) / 256.0));
+        colour = vec4(0.2 + 0.6 * float(t.x & 1), 0.2 + 0.6 * float(t.y & 1), 0.5, 1.0);
+        return;
+    }
     if (n.z < 0.0) n = -n;
     // A degenerate (stitching) triangle has no slope of its own: light it as flat ground.
     if (any(isnan(n))) n = vec3(0.0, 0.0, 1.0);
     vec3 sun = normalize(vec3(-0.45, 0.55, 0.70));
     float light = 0.25 + 0.75 * max(dot(n, sun), 0.0);
-    vec3 base = ground(height);
-    if ((flags & 2u) != 0u) base = mix(base, level_colour(level), 0.65);
+    vec3 base = (flags & RELIEF) != 0u ? vec3(0.82) : ground(height);
+    if ((flags & LEVEL_COLOURS) != 0u) base = mix(base, level_colour(level), 0.65);
     colour = vec4(base * light, 1.0);
 }

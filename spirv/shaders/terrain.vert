@@ -29,8 +29,9 @@ layout(push_constant) uniform Frame {
     vec4 camera;             // xyz: camera relative to its tile's north-west corner (m); w: metres per column
     float spacing_y;         // metres per row (rows run south)
     float height_step;       // metres per height code, one for the tile set
-    uint flags;              // 1: geomorph, 2: level colours
+    uint flags;              // 1: geomorph, 2: level colours, 4: texture, 8: grey relief
     uint pad;
+    vec4 texture_map;        // texture coordinate of tile-local sample s: x + s * y
 } frame;
 
 const uint GEOMORPH = 1u;
@@ -48,12 +49,12 @@ struct TileRecord {
     vec4 units_hi;           // levels 4..7
     uint level;              // the level drawn
     uint morph;              // pool byte of block 0's morph rows
-    uint pad0;
-    uint pad1;
+    uint texture_layer;      // the tile's texture slot (0xffffffff: none)
+    float texture_finest;    // its finest resident mip
     uint block_start[9];     // first vertex of each block
     uint block_len[9];       // vertices of each block
     uint morph_start[9];     // byte of each block's morph rows, from `morph`
-    uint pad2;
+    float texture_shift;     // samples the texture is moved by (0; a test's fault injection)
 };
 
 layout(std430, set = 0, binding = 0) readonly buffer Pool { uint words[]; } pool;
@@ -63,6 +64,12 @@ layout(location = 0) out vec3 relative;   // position relative to the camera (m)
 layout(location = 1) out float height;    // absolute height (m)
 layout(location = 2) out float level;     // the vertex's continuous level
 layout(location = 3) flat out uint flags;
+// Texturing: the sample position relative to the camera's tile (columns, rows), and the
+// provoking vertex's tile: its first sample there, its texture layer (-1: none) and finest
+// resident mip. Stitch triangles join two tiles; the fragment shader takes texture
+// coordinates relative to the provoking vertex's tile, so they sample one layer consistently.
+layout(location = 4) out vec2 sample_xy;
+layout(location = 5) flat out vec4 texture_tile;
 
 // Signed byte `byte` of the pool.
 float pool_byte(uint byte) {
@@ -137,5 +144,10 @@ void main() {
     relative = vec3(float(sample_pos.x) * frame.camera.w, -float(sample_pos.y) * frame.spacing_y, height) - frame.camera.xyz;
     level = l;
     flags = frame.flags;
+    sample_xy = vec2(sample_pos);
+    uint layer = records.tiles[r].texture_layer;
+    texture_tile = vec4(vec2(records.tiles[r].tile_offset) + records.tiles[r].texture_shift,
+                        layer == 0xffffffffu ? -1.0 : float(layer),
+                        records.tiles[r].texture_finest);
     gl_Position = frame.view_proj * vec4(relative, 1.0);
 }

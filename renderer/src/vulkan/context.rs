@@ -40,6 +40,15 @@ pub struct Gpu {
     /// Raw pointer handed to the debug callback; reclaimed on drop.
     callback_counter: *const AtomicU64,
     pub wireframe_supported: bool,
+    /// BC1 textures can be sampled with linear filtering and copied to (feature
+    /// `textureCompressionBC`, enabled when present).
+    pub bc_textures: bool,
+    /// The largest anisotropy a sampler may use (1: `samplerAnisotropy` or
+    /// `shaderResourceMinLod` is missing; the terrain needs both to clamp each tile's texture
+    /// level under anisotropic filtering).
+    pub max_anisotropy: f32,
+    /// Shaders may clamp a sample's level of detail (`shaderResourceMinLod`, enabled).
+    pub min_lod: bool,
     /// Every device-local memory type is also host-visible and coherent (lavapipe, most
     /// integrated GPUs): the CPU can write tile data where the GPU reads it.
     unified_memory: bool,
@@ -193,13 +202,35 @@ impl Gpu {
             .map(|c| c.to_string_lossy().into_owned())
             .unwrap_or_default();
 
+        // SAFETY: plain queries on this instance's device.
+        let supported = unsafe { instance.get_physical_device_features(physical) };
+        let bc1 = unsafe {
+            instance
+                .get_physical_device_format_properties(physical, vk::Format::BC1_RGB_UNORM_BLOCK)
+        };
+        let bc_textures = supported.texture_compression_bc == vk::TRUE
+            && bc1.optimal_tiling_features.contains(
+                vk::FormatFeatureFlags::SAMPLED_IMAGE
+                    | vk::FormatFeatureFlags::SAMPLED_IMAGE_FILTER_LINEAR
+                    | vk::FormatFeatureFlags::TRANSFER_DST,
+            );
+        let min_lod = supported.shader_resource_min_lod == vk::TRUE;
+        let anisotropy = supported.sampler_anisotropy == vk::TRUE && min_lod;
+        let max_anisotropy = if anisotropy {
+            properties.limits.max_sampler_anisotropy.max(1.0)
+        } else {
+            1.0
+        };
         let priorities = [1.0f32];
         let queues = [vk::DeviceQueueCreateInfo::default()
             .queue_family_index(queue_family)
             .queue_priorities(&priorities)];
         let mut v13 = vk::PhysicalDeviceVulkan13Features::default().dynamic_rendering(true);
-        let features =
-            vk::PhysicalDeviceFeatures::default().fill_mode_non_solid(wireframe_supported);
+        let features = vk::PhysicalDeviceFeatures::default()
+            .fill_mode_non_solid(wireframe_supported)
+            .texture_compression_bc(bc_textures)
+            .sampler_anisotropy(anisotropy)
+            .shader_resource_min_lod(min_lod);
         let device_extensions: Vec<*const i8> = if options.display.is_some() {
             vec![ash::khr::swapchain::NAME.as_ptr()]
         } else {
@@ -254,6 +285,9 @@ impl Gpu {
             validation_messages,
             callback_counter,
             wireframe_supported,
+            bc_textures,
+            max_anisotropy,
+            min_lod,
             unified_memory,
             allocations: AtomicU64::new(0),
         };

@@ -8,6 +8,7 @@ pub mod pipeline;
 pub mod pool;
 pub mod swapchain;
 pub mod sync;
+pub mod texture;
 pub mod timestamps;
 
 pub use buffer::Buffer;

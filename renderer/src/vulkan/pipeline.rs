@@ -1,7 +1,8 @@
 //! The terrain pipeline: vertices pulled from the tile pool (a storage buffer) with each draw's
 //! tile record (another), triangle fans with primitive restart, one push-constant block per
 //! frame, reversed-Z depth, dynamic rendering. Two vertex shaders: geomorphing by forward
-//! differences (the default) and the branching reference.
+//! differences (the default) and the branching reference. The fragment shader samples the
+//! texture array (one layer per texture slot).
 
 use std::ffi::CStr;
 
@@ -10,10 +11,11 @@ use ash::vk;
 use super::{Gpu, VkResult};
 
 /// Size of the per-frame push constants.
-pub const PUSH_CONSTANT_BYTES: u32 = 96;
+pub const PUSH_CONSTANT_BYTES: u32 = 112;
 
 pub struct TerrainPipeline {
-    /// Binding 0: the tile pool; binding 1: the frame's tile records (both storage buffers).
+    /// Binding 0: the tile pool; binding 1: the frame's tile records (both storage buffers);
+    /// binding 2: the texture array and its sampler.
     pub set_layout: vk::DescriptorSetLayout,
     pub layout: vk::PipelineLayout,
     pub fill: vk::Pipeline,
@@ -36,13 +38,22 @@ impl TerrainPipeline {
         let ranges = [vk::PushConstantRange::default()
             .stage_flags(vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT)
             .size(PUSH_CONSTANT_BYTES)];
-        let bindings = [0, 1].map(|b| {
+        let buffer = |b| {
             vk::DescriptorSetLayoutBinding::default()
                 .binding(b)
                 .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
                 .descriptor_count(1)
                 .stage_flags(vk::ShaderStageFlags::VERTEX)
-        });
+        };
+        let bindings = [
+            buffer(0),
+            buffer(1),
+            vk::DescriptorSetLayoutBinding::default()
+                .binding(2)
+                .descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER)
+                .descriptor_count(1)
+                .stage_flags(vk::ShaderStageFlags::FRAGMENT),
+        ];
         let set_info = vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings);
         // SAFETY: valid create info.
         let set_layout = unsafe { gpu.device.create_descriptor_set_layout(&set_info, None) }?;
@@ -63,7 +74,11 @@ impl TerrainPipeline {
         gpu.name(layout, "terrain pipeline layout");
         let vert = shader(gpu, spirv::TERRAIN_VERT, "terrain.vert")?;
         let vert_branches = shader(gpu, spirv::TERRAIN_VERT_BRANCHES, "terrain.vert (branches)")?;
-        let frag = shader(gpu, spirv::TERRAIN_FRAG, "terrain.frag")?;
+        let frag = if gpu.min_lod {
+            shader(gpu, spirv::TERRAIN_FRAG_MIN_LOD, "terrain.frag (MinLod)")?
+        } else {
+            shader(gpu, spirv::TERRAIN_FRAG, "terrain.frag")?
+        };
         let fill = Self::build(
             gpu,
             layout,
@@ -215,18 +230,25 @@ pub struct TerrainSets {
 }
 
 impl TerrainSets {
-    /// `count` sets, each pointing at the tile pool and at its own records buffer.
+    /// `count` sets, each pointing at the tile pool, at its own records buffer and at the
+    /// texture array.
     pub fn new(
         gpu: &Gpu,
         pipeline: &TerrainPipeline,
         tile_pool: &super::Buffer,
         records: &[&super::Buffer],
+        textures: &super::texture::TextureArray,
         name: &str,
     ) -> VkResult<TerrainSets> {
         let count = records.len().max(1) as u32;
-        let sizes = [vk::DescriptorPoolSize::default()
-            .ty(vk::DescriptorType::STORAGE_BUFFER)
-            .descriptor_count(2 * count)];
+        let sizes = [
+            vk::DescriptorPoolSize::default()
+                .ty(vk::DescriptorType::STORAGE_BUFFER)
+                .descriptor_count(2 * count),
+            vk::DescriptorPoolSize::default()
+                .ty(vk::DescriptorType::COMBINED_IMAGE_SAMPLER)
+                .descriptor_count(count),
+        ];
         let info = vk::DescriptorPoolCreateInfo::default()
             .max_sets(count)
             .pool_sizes(&sizes);
@@ -256,6 +278,10 @@ impl TerrainSets {
             let record_info = [vk::DescriptorBufferInfo::default()
                 .buffer(r.raw)
                 .range(vk::WHOLE_SIZE)];
+            let texture_info = [vk::DescriptorImageInfo::default()
+                .sampler(textures.sampler)
+                .image_view(textures.view)
+                .image_layout(vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL)];
             let writes = [
                 vk::WriteDescriptorSet::default()
                     .dst_set(set)
@@ -267,8 +293,13 @@ impl TerrainSets {
                     .dst_binding(1)
                     .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
                     .buffer_info(&record_info),
+                vk::WriteDescriptorSet::default()
+                    .dst_set(set)
+                    .dst_binding(2)
+                    .descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER)
+                    .image_info(&texture_info),
             ];
-            // SAFETY: the set is not in use; the buffers are live.
+            // SAFETY: the set is not in use; the buffers, view and sampler are live.
             unsafe { gpu.device.update_descriptor_sets(&writes, &[]) };
         }
         Ok(TerrainSets { pool, sets })

@@ -13,7 +13,7 @@ use ash::vk;
 use gpu_allocator::MemoryLocation;
 
 use super::buffer::BufferDesc;
-use super::sync::{self, Commands};
+use super::sync;
 use super::{Buffer, Gpu, VkResult};
 
 /// What the pool is bound as.
@@ -63,10 +63,7 @@ impl TilePool {
     pub fn read(&self, gpu: &Gpu, offset: u64, len: u64) -> VkResult<Vec<u8>> {
         gpu.wait_idle();
         let mut readback = Buffer::new(gpu, BufferDesc::readback(len.max(4)), "pool read-back")?;
-        let commands = Commands::new(gpu, "pool read-back commands")?;
-        let result = (|| {
-            let cmd = commands.allocate(gpu, "pool read-back")?;
-            sync::begin(gpu, cmd, true)?;
+        let result = sync::run_once(gpu, "pool read-back", |cmd| {
             let region = vk::BufferCopy::default()
                 .src_offset(offset)
                 .size(len.max(1));
@@ -76,18 +73,13 @@ impl TilePool {
                     .cmd_copy_buffer(cmd, self.buffer.raw, readback.raw, &[region]);
             }
             host_read_barrier(gpu, cmd);
-            sync::end(gpu, cmd)?;
-            let fence = sync::fence(gpu, false, "pool read-back")?;
-            let done = sync::submit(gpu, cmd, fence, None, None)
-                .and_then(|()| sync::wait_and_reset(gpu, fence));
-            sync::destroy_fence(gpu, fence);
-            done?;
-            Ok(readback
+        })
+        .map(|()| {
+            readback
                 .mapped()
                 .map(|m| m[..len as usize].to_vec())
-                .unwrap_or_default())
-        })();
-        commands.destroy(gpu);
+                .unwrap_or_default()
+        });
         readback.destroy(gpu);
         result
     }
@@ -136,8 +128,25 @@ impl Staging {
         Some(at)
     }
 
+    /// Copies `bytes` in at an offset that is a multiple of `align` (a power of two, at least
+    /// 4); returns the offset, or None when the slot is full.
+    pub fn push_aligned(&mut self, bytes: &[u8], align: u64) -> Option<u64> {
+        let before = self.used;
+        self.used = self.used.next_multiple_of(align);
+        let at = self.push(bytes);
+        if at.is_none() {
+            self.used = before;
+        }
+        at
+    }
+
     pub fn used(&self) -> u64 {
         self.used
+    }
+
+    /// The buffer copies read from.
+    pub fn raw(&self) -> vk::Buffer {
+        self.buffer.raw
     }
 
     /// Payload bytes pushed since the last reset.

@@ -140,3 +140,21 @@ pub fn destroy_semaphore(gpu: &Gpu, semaphore: vk::Semaphore) {
     // SAFETY: the caller guarantees no pending operation uses it (device idle).
     unsafe { gpu.device.destroy_semaphore(semaphore, None) };
 }
+
+/// Records commands with `record` into a command buffer of their own, submits them and waits
+/// for them (set-up and diagnostics only: never on a frame's path).
+pub fn run_once(gpu: &Gpu, name: &str, record: impl FnOnce(vk::CommandBuffer)) -> VkResult<()> {
+    let commands = Commands::new(gpu, name)?;
+    let result = (|| {
+        let cmd = commands.allocate(gpu, name)?;
+        begin(gpu, cmd, true)?;
+        record(cmd);
+        end(gpu, cmd)?;
+        let fence = fence(gpu, false, name)?;
+        let done = submit(gpu, cmd, fence, None, None).and_then(|()| wait_and_reset(gpu, fence));
+        destroy_fence(gpu, fence);
+        done
+    })();
+    commands.destroy(gpu);
+    result
+}

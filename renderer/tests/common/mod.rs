@@ -4,6 +4,7 @@
 #![allow(dead_code)] // each test file uses its own subset
 
 use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
 
 use tiles::{build_tileset, BuildParams, Grid, TileSetMeta};
 
@@ -54,6 +55,55 @@ pub fn puget(dir: &Path) -> PathBuf {
     tileset(dir, &sample(), puget_options())
 }
 
+/// The Puget sample with texture tiles: its photo (`sample/ps_texture_1k.png`, one texel per
+/// cell) or, with `photo` false, the shaded relief tiletool bakes (two texels per cell).
+pub fn puget_textured(dir: &Path, photo: bool) -> PathBuf {
+    use tiles::texture::{interior_for, relief::Relief, Layout, Photo, Source, Texturing};
+    let grid = dem::read(&[sample()], &puget_options()).unwrap_or_else(|e| panic!("{e}"));
+    let view = Grid {
+        width: grid.width,
+        height: grid.height,
+        heights: &grid.heights,
+        spacing_x: grid.spacing_x,
+        spacing_y: grid.spacing_y,
+    };
+    let (source, density) = if photo {
+        let path = testdata::sample_texture();
+        let rgb = image::open(&path)
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+            .to_rgb8();
+        let photo = Photo {
+            width: rgb.width() as usize,
+            height: rgb.height() as usize,
+            rgb: rgb.into_raw(),
+        };
+        let density = photo.pixels_per_cell(&view);
+        (Source::Photo(photo), density)
+    } else {
+        let relief = Relief {
+            azimuth_deg: 315.0,
+            elevation_deg: 45.0,
+            tint: false,
+        };
+        (Source::Relief(relief), 2.0)
+    };
+    let texturing = Texturing {
+        source,
+        layout: Layout::new(interior_for(density)).expect("layout"),
+    };
+    let out = dir.join("textured.vkt");
+    tiles::build_tileset_textured(
+        &view,
+        &BuildParams::default(),
+        Some(&texturing),
+        &TileSetMeta::default(),
+        &out,
+        &|| {},
+    )
+    .expect("build");
+    out
+}
+
 /// The Puget sample built with its tiles' sides independent (no agreement between neighbours).
 pub fn puget_independent(dir: &Path) -> PathBuf {
     let params = BuildParams {
@@ -61,4 +111,85 @@ pub fn puget_independent(dir: &Path) -> PathBuf {
         ..BuildParams::default()
     };
     tileset_with(dir, &[sample()], puget_options(), &params)
+}
+
+pub const SKY: [u8; 3] = [255, 0, 255];
+
+pub fn vkterrain(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_vkterrain"))
+        .args(args)
+        .output()
+        .expect("vkterrain runs")
+}
+
+pub fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+/// Runs a headless flight with validation and a magenta sky; returns the screenshots' pixels.
+pub fn flight(
+    set: &Path,
+    out: &Path,
+    path: &str,
+    frames: u32,
+    extra: &[&str],
+) -> Vec<image::RgbaImage> {
+    flight_with_fault(set, out, path, frames, extra, None)
+}
+
+/// [`flight`] with a fault injected (`VKTERRAIN_FAULT`, see `renderer::frame::Fault`).
+pub fn flight_with_fault(
+    set: &Path,
+    out: &Path,
+    path: &str,
+    frames: u32,
+    extra: &[&str],
+    fault: Option<&str>,
+) -> Vec<image::RgbaImage> {
+    let log = out.join("frames.csv");
+    let frames_s = frames.to_string();
+    let mut args = vec![
+        s(set),
+        "--headless",
+        "--validation",
+        "--path",
+        path,
+        "--frames",
+        &frames_s,
+        "--sky",
+        "1,0,1",
+        "--log",
+        s(&log),
+        "--out",
+        s(out),
+        "--screenshot-every",
+        "1",
+    ];
+    if !extra.contains(&"--size") {
+        args.extend(["--size", "256x192"]);
+    }
+    args.extend(extra);
+    let mut command = Command::new(env!("CARGO_BIN_EXE_vkterrain"));
+    if let Some(f) = fault {
+        command.env("VKTERRAIN_FAULT", f);
+    }
+    let o = command.args(&args).output().expect("vkterrain runs");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        o.status.success(),
+        "vkterrain failed ({:?}): {err}",
+        o.status.code()
+    );
+    assert!(!err.contains("validation"), "validation messages: {err}");
+    (0..frames)
+        .map(|k| {
+            image::open(out.join(format!("frame_{k:06}.png")))
+                .expect("screenshot")
+                .to_rgba8()
+        })
+        .collect()
+}
+
+pub fn is_sky(p: &image::Rgba<u8>) -> bool {
+    p.0[0] == SKY[0] && p.0[1] == SKY[1] && p.0[2] == SKY[2]
 }

@@ -845,6 +845,14 @@ impl TileSet {
             .get(e.offset as usize..e.offset.checked_add(e.len)? as usize)
     }
 
+    /// Tile `(tx, ty)`'s stored texture bytes, unchecked (see [`TileSet::texture`]); mip
+    /// entries' offsets count from its start.
+    pub fn texture_blob(&self, tx: u32, ty: u32) -> Option<&[u8]> {
+        let e = self.dir_entry(tx, ty)?;
+        self.map
+            .get(e.texture_offset as usize..e.texture_offset.checked_add(e.texture_len)? as usize)
+    }
+
     /// Tile `(tx, ty)`, checksum and structure validated.
     pub fn tile(&self, tx: u32, ty: u32) -> Result<Tile<'_>, FormatError> {
         let invalid = |what: String| self.tile_error(tx, ty, what);

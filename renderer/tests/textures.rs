@@ -1,0 +1,264 @@
+//! Texture tiles on lavapipe with the validation layer on: the Puget photo and a baked relief
+//! streamed into texture slots within the frame's byte budget, no colour seam where tiles meet
+//! on screen, and tiles whose fine mips have not arrived sampling their finest resident mip.
+//! Each measure has a negative control that must fail it (a fault injected into the renderer).
+
+use std::path::Path;
+
+mod common;
+
+use common::{flight, flight_with_fault, is_sky, puget, puget_textured, s, vkterrain};
+
+fn summary(out: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(out.join("frames.json")).expect("summary");
+    serde_json::from_str(&text).expect("summary is JSON")
+}
+
+/// The log's rows as column name -> values.
+fn column(out: &Path, name: &str) -> Vec<f64> {
+    let csv = std::fs::read_to_string(out.join("frames.csv")).expect("log");
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+    let k = header
+        .iter()
+        .position(|&h| h == name)
+        .unwrap_or_else(|| panic!("no column {name}"));
+    lines
+        .map(|l| {
+            l.split(',')
+                .nth(k)
+                .expect("cell")
+                .parse()
+                .unwrap_or(f64::NAN)
+        })
+        .collect()
+}
+
+#[test]
+fn photo_and_relief_stream_into_their_slots_within_the_budget() {
+    for photo in [true, false] {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let set = puget_textured(dir.path(), photo);
+        let out = dir.path().join("run");
+        std::fs::create_dir_all(&out).expect("out");
+        let budget = 0.5;
+        let frames = flight(
+            &set,
+            &out,
+            "flyover",
+            16,
+            &["--upload-budget-mb", &budget.to_string()],
+        );
+        let sum = summary(&out);
+        assert_eq!(sum["validation_messages"], 0);
+        let texture_mb = sum["texture_mb"].as_f64().expect("texture_mb");
+        let sent_mb = sum["upload_mb_textures"]
+            .as_f64()
+            .expect("upload_mb_textures");
+        assert!(texture_mb > 0.0, "no texture slots: {sum}");
+        // Puget's 16 tiles all get a slot, so nothing is evicted and no mip is sent twice.
+        assert!(
+            sent_mb > 0.0 && sent_mb <= texture_mb,
+            "{sent_mb} MB of textures sent into {texture_mb} MB of slots"
+        );
+        // Geometry goes first; textures take what it leaves of the budget, plus new tiles'
+        // base mips (at most 32 texels across: a few hundred bytes each).
+        let geometry = column(&out, "upload_bytes");
+        let textures = column(&out, "upload_bytes_textures");
+        let drawn = column(&out, "tiles_drawn");
+        let budget_bytes = budget * f64::from(1 << 20);
+        for ((g, t), n) in geometry.iter().zip(&textures).zip(&drawn) {
+            assert!(
+                g + t <= budget_bytes.max(*g) + n * 1024.0,
+                "frame sent {g} bytes of geometry and {t} of textures with a {budget_bytes} budget"
+            );
+        }
+        let free = column(&out, "texture_slots_free");
+        assert!(
+            free.windows(2).all(|w| w[1] <= w[0]),
+            "slots freed: {free:?}"
+        );
+        assert!(free[0] < 16.0, "no slot taken on the first frame: {free:?}");
+        // The textured frames are not the height-tinted ones.
+        let tint_out = dir.path().join("tint");
+        std::fs::create_dir_all(&tint_out).expect("out");
+        let tint = flight(&set, &tint_out, "flyover", 16, &["--shading", "tint"]);
+        let last = frames.len() - 1;
+        let differ = frames[last]
+            .pixels()
+            .zip(tint[last].pixels())
+            .filter(|(a, b)| !is_sky(a) && a.0[..3] != b.0[..3])
+            .count();
+        let terrain = frames[last].pixels().filter(|p| !is_sky(p)).count();
+        assert!(
+            differ * 2 > terrain,
+            "only {differ} of {terrain} terrain pixels differ from the tint"
+        );
+    }
+}
+
+/// The colour step (largest channel difference) between neighbouring pixels on either side of
+/// a tile border, summed over every such pair the `tiles` shading shows, and the steps of the
+/// same pairs moved 5 pixels off the border to either side (averaged; both must lie inside
+/// one tile and off the sky): a seam makes the first larger than the second, while the photo's
+/// own detail, which varies over the image, is matched pair by pair. Returns both sums and the
+/// number of pairs.
+fn border_steps(tiles: &[image::RgbaImage], photo: &[image::RgbaImage]) -> (f64, f64, usize) {
+    const OFF: i64 = 5;
+    let (mut across, mut nearby, mut pairs) = (0.0, 0.0, 0usize);
+    for (ids, img) in tiles.iter().zip(photo) {
+        let (w, h) = (i64::from(ids.width()), i64::from(ids.height()));
+        let inside = |x: i64, y: i64| x >= 0 && y >= 0 && x < w && y < h;
+        let id = |x: i64, y: i64| ids.get_pixel(x as u32, y as u32);
+        let colour = |x: i64, y: i64| img.get_pixel(x as u32, y as u32);
+        let step = |(ax, ay): (i64, i64), (bx, by): (i64, i64)| {
+            let (a, b) = (colour(ax, ay).0, colour(bx, by).0);
+            (0..3)
+                .map(|c| (i32::from(a[c]) - i32::from(b[c])).abs())
+                .max()
+                .unwrap_or(0) as f64
+        };
+        // A pair within one tile, terrain in both images.
+        let plain = |a: (i64, i64), b: (i64, i64)| {
+            inside(a.0, a.1)
+                && inside(b.0, b.1)
+                && id(a.0, a.1) == id(b.0, b.1)
+                && !is_sky(id(a.0, a.1))
+                && !is_sky(colour(a.0, a.1))
+                && !is_sky(colour(b.0, b.1))
+        };
+        for y in 0..h {
+            for x in 0..w {
+                for (dx, dy) in [(1, 0), (0, 1)] {
+                    let (a, b) = ((x, y), (x + dx, y + dy));
+                    if !inside(b.0, b.1)
+                        || id(a.0, a.1) == id(b.0, b.1)
+                        || is_sky(id(a.0, a.1))
+                        || is_sky(id(b.0, b.1))
+                        || is_sky(colour(a.0, a.1))
+                        || is_sky(colour(b.0, b.1))
+                    {
+                        continue;
+                    }
+                    let before = (
+                        (x - OFF * dx, y - OFF * dy),
+                        (b.0 - OFF * dx, b.1 - OFF * dy),
+                    );
+                    let after = (
+                        (x + OFF * dx, y + OFF * dy),
+                        (b.0 + OFF * dx, b.1 + OFF * dy),
+                    );
+                    if !plain(before.0, before.1) || !plain(after.0, after.1) {
+                        continue;
+                    }
+                    across += step(a, b);
+                    nearby += 0.5 * (step(before.0, before.1) + step(after.0, after.1));
+                    pairs += 1;
+                }
+            }
+        }
+    }
+    (across, nearby, pairs)
+}
+
+#[test]
+fn tile_borders_show_no_colour_seam() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let set = puget_textured(dir.path(), true);
+    let run = |name: &str, extra: &[&str], fault: Option<&str>| {
+        let out = dir.path().join(name);
+        std::fs::create_dir_all(&out).expect("out");
+        // Warm: every tile's textures resident, so neighbours differ only as the photo does.
+        let mut args = vec!["--size", "512x384", "--warmup"];
+        args.extend(extra);
+        flight_with_fault(&set, &out, "flyover", 12, &args, fault)
+    };
+    let borders = run("tiles", &["--shading", "tiles"], None);
+    // Lines through the middle of the tiles: also BC1 block edges (whose colour steps are
+    // part of the compressed source), but not tile borders.
+    let middles = run(
+        "middles",
+        &["--shading", "tiles", "--tile-grid-offset", "128"],
+        None,
+    );
+    let photo = run("photo", &[], None);
+    let shifted = run("seam", &[], Some("texture-seam"));
+    let ratio = |lines: &[image::RgbaImage], img: &[image::RgbaImage]| {
+        let (across, beside, pairs) = border_steps(lines, img);
+        assert!(pairs > 1000, "only {pairs} pixel pairs across the lines");
+        across / beside
+    };
+    let (at_borders, at_middles) = (ratio(&borders, &photo), ratio(&middles, &photo));
+    let (bad_borders, bad_middles) = (ratio(&borders, &shifted), ratio(&middles, &shifted));
+    eprintln!(
+        "colour steps across / 5 px beside: tile borders {at_borders:.3}, tile middles \
+         {at_middles:.3}; with every other tile's texture moved 4 samples: {bad_borders:.3} and \
+         {bad_middles:.3}"
+    );
+    // Across a tile border the rendered photo changes as across any other block edge.
+    assert!(
+        at_borders <= 1.1 * at_middles,
+        "seams: steps across tile borders {at_borders:.3} x those beside, {at_middles:.3} x mid-tile"
+    );
+    // Control: a misregistration of a few texels at every other tile shows.
+    assert!(
+        bad_borders > 1.2 * bad_middles,
+        "the seam measure missed misregistered tiles ({bad_borders:.3} against {bad_middles:.3})"
+    );
+}
+
+/// Terrain pixels that are pure black (no Puget texel is).
+fn black(frames: &[image::RgbaImage]) -> usize {
+    frames
+        .iter()
+        .flat_map(|f| f.pixels())
+        .filter(|p| p.0[..3] == [0, 0, 0])
+        .count()
+}
+
+#[test]
+fn tiles_without_their_fine_mips_sample_the_finest_resident_one() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let set = puget_textured(dir.path(), false);
+    // So little budget that fine mips arrive over many frames.
+    let extra = ["--upload-budget-mb", "0.05", "--size", "320x240"];
+    let out = dir.path().join("clamped");
+    std::fs::create_dir_all(&out).expect("out");
+    let clamped = flight(&set, &out, "flyover", 8, &extra);
+    let coarser: f64 = column(&out, "tiles_texture_coarser").iter().sum();
+    assert!(
+        coarser > 0.0,
+        "every texture arrived at once; the clamp was not exercised"
+    );
+    let bad_out = dir.path().join("unclamped");
+    std::fs::create_dir_all(&bad_out).expect("out");
+    let unclamped = flight_with_fault(
+        &set,
+        &bad_out,
+        "flyover",
+        8,
+        &extra,
+        Some("texture-no-clamp"),
+    );
+    let (good, bad) = (black(&clamped), black(&unclamped));
+    eprintln!("black terrain pixels: {good} clamped, {bad} without the clamp");
+    assert_eq!(good, 0, "{good} pixels sampled a mip nothing was copied to");
+    assert!(
+        bad > 100,
+        "the control did not sample missing mips ({bad} black pixels)"
+    );
+}
+
+#[test]
+fn photo_shading_of_a_set_without_textures_is_one_clear_line() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let set = puget(dir.path());
+    let o = vkterrain(&[s(&set), "--headless", "--frames", "1", "--shading", "photo"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("no texture tiles") && err.contains(s(&set)),
+        "{err}"
+    );
+}
