@@ -42,8 +42,8 @@ impl TextureConfig {
         self.mip_bytes.iter().sum()
     }
 
-    /// The finest mip of a slot's base.
-    fn base(&self) -> u32 {
+    /// The finest mip of a slot's base (the mips of at most [`BASE_MIP_TEXELS`] texels).
+    pub fn base(&self) -> u32 {
         self.mip_texels
             .iter()
             .position(|&t| t <= BASE_MIP_TEXELS)

@@ -1315,13 +1315,7 @@ fn texture_config(gpu: &Gpu, terrain: &Terrain, options: &MemoryOptions) -> Opti
 /// and the copies' alignment.
 fn texture_staging_bound(config: &TextureConfig, upload_budget: u64) -> u64 {
     let slots = config.slots as u64;
-    let base: u64 = config
-        .mip_texels
-        .iter()
-        .zip(&config.mip_bytes)
-        .filter(|(&t, _)| t <= memory::textures::BASE_MIP_TEXELS)
-        .map(|(_, &b)| b)
-        .sum();
+    let base: u64 = config.mip_bytes[config.base() as usize..].iter().sum();
     let padding = TEXTURE_ALIGN * slots * u64::from(config.mips());
     upload_budget.min(slots * config.slot_bytes()) + slots * base + padding
 }

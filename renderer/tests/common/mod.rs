@@ -30,16 +30,21 @@ pub fn tileset_with(
     params: &BuildParams,
 ) -> PathBuf {
     let grid = dem::read(inputs, &opts).unwrap_or_else(|e| panic!("{e}"));
-    let view = Grid {
+    let view = grid_view(&grid);
+    let out = dir.join("set.vkt");
+    build_tileset(&view, params, &TileSetMeta::default(), &out, &|| {}).expect("build");
+    out
+}
+
+/// The builder's view of a DEM read by `dem`.
+pub fn grid_view(grid: &dem::HeightGrid) -> Grid<'_> {
+    Grid {
         width: grid.width,
         height: grid.height,
         heights: &grid.heights,
         spacing_x: grid.spacing_x,
         spacing_y: grid.spacing_y,
-    };
-    let out = dir.join("set.vkt");
-    build_tileset(&view, params, &TileSetMeta::default(), &out, &|| {}).expect("build");
-    out
+    }
 }
 
 /// How the tests read the bundled Puget Sound sample.
@@ -60,13 +65,7 @@ pub fn puget(dir: &Path) -> PathBuf {
 pub fn puget_textured(dir: &Path, photo: bool) -> PathBuf {
     use tiles::texture::{interior_for, relief::Relief, Layout, Photo, Source, Texturing};
     let grid = dem::read(&[sample()], &puget_options()).unwrap_or_else(|e| panic!("{e}"));
-    let view = Grid {
-        width: grid.width,
-        height: grid.height,
-        heights: &grid.heights,
-        spacing_x: grid.spacing_x,
-        spacing_y: grid.spacing_y,
-    };
+    let view = grid_view(&grid);
     let (source, density) = if photo {
         let path = testdata::sample_texture();
         let rgb = image::open(&path)

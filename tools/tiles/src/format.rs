@@ -841,16 +841,20 @@ impl TileSet {
     /// with [`tile`](Self::tile) and then fetch parts of it often (the renderer's uploads).
     pub fn blob(&self, tx: u32, ty: u32) -> Option<&[u8]> {
         let e = self.dir_entry(tx, ty)?;
+        self.bytes_at(e.offset, e.len)
+    }
+
+    /// `len` bytes of the file from `offset`, if the file holds them.
+    fn bytes_at(&self, offset: u64, len: u64) -> Option<&[u8]> {
         self.map
-            .get(e.offset as usize..e.offset.checked_add(e.len)? as usize)
+            .get(usize::try_from(offset).ok()?..usize::try_from(offset.checked_add(len)?).ok()?)
     }
 
     /// Tile `(tx, ty)`'s stored texture bytes, unchecked (see [`TileSet::texture`]); mip
     /// entries' offsets count from its start.
     pub fn texture_blob(&self, tx: u32, ty: u32) -> Option<&[u8]> {
         let e = self.dir_entry(tx, ty)?;
-        self.map
-            .get(e.texture_offset as usize..e.texture_offset.checked_add(e.texture_len)? as usize)
+        self.bytes_at(e.texture_offset, e.texture_len)
     }
 
     /// Tile `(tx, ty)`, checksum and structure validated.
