@@ -356,10 +356,8 @@ pub struct TexturePlan {
     pub stats: TextureStats,
 }
 
-/// The finest texture mip a tile can show from `camera`: texels of mip `m` are
-/// `2^m * 256 * spacing / T` metres across, and a point at distance `r` inside the view is at
-/// least `r * cos(half diagonal)` deep, where a metre covers at most `focal / depth` pixels;
-/// the mip whose texels cover at least a pixel there is the finest the footprint can use.
+/// The finest texture mip tile `tile` can show from `camera`: [`mip_for_distance`] at the
+/// tile box's nearest point, for mip-0 texels `256 * spacing / T` metres across.
 pub fn texture_mip_wanted(
     terrain: &Terrain,
     layout: &tiles::texture::Layout,
@@ -369,19 +367,28 @@ pub fn texture_mip_wanted(
 ) -> u32 {
     let t = &terrain.tiles[tile];
     let r = camera.clamp(t.min, t.max).distance(camera);
+    let (sx, sy) = terrain.spacing;
+    let texel = f64::from(tiles::mesh::TILE_CELLS) * sx.min(sy) / f64::from(layout.interior);
+    mip_for_distance(r, texel, view, layout.mips)
+}
+
+/// The mip to sample for surface `distance` metres or more from the camera, with mip-0 texels
+/// `texel` metres across and `mips` mips: the coarsest whose texels still project to at most
+/// a pixel anywhere in the view (a point at distance `r` is at least `r * cos(half
+/// diagonal)` deep, where a metre covers at most `focal / depth` pixels). Finer mips would
+/// only be minified; the next coarser one would be magnified somewhere.
+pub fn mip_for_distance(distance: f64, texel: f64, view: &View, mips: u32) -> u32 {
     let focal = view.focal.0.max(view.focal.1);
     let (hx, hy) = (
         f64::from(view.width) * 0.5 / view.focal.0,
         f64::from(view.height) * 0.5 / view.focal.1,
     );
-    let depth = r / (1.0 + hx * hx + hy * hy).sqrt();
-    let (sx, sy) = terrain.spacing;
-    let texel = f64::from(tiles::mesh::TILE_CELLS) * sx.min(sy) / f64::from(layout.interior);
+    let depth = distance / (1.0 + hx * hx + hy * hy).sqrt();
     let ratio = depth / (texel * focal);
     if ratio <= 1.0 || !ratio.is_finite() {
         return 0;
     }
-    (ratio.log2().floor() as u32).min(layout.mips - 1)
+    (ratio.log2().floor() as u32).min(mips.saturating_sub(1))
 }
 
 /// Textures for the plan's draws: each drawn tile asks for the finest mip its footprint
@@ -445,4 +452,53 @@ pub fn plan_textures(
 
 fn ms(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1000.0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::Camera;
+
+    #[test]
+    fn the_texture_mip_follows_the_pixel_footprint() {
+        let camera = Camera {
+            position: DVec3::ZERO,
+            yaw: 0.3,
+            pitch: -0.2,
+            fov_y: 60f64.to_radians(),
+        };
+        let view = camera.view(1024, 768);
+        let (texel, mips) = (40.0, 10);
+        // The direction of the image's corner: there a point at distance r is shallowest, so
+        // its texels look largest.
+        let (hx, hy) = (512.0 / view.focal.0, 384.0 / view.focal.1);
+        let corner = (-view.back + hx * view.right + hy * view.up).normalize();
+        let corner_pixel = view.project(corner * 100.0).expect("in front");
+        assert!((corner_pixel.0 - 1024.0).abs() < 1e-6 && corner_pixel.1.abs() < 1e-6);
+        // Pixels spanned on screen by a segment of `size` metres at `p`, across the view.
+        let pixels = |p: DVec3, size: f64| {
+            let a = view.project(p).expect("in front");
+            let b = view.project(p + view.right * size).expect("in front");
+            (b.0 - a.0).hypot(b.1 - a.1)
+        };
+        let mut last = 0;
+        for k in 0..400 {
+            let r = 10.0 * 1.05f64.powi(k);
+            let m = mip_for_distance(r, texel, &view, mips);
+            assert!(m >= last, "farther asks for a finer mip at {r} m");
+            last = m;
+            let size = |m: u32| texel * f64::from(1u32 << m);
+            let here = pixels(corner * r, size(m));
+            assert!(m == 0 || here <= 1.0 + 1e-9, "mip {m} at {r} m: {here} px");
+            if m + 1 < mips {
+                let coarser = pixels(corner * r, size(m + 1));
+                assert!(coarser > 1.0, "mip {} at {r} m: {coarser} px", m + 1);
+            }
+        }
+        assert_eq!(last, mips - 1, "far away reaches the coarsest mip");
+        // Inside the tile's box, or nonsense distances: the finest mip.
+        assert_eq!(mip_for_distance(0.0, texel, &view, mips), 0);
+        assert_eq!(mip_for_distance(f64::NAN, texel, &view, mips), 0);
+        assert_eq!(mip_for_distance(f64::INFINITY, texel, &view, mips), 0);
+    }
 }

@@ -71,12 +71,9 @@ pub fn puget_textured(dir: &Path, photo: bool) -> PathBuf {
         let rgb = image::open(&path)
             .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
             .to_rgb8();
-        let photo = Photo {
-            width: rgb.width() as usize,
-            height: rgb.height() as usize,
-            rgb: rgb.into_raw(),
-        };
-        let density = photo.pixels_per_cell(&view);
+        let (width, height) = (rgb.width() as usize, rgb.height() as usize);
+        let photo = Photo::spanning(width, height, rgb.into_raw(), &view);
+        let density = photo.pixels_per_cell();
         (Source::Photo(photo), density)
     } else {
         let relief = Relief {

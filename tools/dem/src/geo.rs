@@ -3,6 +3,8 @@
 //! usual ones (e.g. the USGS/NGA "length of a degree" tables); they are accurate to about a
 //! metre per degree, far below what a terrain mesh can notice.
 
+use crate::placement::{Crs, Placement};
+
 /// Metres per degree of latitude at latitude `lat_deg`.
 pub fn metres_per_degree_lat(lat_deg: f64) -> f64 {
     let phi = lat_deg.to_radians();
@@ -31,6 +33,25 @@ pub fn mercator_latitude(t: f64) -> f64 {
 /// Mercator is conformal, so this holds for both axes.
 pub fn mercator_metres_per_pixel(zoom: u32, tile_px: usize, lat_deg: f64) -> f64 {
     EQUATOR_M * lat_deg.to_radians().cos() / (2f64.powi(zoom as i32) * tile_px as f64)
+}
+
+/// The placement of slippy-map tile `zoom/x/y` of `width x height` pixels in web-mercator
+/// metres (EPSG:3857): its pixels are areas, so pixel (0, 0)'s centre is half a pixel in from
+/// the tile's north-west corner.
+pub fn mercator_placement(
+    zoom: u32,
+    (x, y): (u64, u64),
+    (width, height): (usize, usize),
+) -> Placement {
+    let tile = EQUATOR_M / 2f64.powi(zoom as i32);
+    let (dx, dy) = (tile / width as f64, tile / height as f64);
+    Placement {
+        crs: Crs::Projected { code: Some(3857) },
+        x0: -EQUATOR_M / 2.0 + x as f64 * tile + dx / 2.0,
+        y0: EQUATOR_M / 2.0 - y as f64 * tile - dy / 2.0,
+        dx,
+        dy,
+    }
 }
 
 /// Finds a `z-x-y` slippy-map tile address in a file name (`berkeley_14-2625-6369_terrain_rgb`),

@@ -14,13 +14,16 @@ use tiff::tags::Tag;
 use tiff::ColorType;
 
 use crate::error::{label, one_line};
+use crate::placement::{Crs, Placement};
 use crate::raster::{check_dimensions, Georef, Raster, MAX_COMPRESSION_RATIO};
 use crate::{DemError, ReadOptions};
 
 // GeoKey ids and values from the GeoTIFF 1.1 spec (OGC 19-008r4), section 7.
 const GT_MODEL_TYPE: u16 = 1024;
 const GT_RASTER_TYPE: u16 = 1025;
+const GEOGRAPHIC_TYPE: u16 = 2048;
 const GEOG_ANGULAR_UNITS: u16 = 2054;
+const PROJECTED_CS_TYPE: u16 = 3072;
 const PROJ_LINEAR_UNITS: u16 = 3076;
 const VERTICAL_UNITS: u16 = 4099;
 const MODEL_PROJECTED: u16 = 1;
@@ -156,6 +159,9 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<Raster, DemError> {
         Some((factor, _)) => factor,
         None => 1.0, // absent or unknown: heights are taken as metres
     };
+    // Where it lies matters only for laying a photo over it; a file that cannot say is still
+    // a DEM (its spacing problems, if any, are reported next).
+    let placement = placement_of(&mut decoder, &keys).ok().flatten();
     let (georef, georef_text) = if opts.spacing.is_some() {
         // The user's spacing wins; don't fail on georeferencing we would not use.
         (Georef::None, "spacing from --spacing".to_string())
@@ -257,6 +263,7 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<Raster, DemError> {
         height: height as usize,
         samples: out,
         georef,
+        placement,
         description: format!(
             "GeoTIFF {sample_type} {compression}, {layout}, {georef_text}{nodata_text}"
         ),
@@ -564,19 +571,22 @@ fn f64_tag<R: std::io::Read + std::io::Seek>(
     decoder.find_tag(tag)?.map(|v| v.into_f64_vec()).transpose()
 }
 
-/// Spacing (or what is needed to work it out after cropping) and a few words for the
-/// description.
-fn georef<R: std::io::Read + std::io::Seek>(
+/// What the georeferencing tags say: the size of a pixel in model units, and one raster point
+/// `(i, j)` with its model position `(x, y)` when the file gives one.
+struct ModelFrame {
+    sx: f64,
+    sy: f64,
+    origin: Option<(f64, f64, f64, f64)>,
+}
+
+/// The georeferencing tags, `None` when the file has none.
+fn model_frame<R: std::io::Read + std::io::Seek>(
     decoder: &mut Decoder<R>,
-    keys: &GeoKeys,
-) -> Result<(Georef, String), GeorefError> {
+) -> Result<Option<ModelFrame>, GeorefError> {
     let scale = f64_tag(decoder, Tag::ModelPixelScaleTag)?;
     let tiepoint = f64_tag(decoder, Tag::ModelTiepointTag)?;
     let transform = f64_tag(decoder, Tag::ModelTransformationTag)?;
-
-    // (size of a pixel in x and y, and a raster point (i, j) with its model position (x, y)).
-    type Origin = Option<(f64, f64, f64, f64)>;
-    let (sx, sy, origin): (f64, f64, Origin) = match (scale, tiepoint, transform) {
+    let (sx, sy, origin) = match (scale, tiepoint, transform) {
         (Some(s), t, _) if s.len() >= 2 => {
             let origin = t.filter(|t| t.len() >= 6).map(|t| (t[0], t[1], t[3], t[4]));
             (s[0].abs(), s[1].abs(), origin)
@@ -589,22 +599,145 @@ fn georef<R: std::io::Read + std::io::Seek>(
             }
             (m[0].abs(), m[5].abs(), Some((0.0, 0.0, m[3], m[7])))
         }
-        _ => {
+        _ => return Ok(None),
+    };
+    let finite = |v: f64| v.is_finite();
+    if !(finite(sx) && finite(sy) && sx > 0.0 && sy > 0.0) {
+        return Err(GeorefError::Unsupported(format!("pixel scale {sx} x {sy}")));
+    }
+    if let Some((i, j, x, y)) = origin {
+        if ![i, j, x, y].into_iter().all(finite) {
+            return Err(GeorefError::Unsupported(format!(
+                "tiepoint ({i}, {j}) -> ({x}, {y})"
+            )));
+        }
+    }
+    Ok(Some(ModelFrame { sx, sy, origin }))
+}
+
+/// Degrees per unit of the file's geographic angular unit.
+fn angular_unit(keys: &GeoKeys) -> Result<f64, GeorefError> {
+    match keys.get(GEOG_ANGULAR_UNITS).unwrap_or(9102) {
+        9102 => Ok(1.0),
+        9101 => Ok(180.0 / std::f64::consts::PI),
+        9105 => Ok(0.9), // grad
+        other => Err(GeorefError::Unsupported(format!(
+            "geographic angular unit code {other}"
+        ))),
+    }
+}
+
+/// Metres per unit of the file's projected linear unit, and its name.
+fn projected_unit(keys: &GeoKeys) -> Result<(f64, &'static str), GeorefError> {
+    let unit = keys.get(PROJ_LINEAR_UNITS).unwrap_or(9001);
+    linear_unit(unit)
+        .ok_or_else(|| GeorefError::Unsupported(format!("projected linear unit code {unit}")))
+}
+
+/// Where the centre of pixel (0, 0) lies in raster space: (0.5, 0.5) with PixelIsArea (the
+/// default: raster point (0, 0) is the first pixel's corner), (0, 0) with PixelIsPoint.
+fn first_centre(keys: &GeoKeys) -> f64 {
+    if keys.get(GT_RASTER_TYPE) == Some(RASTER_PIXEL_IS_POINT) {
+        0.0
+    } else {
+        0.5
+    }
+}
+
+/// An EPSG code from a GeoKey, none for "user-defined" (32767) or absent.
+fn epsg(keys: &GeoKeys, key: u16) -> Option<u16> {
+    keys.get(key).filter(|&c| c != 0 && c != 32767)
+}
+
+/// The file's [`Placement`], `None` when it has no georeferencing tags at all; an error when
+/// it has some that cannot place it (no tiepoint, unknown model type or unit).
+fn placement_of<R: std::io::Read + std::io::Seek>(
+    decoder: &mut Decoder<R>,
+    keys: &GeoKeys,
+) -> Result<Option<Placement>, GeorefError> {
+    let Some(frame) = model_frame(decoder)? else {
+        return Ok(None);
+    };
+    let Some((i, j, x, y)) = frame.origin else {
+        return Err(GeorefError::Missing(
+            "no tiepoint: where it lies is unknown".into(),
+        ));
+    };
+    let (crs, factor) = match keys.get(GT_MODEL_TYPE) {
+        Some(MODEL_PROJECTED) => (
+            Crs::Projected {
+                code: epsg(keys, PROJECTED_CS_TYPE),
+            },
+            projected_unit(keys)?.0,
+        ),
+        Some(MODEL_GEOGRAPHIC) => (
+            Crs::Geographic {
+                code: epsg(keys, GEOGRAPHIC_TYPE),
+            },
+            angular_unit(keys)?,
+        ),
+        Some(other) => {
+            return Err(GeorefError::Unsupported(format!(
+                "GeoTIFF model type {other} (neither projected nor geographic)"
+            )))
+        }
+        None => {
             return Err(GeorefError::Missing(
-                "no georeferencing (ModelPixelScale/ModelTransformation), so no spacing".into(),
+                "pixel scale without GTModelTypeGeoKey: degrees or metres is unknown".into(),
             ))
         }
     };
-    if !(sx.is_finite() && sy.is_finite() && sx > 0.0 && sy > 0.0) {
-        return Err(GeorefError::Unsupported(format!("pixel scale {sx} x {sy}")));
-    }
+    let c = first_centre(keys);
+    Ok(Some(Placement {
+        crs,
+        x0: (x + (c - i) * frame.sx) * factor,
+        y0: (y - (c - j) * frame.sy) * factor,
+        dx: frame.sx * factor,
+        dy: frame.sy * factor,
+    }))
+}
 
+/// The placement of a GeoTIFF that is not a DEM (a photo to drape over one): `None` when it
+/// has no georeferencing tags, an error naming the file when it has tags that cannot place it.
+pub fn read_placement(path: &Path) -> Result<Option<Placement>, DemError> {
+    let file = label(path);
+    let handle = File::open(path).map_err(|source| DemError::Io {
+        file: file.clone(),
+        source,
+    })?;
+    let malformed = |e: tiff::TiffError| DemError::Malformed {
+        file: file.clone(),
+        problem: format!("not a readable TIFF: {}", one_line(e)),
+    };
+    let mut decoder = Decoder::new(BufReader::new(handle)).map_err(malformed)?;
+    let keys = geo_keys(&mut decoder).map_err(malformed)?;
+    placement_of(&mut decoder, &keys).map_err(|e| match e {
+        GeorefError::Tiff(e) => malformed(e),
+        GeorefError::Unsupported(what) => DemError::Unsupported {
+            file: file.clone(),
+            problem: format!("georeferencing: {what}"),
+        },
+        GeorefError::Missing(what) => DemError::Malformed {
+            file: file.clone(),
+            problem: format!("georeferencing: {what}"),
+        },
+    })
+}
+
+/// Spacing (or what is needed to work it out after cropping) and a few words for the
+/// description.
+fn georef<R: std::io::Read + std::io::Seek>(
+    decoder: &mut Decoder<R>,
+    keys: &GeoKeys,
+) -> Result<(Georef, String), GeorefError> {
+    let Some(ModelFrame { sx, sy, origin }) = model_frame(decoder)? else {
+        return Err(GeorefError::Missing(
+            "no georeferencing (ModelPixelScale/ModelTransformation), so no spacing".into(),
+        ));
+    };
     match keys.get(GT_MODEL_TYPE) {
         Some(MODEL_PROJECTED) => {
-            let unit = keys.get(PROJ_LINEAR_UNITS).unwrap_or(9001);
-            let (factor, name) = linear_unit(unit).ok_or_else(|| {
-                GeorefError::Unsupported(format!("projected linear unit code {unit}"))
-            })?;
+            let (factor, name) = projected_unit(keys)?;
             Ok((
                 Georef::Metres {
                     dx: sx * factor,
@@ -614,30 +747,14 @@ fn georef<R: std::io::Read + std::io::Seek>(
             ))
         }
         Some(MODEL_GEOGRAPHIC) => {
-            let to_degrees = match keys.get(GEOG_ANGULAR_UNITS).unwrap_or(9102) {
-                9102 => 1.0,
-                9101 => 180.0 / std::f64::consts::PI,
-                9105 => 0.9, // grad
-                other => {
-                    return Err(GeorefError::Unsupported(format!(
-                        "geographic angular unit code {other}"
-                    )))
-                }
-            };
+            let to_degrees = angular_unit(keys)?;
             let Some((_i, j, _x, y)) = origin else {
                 return Err(GeorefError::Missing(
                     "geographic TIFF without a tiepoint: its latitude is unknown".into(),
                 ));
             };
-            // With PixelIsArea (the default) raster point (0, 0) is the corner of the first
-            // pixel, whose centre is half a pixel in.
-            let centre = if keys.get(GT_RASTER_TYPE) == Some(RASTER_PIXEL_IS_POINT) {
-                0.0
-            } else {
-                0.5
-            };
             let step_lat = sy * to_degrees;
-            let lat_row0 = y * to_degrees - (centre - j) * step_lat;
+            let lat_row0 = (y - (first_centre(keys) - j) * sy) * to_degrees;
             if !(-90.0..=90.0).contains(&lat_row0) {
                 return Err(GeorefError::Unsupported(format!(
                     "geographic tiepoint latitude {lat_row0}"

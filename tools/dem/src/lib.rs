@@ -19,6 +19,7 @@ mod geo;
 mod geotiff;
 mod options;
 mod picture;
+mod placement;
 mod raster;
 mod raw;
 mod srtm;
@@ -27,7 +28,9 @@ use std::path::{Path, PathBuf};
 
 pub use error::DemError;
 pub use geo::{metres_per_degree_lat, metres_per_degree_lon};
+pub use geotiff::read_placement as read_tiff_placement;
 pub use options::{parse_size, Crop, Encoding, ReadOptions};
+pub use placement::{Crs, Mapping, Placement};
 pub use raster::MAX_SAMPLES;
 
 use error::label;
@@ -48,6 +51,8 @@ pub struct HeightGrid {
     pub voids_filled: u64,
     /// What was read, e.g. "SRTM3 mosaic N41E001..N42E001 (2 files)".
     pub description: String,
+    /// Where the (cropped) grid lies, when the file says.
+    pub placement: Option<Placement>,
 }
 
 impl HeightGrid {
@@ -331,5 +336,6 @@ fn finish(raster: Raster, file: &str, opts: &ReadOptions) -> Result<HeightGrid, 
         spacing_y,
         voids_filled,
         description,
+        placement: raster.placement.map(|p| p.window(x0, y0)),
     })
 }

@@ -10,7 +10,8 @@ use std::path::Path;
 use image::{DynamicImage, ImageDecoder, ImageFormat, ImageReader, Limits};
 
 use crate::error::{label, one_line};
-use crate::geo::tile_address;
+use crate::geo::{self, tile_address};
+use crate::placement::Placement;
 use crate::raster::{check_dimensions, Georef, Raster, MAX_COMPRESSION_RATIO};
 use crate::{DemError, Encoding, ReadOptions};
 
@@ -177,11 +178,16 @@ pub fn read(path: &Path, format: ImageFormat, opts: &ReadOptions) -> Result<Rast
         }
         _ => format!("{kind} {what} {width}x{height}"),
     };
+    let placement = match georef {
+        Georef::Mercator { .. } => tile_placement(path, width, height),
+        _ => None,
+    };
     Ok(Raster {
         width,
         height,
         samples,
         georef,
+        placement,
         description,
     })
 }
@@ -238,6 +244,13 @@ fn grey_or_void(value: f64, transparent: bool, scale: f64) -> f32 {
     } else {
         (value * scale) as f32
     }
+}
+
+/// Where a slippy-map tile's pixels lie in web-mercator metres (EPSG:3857), from its name.
+fn tile_placement(path: &Path, width: usize, height: usize) -> Option<Placement> {
+    let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("");
+    let (zoom, x, y) = tile_address(stem)?;
+    Some(geo::mercator_placement(zoom, (x, y), (width, height)))
 }
 
 /// A slippy-map tile's name (`..._14-2625-6369_...`) says where it lies.

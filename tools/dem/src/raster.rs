@@ -2,6 +2,7 @@
 //! marking voids, plus what the file said about where it lies. Also the size checks every
 //! reader runs on header values before it allocates anything.
 
+use crate::placement::Placement;
 use crate::DemError;
 
 /// Largest grid we accept, in samples (8 GiB of f32 heights already).
@@ -42,6 +43,9 @@ pub struct Raster {
     pub height: usize,
     pub samples: Vec<f32>,
     pub georef: Georef,
+    /// Where the samples lie, when the file says (GeoTIFF tiepoints, SRTM names, web-mercator
+    /// tile addresses).
+    pub placement: Option<Placement>,
     pub description: String,
 }
 

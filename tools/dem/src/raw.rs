@@ -105,6 +105,7 @@ pub fn read(path: &Path, kind: RawKind, opts: &ReadOptions) -> Result<Raster, De
         height,
         samples,
         georef: Georef::None,
+        placement: None,
         description: format!("{kind_name} {width}x{height}"),
     })
 }

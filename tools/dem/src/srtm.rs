@@ -5,6 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use crate::error::label;
+use crate::placement::{Crs, Placement};
 use crate::raster::{Georef, Raster};
 use crate::{DemError, ReadOptions};
 
@@ -113,8 +114,22 @@ pub fn read(paths: &[PathBuf], opts: &ReadOptions) -> Result<Raster, DemError> {
         height: side,
         samples,
         georef,
+        placement: cell.map(|c| placement(c.lat + 1, c.lon, side)),
         description,
     })
+}
+
+/// Sample (0, 0) of a tile or mosaic is the north-west corner of its top-left cell: SRTM
+/// samples are points on whole degrees (and fractions), WGS 84.
+fn placement(lat_north: i32, lon_west: i32, side: usize) -> Placement {
+    let step = 1.0 / (side - 1) as f64;
+    Placement {
+        crs: Crs::Geographic { code: Some(4326) },
+        x0: f64::from(lon_west),
+        y0: f64::from(lat_north),
+        dx: step,
+        dy: step,
+    }
 }
 
 /// Row 0 of a tile or mosaic lies on the northern edge of its top cells.
@@ -242,6 +257,7 @@ fn read_mosaic(tiles: &[Tile<'_>], opts: &ReadOptions) -> Result<Raster, DemErro
         height,
         samples,
         georef: georef(lat_max + 1, side),
+        placement: Some(placement(lat_max + 1, lon_min, side)),
         description: format!(
             "SRTM{arc} mosaic {}..{} ({} files)",
             sw.name(),

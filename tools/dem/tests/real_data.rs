@@ -324,3 +324,104 @@ fn geotiff_bigtujunga_projected() {
         "GeoTIFF i16 uncompressed, tiled 128x128, projected (metres), nodata 32767"
     );
 }
+
+/// Longitude and latitude of the highest sample of a geographic grid, from its placement.
+fn highest_point(grid: &dem::HeightGrid) -> (f64, f64) {
+    let p = grid.placement.expect("the file says where it lies");
+    assert!(matches!(p.crs, dem::Crs::Geographic { .. }), "{:?}", p.crs);
+    let k = (0..grid.heights.len())
+        .max_by(|&a, &b| grid.heights[a].total_cmp(&grid.heights[b]))
+        .unwrap();
+    let (col, row) = ((k % grid.width) as f64, (k / grid.width) as f64);
+    (p.x0 + col * p.dx, p.y0 - row * p.dy)
+}
+
+#[test]
+fn placements_put_the_summits_where_they_are() {
+    // Published summit positions (USGS / GSI): the highest sample of each DEM must lie within
+    // a few samples of them, which a placement off by a tile, a sign or a half-degree is not.
+    for (file, name, (lon, lat)) in [
+        (
+            "geotiff/mt_rainier_90m.tif",
+            "Mount Rainier",
+            (-121.7603, 46.8529),
+        ),
+        ("geotiff/mt_fuji_90m.tif", "Mount Fuji", (138.7274, 35.3606)),
+    ] {
+        let (x, y) = highest_point(&read_one(file));
+        assert!(
+            (x - lon).abs() < 0.005 && (y - lat).abs() < 0.005,
+            "{name}: highest sample at {x:.4}, {y:.4}, the summit is at {lon}, {lat}"
+        );
+    }
+}
+
+#[test]
+fn placements_of_srtm_tiles_mosaics_and_crops() {
+    let tile = read_one("srtm/N43E007.hgt").placement.unwrap();
+    assert_eq!(tile.crs, dem::Crs::Geographic { code: Some(4326) });
+    assert_eq!((tile.x0, tile.y0), (7.0, 44.0));
+    assert_eq!((tile.dx, tile.dy), (1.0 / 1200.0, 1.0 / 1200.0));
+    let crop = Crop {
+        x: 600,
+        y: 1200,
+        width: 601,
+        height: 1201,
+    };
+    let paths = [data("srtm/N41E001.hgt"), data("srtm/N42E001.hgt")];
+    let opts = ReadOptions {
+        crop: Some(crop),
+        ..ReadOptions::default()
+    };
+    // The crop starts on row 1200 of the mosaic (43 N at the top): 42 N, and half a degree east.
+    let p = read(&paths, &opts).placement.unwrap();
+    assert!(
+        (p.x0 - 1.5).abs() < 1e-12 && (p.y0 - 42.0).abs() < 1e-12,
+        "{p:?}"
+    );
+}
+
+#[test]
+fn placements_of_projected_and_web_mercator_grids() {
+    let utm = read_one("geotiff/bigtujunga.tif");
+    let p = utm.placement.unwrap();
+    assert_eq!(p.crs, dem::Crs::Projected { code: Some(32611) });
+    assert_eq!((p.dx, p.dy), (utm.spacing_x, utm.spacing_y));
+    // UTM 11N eastings lie within 166..834 km of the zone's false origin; the San Gabriels
+    // are near 34.3 N, about 3.8e6 m north of the equator.
+    assert!((166e3..834e3).contains(&p.x0), "{p:?}");
+    assert!((3.7e6..3.9e6).contains(&p.y0), "{p:?}");
+
+    // Tile 14/2625/6369 of the web-mercator world: its west edge is at longitude
+    // 2625 / 2^14 * 360 - 180 = -122.32 degrees, i.e. -122.32 / 180 * half the equator.
+    let opts = ReadOptions {
+        encoding: Some(Encoding::TerrainRgb),
+        ..ReadOptions::default()
+    };
+    let tile = read(
+        &[data("terrainrgb/berkeley_14-2625-6369_terrain_rgb.png")],
+        &opts,
+    );
+    let p = tile.placement.unwrap();
+    assert_eq!(p.crs, dem::Crs::Projected { code: Some(3857) });
+    let half_equator = std::f64::consts::PI * 6_378_137.0;
+    let west = (2625.0 / 16384.0 * 360.0 - 180.0) / 180.0 * half_equator;
+    let tile_m = 2.0 * half_equator / 16384.0;
+    assert!((p.x0 - p.dx / 2.0 - west).abs() < 0.01, "{p:?} west {west}");
+    assert!((p.dx * 512.0 - tile_m).abs() < 1e-6);
+    // Unnamed tiles, raw files and grey pictures say nothing.
+    let spaced = ReadOptions {
+        spacing: Some(30.0),
+        ..ReadOptions::default()
+    };
+    let fuji = read(
+        &[data("terrainrgb/fuji_terrain_rgb.png")],
+        &ReadOptions {
+            spacing: Some(30.0),
+            ..opts
+        },
+    );
+    assert_eq!(fuji.placement, None);
+    let puget = read(&[data("puget/ps_height_1k.png")], &spaced);
+    assert_eq!(puget.placement, None);
+}

@@ -518,7 +518,7 @@ fn texture_layout(h: &FileHeader) -> Result<Option<texture::Layout>, String> {
             h.texture_gutter, h.texture_mips, h.texture_interior
         ));
     }
-    if !(texture::SOURCE_PHOTO..=texture::SOURCE_TINTED_RELIEF).contains(&h.texture_source) {
+    if !(texture::SOURCE_PHOTO..=texture::SOURCE_GEOREFERENCED_PHOTO).contains(&h.texture_source) {
         return Err(format!("texture source {} is not known", h.texture_source));
     }
     Ok(Some(layout))

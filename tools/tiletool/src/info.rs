@@ -108,7 +108,7 @@ pub fn run(file: &Path, json: bool) -> Result<ExitCode> {
     let texture = match set.texture_layout() {
         None => None,
         Some(layout) => {
-            use tiles::texture::{SOURCE_PHOTO, SOURCE_RELIEF};
+            use tiles::texture::{SOURCE_GEOREFERENCED_PHOTO, SOURCE_PHOTO, SOURCE_RELIEF};
             let mut mips: Vec<MipInfo> = (0..layout.mips)
                 .map(|m| MipInfo {
                     mip: m,
@@ -132,7 +132,11 @@ pub fn run(file: &Path, json: bool) -> Result<ExitCode> {
             let (source, placement) = match h.texture_source {
                 SOURCE_PHOTO => (
                     "photo",
-                    "spans the height grid exactly (first to last column and row)",
+                    "spans the height grid exactly (first to last column and row): it had no georeferencing, or the heights had none",
+                ),
+                SOURCE_GEOREFERENCED_PHOTO => (
+                    "photo",
+                    "aligned with the heights by both files' georeferencing (grey where the photo does not reach)",
                 ),
                 SOURCE_RELIEF => ("relief", "computed from the heights"),
                 _ => ("tinted relief", "computed from the heights"),

@@ -100,8 +100,10 @@ enum Command {
 /// What the terrain is textured with (default: a pre-lit shaded relief of the heights).
 #[derive(Args, Clone)]
 struct TextureArgs {
-    /// Photo texture draped over the heights: PNG, JPEG or RGB GeoTIFF of any resolution,
-    /// taken to span the height grid exactly (first to last column and row).
+    /// Photo texture draped over the heights: PNG, JPEG or RGB GeoTIFF of any resolution.
+    /// A GeoTIFF over georeferenced heights (GeoTIFF, SRTM, named Terrain-RGB tile) is aligned
+    /// by both files' georeferencing (same coordinate system; grey where it does not reach);
+    /// otherwise it is taken to span the height grid exactly (first to last column and row).
     #[arg(long, conflicts_with = "no_texture")]
     texture: Option<PathBuf>,
     /// No texture tiles: the renderer lights the terrain itself (as before format v2).
@@ -123,8 +125,12 @@ struct TextureArgs {
 }
 
 impl TextureArgs {
-    /// The texturing to build with, reading the photo if there is one.
-    fn texturing(&self, grid: &dem::HeightGrid) -> Result<Option<tiles::texture::Texturing>> {
+    /// The texturing to build with, reading the photo if there is one, and how the photo lies
+    /// on the heights.
+    fn texturing(
+        &self,
+        grid: &dem::HeightGrid,
+    ) -> Result<Option<(tiles::texture::Texturing, Option<photo::Laid>)>> {
         use tiles::texture::{interior_for, Layout, Source, Texturing};
         if self.no_texture {
             return Ok(None);
@@ -134,11 +140,12 @@ impl TextureArgs {
                 bail!("--texels-per-sample {t} must be a positive number");
             }
         }
-        let (source, density) = match &self.texture {
+        let (source, density, laid) = match &self.texture {
             Some(path) => {
-                let photo = photo::read(path)?;
-                let density = photo.pixels_per_cell(&view(grid));
-                (Source::Photo(photo), density)
+                let picture = photo::read(path)?;
+                let (photo, laid) = photo::lay(picture, path, grid, &view(grid))?;
+                let density = photo.pixels_per_cell();
+                (Source::Photo(photo), density, Some(laid))
             }
             None => {
                 let relief = tiles::texture::relief::Relief {
@@ -147,12 +154,12 @@ impl TextureArgs {
                     tint: self.tint,
                 };
                 relief.validate().map_err(|e| anyhow::anyhow!(e))?;
-                (Source::Relief(relief), 2.0)
+                (Source::Relief(relief), 2.0, None)
             }
         };
         let layout = Layout::new(interior_for(self.texels_per_sample.unwrap_or(density)))
             .map_err(|e| anyhow::anyhow!(e))?;
-        Ok(Some(Texturing { source, layout }))
+        Ok(Some((Texturing { source, layout }, laid)))
     }
 }
 
@@ -366,7 +373,8 @@ fn build(
     }
     let start = Instant::now();
     let grid = read_dem(&input.inputs, &input.read)?;
-    let texturing = texture.texturing(&grid)?;
+    let (texturing, laid) = texture.texturing(&grid)?.unzip();
+    let laid = laid.flatten();
     let decoded = start.elapsed();
     let (tiles_x, tiles_y) = tiles::format::tile_count(grid.width, grid.height)
         .map_err(|e| anyhow::anyhow!("{}: {e}", input.inputs[0].display()))?;
@@ -450,7 +458,7 @@ fn build(
             );
         }
         if let Some(t) = &texturing {
-            print_texture(t, &summary, tiles_x * tiles_y);
+            print_texture(t, laid.as_ref(), &summary, tiles_x * tiles_y);
         }
         let secs = total.as_secs_f64();
         println!(
@@ -467,15 +475,18 @@ fn build(
     Ok(ExitCode::SUCCESS)
 }
 
-fn print_texture(t: &tiles::texture::Texturing, summary: &tiles::BuildSummary, tiles: u32) {
+fn print_texture(
+    t: &tiles::texture::Texturing,
+    laid: Option<&photo::Laid>,
+    summary: &tiles::BuildSummary,
+    tiles: u32,
+) {
     use tiles::texture::Source;
     let l = &t.layout;
-    let what = match &t.source {
-        Source::Photo(p) => format!(
-            "photo {}x{} px, taken to span the height grid exactly (not aligned by georeferencing)",
-            p.width, p.height
-        ),
-        Source::Relief(r) => format!(
+    let what = match (&t.source, laid) {
+        (Source::Photo(p), Some(laid)) => format!("photo {}x{} px, {laid}", p.width, p.height),
+        (Source::Photo(p), None) => format!("photo {}x{} px", p.width, p.height),
+        (Source::Relief(r), _) => format!(
             "shaded relief{}, sun at azimuth {} and elevation {} degrees",
             if r.tint { " with hypsometric tint" } else { "" },
             r.azimuth_deg,

@@ -1,15 +1,105 @@
 //! Reading the photo texture `tiletool build --texture` drapes over the heights: PNG, JPEG
-//! or an RGB(A)/grey GeoTIFF, 8 or 16 bits per channel, decoded to RGB bytes.
+//! or an RGB(A)/grey GeoTIFF, 8 or 16 bits per channel, decoded to RGB bytes; and laying it
+//! on the height grid, by both files' georeferencing when both have it.
 
 use std::path::Path;
 
 use anyhow::{anyhow, bail, Context, Result};
-use tiles::texture::Photo;
+use tiles::texture::{Frame, Photo};
 
 /// Largest photo we decode, in pixels (64K x 64K RGB would already be 12 GiB).
 const MAX_PIXELS: u64 = 1 << 32;
 
-pub fn read(path: &Path) -> Result<Photo> {
+/// A decoded picture and where it lies, if its file says (GeoTIFF tags).
+pub struct Picture {
+    pub width: usize,
+    pub height: usize,
+    pub rgb: Vec<u8>,
+    pub placement: Option<dem::Placement>,
+}
+
+/// How a photo was laid on the heights, for `build`'s report.
+pub enum Laid {
+    /// By both files' georeferencing; the fraction of the heights' area it covers.
+    Georeferenced { crs: dem::Crs, coverage: f64 },
+    /// Stretched over the height grid edge to edge, and why.
+    Spanning(&'static str),
+}
+
+impl std::fmt::Display for Laid {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Laid::Georeferenced { crs, coverage } if *coverage >= 1.0 => {
+                write!(f, "aligned by georeferencing ({crs}), covering the heights")
+            }
+            Laid::Georeferenced { crs, coverage } => write!(
+                f,
+                "aligned by georeferencing ({crs}), covering {:.1}% of the heights (grey beyond it)",
+                coverage * 100.0
+            ),
+            Laid::Spanning(why) => write!(f, "taken to span the height grid exactly ({why})"),
+        }
+    }
+}
+
+/// Lays `picture` (read from `path`) on `grid`: by georeferencing when both have it, else
+/// spanning the grid. Refuses, naming the file, a photo in another coordinate system or one
+/// that does not overlap the heights.
+pub fn lay(
+    picture: Picture,
+    path: &Path,
+    grid: &dem::HeightGrid,
+    view: &tiles::Grid,
+) -> Result<(Photo, Laid)> {
+    let name = path.display();
+    let Picture {
+        width,
+        height,
+        rgb,
+        placement,
+    } = picture;
+    let (photo_at, heights_at) = match (placement, grid.placement) {
+        (Some(p), Some(h)) => (p, h),
+        (None, _) => {
+            let photo = Photo::spanning(width, height, rgb, view);
+            return Ok((photo, Laid::Spanning("the photo has no georeferencing")));
+        }
+        (Some(_), None) => {
+            let photo = Photo::spanning(width, height, rgb, view);
+            let why = "the heights have no georeferencing";
+            return Ok((photo, Laid::Spanning(why)));
+        }
+    };
+    let dem::Mapping {
+        origin: (ox, oy),
+        step,
+    } = heights_at
+        .in_grid_of(&photo_at)
+        .map_err(|e| anyhow!("{name}: cannot lay this photo on the heights: {e}"))?;
+    // `in_grid_of` maps to pixel centres; the frame wants pixel edges (centre = edge + 0.5).
+    let photo = Photo {
+        width,
+        height,
+        rgb,
+        frame: Frame {
+            origin: (ox + 0.5, oy + 0.5),
+            step,
+        },
+        georeferenced: true,
+    };
+    let coverage = photo.coverage(view);
+    if coverage <= 0.0 {
+        bail!(
+            "{name}: the photo does not overlap the heights: it spans {}, the heights {}",
+            photo_at.extent(width, height),
+            heights_at.extent(grid.width, grid.height)
+        );
+    }
+    let crs = heights_at.crs;
+    Ok((photo, Laid::Georeferenced { crs, coverage }))
+}
+
+pub fn read(path: &Path) -> Result<Picture> {
     let name = path.display();
     let meta = std::fs::metadata(path).with_context(|| format!("{name}"))?;
     if !meta.is_file() {
@@ -39,7 +129,7 @@ pub fn read(path: &Path) -> Result<Photo> {
     Ok(photo)
 }
 
-fn read_image(path: &Path) -> Result<Photo> {
+fn read_image(path: &Path) -> Result<Picture> {
     let name = path.display();
     let reader = image::ImageReader::open(path)
         .with_context(|| format!("{name}"))?
@@ -52,14 +142,15 @@ fn read_image(path: &Path) -> Result<Photo> {
         .decode()
         .map_err(|e| anyhow!("{name}: cannot decode the texture: {e}"))?;
     let rgb = decoded.to_rgb8();
-    Ok(Photo {
+    Ok(Picture {
         width: rgb.width() as usize,
         height: rgb.height() as usize,
         rgb: rgb.into_raw(),
+        placement: None,
     })
 }
 
-fn read_tiff(path: &Path) -> Result<Photo> {
+fn read_tiff(path: &Path) -> Result<Picture> {
     use tiff::decoder::{Decoder, DecodingResult};
     use tiff::ColorType;
     let name = path.display();
@@ -94,9 +185,11 @@ fn read_tiff(path: &Path) -> Result<Photo> {
             _ => [p[0], p[1], p[2]],
         })
         .collect();
-    Ok(Photo {
+    let placement = dem::read_tiff_placement(path)?;
+    Ok(Picture {
         width: width as usize,
         height: height as usize,
         rgb,
+        placement,
     })
 }

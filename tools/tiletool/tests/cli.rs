@@ -936,3 +936,208 @@ fn a_corrupted_texture_is_caught_by_verify_and_export() {
     ]);
     assert_one_line_error(&o, "bad.vkt");
 }
+
+/// Photo pixels per degree in the georeferenced tests: 1.5 per 3" cell of the SRTM heights.
+const PHOTO_PX_PER_DEGREE: f64 = 1800.0;
+
+/// The colour a test photo shows at longitude `lon`, latitude `lat`: three sinusoids of
+/// 37, 29 and 53 photo pixels, so a texel taken from the wrong place shows.
+fn geo_colour(lon: f64, lat: f64) -> [u8; 3] {
+    let wave = |t: f64, period: f64, amplitude: f64| {
+        (128.0 + amplitude * (t * PHOTO_PX_PER_DEGREE * std::f64::consts::TAU / period).sin())
+            .round() as u8
+    };
+    [
+        wave(lon, 37.0, 100.0),
+        wave(lat, 29.0, 100.0),
+        wave(lon + lat, 53.0, 60.0),
+    ]
+}
+
+/// An RGB8 GeoTIFF photo of `geo_colour`, `w x h` pixels whose north-west corner lies at
+/// `corner` in the given GeoKeys' system (`None`: no georeferencing tags at all).
+fn geo_photo(path: &Path, corner: (f64, f64), (w, h): (u32, u32), keys: Option<&[u16]>) {
+    use tiff::encoder::{colortype, TiffEncoder};
+    use tiff::tags::Tag;
+    let step = 1.0 / PHOTO_PX_PER_DEGREE;
+    let rgb: Vec<u8> = (0..h)
+        .flat_map(|j| (0..w).map(move |i| (i, j)))
+        .flat_map(|(i, j)| {
+            let lon = corner.0 + (f64::from(i) + 0.5) * step;
+            let lat = corner.1 - (f64::from(j) + 0.5) * step;
+            geo_colour(lon, lat)
+        })
+        .collect();
+    let file = std::fs::File::create(path).expect("create photo");
+    let mut encoder = TiffEncoder::new(file).expect("tiff");
+    let mut image = encoder.new_image::<colortype::RGB8>(w, h).expect("image");
+    if let Some(keys) = keys {
+        let e = image.encoder();
+        e.write_tag(Tag::ModelPixelScaleTag, &[step, step, 0.0][..])
+            .expect("tag");
+        let tie = [0.0, 0.0, 0.0, corner.0, corner.1, 0.0];
+        e.write_tag(Tag::ModelTiepointTag, &tie[..]).expect("tag");
+        e.write_tag(Tag::GeoKeyDirectoryTag, keys).expect("tag");
+    }
+    image.write_data(&rgb).expect("pixels");
+}
+
+/// GeoKeys of a geographic WGS 84 (EPSG:4326) raster of areas.
+const WGS84_KEYS: [u16; 16] = [1, 1, 0, 3, 1024, 0, 1, 2, 1025, 0, 1, 1, 2048, 0, 1, 4326];
+
+#[test]
+fn a_georeferenced_photo_is_laid_by_its_georeferencing() {
+    // Heights: the first 513 x 513 samples of N43E007 (2 x 2 tiles); SRTM samples are points
+    // on the 3" lattice from the tile's north-west corner, 44 N 7 E (the file name says so,
+    // independently of any code under test). The photo starts 0.05 degree west and 0.013
+    // north of it, at 1.5 pixels per cell, and stops at 7.3 E: it covers
+    // 0.3 / (512 / 1200) = 70.3% of the heights, all of them north to south.
+    let dir = tempfile::tempdir().expect("temp dir");
+    let d = dir.path();
+    let heights = data("srtm/N43E007.hgt");
+    let corner = (6.95, 44.013);
+    let size = (((7.3 - corner.0) * PHOTO_PX_PER_DEGREE).round() as u32, 923);
+    let photo = d.join("photo.tif");
+    geo_photo(&photo, corner, size, Some(&WGS84_KEYS));
+    let vkt = d.join("geo.vkt");
+    let build = |photo: &Path, out: &Path| {
+        tiletool(&[
+            "build",
+            s(&heights),
+            "--crop",
+            "0,0,513x513",
+            "-o",
+            s(out),
+            "--texture",
+            s(photo),
+        ])
+    };
+    let o = build(&photo, &vkt);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let report = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        report.contains("aligned by georeferencing (EPSG:4326), covering 70.3% of the heights"),
+        "{report}"
+    );
+    let o = tiletool(&["info", s(&vkt), "--json"]);
+    let info: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    let t = &info["texture"];
+    assert!(t["placement"].as_str().unwrap().contains("georeferencing"));
+    // 1.5 photo pixels per cell round to 512 texels per 256 cells.
+    assert_eq!(t["interior_texels"], 512);
+    let g = t["gutter_texels"].as_u64().unwrap() as u32;
+
+    // Every interior texel of every tile against the colour the photo has at the texel's
+    // own longitude and latitude (texel i of tile tx: cell 256 tx + (i + 0.5) / 2).
+    let layer = |vkt: &Path, (tx, ty): (u32, u32)| {
+        let png = d.join(format!("mip-{tx}-{ty}.png"));
+        let tile = format!("{tx},{ty}");
+        let o = tiletool(&[
+            "export",
+            s(vkt),
+            "--tile",
+            &tile,
+            "--texture-mip",
+            "0",
+            "-o",
+            s(&png),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        image::open(&png).expect("png").to_rgb8()
+    };
+    let texel_place = |(tx, ty): (u32, u32), (i, j): (u32, u32)| {
+        let c = f64::from(256 * tx) + (f64::from(i) + 0.5) / 2.0;
+        let r = f64::from(256 * ty) + (f64::from(j) + 0.5) / 2.0;
+        (7.0 + c / 1200.0, 44.0 - r / 1200.0)
+    };
+    let photo_east = corner.0 + f64::from(size.0) / PHOTO_PX_PER_DEGREE;
+    // PSNR of the texels on the photo against the photo's colours at their own place and at
+    // places half a photo pixel away (a pixel-is-area/point mix-up), and the count of texels
+    // beyond the photo that are not grey (BC1 stores grey 128 as 132 in its 5-bit channels,
+    // hence a tolerance of 5).
+    let half = 0.5 / PHOTO_PX_PER_DEGREE;
+    let shifts = [
+        (0.0, 0.0),
+        (half, 0.0),
+        (-half, 0.0),
+        (0.0, half),
+        (0.0, -half),
+    ];
+    let measure = |vkt: &Path| {
+        let mut pairs = vec![Vec::new(); shifts.len()];
+        let mut off_not_grey = 0;
+        for tile in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+            let layer = layer(vkt, tile);
+            for j in 0..512 {
+                for i in 0..512 {
+                    let (lon, lat) = texel_place(tile, (i, j));
+                    let texel = layer.get_pixel(g + i, g + j).0;
+                    // A texel within two photo pixels of the photo's edge blends both sides.
+                    let margin = 2.0 / PHOTO_PX_PER_DEGREE;
+                    if lon < photo_east - margin {
+                        for (p, (dx, dy)) in pairs.iter_mut().zip(shifts) {
+                            p.push((texel, geo_colour(lon + dx, lat + dy)));
+                        }
+                    } else if lon > photo_east + margin
+                        && texel.iter().any(|&c| c.abs_diff(128) > 5)
+                    {
+                        off_not_grey += 1;
+                    }
+                }
+            }
+        }
+        let psnrs: Vec<f64> = pairs.into_iter().map(|p| psnr(p.into_iter())).collect();
+        (psnrs, off_not_grey)
+    };
+    let (psnrs, off_not_grey) = measure(&vkt);
+    let on = psnrs[0];
+    assert!(on >= PSNR_FLOOR_DB, "aligned: {on:.2} dB");
+    for (shift, db) in shifts.iter().zip(&psnrs).skip(1) {
+        assert!(
+            *db < on - 0.5,
+            "half a photo pixel off {shift:?} is not worse: {db:.2} vs {on:.2} dB"
+        );
+    }
+    assert_eq!(off_not_grey, 0, "texels beyond the photo that are not grey");
+
+    // Control: the same pixels without georeferencing are stretched over the grid instead,
+    // and the same measure finds them far from where they belong.
+    let plain = d.join("plain.tif");
+    geo_photo(&plain, corner, size, None);
+    let stretched = d.join("stretched.vkt");
+    let o = build(&plain, &stretched);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("span the height grid exactly"));
+    let control = measure(&stretched).0[0];
+    eprintln!("aligned {on:.2} dB, half a pixel off {psnrs:.2?} dB, stretched {control:.2} dB");
+    assert!(
+        control < on - 10.0,
+        "a stretched photo measures {control:.2} dB, the aligned one {on:.2} dB"
+    );
+}
+
+#[test]
+fn photos_that_cannot_be_laid_on_the_heights_are_refused() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let d = dir.path();
+    let heights = data("srtm/N43E007.hgt");
+    let crop = ["--crop", "0,0,257x257"];
+    // Three degrees east of the heights.
+    let far = d.join("far.tif");
+    geo_photo(&far, (10.0, 44.0), (200, 200), Some(&WGS84_KEYS));
+    let mut extra = crop.to_vec();
+    extra.extend(["--texture", s(&far)]);
+    let err = build_fails(&[&heights], &extra, "far.tif");
+    assert!(err.contains("does not overlap the heights"), "{err}");
+    // A projected photo (UTM 32N, EPSG:32632) over geographic heights.
+    let utm = d.join("utm.tif");
+    let utm_keys = [1u16, 1, 0, 2, 1024, 0, 1, 1, 3072, 0, 1, 32632];
+    geo_photo(&utm, (350_000.0, 4_870_000.0), (200, 200), Some(&utm_keys));
+    let mut extra = crop.to_vec();
+    extra.extend(["--texture", s(&utm)]);
+    let err = build_fails(&[&heights], &extra, "utm.tif");
+    assert!(
+        err.contains("EPSG:32632") && err.contains("EPSG:4326"),
+        "{err}"
+    );
+}

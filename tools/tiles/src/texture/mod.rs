@@ -48,6 +48,8 @@ pub const FORMAT_BC1: u32 = 1;
 pub const SOURCE_PHOTO: u32 = 1;
 pub const SOURCE_RELIEF: u32 = 2;
 pub const SOURCE_TINTED_RELIEF: u32 = 3;
+/// A photo laid on the heights by its georeferencing (`SOURCE_PHOTO` spans the grid).
+pub const SOURCE_GEOREFERENCED_PHOTO: u32 = 4;
 
 pub const TEXTURE_MAGIC: [u8; 4] = *b"TXTR";
 
@@ -124,22 +126,77 @@ impl Layout {
     }
 }
 
-/// A photo (or any RGB picture) taken to cover the height grid exactly: its left edge on
-/// column 0, its right edge on the last column, top on row 0, bottom on the last row.
+/// Where the height grid lies on a photo, in the photo's *pixel-edge* coordinates (pixel `p`
+/// spans `[p, p + 1)`, its centre at `p + 0.5`): grid sample `(column, row)` lies at
+/// `(origin.0 + column * step.0, origin.1 + row * step.1)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Frame {
+    pub origin: (f64, f64),
+    /// Photo pixels per grid cell, across and down.
+    pub step: (f64, f64),
+}
+
+/// A photo (or any RGB picture) to drape over the heights, and where it lies on them.
 #[derive(Clone, Debug)]
 pub struct Photo {
     pub width: usize,
     pub height: usize,
     /// RGB, 3 bytes per pixel, row-major, row 0 north.
     pub rgb: Vec<u8>,
+    pub frame: Frame,
+    /// Whether `frame` comes from georeferencing (else the photo spans the grid).
+    pub georeferenced: bool,
 }
 
+/// What the texture shows where the photo does not reach: a neutral grey, plainly not terrain.
+pub const UNCOVERED: [f32; 3] = [128.0; 3];
+
 impl Photo {
+    /// A photo taken to cover the height grid exactly: its left edge on column 0, its right
+    /// edge on the last column, top on row 0, bottom on the last row.
+    pub fn spanning(width: usize, height: usize, rgb: Vec<u8>, grid: &Grid) -> Photo {
+        let step = (
+            width as f64 / (grid.width - 1) as f64,
+            height as f64 / (grid.height - 1) as f64,
+        );
+        Photo {
+            width,
+            height,
+            rgb,
+            frame: Frame {
+                origin: (0.0, 0.0),
+                step,
+            },
+            georeferenced: false,
+        }
+    }
+
     /// Pixels across one grid cell (the photo's own density).
-    pub fn pixels_per_cell(&self, grid: &Grid) -> f64 {
-        let x = self.width as f64 / (grid.width - 1) as f64;
-        let y = self.height as f64 / (grid.height - 1) as f64;
-        x.max(y)
+    pub fn pixels_per_cell(&self) -> f64 {
+        self.frame.step.0.max(self.frame.step.1)
+    }
+
+    /// Whether grid position `(c, r)` (in cells, clamped into the grid first: beyond the grid
+    /// the texture repeats its edge) lies on the photo.
+    fn covers(&self, grid: &Grid, (c, r): (f64, f64)) -> bool {
+        let c = c.clamp(0.0, (grid.width - 1) as f64);
+        let r = r.clamp(0.0, (grid.height - 1) as f64);
+        let x = self.frame.origin.0 + c * self.frame.step.0;
+        let y = self.frame.origin.1 + r * self.frame.step.1;
+        (0.0..=self.width as f64).contains(&x) && (0.0..=self.height as f64).contains(&y)
+    }
+
+    /// The fraction of the height grid's area the photo covers.
+    pub fn coverage(&self, grid: &Grid) -> f64 {
+        let axis = |origin: f64, step: f64, cells: usize, pixels: usize| {
+            // The grid's cells [0, cells] span [origin, origin + cells * step] in pixels.
+            let (lo, hi) = (origin, origin + cells as f64 * step);
+            let overlap = hi.min(pixels as f64) - lo.max(0.0);
+            (overlap / (hi - lo)).clamp(0.0, 1.0)
+        };
+        let f = &self.frame;
+        axis(f.origin.0, f.step.0, grid.width - 1, self.width)
+            * axis(f.origin.1, f.step.1, grid.height - 1, self.height)
     }
 
     /// Pixels `x..x+w`, `y..y+h` as an [`Image`], clamped into the photo.
@@ -178,6 +235,7 @@ impl Texturing {
     /// The `FileHeader::texture_source` code.
     pub fn source_code(&self) -> u32 {
         match &self.source {
+            Source::Photo(p) if p.georeferenced => SOURCE_GEOREFERENCED_PHOTO,
             Source::Photo(_) => SOURCE_PHOTO,
             Source::Relief(r) if r.tint => SOURCE_TINTED_RELIEF,
             Source::Relief(_) => SOURCE_RELIEF,
@@ -219,12 +277,14 @@ fn base_region(
             relief::render(grid, lighting, (cx, cy), cells_per_texel, (n, n))
         }
         Prepared::Photo(photo) => {
-            // Pixel centres sit at (p + 0.5) / density cells; in pixel index space a cell
-            // position c is at c * density - 0.5.
-            let kx = photo.width as f64 / (grid.width - 1) as f64;
-            let ky = photo.height as f64 / (grid.height - 1) as f64;
-            let (x0, sx) = (cx * kx - 0.5, cells_per_texel * kx);
-            let (y0, sy) = (cy * ky - 0.5, cells_per_texel * ky);
+            // In pixel *index* space (pixel p's centre at p) a cell position c lies at
+            // origin + c * step - 0.5.
+            let Frame {
+                origin: (ox, oy),
+                step: (kx, ky),
+            } = photo.frame;
+            let (x0, sx) = (ox + cx * kx - 0.5, cells_per_texel * kx);
+            let (y0, sy) = (oy + cy * ky - 0.5, cells_per_texel * ky);
             // Only the pixels the taps reach, clamped into the photo.
             let reach = |start: f64, step: f64, len: usize| {
                 let support = lanczos::RADIUS * step.max(1.0) + 1.0;
@@ -236,7 +296,20 @@ fn base_region(
             let (wx, ww) = reach(x0, sx, photo.width);
             let (wy, wh) = reach(y0, sy, photo.height);
             let window = photo.window(wx, wy, ww, wh);
-            resample(&window, n, n, (x0 - wx as f64, sx), (y0 - wy as f64, sy))
+            let mut image = resample(&window, n, n, (x0 - wx as f64, sx), (y0 - wy as f64, sy));
+            // Where the photo does not reach, grey rather than its edge pixels smeared on.
+            for j in 0..n {
+                for i in 0..n {
+                    let at = (
+                        cx + i as f64 * cells_per_texel,
+                        cy + j as f64 * cells_per_texel,
+                    );
+                    if !photo.covers(grid, at) {
+                        image.texels[j * n + i] = UNCOVERED;
+                    }
+                }
+            }
+            image
         }
     }
 }
@@ -558,14 +631,8 @@ mod tests {
                 rgb.push((128.0 + 60.0 * ((fx + fy) * 0.7).sin()) as u8);
             }
         }
-        (
-            heights,
-            Photo {
-                width: pw,
-                height: ph,
-                rgb,
-            },
-        )
+        let photo = Photo::spanning(pw, ph, rgb, &grid_of(&heights));
+        (heights, photo)
     }
 
     fn grid_of(heights: &[f32]) -> Grid<'_> {
