@@ -1,5 +1,5 @@
 //! Single-band GeoTIFF DEMs through the `tiff` crate: integer or float samples, stripped or
-//! tiled, uncompressed/LZW/Deflate/PackBits with any predictor it decodes. Voids come from the
+//! tiled, uncompressed/LZW/Deflate/PackBits/ZSTD with any predictor it decodes. Voids come from the
 //! GDAL_NODATA tag (42113); spacing from ModelPixelScale (33550) + ModelTiepoint (33922) or
 //! ModelTransformation (34264), read as degrees or metres per GTModelTypeGeoKey (1024) in the
 //! GeoKeyDirectory (34735). Everything else (RGB, multi-band, JPEG-in-TIFF, 1-bit) is refused
@@ -48,7 +48,7 @@ fn compression_name(code: u16) -> Result<&'static str, String> {
         8 | 32946 => Ok("Deflate"),
         32773 => Ok("PackBits"),
         6 | 7 => Err("JPEG-compressed TIFF (lossy; heights need lossless compression)".into()),
-        50000 => Err("ZSTD-compressed TIFF (recompress with LZW or Deflate)".into()),
+        50000 => Ok("ZSTD"),
         other => Err(format!("TIFF compression method {other}")),
     }
 }

@@ -407,6 +407,10 @@ impl TiffSpec {
             5 => Lzw.write_to(&mut out, bytes),
             8 => Deflate::default().write_to(&mut out, bytes),
             32773 => Packbits.write_to(&mut out, bytes),
+            50000 => {
+                out = zstd::encode_all(bytes, 3).expect("zstd");
+                Ok(0)
+            }
             _ => {
                 out.extend_from_slice(bytes);
                 Ok(0)
