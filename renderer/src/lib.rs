@@ -24,3 +24,6 @@ pub mod target;
 pub mod terrain;
 pub mod vulkan;
 pub mod window;
+
+#[cfg(test)]
+mod test_rng;

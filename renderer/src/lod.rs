@@ -225,20 +225,7 @@ pub fn level_for(tile: &TileInfo, r: f64) -> u32 {
 mod tests {
     use super::*;
     use crate::camera::Camera;
-
-    /// A xorshift stream in [0, 1).
-    struct Rng(u64);
-    impl Rng {
-        fn next(&mut self) -> f64 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            (self.0 >> 11) as f64 / (1u64 << 53) as f64
-        }
-        fn range(&mut self, a: f64, b: f64) -> f64 {
-            a + (b - a) * self.next()
-        }
-    }
+    use crate::test_rng::Rng;
 
     /// Random cameras and boxes in front of them: `|J z|` at every on-screen point of a dense
     /// lattice of the box stays within the bound; the sampled rule is exceeded somewhere (it
