@@ -297,15 +297,18 @@ fn base_region(
             let (wy, wh) = reach(y0, sy, photo.height);
             let window = photo.window(wx, wy, ww, wh);
             let mut image = resample(&window, n, n, (x0 - wx as f64, sx), (y0 - wy as f64, sy));
-            // Where the photo does not reach, grey rather than its edge pixels smeared on.
-            for j in 0..n {
-                for i in 0..n {
-                    let at = (
-                        cx + i as f64 * cells_per_texel,
-                        cy + j as f64 * cells_per_texel,
-                    );
-                    if !photo.covers(grid, at) {
-                        image.texels[j * n + i] = UNCOVERED;
+            // Where the photo does not reach, grey rather than its edge pixels smeared on
+            // (nothing to do for a photo that covers the grid, the usual case).
+            if photo.coverage(grid) < 1.0 {
+                for j in 0..n {
+                    for i in 0..n {
+                        let at = (
+                            cx + i as f64 * cells_per_texel,
+                            cy + j as f64 * cells_per_texel,
+                        );
+                        if !photo.covers(grid, at) {
+                            image.texels[j * n + i] = UNCOVERED;
+                        }
                     }
                 }
             }
