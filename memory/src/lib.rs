@@ -68,8 +68,9 @@ pub mod trace;
 pub use classes::ClassPlan;
 pub use cost::{Layout, LevelCost, TileCost};
 pub use manager::{
-    Config, FramePlan, Grant, Manager, Move, Part, Request, Scheme, Stats, TileId, Upload, Victim,
-    DEFAULT_DOWNGRADE_SLACK, DEFAULT_PREFETCH_FREE, DEFAULT_UPLOAD_BUDGET, DEFAULT_WEIGHT,
+    Config, FramePlan, Grant, IndexArrays, Manager, Move, Part, Request, Scheme, Stats, TileId,
+    Upload, Victim, DEFAULT_DOWNGRADE_SLACK, DEFAULT_PREFETCH_FREE, DEFAULT_UPLOAD_BUDGET,
+    DEFAULT_WEIGHT,
 };
 pub use textures::{
     TextureConfig, TextureGrant, TextureRequest, TextureSlots, TextureStats, TextureUpload,

@@ -21,6 +21,18 @@ pub enum Scheme {
     WholeTile,
 }
 
+/// Where index arrays come from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum IndexArrays {
+    /// Copied from the file like the blocks: they cost upload budget.
+    #[default]
+    Sent,
+    /// Built on the GPU from the tile's resident blocks (the renderer's compute pass, see
+    /// `renderer/src/vulkan/indices.rs`): they take the same pool space but cross no bus, so
+    /// the upload budget pays for blocks only.
+    Built,
+}
+
 /// How a victim is chosen when no free chunk fits.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Victim {
@@ -54,6 +66,7 @@ pub struct Config {
     /// [`Manager::prefetch`] runs while at least this share of the chunks is free, and stops
     /// before taking the pool below it.
     pub prefetch_free: f64,
+    pub index_arrays: IndexArrays,
 }
 
 /// The default per-frame upload budget: 4 MiB, ~240 MB/s at 60 frames per second, a small
@@ -80,6 +93,7 @@ impl Default for Config {
             victim: Victim::Mixture,
             downgrade_slack: DEFAULT_DOWNGRADE_SLACK,
             prefetch_free: DEFAULT_PREFETCH_FREE,
+            index_arrays: IndexArrays::Sent,
         }
     }
 }
@@ -109,6 +123,29 @@ pub struct Upload {
     /// The destination may be read by a frame still in flight (an index region rewritten):
     /// it must be written by a copy ordered after those frames, not by the CPU now.
     pub in_flight: bool,
+    /// Pool offset of the chunk it goes into (where the tile's block 0 positions start: an
+    /// index array is built from the blocks there).
+    pub chunk: u64,
+    /// An index array built on the GPU from the tile's blocks ([`IndexArrays::Built`]):
+    /// nothing is sent, and it is written in the frame's command buffer after the copies.
+    pub built: bool,
+}
+
+impl Upload {
+    /// Bytes that cross the bus (what the upload budget counts).
+    pub fn sent(&self) -> u64 {
+        if self.built {
+            0
+        } else {
+            self.bytes
+        }
+    }
+
+    /// Written on the GPU in the frame's command buffer (after its in-pool copies), not by
+    /// the CPU when planned.
+    pub fn gpu_ordered(&self) -> bool {
+        self.in_flight || self.built
+    }
 }
 
 /// A copy inside the pool (a tile moving to a larger chunk).
@@ -144,7 +181,12 @@ pub struct Stats {
     pub tiles_coarser: u64,
     pub tiles_missing: u64,
     pub upload_bytes_blocks: u64,
+    /// Index array bytes sent (0 when they are built on the GPU).
     pub upload_bytes_indices: u64,
+    /// Index arrays built on the GPU this frame, and their bytes (written in GPU memory,
+    /// not sent).
+    pub index_builds: u64,
+    pub index_build_bytes: u64,
     /// Of `upload_bytes_indices`: index arrays sent to draw a tile coarser than it was drawn
     /// (its blocks are resident; a coarser level needs only its index array). This is what
     /// `Config::downgrade_slack` trades for triangles.
@@ -468,7 +510,7 @@ impl Manager {
             return;
         }
         let min_free = (self.config.prefetch_free * self.chunks.len() as f64).ceil() as usize;
-        let spent: u64 = plan.uploads.iter().map(|u| u.bytes).sum();
+        let spent: u64 = plan.uploads.iter().map(Upload::sent).sum();
         let mut left = self.config.upload_budget.saturating_sub(spent);
         let requested: std::collections::HashSet<TileId> =
             plan.grants.iter().map(|g| g.tile).collect();
@@ -528,7 +570,10 @@ impl Manager {
         // Not twice in a frame, and not a chunk with a staged upload this frame (copies run
         // before staged uploads: the move would carry the old index array).
         let moved = self.chunks[res.chunk].copied_in == Some(self.frame)
-            || plan.uploads.iter().any(|u| u.tile == tile && u.in_flight);
+            || plan
+                .uploads
+                .iter()
+                .any(|u| u.tile == tile && u.gpu_ordered());
         let spare_bytes = self.tiles[tile as usize].levels[wanted as usize].indices;
         let outgrown = wanted > res.layout.capacity && b < wanted;
         // A spare between the drawn level and the one wanted stays: it is the next step, and
@@ -564,17 +609,13 @@ impl Manager {
         let level = top.min(wanted);
         let bytes = t.levels[level as usize].indices;
         let mut sent = false;
-        if may_spare && level > index && !ahead(&res, level) && sum + bytes <= left {
+        let cost = self.index_cost(tile, level);
+        if may_spare && level > index && !ahead(&res, level) && sum + cost <= left {
             if let Some(at) = self.spare_slot(tile, &res, bytes) {
                 sent = true;
                 self.drop_spare(tile, &mut res, plan);
-                plan.uploads.push(Upload {
-                    tile,
-                    part: Part::Indices(level),
-                    dst: base + at,
-                    bytes,
-                    in_flight: self.read_in_flight(res.chunk),
-                });
+                plan.uploads
+                    .push(self.index_upload(tile, level, base + at, res.chunk));
                 res.spare = Some((level, at));
             }
         }
@@ -676,7 +717,7 @@ impl Manager {
                     return;
                 }
                 let t = &self.tiles[tile as usize];
-                if t.block_bytes(0) + t.levels[0].indices > left {
+                if t.block_bytes(0) + self.index_cost(tile, 0) > left {
                     return;
                 }
                 let Some(res) = self.admit(tile, wanted, plan) else {
@@ -725,8 +766,13 @@ impl Manager {
     fn summarise(&self, plan: &mut FramePlan) {
         let s = &mut plan.stats;
         (s.upload_bytes_blocks, s.upload_bytes_indices) = (0, 0);
+        (s.index_builds, s.index_build_bytes) = (0, 0);
         for u in &plan.uploads {
             match u.part {
+                Part::Indices(_) if u.built => {
+                    s.index_builds += 1;
+                    s.index_build_bytes += u.bytes;
+                }
                 Part::Indices(_) => s.upload_bytes_indices += u.bytes,
                 _ => s.upload_bytes_blocks += u.bytes,
             }
@@ -854,10 +900,37 @@ impl Manager {
         })
     }
 
-    /// Drops `res`'s spare index array, unused: its bytes were wasted.
+    /// Bytes sent for `res`'s spare index array (0 without one, or when it was built).
+    fn spare_sent(&self, tile: TileId, res: &Resident) -> u64 {
+        res.spare.map_or(0, |(s, _)| self.index_cost(tile, s))
+    }
+
+    /// Drops `res`'s spare index array, unused: the bytes sent for it were wasted.
     fn drop_spare(&self, tile: TileId, res: &mut Resident, plan: &mut FramePlan) {
-        plan.stats.prefetch_wasted_bytes += self.spare_bytes(tile, res);
+        plan.stats.prefetch_wasted_bytes += self.spare_sent(tile, res);
         res.spare = None;
+    }
+
+    /// Upload-budget bytes of level `level`'s index array: its size when sent, nothing when
+    /// built on the GPU.
+    fn index_cost(&self, tile: TileId, level: u32) -> u64 {
+        match self.config.index_arrays {
+            IndexArrays::Sent => self.tiles[tile as usize].levels[level as usize].indices,
+            IndexArrays::Built => 0,
+        }
+    }
+
+    /// The upload of level `level`'s index array to pool offset `dst` in `chunk`.
+    fn index_upload(&self, tile: TileId, level: u32, dst: u64, chunk: usize) -> Upload {
+        Upload {
+            tile,
+            part: Part::Indices(level),
+            dst,
+            bytes: self.tiles[tile as usize].levels[level as usize].indices,
+            in_flight: self.read_in_flight(chunk),
+            chunk: self.chunks[chunk].offset,
+            built: self.config.index_arrays == IndexArrays::Built,
+        }
     }
 
     /// Where in `res`'s chunk an index array of `bytes` can go without touching the drawn one
@@ -888,8 +961,7 @@ impl Manager {
             Some(res) if res.whole => 0,
             Some(res) => self.step_cost(tile, &res, wanted),
             None => {
-                (0..=wanted).map(|j| t.block_bytes(j)).sum::<u64>()
-                    + t.levels[wanted as usize].indices
+                (0..=wanted).map(|j| t.block_bytes(j)).sum::<u64>() + self.index_cost(tile, wanted)
             }
         }
     }
@@ -941,7 +1013,7 @@ impl Manager {
         let blocks: u64 = (first_block..=level).map(|j| t.block_bytes(j)).sum();
         let index = match res.spare {
             Some((s, _)) if s == level => 0,
-            _ => t.levels[level as usize].indices,
+            _ => self.index_cost(tile, level),
         };
         blocks + index
     }
@@ -1083,15 +1155,10 @@ impl Manager {
             }
         } else {
             if res.index.is_some_and(|previous| level < previous) {
-                plan.stats.upload_bytes_coarser += bytes;
+                plan.stats.upload_bytes_coarser += self.index_cost(tile, level);
             }
-            plan.uploads.push(Upload {
-                tile,
-                part: Part::Indices(level),
-                dst: base + res.layout.index,
-                bytes,
-                in_flight: self.read_in_flight(res.chunk),
-            });
+            plan.uploads
+                .push(self.index_upload(tile, level, base + res.layout.index, res.chunk));
             res.index_at = res.layout.index;
             if res
                 .spare
@@ -1126,6 +1193,8 @@ impl Manager {
             dst: base + t.positions_before(j),
             bytes: l.positions,
             in_flight: false,
+            chunk: base,
+            built: false,
         });
         if l.morph > 0 {
             plan.uploads.push(Upload {
@@ -1134,6 +1203,8 @@ impl Manager {
                 dst: base + layout.morph + t.morph_before(j),
                 bytes: l.morph,
                 in_flight: false,
+                chunk: base,
+                built: false,
             });
         }
     }
@@ -1163,6 +1234,8 @@ impl Manager {
                         dst: base + dst,
                         bytes,
                         in_flight: false,
+                        chunk: base,
+                        built: false,
                     });
                 }
             }
@@ -1243,7 +1316,7 @@ impl Manager {
         if let Some(owner) = self.chunks[victim].owner {
             if let Some(res) = self.resident[owner as usize] {
                 plan.stats.prefetch_wasted_bytes +=
-                    res.speculative.map_or(0, |s| s.bytes) + self.spare_bytes(owner, &res);
+                    res.speculative.map_or(0, |s| s.bytes) + self.spare_sent(owner, &res);
             }
             self.resident[owner as usize] = None;
         }
@@ -1313,5 +1386,5 @@ fn speculate(res: &mut Resident, from: u32, bytes: u64) {
 
 /// Bytes of the uploads planned after the first `before`.
 fn bytes_since(plan: &FramePlan, before: usize) -> u64 {
-    plan.uploads[before..].iter().map(|u| u.bytes).sum()
+    plan.uploads[before..].iter().map(Upload::sent).sum()
 }

@@ -52,6 +52,53 @@ fn progressive_refinement_sends_only_new_blocks_and_one_index_array() {
     m.check().unwrap();
 }
 
+/// Index arrays built on the GPU take their pool space but none of the upload budget: a
+/// budget that holds the blocks of a step but not its index array refines at once when the
+/// arrays are built, and waits a frame per step when they are sent (the control).
+#[test]
+fn built_index_arrays_cost_pool_space_but_no_upload_budget() {
+    let t = tile(6, 50);
+    let budget = (3..=5).map(|j| t.block_bytes(j)).sum::<u64>();
+    let run = |arrays: IndexArrays| {
+        let mut c = config(64 << 20, budget);
+        c.index_arrays = arrays;
+        let mut m = Manager::new(vec![t.clone()], c);
+        m.plan_frame(0, None, &[req(0, 2)], true);
+        let mut levels = Vec::new();
+        for f in 1..4 {
+            let p = m.plan_frame(f, Some(f - 1), &[req(0, 5)], true);
+            let indices: Vec<&Upload> = p
+                .uploads
+                .iter()
+                .filter(|u| matches!(u.part, Part::Indices(_)))
+                .collect();
+            for u in &indices {
+                assert_eq!(u.built, arrays == IndexArrays::Built);
+            }
+            let built: u64 = indices.iter().filter(|u| u.built).map(|u| u.bytes).sum();
+            assert_eq!(
+                (p.stats.index_builds, p.stats.index_build_bytes),
+                (indices.iter().filter(|u| u.built).count() as u64, built)
+            );
+            let sent = p.stats.upload_bytes_blocks + p.stats.upload_bytes_indices;
+            assert!(sent <= budget + p.stats.upload_overshoot_bytes);
+            if arrays == IndexArrays::Built {
+                assert_eq!(p.stats.upload_bytes_indices, 0, "built arrays are not sent");
+            }
+            levels.push(p.grants[0].level.unwrap());
+            m.check().unwrap();
+        }
+        // The pool holds the drawn array either way.
+        let (_, index) = m.resident_levels(0).unwrap();
+        (levels, index)
+    };
+    let (built, index) = run(IndexArrays::Built);
+    assert_eq!(built, vec![5, 5, 5], "built: one frame to level 5");
+    assert_eq!(index, Some(5));
+    let (sent, _) = run(IndexArrays::Sent);
+    assert!(sent[0] < 5, "sent: the index array must not fit ({sent:?})");
+}
+
 #[test]
 fn a_tile_takes_the_tightest_class_for_its_wanted_level_and_moves_when_it_outgrows_it() {
     let t = tile(9, 200);
@@ -482,12 +529,16 @@ proptest! {
         victim in 0usize..3,
         prefetch in any::<bool>(),
         noise in proptest::collection::vec((0u32..14, 0u32..7), 0..4),
+        built in any::<bool>(),
     ) {
         let tiles: Vec<TileCost> = scales.iter().map(|&s| tile(7, s)).collect();
         let n = tiles.len() as u32;
         let mut c = config(pool_kib << 10, upload);
         c.weight = weight;
         c.victim = [Victim::Mixture, Victim::Lru, Victim::TightestFit][victim];
+        if built {
+            c.index_arrays = IndexArrays::Built;
+        }
         let mut m = Manager::new(tiles.clone(), c);
         prop_assert!(m.pool_bytes() <= pool_kib << 10);
         // What each frame read, by frame.
@@ -515,7 +566,7 @@ proptest! {
                 let w = (u.dst, u.dst + u.bytes);
                 for r in read[flying.clone()].iter().flatten() {
                     prop_assert!(
-                        u.in_flight || !overlaps(w, *r),
+                        u.gpu_ordered() || !overlaps(w, *r),
                         "frame {f}: upload {u:?} overwrites {r:?} read by a frame in flight"
                     );
                 }
@@ -565,7 +616,7 @@ proptest! {
                         prop_assert!(!overlaps(w, *r), "prefetch {u:?} over this frame's {r:?}");
                     }
                     for r in read[flying.clone()].iter().flatten() {
-                        prop_assert!(u.in_flight || !overlaps(w, *r), "prefetch {u:?} over {r:?}");
+                        prop_assert!(u.gpu_ordered() || !overlaps(w, *r), "prefetch {u:?} over {r:?}");
                     }
                 }
                 for mv in &p.moves[moves..] {
@@ -581,7 +632,7 @@ proptest! {
             }
             // CPU writes never race a copy not yet run (this frame's or one in flight).
             let moved: Vec<(u64, u64)> = p.moves.iter().map(|mv| (mv.dst, mv.dst + mv.bytes)).collect();
-            for u in p.uploads.iter().filter(|u| !u.in_flight) {
+            for u in p.uploads.iter().filter(|u| !u.gpu_ordered()) {
                 let w = (u.dst, u.dst + u.bytes);
                 for c in copied[flying.clone()].iter().flatten().chain(&moved) {
                     prop_assert!(!overlaps(w, *c), "frame {f}: upload {u:?} races the copy to {c:?}");
@@ -590,7 +641,7 @@ proptest! {
             // Staged uploads run after the frame's copies: a copy must not read what one of
             // them writes (it would carry the old bytes).
             for mv in &p.moves {
-                for u in p.uploads.iter().filter(|u| u.in_flight) {
+                for u in p.uploads.iter().filter(|u| u.gpu_ordered()) {
                     prop_assert!(
                         !overlaps((mv.src, mv.src + mv.bytes), (u.dst, u.dst + u.bytes)),
                         "frame {f}: move {mv:?} reads before {u:?} writes"
