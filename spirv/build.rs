@@ -5,7 +5,7 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 /// (constant, file, stage, macro defined for this build).
-const SHADERS: [(&str, &str, shaderc::ShaderKind, Option<&str>); 4] = [
+const SHADERS: [(&str, &str, shaderc::ShaderKind, Option<&str>); 5] = [
     (
         "TERRAIN_VERT",
         "terrain.vert",
@@ -29,6 +29,12 @@ const SHADERS: [(&str, &str, shaderc::ShaderKind, Option<&str>); 4] = [
         "terrain.frag",
         shaderc::ShaderKind::Fragment,
         Some("MIN_LOD"),
+    ),
+    (
+        "INDICES_COMP",
+        "indices.comp",
+        shaderc::ShaderKind::Compute,
+        None,
     ),
 ];
 

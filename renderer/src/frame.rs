@@ -22,7 +22,7 @@ use ash::vk;
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
 use memory::textures::{TextureConfig, TextureSlots};
-use memory::{Config, Manager, Scheme, Victim};
+use memory::{Config, IndexArrays, Manager, Scheme, Victim};
 
 use crate::camera::Camera;
 use crate::log::FrameRecord;
@@ -34,6 +34,7 @@ use crate::stitch::{pulled, Stitch, MAX_RECORDS};
 use crate::target::{Target, COLOR_FORMAT, DEPTH_FORMAT};
 use crate::terrain::Terrain;
 use crate::vulkan::buffer::BufferDesc;
+use crate::vulkan::indices::{self, IndexBuilder};
 use crate::vulkan::pipeline::{TerrainPipeline, TerrainSets};
 use crate::vulkan::pool::{self, Staging, TilePool};
 use crate::vulkan::sync::{self, Commands};
@@ -145,6 +146,9 @@ pub struct MemoryOptions {
     pub texture_share: f64,
     /// Anisotropic filtering of the textures, up to the device's limit (1: off).
     pub anisotropy: f32,
+    /// Build index arrays on the GPU from the resident blocks (the default; sent from the
+    /// file instead when the device cannot store 16-bit values from a shader).
+    pub index_arrays: IndexArrays,
 }
 
 impl Default for MemoryOptions {
@@ -161,6 +165,7 @@ impl Default for MemoryOptions {
             textures: true,
             texture_share: DEFAULT_TEXTURE_SHARE,
             anisotropy: 16.0,
+            index_arrays: IndexArrays::Built,
         }
     }
 }
@@ -356,6 +361,8 @@ pub struct Renderer {
     collected: Vec<Finished>,
     /// The camera predictor and the file side of prefetching.
     prefetcher: Prefetcher,
+    /// Builds index arrays on the GPU (None: they are sent from the file).
+    builder: Option<IndexBuilder>,
 }
 
 /// Faults the tests inject through the `VKTERRAIN_FAULT` environment variable, to check the
@@ -422,8 +429,22 @@ impl Renderer {
         let texture_bytes = slot_config
             .as_ref()
             .map_or(0, |c| c.slots as u64 * c.slot_bytes());
+        let index_arrays = if gpu.storage_16bit {
+            options.index_arrays
+        } else {
+            IndexArrays::Sent
+        };
+        let slot_count = options.frames_in_flight.max(1);
+        let builds_per_frame = builds_per_frame(terrain);
+        let builder_bytes = match index_arrays {
+            IndexArrays::Built => IndexBuilder::bytes_for(slot_count, builds_per_frame),
+            IndexArrays::Sent => 0,
+        };
         let config = Config {
-            pool_bytes: (options.gpu_budget_bytes - texture_bytes).min(readable),
+            pool_bytes: options
+                .gpu_budget_bytes
+                .saturating_sub(texture_bytes + builder_bytes)
+                .min(readable),
             upload_budget: options.upload_budget,
             weight: options.weight,
             class_ratio: 2.0,
@@ -431,6 +452,7 @@ impl Renderer {
             victim: Victim::Mixture,
             downgrade_slack: options.downgrade_slack,
             prefetch_free: options.prefetch.free_share,
+            index_arrays,
         };
         let fault = Fault::from_env();
         let (manager, pool) = allocate_pool(gpu, terrain, config, options.force_staging, fault)?;
@@ -475,12 +497,19 @@ impl Renderer {
         let pipeline = TerrainPipeline::new(gpu, COLOR_FORMAT, DEPTH_FORMAT);
         let mut slots = Vec::new();
         let mut failure = pipeline.as_ref().err().map(|e| e.to_string());
-        for i in 0..options.frames_in_flight.max(1) {
+        for i in 0..slot_count {
             if failure.is_some() {
                 break;
             }
             match Slot::new(gpu, &commands, i, sizes) {
                 Ok(s) => slots.push(s),
+                Err(e) => failure = Some(e.to_string()),
+            }
+        }
+        let mut builder = None;
+        if let (IndexArrays::Built, None) = (index_arrays, &failure) {
+            match IndexBuilder::new(gpu, &pool.buffer, slot_count, builds_per_frame) {
+                Ok(b) => builder = Some(b),
                 Err(e) => failure = Some(e.to_string()),
             }
         }
@@ -518,9 +547,13 @@ impl Renderer {
                 fault,
                 collected: Vec::new(),
                 prefetcher: Prefetcher::new(options.prefetch, terrain.tiles.len()),
+                builder,
             }),
             (pipeline, failure) => {
                 gpu.wait_idle();
+                if let Some(b) = builder {
+                    b.destroy(gpu);
+                }
                 for s in slots {
                     s.destroy(gpu);
                 }
@@ -533,6 +566,11 @@ impl Renderer {
                 Err(VkError::Unsupported(failure.unwrap_or_default()))
             }
         }
+    }
+
+    /// Whether index arrays are built on the GPU (else sent from the file).
+    pub fn builds_indices(&self) -> bool {
+        self.builder.is_some()
     }
 
     pub fn manager(&self) -> &Manager {
@@ -634,6 +672,10 @@ impl Renderer {
             return Err(VkError::Unsupported("no frame pending".into()));
         };
         sync::wait_and_reset(gpu, slot.fence)?;
+        if let Some(f) = self.builder.as_mut().and_then(|b| b.take_failure(s)) {
+            return Err(VkError::InvalidData(build_failure(f)));
+        }
+        let slot = &mut self.slots[s];
         let mut record = p.record;
         // frame_ms: the interval between this frame's and the previous frame's completion on
         // the GPU (the cadence a display sees, whatever runs ahead); the first frame costs its
@@ -781,7 +823,7 @@ impl Renderer {
 
         let t = Instant::now();
         self.slots[s].staging.reset();
-        let (moves, staged) = self.write_uploads(terrain, &plan, s)?;
+        let (moves, staged, builds) = self.write_uploads(terrain, &plan, s)?;
         let staged_geometry = self.slots[s].staging.sent();
         let texture_copies = self.write_texture_uploads(terrain, &textures, s)?;
         let cpu_upload_ms = ms(t);
@@ -811,6 +853,9 @@ impl Renderer {
             slot.staging.raw(),
             &texture_copies,
         );
+        if let Some(b) = &self.builder {
+            b.record(gpu, cmd, s, builds);
+        }
         slot.timestamps.pass_begin(gpu, cmd);
         let pass = Pass {
             gpu,
@@ -978,7 +1023,7 @@ impl Renderer {
         terrain: &Terrain,
         plan: &Plan,
         s: usize,
-    ) -> Result<(Vec<vk::BufferCopy>, Vec<vk::BufferCopy>), FrameError> {
+    ) -> Result<(Vec<vk::BufferCopy>, Vec<vk::BufferCopy>, u32), FrameError> {
         let moves = plan
             .moves
             .iter()
@@ -1015,7 +1060,8 @@ impl Renderer {
             }
         }
         let mut staged = Vec::new();
-        for u in &plan.uploads {
+        let builds = self.write_builds(terrain, plan, s)?;
+        for u in plan.uploads.iter().filter(|u| !u.built) {
             self.prefetcher.touched(terrain, u.tile as usize);
             let bytes = terrain.part(u.tile as usize, u.part).ok_or_else(|| {
                 FrameError::Internal(format!("tile {} has no {:?}", u.tile, u.part))
@@ -1040,7 +1086,62 @@ impl Renderer {
                     .size(bytes.len() as u64),
             );
         }
-        Ok((moves, staged))
+        Ok((moves, staged, builds))
+    }
+
+    /// Writes the plan's index array builds into slot `s`'s list; returns how many. A build
+    /// whose destination a later one in the plan overlaps is dropped (the later write is the
+    /// one that counts, and two workgroups must not write the same indices).
+    fn write_builds(
+        &mut self,
+        terrain: &Terrain,
+        plan: &Plan,
+        s: usize,
+    ) -> Result<u32, FrameError> {
+        let Some(builder) = self.builder.as_mut() else {
+            return Ok(0);
+        };
+        let mut kept: Vec<&memory::Upload> = Vec::new();
+        for u in plan.uploads.iter().rev().filter(|u| u.built) {
+            let overlaps = |k: &&memory::Upload| u.dst < k.dst + k.bytes && k.dst < u.dst + u.bytes;
+            if !kept.iter().any(overlaps) {
+                kept.push(u);
+            }
+        }
+        let mut builds = Vec::with_capacity(kept.len());
+        for u in kept.iter().rev() {
+            let memory::Part::Indices(level) = u.part else {
+                return Err(FrameError::Internal(format!(
+                    "tile {}: {:?} built",
+                    u.tile, u.part
+                )));
+            };
+            let tile = &terrain.tiles[u.tile as usize];
+            let l = &tile.levels[level as usize];
+            let word = |bytes: u64, width: u64| {
+                u32::try_from(bytes / width).map_err(|_| {
+                    FrameError::Internal(format!("pool offset {bytes} past 32-bit indexing"))
+                })
+            };
+            builds.push(indices::Build {
+                vertex_word: word(u.chunk, 4)?,
+                vertex_count: l.vertex_count(),
+                index_at: word(u.dst, u64::from(l.index_width))?,
+                index_count: l.index_count,
+                index_width: l.index_width,
+                mesh_max_x: tile.header.mesh_max_x,
+                mesh_max_y: tile.header.mesh_max_y,
+                tile: u.tile,
+            });
+        }
+        if !builder.write(s, &builds) {
+            return Err(FrameError::Internal(format!(
+                "{} index builds in one frame (room for {})",
+                builds.len(),
+                builder.capacity()
+            )));
+        }
+        Ok(builds.len() as u32)
     }
 
     /// Records a frame into its own command buffer over what is resident now, for replay
@@ -1184,10 +1285,32 @@ impl Renderer {
             s.destroy(gpu);
         }
         self.pool.destroy(gpu);
+        if let Some(b) = self.builder {
+            b.destroy(gpu);
+        }
         self.textures.destroy(gpu);
         self.pipeline.destroy(gpu);
         self.commands.destroy(gpu);
     }
+}
+
+/// The error for a build whose array did not come out as the file says.
+fn build_failure(f: indices::BuildFailure) -> String {
+    let got = if f.got == u32::MAX {
+        "lacks a vertex its fans need".to_string()
+    } else {
+        format!("has {} indices", f.got)
+    };
+    format!(
+        "tile #{}: the index array built from its vertices {got} where the tile set says {} ({} such builds in the frame): the file's vertices do not make the mesh it claims",
+        f.tile, f.expected, f.failed
+    )
+}
+
+/// Index arrays a frame may build at most: each visible tile's presence, refinement and
+/// prefetched spare, and a few prefetched tiles not visible yet.
+fn builds_per_frame(terrain: &Terrain) -> usize {
+    3 * terrain.tiles.len() + 8
 }
 
 /// The smallest pool worth trying when device memory runs short.
@@ -1464,6 +1587,8 @@ fn frame_record(
         evictions: st.evictions,
         upload_bytes_blocks: st.upload_bytes_blocks,
         upload_bytes_indices: st.upload_bytes_indices,
+        index_builds: st.index_builds,
+        index_build_bytes: st.index_build_bytes,
         upload_bytes_coarser: st.upload_bytes_coarser,
         uploads_deferred_bytes: st.uploads_deferred_bytes,
         upload_overshoot_bytes: st.upload_overshoot_bytes,

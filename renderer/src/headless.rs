@@ -73,6 +73,8 @@ pub struct FlightResult {
     pub texture_bytes: u64,
     /// Uploads went through the staging ring.
     pub staging: bool,
+    /// Index arrays were built on the GPU (else sent from the file).
+    pub built_indices: bool,
     /// Why the flight stopped early (the device was lost, a tile set changed under it, ...):
     /// `records` holds the frames that completed before.
     pub error: Option<FlightError>,
@@ -104,6 +106,7 @@ pub fn fly(
     let pool_bytes = renderer.manager().pool_bytes();
     let texture_bytes = renderer.texture_bytes();
     let staging = !renderer.pool().direct();
+    let built_indices = renderer.builds_indices();
     renderer.destroy(gpu);
     Ok(FlightResult {
         records,
@@ -111,6 +114,7 @@ pub fn fly(
         pool_bytes,
         texture_bytes,
         staging,
+        built_indices,
         error,
     })
 }

@@ -10,7 +10,8 @@
 //! upload_bytes_coarser, max_error_px, pop_px`, then prefetching's
 //! `prefetch_bytes, prefetch_hits, prefetch_wasted_bytes, prediction_error_m, cpu_prefetch_ms,
 //! file_advised_bytes, file_released_bytes`, then the textures'
-//! `upload_bytes_textures, texture_slots_free, tiles_texture_coarser`,
+//! `upload_bytes_textures, texture_slots_free, tiles_texture_coarser`, then the index arrays
+//! built on the GPU `index_builds, index_build_bytes`,
 //! and last `tiles_level_0 .. tiles_level_{n-1}`.
 
 use std::io::Write;
@@ -51,6 +52,10 @@ pub struct FrameRecord {
     pub gpu_allocations: u64,
     pub upload_bytes_blocks: u64,
     pub upload_bytes_indices: u64,
+    /// Index arrays built on the GPU this frame, and their bytes (not sent: not in
+    /// `upload_bytes`).
+    pub index_builds: u64,
+    pub index_build_bytes: u64,
     /// Of `upload_bytes_indices`: coarser index arrays for tiles whose wanted level dropped.
     pub upload_bytes_coarser: u64,
     /// With `--measure-error`: the largest screen distance, pixels, between the drawn surface
@@ -101,7 +106,7 @@ pub struct FrameRecord {
     pub tiles_per_level: Vec<u64>,
 }
 
-pub const BASE_COLUMNS: [&str; 46] = [
+pub const BASE_COLUMNS: [&str; 48] = [
     "frame",
     "time_s",
     "frame_ms",
@@ -148,6 +153,8 @@ pub const BASE_COLUMNS: [&str; 46] = [
     "upload_bytes_textures",
     "texture_slots_free",
     "tiles_texture_coarser",
+    "index_builds",
+    "index_build_bytes",
 ];
 
 pub fn header(levels: u32) -> String {
@@ -216,6 +223,8 @@ impl FrameRecord {
             n(self.upload_bytes_textures),
             n(self.texture_slots_free),
             n(self.tiles_texture_coarser),
+            n(self.index_builds),
+            n(self.index_build_bytes),
         ];
         let levels = self.tiles_per_level.iter().map(|&v| n(v));
         cells
@@ -256,6 +265,8 @@ pub struct RunInfo {
     pub staging: bool,
     /// How levels travel: "progressive", "per-level" or "whole-tile".
     pub upload_scheme: &'static str,
+    /// Where index arrays came from: "built" on the GPU or "sent" from the file.
+    pub index_arrays: &'static str,
     /// Device memory of the texture slots (0: none).
     pub texture_bytes: u64,
 }
@@ -304,6 +315,10 @@ pub struct Summary {
     pub frames_in_flight: usize,
     pub staging: bool,
     pub upload_scheme: &'static str,
+    pub index_arrays: &'static str,
+    /// Index arrays built on the GPU, and their megabytes (written in GPU memory, not sent).
+    pub index_builds: u64,
+    pub index_build_mb: f64,
     /// GPU allocations after the first frame (the pool is allocated once: 0).
     pub gpu_allocations_after_first_frame: u64,
     pub hits: u64,
@@ -405,6 +420,9 @@ impl Summary {
             frames_in_flight: run.frames_in_flight,
             staging: run.staging,
             upload_scheme: run.upload_scheme,
+            index_arrays: run.index_arrays,
+            index_builds: sum(|r| r.index_builds),
+            index_build_mb: sum(|r| r.index_build_bytes) as f64 / 1e6,
             gpu_allocations_after_first_frame: records
                 .iter()
                 .skip(1)

@@ -113,6 +113,11 @@ struct Cli {
     /// --draw-only uses whole-tile, so that every pre-recorded frame finds its levels.
     #[arg(long, value_enum, default_value_t = UploadScheme::Progressive)]
     upload_scheme: UploadScheme,
+    /// Where index arrays come from: built on the GPU from the tile's resident vertex blocks
+    /// (they then cost no upload budget; needs storageBuffer16BitAccess, else sent), or sent
+    /// from the file like the blocks (the comparison).
+    #[arg(long, value_enum, default_value_t = IndexArraysArg::Built)]
+    index_arrays: IndexArraysArg,
     /// Measure each frame's screen-space error against this DEM (the one the tile set was
     /// built from; with --source-spacing / --source-vertical-scale as given to tiletool):
     /// log column max_error_px. Slow (every sample of the drawn tiles, on the CPU); headless.
@@ -322,6 +327,12 @@ impl From<UploadScheme> for memory::Scheme {
     }
 }
 
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+enum IndexArraysArg {
+    Built,
+    Sent,
+}
+
 fn main() -> ExitCode {
     match run(Cli::parse()) {
         Ok(code) => code,
@@ -452,6 +463,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
         textures: shading == Shading::Photo || windowed,
         texture_share: cli.texture_share,
         anisotropy: cli.anisotropy as f32,
+        index_arrays: match cli.index_arrays {
+            IndexArraysArg::Built => memory::IndexArrays::Built,
+            IndexArraysArg::Sent => memory::IndexArrays::Sent,
+        },
     };
     let gpu_options = GpuOptions {
         validation: cli.validation,
@@ -541,6 +556,11 @@ fn finish(
             memory::Scheme::Progressive => "progressive",
             memory::Scheme::PerLevel => "per-level",
             memory::Scheme::WholeTile => "whole-tile",
+        },
+        index_arrays: if result.built_indices {
+            "built"
+        } else {
+            "sent"
         },
     };
     let records = &result.records;

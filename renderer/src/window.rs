@@ -69,6 +69,7 @@ struct App<'a> {
     pool_bytes: u64,
     texture_bytes: u64,
     staging: bool,
+    built_indices: bool,
 }
 
 /// Runs the window until it closes; returns the flight, the device's name and the number of
@@ -109,6 +110,7 @@ pub fn run(
         pool_bytes: 0,
         texture_bytes: 0,
         staging: false,
+        built_indices: false,
     };
     let result = event_loop.run_app(&mut app);
     app.shutdown();
@@ -147,6 +149,7 @@ pub fn run(
         pool_bytes: app.pool_bytes,
         texture_bytes: app.texture_bytes,
         staging: app.staging,
+        built_indices: app.built_indices,
         error: None,
     };
     Ok((result, app.gpu.device_name.clone(), validation))
@@ -163,6 +166,7 @@ impl App<'_> {
             self.pool_bytes = r.manager().pool_bytes();
             self.texture_bytes = r.texture_bytes();
             self.staging = !r.pool().direct();
+            self.built_indices = r.builds_indices();
             r.destroy(&self.gpu);
         }
         self.gpu.wait_idle();

@@ -1,9 +1,11 @@
 //! The tile pool on lavapipe with the validation layer on: after flights that refine tiles
 //! progressively within a small pool and a small upload budget (so chunks move and tiles are
 //! evicted), every resident tile's blocks, morph rows and index array read back from GPU
-//! memory byte for byte as the file stores them, through both transfer paths.
+//! memory as the file stores them, through both transfer paths: blocks and morph rows byte
+//! for byte, index arrays byte for byte when sent and fan for fan when built on the GPU
+//! (each ring may start elsewhere, see `tests/indices.rs`).
 
-use memory::Part;
+use memory::{IndexArrays, Part};
 use renderer::camera::Camera;
 use renderer::frame::{FrameInput, MemoryOptions, Renderer, Settings};
 use renderer::log::FrameRecord;
@@ -61,7 +63,19 @@ fn check_pool(gpu: &Gpu, renderer: &Renderer, terrain: &Terrain) -> (usize, u64,
             expect(offset + layout.morph + cost.morph_before(j), Part::Morph(j));
         }
         let level = index.expect("index array");
-        expect(offset + layout.index, Part::Indices(level));
+        if renderer.builds_indices() {
+            let want = terrain.part(t, Part::Indices(level)).expect("part");
+            let at = (offset + layout.index) as usize;
+            let width = cost.levels[level as usize].index_width;
+            assert_eq!(
+                common::fans(&pool[at..at + want.len()], width),
+                common::fans(want, width),
+                "tile {t} level {level}: the built array differs from the file's"
+            );
+            bytes += want.len() as u64;
+        } else {
+            expect(offset + layout.index, Part::Indices(level));
+        }
         tiles += 1;
         // Negative control: another resident tile's chunk does not hold this tile's data.
         if let Some(&other) = resident.get((k + 1) % resident.len()).filter(|&&o| o != t) {
@@ -73,7 +87,7 @@ fn check_pool(gpu: &Gpu, renderer: &Renderer, terrain: &Terrain) -> (usize, u64,
     (tiles, bytes, wrong_if_swapped)
 }
 
-fn fly(force_staging: bool) {
+fn fly(force_staging: bool, index_arrays: IndexArrays) {
     let dir = tempfile::tempdir().expect("temp dir");
     let set = common::puget(dir.path());
     let terrain = Terrain::open(&set).expect("tile set");
@@ -87,6 +101,7 @@ fn fly(force_staging: bool) {
         upload_budget: 256 << 10,
         frames_in_flight: 2,
         force_staging,
+        index_arrays,
         ..Default::default()
     };
     let mut renderer = Renderer::new(&gpu, &terrain, (128, 96), memory).expect("renderer");
@@ -128,6 +143,19 @@ fn fly(force_staging: bool) {
     assert!(sum(|r| r.tiles_coarser) > 0, "the budget never bit");
     assert_eq!(sum(|r| r.tiles_missing), 0);
     assert_eq!(sum(|r| r.gpu_allocations), 0, "allocations after start");
+    assert_eq!(
+        renderer.builds_indices(),
+        index_arrays == IndexArrays::Built
+    );
+    if index_arrays == IndexArrays::Built {
+        assert!(
+            sum(|r| r.index_builds) > 10,
+            "few builds: the check is weak"
+        );
+        assert_eq!(sum(|r| r.upload_bytes_indices), 0, "built arrays were sent");
+    } else {
+        assert_eq!(sum(|r| r.index_builds), 0);
+    }
     let (uploaded, staged) = (sum(|r| r.upload_bytes), sum(|r| r.staged_bytes));
     if force_staging {
         assert_eq!(
@@ -154,11 +182,16 @@ fn fly(force_staging: bool) {
 }
 
 #[test]
-fn direct_writes_read_back_from_the_pool() {
-    fly(false);
+fn direct_writes_and_built_index_arrays_read_back_from_the_pool() {
+    fly(false, IndexArrays::Built);
 }
 
 #[test]
-fn staged_copies_and_chunk_moves_read_back_from_the_pool() {
-    fly(true);
+fn staged_copies_chunk_moves_and_built_index_arrays_read_back_from_the_pool() {
+    fly(true, IndexArrays::Built);
+}
+
+#[test]
+fn direct_writes_of_sent_index_arrays_read_back_from_the_pool() {
+    fly(false, IndexArrays::Sent);
 }

@@ -49,6 +49,9 @@ pub struct Gpu {
     pub max_anisotropy: f32,
     /// Shaders may clamp a sample's level of detail (`shaderResourceMinLod`, enabled).
     pub min_lod: bool,
+    /// Shaders may store 16-bit values in storage buffers (`storageBuffer16BitAccess`,
+    /// enabled): the index arrays are built on the GPU (`vulkan::indices`).
+    pub storage_16bit: bool,
     /// Every device-local memory type is also host-visible and coherent (lavapipe, most
     /// integrated GPUs): the CPU can write tile data where the GPU reads it.
     unified_memory: bool,
@@ -215,6 +218,13 @@ impl Gpu {
                     | vk::FormatFeatureFlags::TRANSFER_DST,
             );
         let min_lod = supported.shader_resource_min_lod == vk::TRUE;
+        let storage_16bit = {
+            let mut v11 = vk::PhysicalDeviceVulkan11Features::default();
+            let mut features = vk::PhysicalDeviceFeatures2::default().push_next(&mut v11);
+            // SAFETY: plain query on this instance's device; the chain outlives the call.
+            unsafe { instance.get_physical_device_features2(physical, &mut features) };
+            v11.storage_buffer16_bit_access == vk::TRUE
+        };
         let anisotropy = supported.sampler_anisotropy == vk::TRUE && min_lod;
         let max_anisotropy = if anisotropy {
             properties.limits.max_sampler_anisotropy.max(1.0)
@@ -226,6 +236,8 @@ impl Gpu {
             .queue_family_index(queue_family)
             .queue_priorities(&priorities)];
         let mut v13 = vk::PhysicalDeviceVulkan13Features::default().dynamic_rendering(true);
+        let mut v11 = vk::PhysicalDeviceVulkan11Features::default()
+            .storage_buffer16_bit_access(storage_16bit);
         let features = vk::PhysicalDeviceFeatures::default()
             .fill_mode_non_solid(wireframe_supported)
             .texture_compression_bc(bc_textures)
@@ -240,7 +252,8 @@ impl Gpu {
             .queue_create_infos(&queues)
             .enabled_extension_names(&device_extensions)
             .enabled_features(&features)
-            .push_next(&mut v13);
+            .push_next(&mut v13)
+            .push_next(&mut v11);
         // SAFETY: the features were checked in open_device; pointers outlive the call.
         let device = unsafe { instance.create_device(physical, &device_info, None) }?;
         // SAFETY: family and index exist (one queue requested).
@@ -288,6 +301,7 @@ impl Gpu {
             bc_textures,
             max_anisotropy,
             min_lod,
+            storage_16bit,
             unified_memory,
             allocations: AtomicU64::new(0),
         };

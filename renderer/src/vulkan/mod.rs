@@ -4,6 +4,7 @@
 pub mod buffer;
 pub mod context;
 pub mod image;
+pub mod indices;
 pub mod pipeline;
 pub mod pool;
 pub mod swapchain;
@@ -31,6 +32,10 @@ pub enum VkError {
     /// The machine cannot run the renderer (no device, missing feature or layer).
     #[error("{0}")]
     Unsupported(String),
+    /// The GPU found the tile data inconsistent (an index array built from a tile's vertices
+    /// does not come out as the file says).
+    #[error("{0}")]
+    InvalidData(String),
 }
 
 impl From<vk::Result> for VkError {

@@ -189,3 +189,33 @@ pub fn flight_with_fault(
 pub fn is_sky(p: &image::Rgba<u8>) -> bool {
     p.0[0] == SKY[0] && p.0[1] == SKY[1] && p.0[2] == SKY[2]
 }
+
+/// The fans of an index array (`width` 2 or 4 bytes): (centre, ring without its closing vertex, rotated to start at
+/// its smallest index), in order. Panics on a fan that is not closed.
+pub fn fans(bytes: &[u8], width: u32) -> Vec<(u32, Vec<u32>)> {
+    let indices: Vec<u32> = match width {
+        2 => bytes
+            .chunks_exact(2)
+            .map(|c| u32::from(u16::from_le_bytes([c[0], c[1]])))
+            .map(|i| if i == 0xffff { u32::MAX } else { i })
+            .collect(),
+        _ => bytes
+            .chunks_exact(4)
+            .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect(),
+    };
+    indices
+        .split(|&i| i == u32::MAX)
+        .map(|fan| {
+            let (&centre, ring) = fan.split_first().expect("a fan has a centre");
+            assert!(
+                ring.len() >= 5 && ring.first() == ring.last(),
+                "fan {fan:?} is not closed"
+            );
+            let mut ring = ring[..ring.len() - 1].to_vec();
+            let start = (0..ring.len()).min_by_key(|&k| ring[k]).expect("ring");
+            ring.rotate_left(start);
+            (centre, ring)
+        })
+        .collect()
+}

@@ -1,0 +1,199 @@
+//! Index arrays built on the GPU (`vulkan::indices`, lavapipe, validation on) against the
+//! arrays the file stores: for every level of every tile, the same fans in the same order,
+//! each with the same centre and the same ring (the builder starts each ring where a vertex
+//! cache suits it, the GPU at the north-west corner). Tiles past the data's edge (meshes that
+//! stop inside the tile) and both index widths are covered; a wrong mesh extent, a missing
+//! vertex and a wrong expected count are caught.
+
+use memory::Part;
+use renderer::terrain::Terrain;
+use renderer::vulkan::indices::{Build, IndexBuilder, MAX_BUILDS_PER_DISPATCH};
+use renderer::vulkan::pool::TilePool;
+use renderer::vulkan::{sync, Gpu, GpuOptions};
+
+mod common;
+
+/// Bytes of pool the test uses: a tile's blocks, then one region per level.
+const POOL_BYTES: u64 = 24 << 20;
+
+struct Bench {
+    gpu: Gpu,
+    pool: TilePool,
+    builder: IndexBuilder,
+}
+
+impl Bench {
+    fn new() -> Bench {
+        let gpu = Gpu::new(&GpuOptions {
+            validation: true,
+            ..Default::default()
+        })
+        .expect("Vulkan device");
+        assert!(gpu.storage_16bit, "lavapipe stores 16-bit values");
+        let pool = TilePool::new(&gpu, POOL_BYTES, false).expect("pool");
+        assert!(pool.direct(), "the test writes the pool from the CPU");
+        let builder = IndexBuilder::new(&gpu, &pool.buffer, 1, 64).expect("builder");
+        Bench { gpu, pool, builder }
+    }
+
+    /// Writes tile `t`'s blocks at 0 and builds `levels`' arrays after them (at the file's
+    /// index width, or 4 bytes with `wide`); returns each array's bytes as built, and the
+    /// failure the shader reported.
+    fn build(
+        &mut self,
+        terrain: &Terrain,
+        t: usize,
+        levels: &[u32],
+        wide: bool,
+        tamper: impl Fn(&mut Build),
+    ) -> (
+        Vec<Vec<u8>>,
+        Option<renderer::vulkan::indices::BuildFailure>,
+    ) {
+        let info = &terrain.tiles[t];
+        let mut at = 0u64;
+        for j in 0..info.levels.len() as u32 {
+            let bytes = terrain.part(t, Part::Positions(j)).expect("positions");
+            assert!(self.pool.write(at, bytes));
+            at += bytes.len() as u64;
+        }
+        let mut builds = Vec::new();
+        let mut regions = Vec::new();
+        for &level in levels {
+            let l = &info.levels[level as usize];
+            let width = if wide { 4 } else { l.index_width };
+            let bytes = u64::from(l.index_count) * u64::from(width);
+            at = at.div_ceil(4) * 4;
+            // Stale values where the array goes: the build must overwrite every index.
+            assert!(self.pool.write(at, &vec![0x5a; bytes as usize]));
+            let mut b = Build {
+                vertex_word: 0,
+                vertex_count: l.vertex_count(),
+                index_at: (at / u64::from(width)) as u32,
+                index_count: l.index_count,
+                index_width: width,
+                mesh_max_x: info.header.mesh_max_x,
+                mesh_max_y: info.header.mesh_max_y,
+                tile: t as u32,
+            };
+            tamper(&mut b);
+            builds.push(b);
+            regions.push((at, bytes));
+            at += bytes;
+        }
+        assert!(at <= POOL_BYTES, "pool too small for tile {t}");
+        assert!(self.builder.write(0, &builds));
+        let (gpu, builder) = (&self.gpu, &self.builder);
+        sync::run_once(gpu, "index builds", |cmd| {
+            builder.record(gpu, cmd, 0, builds.len() as u32)
+        })
+        .expect("builds run");
+        let failure = self.builder.take_failure(0);
+        let arrays = regions
+            .iter()
+            .map(|&(at, bytes)| self.pool.read(&self.gpu, at, bytes).expect("read back"))
+            .collect();
+        (arrays, failure)
+    }
+}
+
+/// Builds every level of every tile and compares with the file; returns (arrays, of them
+/// 32-bit, tiles whose mesh stops inside the tile).
+fn check_every_level(bench: &mut Bench, terrain: &Terrain) -> (usize, usize, usize) {
+    let (mut arrays, mut wide, mut partial) = (0, 0, 0);
+    for t in 0..terrain.tiles.len() {
+        let info = &terrain.tiles[t];
+        let levels: Vec<u32> = (0..info.levels.len() as u32).collect();
+        for chunk in levels.chunks(2 * MAX_BUILDS_PER_DISPATCH as usize) {
+            let (built, failure) = bench.build(terrain, t, chunk, false, |_| {});
+            assert_eq!(failure, None, "tile {t}");
+            for (&level, got) in chunk.iter().zip(&built) {
+                let l = &info.levels[level as usize];
+                let want = terrain.part(t, Part::Indices(level)).expect("indices");
+                let (got, want) = (
+                    common::fans(got, l.index_width),
+                    common::fans(want, l.index_width),
+                );
+                assert_eq!(got.len(), want.len(), "tile {t} level {level}: fan count");
+                if let Some(k) = (0..got.len()).find(|&k| got[k] != want[k]) {
+                    panic!(
+                        "tile {t} level {level}: fan {k} built as {:?}, the file has {:?}",
+                        got[k], want[k]
+                    );
+                }
+                arrays += 1;
+                wide += usize::from(l.index_width == 4);
+            }
+        }
+        partial += usize::from(info.header.mesh_max_x < 256 || info.header.mesh_max_y < 256);
+    }
+    (arrays, wide, partial)
+}
+
+#[test]
+fn every_level_of_the_puget_sample_builds_as_the_file_says() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let terrain = Terrain::open(&common::puget(dir.path())).expect("tile set");
+    let mut bench = Bench::new();
+    let (arrays, wide, _) = check_every_level(&mut bench, &terrain);
+    eprintln!("{arrays} arrays, {wide} of them 32-bit");
+    assert_eq!(arrays, terrain.tiles.len() * terrain.levels as usize);
+    // The builder writes 32-bit indices when a level has more vertices than 16 bits number;
+    // the sample has none, so every level of one tile is built 32-bit too.
+    let t = 5;
+    let levels: Vec<u32> = (0..terrain.levels).collect();
+    let (built, failure) = bench.build(&terrain, t, &levels, true, |_| {});
+    assert_eq!(failure, None);
+    for (&level, got) in levels.iter().zip(&built) {
+        let l = &terrain.tiles[t].levels[level as usize];
+        let want = terrain.part(t, Part::Indices(level)).expect("indices");
+        assert_eq!(
+            common::fans(got, 4),
+            common::fans(want, l.index_width),
+            "level {level}, 32-bit"
+        );
+    }
+    // Control: the same builds told the wrong expected count fail, and report it.
+    let (_, failure) = bench.build(&terrain, 5, &[3], false, |b| b.index_count -= 1);
+    let f = failure.expect("a wrong count is reported");
+    assert_eq!((f.tile, f.expected + 1), (5, f.got));
+    bench.builder.destroy(&bench.gpu);
+    bench.pool.destroy(&bench.gpu);
+    assert_eq!(bench.gpu.validation_messages(), 0);
+}
+
+/// An SRTM window whose last tile column and row hold 187 and 17 cells: meshes that stop
+/// inside their tile, where cells straddling the data's edge are split and cells past it are
+/// not drawn.
+#[test]
+fn tiles_past_the_data_edge_build_as_the_file_says_and_controls_fail() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let opts = dem::ReadOptions {
+        crop: Some("1500,1500,700x530".parse().expect("crop")),
+        ..Default::default()
+    };
+    let set = common::tileset(dir.path(), &common::data("srtm/N48W125.hgt"), opts);
+    let terrain = Terrain::open(&set).expect("tile set");
+    let mut bench = Bench::new();
+    let (arrays, _, partial) = check_every_level(&mut bench, &terrain);
+    eprintln!("{arrays} arrays, {partial} partial tiles");
+    assert_eq!(partial, 5, "3 x 3 tiles, the last column and row partial");
+    let t = terrain
+        .tiles
+        .iter()
+        .position(|i| i.header.mesh_max_x < 256 && i.header.mesh_max_y < 256)
+        .expect("a corner tile");
+    let finest = terrain.tiles[t].levels.len() as u32 - 1;
+    // Control 1: told the mesh covers the whole tile, the builder draws cells past the data
+    // (vertices missing, counts wrong).
+    let (_, failure) = bench.build(&terrain, t, &[finest], false, |b| {
+        (b.mesh_max_x, b.mesh_max_y) = (256, 256)
+    });
+    assert!(failure.is_some(), "a wrong extent went unnoticed");
+    // Control 2: without the level's last vertex, a fan lacks it.
+    let (_, failure) = bench.build(&terrain, t, &[finest], false, |b| b.vertex_count -= 1);
+    assert!(failure.is_some(), "a missing vertex went unnoticed");
+    bench.builder.destroy(&bench.gpu);
+    bench.pool.destroy(&bench.gpu);
+    assert_eq!(bench.gpu.validation_messages(), 0);
+}

@@ -1,0 +1,225 @@
+#version 450
+// Builds a level's index array on the GPU from the tile's vertex blocks already in the pool,
+// so index arrays never cross the bus (renderer/src/vulkan/indices.rs records the dispatch).
+//
+// The mesh of level i is a function of its vertex set (tools/tiles/src/mesh.rs): a quadtree of
+// cells over the 257 x 257 tile, each leaf drawn as one fan around its centre. Within the
+// mesh's extent (mesh_max), a cell that straddles the extent's edge is always split, a cell
+// past it is never drawn, and a cell inside it is split exactly when the centre of one of its
+// children is a vertex (a leaf's centre is its fan's centre; a split cell's centre is a corner
+// of its children's fans; no other vertex lies inside a leaf). A leaf's edge midpoint is in
+// its fan exactly when it is a vertex. Fans go in P-order (the Hilbert curve over the 128 x
+// 128 finest cells, as the builder sorts them), each as: centre, then the perimeter
+// counter-clockwise from above starting at the north-west corner and closed by repeating it,
+// then a restart (none after the last). The builder rotates each ring to suit a vertex cache;
+// the GPU keeps the north-west start, so the arrays hold the same fans, not the same bytes.
+//
+// One workgroup builds one array: its invocations scatter the blocks' vertices into a
+// position -> vertex lookup (a scratch slot per workgroup, never cleared: an entry counts only
+// if the vertex it names lies at that position), then each takes 64 consecutive finest cells
+// along the curve, counts the indices of the leaves that start there, and after a prefix sum
+// over the invocations writes them. A count that differs from the file's, or a fan vertex that
+// is missing, is reported in `status` and nothing past the array is written.
+
+#extension GL_EXT_shader_16bit_storage : require
+
+layout(local_size_x = 256) in;
+
+const uint SIDE = 257;
+const uint LOOKUP_WORDS = SIDE * SIDE;
+const uint CELLS_PER_INVOCATION = 64;
+const uint NONE = 0xffffffffu;
+
+struct Build {
+    // Pool word of block 0's first packed position, and the vertices of blocks 0..=level.
+    uint vertex_word;
+    uint vertex_count;
+    // Pool position of the array's first index, in indices of its width (2 or 4 bytes).
+    uint index_at;
+    uint index_count;
+    uint index_width;
+    uint mesh_max_x;
+    uint mesh_max_y;
+    // Tile number, reported on failure.
+    uint tile;
+};
+
+layout(std430, set = 0, binding = 0) readonly buffer Positions { uint positions[]; };
+layout(std430, set = 0, binding = 1) writeonly buffer Indices16 { uint16_t indices16[]; };
+layout(std430, set = 0, binding = 2) writeonly buffer Indices32 { uint indices32[]; };
+layout(std430, set = 0, binding = 3) buffer Lookup { uint lookup[]; };
+layout(std430, set = 0, binding = 4) readonly buffer Builds { Build builds[]; };
+// [0] failed builds, [1] the first failing tile, [2] its GPU count, [3] its expected count.
+layout(std430, set = 0, binding = 5) buffer Status { uint status[]; };
+
+// `restart` is all ones, given at run time: a constant would be folded into a 16-bit constant,
+// which SPIR-V forbids without the Int16 capability.
+layout(push_constant) uniform Push { uint first_build; uint restart; } pc;
+
+shared uint counts[256];
+
+Build b;
+uint lookup_base;
+
+// The vertex at lattice point (x, y), or NONE.
+uint vertex_at(uint x, uint y) {
+    uint v = lookup[lookup_base + y * SIDE + x];
+    if (v >= b.vertex_count) {
+        return NONE;
+    }
+    return (positions[b.vertex_word + v] & 0x3ffffu) == (x | (y << 9)) ? v : NONE;
+}
+
+// Finest cell (i, j) at position d of the Hilbert curve over 128 x 128 cells (the inverse of
+// the builder's hilbert_index).
+uvec2 hilbert_cell(uint d) {
+    uvec2 p = uvec2(0);
+    uint t = d;
+    for (uint s = 1; s < 128; s *= 2) {
+        uint rx = 1 & (t / 2);
+        uint ry = 1 & (t ^ rx);
+        if (ry == 0) {
+            if (rx == 1) {
+                p = uvec2(s - 1) - p;
+            }
+            p = p.yx;
+        }
+        p += s * uvec2(rx, ry);
+        t /= 4;
+    }
+    return p;
+}
+
+// Depth of the leaf covering finest cell `c`, or NONE where the mesh does not reach.
+uint leaf_depth(uvec2 c) {
+    for (uint d = 0; d < 7; d++) {
+        uint s = 256u >> d;
+        uvec2 o = (c >> (7 - d)) * s;
+        if (o.x >= b.mesh_max_x || o.y >= b.mesh_max_y) {
+            return NONE;
+        }
+        bool straddles = (b.mesh_max_x > o.x && b.mesh_max_x < o.x + s)
+            || (b.mesh_max_y > o.y && b.mesh_max_y < o.y + s);
+        if (!straddles) {
+            uvec2 child = (c >> (6 - d)) * (s / 2) + s / 4;
+            if (vertex_at(child.x, child.y) == NONE) {
+                return d;
+            }
+        }
+    }
+    uvec2 o = c * 2;
+    return (o.x >= b.mesh_max_x || o.y >= b.mesh_max_y) ? NONE : 7;
+}
+
+// Lattice points of a leaf's fan in drawing order: centre, then corner 0, [mid 3], corner 3,
+// [mid 2], corner 2, [mid 1], corner 1, [mid 0], corner 0 (corner k starts edge k; edges
+// 0 N, 1 E, 2 S, 3 W). Returns the count (6 to 10).
+uint fan(uvec2 o, uint s, out uvec2 points[10]) {
+    uint h = s / 2;
+    uvec2 corners[4] = uvec2[4](o, o + uvec2(s, 0), o + uvec2(s, s), o + uvec2(0, s));
+    uvec2 mids[4] = uvec2[4](o + uvec2(h, 0), o + uvec2(s, h), o + uvec2(h, s), o + uvec2(0, h));
+    uint n = 0;
+    points[n++] = o + uvec2(h);
+    points[n++] = corners[0];
+    for (int k = 3; k >= 0; k--) {
+        if (vertex_at(mids[k].x, mids[k].y) != NONE) {
+            points[n++] = mids[k];
+        }
+        points[n++] = corners[k];
+    }
+    return n;
+}
+
+void put(uint at, uint value) {
+    if (at >= b.index_count) {
+        return;
+    }
+    if (b.index_width == 2) {
+        indices16[b.index_at + at] = uint16_t(value);
+    } else {
+        indices32[b.index_at + at] = value;
+    }
+}
+
+void fail(uint got) {
+    if (atomicAdd(status[0], 1) == 0) {
+        status[1] = b.tile;
+        status[2] = got;
+        status[3] = b.index_count;
+    }
+}
+
+void main() {
+    uint slot = gl_WorkGroupID.x;
+    uint me = gl_LocalInvocationID.x;
+    b = builds[pc.first_build + slot];
+    lookup_base = slot * LOOKUP_WORDS;
+
+    for (uint v = me; v < b.vertex_count; v += 256) {
+        uint p = positions[b.vertex_word + v];
+        uint x = p & 511;
+        uint y = (p >> 9) & 511;
+        if (x < SIDE && y < SIDE) {
+            lookup[lookup_base + y * SIDE + x] = v;
+        }
+    }
+    memoryBarrierBuffer();
+    barrier();
+
+    // Pass 0 counts this invocation's indices (fan, restart); pass 1 writes them.
+    uint first = me * CELLS_PER_INVOCATION;
+    uint at = 0;
+    bool missing = false;
+    uint depths[CELLS_PER_INVOCATION];
+    for (uint pass = 0; pass < 2; pass++) {
+        if (pass == 1) {
+            counts[me] = at;
+            barrier();
+            if (me == 0) {
+                uint sum = 0;
+                for (uint k = 0; k < 256; k++) {
+                    uint n = counts[k];
+                    counts[k] = sum;
+                    sum += n;
+                }
+                // The last fan has no restart.
+                uint total = sum == 0 ? 0 : sum - 1;
+                if (total != b.index_count) {
+                    fail(total);
+                }
+            }
+            barrier();
+            at = counts[me];
+        }
+        for (uint k = 0; k < CELLS_PER_INVOCATION; k++) {
+            uint h = first + k;
+            uvec2 c = hilbert_cell(h);
+            if (pass == 0) {
+                depths[k] = leaf_depth(c);
+            }
+            uint d = depths[k];
+            // A leaf of depth d covers 4^(7-d) consecutive positions: draw it at the first.
+            if (d == NONE || (h & ((1u << (2 * (7 - d))) - 1)) != 0) {
+                continue;
+            }
+            uint s = 256u >> d;
+            uvec2 points[10];
+            uint n = fan((c >> (7 - d)) * s, s, points);
+            for (uint i = 0; i < n; i++) {
+                if (pass == 1) {
+                    uint v = vertex_at(points[i].x, points[i].y);
+                    missing = missing || v == NONE;
+                    put(at, v == NONE ? 0 : v);
+                }
+                at++;
+            }
+            if (pass == 1) {
+                put(at, pc.restart);
+            }
+            at++;
+        }
+    }
+    if (missing) {
+        fail(NONE);
+    }
+}
