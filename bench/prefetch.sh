@@ -6,12 +6,13 @@
 # with our recorded predictions and with a perfect predictor; and a first flight from a cold
 # page cache with and without madvise.
 # Usage: bench/prefetch.sh TILESET [BUDGET_MB] [FRAMES] [--no-cold]   (after cargo build --release)
+# INDEX_ARRAYS=sent sends index arrays from the file instead of building them on the GPU.
 set -euo pipefail
-set_file=$1; budget=${2:-1}; frames=${3:-120}; cold=${4:-}
+set_file=$1; budget=${2:-1}; frames=${3:-120}; cold=${4:-}; arrays=${INDEX_ARRAYS:-built}
 bin=$(dirname "$0")/../target/release
 out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
-common=(--headless --size 1024x768 --frames "$frames" --tau 1 --upload-budget-mb "$budget")
+common=(--headless --size 1024x768 --frames "$frames" --tau 1 --upload-budget-mb "$budget" --index-arrays "$arrays")
 echo "| path | prefetch | tile-frames coarser | after the cold start (frames) | p99 frame ms | prefetched MB | hits | wasted MB | prediction error m (median) | prefetch CPU ms (median) |"
 echo "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"
 for path in orbit flyover; do
@@ -37,7 +38,7 @@ echo
 for path in orbit flyover; do
   echo "**Simulator, $path** (the trace of the run with prefetching, replayed with the pool as large as the set)"
   echo
-  "$bin/memsim" "$out/$path-on.trace" --pool-mb 100000 --upload-budget-mb "$budget" | sed -n '/^| prefetching/,$p'
+  "$bin/memsim" "$out/$path-on.trace" --pool-mb 100000 --upload-budget-mb "$budget" --index-arrays "$arrays" | sed -n '/^| prefetching/,$p'
   echo
 done
 [ "$cold" = --no-cold ] && exit 0

@@ -30,7 +30,7 @@ fn main() -> ExitCode {
 fn run() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some(path) = args.first().filter(|a| !a.starts_with('-')) else {
-        bail!("usage: memsim TRACE.csv [--pool-share F | --pool-mb MB] [--upload-budget-mb MB] [--perfect-frames N] | --time-manager");
+        bail!("usage: memsim TRACE.csv [--pool-share F | --pool-mb MB] [--upload-budget-mb MB] [--perfect-frames N] [--index-arrays built|sent] | --time-manager");
     };
     let flag = |name: &str| -> Result<Option<f64>> {
         match args.iter().position(|a| a == name) {
@@ -102,10 +102,20 @@ fn run() -> Result<()> {
         println!("- slack {slack}: {:.1} MB uploaded", o.bytes() as f64 / 1e6);
     }
     let ahead = flag("--perfect-frames")?.map_or(2, |f| f as usize);
-    println!("\nPrefetching (pool {:.1} MB, upload budget {:.2} MB per frame; perfect: the next {ahead} frames' requests)\n", pool as f64 / 1e6, upload as f64 / 1e6);
+    // As the renderer: index arrays built on the GPU unless told they are sent.
+    let arrays = match args
+        .iter()
+        .position(|a| a == "--index-arrays")
+        .map(|i| args.get(i + 1).map(String::as_str))
+    {
+        None | Some(Some("built")) => memory::IndexArrays::Built,
+        Some(Some("sent")) => memory::IndexArrays::Sent,
+        Some(other) => bail!("--index-arrays needs built or sent, not {other:?}"),
+    };
+    println!("\nPrefetching (pool {:.1} MB, upload budget {:.2} MB per frame, index arrays {arrays:?}; perfect: the next {ahead} frames' requests)\n", pool as f64 / 1e6, upload as f64 / 1e6);
     print!(
         "{}",
-        bench::residency::prefetch_table(&trace, pool, upload, ahead)
+        bench::residency::prefetch_table(&trace, pool, upload, ahead, arrays)
     );
     Ok(())
 }

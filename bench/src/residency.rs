@@ -167,11 +167,18 @@ pub fn time_manager(costs: &[TileCost]) -> (usize, Vec<f64>, u64) {
 /// Replays `trace` without prefetching, with the predictions it recorded, and with a perfect
 /// predictor (the next `ahead` frames' requests): tile-frames drawn coarser than wanted,
 /// missing, bytes prefetched, hits and waste, as a Markdown table.
-pub fn prefetch_table(trace: &Trace, pool: u64, upload: u64, ahead: usize) -> String {
+pub fn prefetch_table(
+    trace: &Trace,
+    pool: u64,
+    upload: u64,
+    ahead: usize,
+    index_arrays: memory::IndexArrays,
+) -> String {
     use memory::sim::{replay_prefetching, Prefetching};
     let c = memory::Config {
         pool_bytes: pool,
         upload_budget: upload,
+        index_arrays,
         ..memory::Config::default()
     };
     let runs = [

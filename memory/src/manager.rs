@@ -232,6 +232,8 @@ struct Chunk {
     /// The last frame whose in-pool copies wrote into it (a tile moves once per frame: the
     /// copies of one frame are one command, whose regions must not chain).
     copied_in: Option<u64>,
+    /// The last frame that builds an index array into it on the GPU.
+    built_in: Option<u64>,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -326,6 +328,7 @@ impl Manager {
                     last_used: 0,
                     drawn: None,
                     copied_in: None,
+                    built_in: None,
                 });
                 offset += size;
             }
@@ -921,7 +924,11 @@ impl Manager {
     }
 
     /// The upload of level `level`'s index array to pool offset `dst` in `chunk`.
-    fn index_upload(&self, tile: TileId, level: u32, dst: u64, chunk: usize) -> Upload {
+    fn index_upload(&mut self, tile: TileId, level: u32, dst: u64, chunk: usize) -> Upload {
+        let built = self.config.index_arrays == IndexArrays::Built;
+        if built {
+            self.chunks[chunk].built_in = Some(self.frame);
+        }
         Upload {
             tile,
             part: Part::Indices(level),
@@ -929,7 +936,7 @@ impl Manager {
             bytes: self.tiles[tile as usize].levels[level as usize].indices,
             in_flight: self.read_in_flight(chunk),
             chunk: self.chunks[chunk].offset,
-            built: self.config.index_arrays == IndexArrays::Built,
+            built,
         }
     }
 
@@ -1293,8 +1300,10 @@ impl Manager {
         if self.chunks[chunk].owner.take().is_some() {
             self.owned -= 1;
         }
-        if c.drawn.is_none() && c.last_used == self.frame {
-            // Never drawn (taken this frame and given back): nobody reads it.
+        let gpu_writes = c.copied_in == Some(self.frame) || c.built_in == Some(self.frame);
+        if c.drawn.is_none() && c.last_used == self.frame && !gpu_writes {
+            // Never drawn (taken this frame and given back), and nothing this frame's commands
+            // write goes there: nobody reads it, and whoever takes it next may write it now.
             self.free[c.class].push(chunk);
         } else {
             self.retiring.push(chunk);

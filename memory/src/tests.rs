@@ -648,6 +648,17 @@ proptest! {
                     );
                 }
             }
+            // Writes on the GPU (builds, staged copies) run after every CPU write of the frame:
+            // a CPU write planned after one must not land where it does (a chunk given back
+            // and taken again within the frame), or the GPU would overwrite it.
+            for (i, a) in p.uploads.iter().enumerate().filter(|(_, u)| u.gpu_ordered()) {
+                for b in p.uploads[i + 1..].iter().filter(|u| !u.gpu_ordered()) {
+                    prop_assert!(
+                        !overlaps((a.dst, a.dst + a.bytes), (b.dst, b.dst + b.bytes)),
+                        "frame {f}: {b:?} written now, then overwritten by {a:?}"
+                    );
+                }
+            }
             // One copy command: no region is both read and written.
             for a in &p.moves {
                 for b in &p.moves {

@@ -15,10 +15,11 @@
 // the GPU keeps the north-west start, so the arrays hold the same fans, not the same bytes.
 //
 // One workgroup builds one array: its invocations scatter the blocks' vertices into a
-// position -> vertex lookup (a scratch slot per workgroup, never cleared: an entry counts only
-// if the vertex it names lies at that position), then each takes 64 consecutive finest cells
-// along the curve, counts the indices of the leaves that start there, and after a prefix sum
-// over the invocations writes them. A count that differs from the file's, or a fan vertex that
+// position -> vertex lookup (a scratch slot per workgroup, never cleared: only positions this
+// build wrote are read) and into a bitmap of the positions that are vertices (shared memory,
+// where every test of the walk below goes), then each takes 64 consecutive finest cells along
+// the curve, counts the indices of the leaves that start there, and after a prefix sum over
+// the invocations writes them. A count that differs from the file's, or a fan vertex that
 // is missing, is reported in `status` and nothing past the array is written.
 
 #extension GL_EXT_shader_16bit_storage : require
@@ -57,17 +58,20 @@ layout(std430, set = 0, binding = 5) buffer Status { uint status[]; };
 layout(push_constant) uniform Push { uint first_build; uint restart; } pc;
 
 shared uint counts[256];
+// Bit y * 257 + x: lattice point (x, y) is a vertex of the level.
+shared uint present[(LOOKUP_WORDS + 31) / 32];
 
 Build b;
 uint lookup_base;
 
+bool is_vertex(uint x, uint y) {
+    uint i = y * SIDE + x;
+    return (present[i / 32] & (1u << (i % 32))) != 0;
+}
+
 // The vertex at lattice point (x, y), or NONE.
 uint vertex_at(uint x, uint y) {
-    uint v = lookup[lookup_base + y * SIDE + x];
-    if (v >= b.vertex_count) {
-        return NONE;
-    }
-    return (positions[b.vertex_word + v] & 0x3ffffu) == (x | (y << 9)) ? v : NONE;
+    return is_vertex(x, y) ? lookup[lookup_base + y * SIDE + x] : NONE;
 }
 
 // Finest cell (i, j) at position d of the Hilbert curve over 128 x 128 cells (the inverse of
@@ -102,7 +106,7 @@ uint leaf_depth(uvec2 c) {
             || (b.mesh_max_y > o.y && b.mesh_max_y < o.y + s);
         if (!straddles) {
             uvec2 child = (c >> (6 - d)) * (s / 2) + s / 4;
-            if (vertex_at(child.x, child.y) == NONE) {
+            if (!is_vertex(child.x, child.y)) {
                 return d;
             }
         }
@@ -122,7 +126,7 @@ uint fan(uvec2 o, uint s, out uvec2 points[10]) {
     points[n++] = o + uvec2(h);
     points[n++] = corners[0];
     for (int k = 3; k >= 0; k--) {
-        if (vertex_at(mids[k].x, mids[k].y) != NONE) {
+        if (is_vertex(mids[k].x, mids[k].y)) {
             points[n++] = mids[k];
         }
         points[n++] = corners[k];
@@ -155,69 +159,79 @@ void main() {
     b = builds[pc.first_build + slot];
     lookup_base = slot * LOOKUP_WORDS;
 
+    for (uint w = me; w < present.length(); w += 256) {
+        present[w] = 0;
+    }
+    barrier();
     for (uint v = me; v < b.vertex_count; v += 256) {
         uint p = positions[b.vertex_word + v];
         uint x = p & 511;
         uint y = (p >> 9) & 511;
         if (x < SIDE && y < SIDE) {
-            lookup[lookup_base + y * SIDE + x] = v;
+            uint i = y * SIDE + x;
+            lookup[lookup_base + i] = v;
+            atomicOr(present[i / 32], 1u << (i % 32));
         }
     }
     memoryBarrierBuffer();
+    memoryBarrierShared();
     barrier();
 
-    // Pass 0 counts this invocation's indices (fan, restart); pass 1 writes them.
+    // Pass 0 finds the leaves that start in this invocation's cells (skipping the rest of
+    // each leaf's run of cells) and counts their indices (fan, restart); pass 1 writes them.
     uint first = me * CELLS_PER_INVOCATION;
-    uint at = 0;
-    bool missing = false;
+    uint end = first + CELLS_PER_INVOCATION;
+    uint starts[CELLS_PER_INVOCATION];
     uint depths[CELLS_PER_INVOCATION];
-    for (uint pass = 0; pass < 2; pass++) {
-        if (pass == 1) {
-            counts[me] = at;
-            barrier();
-            if (me == 0) {
-                uint sum = 0;
-                for (uint k = 0; k < 256; k++) {
-                    uint n = counts[k];
-                    counts[k] = sum;
-                    sum += n;
-                }
-                // The last fan has no restart.
-                uint total = sum == 0 ? 0 : sum - 1;
-                if (total != b.index_count) {
-                    fail(total);
-                }
-            }
-            barrier();
-            at = counts[me];
+    uint leaves = 0;
+    uint at = 0;
+    for (uint h = first; h < end;) {
+        uint d = leaf_depth(hilbert_cell(h));
+        if (d == NONE) {
+            h++;
+            continue;
         }
-        for (uint k = 0; k < CELLS_PER_INVOCATION; k++) {
-            uint h = first + k;
-            uvec2 c = hilbert_cell(h);
-            if (pass == 0) {
-                depths[k] = leaf_depth(c);
-            }
-            uint d = depths[k];
-            // A leaf of depth d covers 4^(7-d) consecutive positions: draw it at the first.
-            if (d == NONE || (h & ((1u << (2 * (7 - d))) - 1)) != 0) {
-                continue;
-            }
-            uint s = 256u >> d;
+        // A leaf of depth d covers 4^(7-d) consecutive positions: it is drawn at the first.
+        uint run = 1u << (2 * (7 - d));
+        if ((h & (run - 1)) == 0) {
+            starts[leaves] = h;
+            depths[leaves] = d;
+            leaves++;
             uvec2 points[10];
-            uint n = fan((c >> (7 - d)) * s, s, points);
-            for (uint i = 0; i < n; i++) {
-                if (pass == 1) {
-                    uint v = vertex_at(points[i].x, points[i].y);
-                    missing = missing || v == NONE;
-                    put(at, v == NONE ? 0 : v);
-                }
-                at++;
-            }
-            if (pass == 1) {
-                put(at, pc.restart);
-            }
-            at++;
+            uint s = 256u >> d;
+            at += fan((hilbert_cell(h) >> (7 - d)) * s, s, points) + 1;
         }
+        h = (h | (run - 1)) + 1;
+    }
+    counts[me] = at;
+    barrier();
+    if (me == 0) {
+        uint sum = 0;
+        for (uint k = 0; k < 256; k++) {
+            uint n = counts[k];
+            counts[k] = sum;
+            sum += n;
+        }
+        // The last fan has no restart.
+        uint total = sum == 0 ? 0 : sum - 1;
+        if (total != b.index_count) {
+            fail(total);
+        }
+    }
+    barrier();
+    at = counts[me];
+    bool missing = false;
+    for (uint k = 0; k < leaves; k++) {
+        uint d = depths[k];
+        uint s = 256u >> d;
+        uvec2 points[10];
+        uint n = fan((hilbert_cell(starts[k]) >> (7 - d)) * s, s, points);
+        for (uint i = 0; i < n; i++) {
+            uint v = vertex_at(points[i].x, points[i].y);
+            missing = missing || v == NONE;
+            put(at++, v == NONE ? 0 : v);
+        }
+        put(at++, pc.restart);
     }
     if (missing) {
         fail(NONE);
