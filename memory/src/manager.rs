@@ -697,7 +697,11 @@ impl Manager {
         res.index_at = layout.index;
         self.own(chunk, tile);
         self.chunks[chunk].copied_in = Some(self.frame);
+        // The old chunk is read by this frame's copies whether or not the frame draws the tile
+        // (a prefetch moves tiles no frame draws): it is not reused before the frame completes,
+        // or the next frame's CPU writes could land under the copies (own() marks the new one).
         self.chunks[old_chunk].drawn = Some(self.frame);
+        self.chunks[old_chunk].last_used = self.frame;
         self.release(old_chunk);
         res.chunk = chunk;
         res.layout = layout;
@@ -927,6 +931,10 @@ impl Manager {
     fn index_upload(&mut self, tile: TileId, level: u32, dst: u64, chunk: usize) -> Upload {
         let built = self.config.index_arrays == IndexArrays::Built;
         if built {
+            // The GPU writes the chunk (and reads its blocks) when this frame runs: it is used
+            // by this frame, so it is not evicted or reused before the frame completes (a
+            // prefetch builds into chunks no frame draws).
+            self.touch(chunk);
             self.chunks[chunk].built_in = Some(self.frame);
         }
         Upload {

@@ -512,7 +512,7 @@ fn prefetching_stops_at_the_free_share_and_the_budget() {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(200))]
+    #![proptest_config(ProptestConfig::with_cases(1000))]
 
     /// On random flights with random budgets, weights and frames in flight: the bookkeeping
     /// holds, resident bytes stay within the pool, every drawn tile is drawn at a level whose
@@ -667,6 +667,18 @@ proptest! {
                         "frame {f}: move {a:?} reads what {b:?} writes"
                     );
                 }
+            }
+            // A build reads its tile's blocks and writes its array when the frame runs: both
+            // count as the frame's reads and GPU writes for the frames after it.
+            let mut drawn = drawn;
+            let mut moved = moved;
+            // So do the sources of the frame's in-pool copies.
+            drawn.extend(p.moves.iter().map(|mv| (mv.src, mv.src + mv.bytes)));
+            for u in p.uploads.iter().filter(|u| u.built) {
+                let Part::Indices(level) = u.part else { unreachable!("only arrays are built") };
+                let blocks = tiles[u.tile as usize].positions_before(level + 1);
+                drawn.push((u.chunk, u.chunk + blocks));
+                moved.push((u.dst, u.dst + u.bytes));
             }
             copied.push(moved);
             read.push(drawn);

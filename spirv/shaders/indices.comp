@@ -11,8 +11,10 @@
 // its fan exactly when it is a vertex. Fans go in P-order (the Hilbert curve over the 128 x
 // 128 finest cells, as the builder sorts them), each as: centre, then the perimeter
 // counter-clockwise from above starting at the north-west corner and closed by repeating it,
-// then a restart (none after the last). The builder rotates each ring to suit a vertex cache;
-// the GPU keeps the north-west start, so the arrays hold the same fans, not the same bytes.
+// then a restart (none after the last). The builder rotates each ring to start with the
+// vertices a model of a vertex cache still holds; the GPU rotates it to start with the run of
+// vertices it shares with the previous fan (consecutive fans are adjacent cells), so the
+// arrays hold the same fans in the same order, not the same bytes.
 //
 // One workgroup builds one array: its invocations scatter the blocks' vertices into a
 // position -> vertex lookup (a scratch slot per workgroup, never cleared: only positions this
@@ -221,17 +223,50 @@ void main() {
     barrier();
     at = counts[me];
     bool missing = false;
+    // The previous fan's cell (origin, size; size 0: none), for each ring's start.
+    uvec2 previous = uvec2(0);
+    uint previous_size = 0;
+    // Before this invocation's first fan: the leaf of the cell just before it on the curve
+    // (none if the mesh does not reach that cell).
+    if (leaves > 0 && starts[0] > 0) {
+        uvec2 c = hilbert_cell(starts[0] - 1);
+        uint d = leaf_depth(c);
+        if (d != NONE) {
+            previous_size = 256u >> d;
+            previous = (c >> (7 - d)) * previous_size;
+        }
+    }
     for (uint k = 0; k < leaves; k++) {
         uint d = depths[k];
         uint s = 256u >> d;
+        uvec2 o = (hilbert_cell(starts[k]) >> (7 - d)) * s;
         uvec2 points[10];
-        uint n = fan((hilbert_cell(starts[k]) >> (7 - d)) * s, s, points);
+        uint n = fan(o, s, points);
+        // The ring is points[1 .. n-1) (points[n-1] closes it): start it where the run of
+        // vertices on the previous cell's boundary starts.
+        uint ring = n - 2;
+        uint start = 0;
+        for (uint r = 0; r < ring && previous_size > 0; r++) {
+            uvec2 p = points[1 + r];
+            uvec2 q = points[1 + (r + ring - 1) % ring];
+            uvec2 lo = previous;
+            uvec2 hi = previous + previous_size;
+            bool here = all(greaterThanEqual(p, lo)) && all(lessThanEqual(p, hi));
+            bool before = all(greaterThanEqual(q, lo)) && all(lessThanEqual(q, hi));
+            if (here && !before) {
+                start = r;
+                break;
+            }
+        }
         for (uint i = 0; i < n; i++) {
-            uint v = vertex_at(points[i].x, points[i].y);
+            uvec2 p = i == 0 ? points[0] : points[1 + (start + i - 1) % ring];
+            uint v = vertex_at(p.x, p.y);
             missing = missing || v == NONE;
             put(at++, v == NONE ? 0 : v);
         }
         put(at++, pc.restart);
+        previous = o;
+        previous_size = s;
     }
     if (missing) {
         fail(NONE);

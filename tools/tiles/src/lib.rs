@@ -20,6 +20,7 @@ pub mod grid;
 pub mod mesh;
 pub mod pack;
 pub mod quantise;
+pub mod rings;
 pub mod texture;
 pub mod verify;
 
