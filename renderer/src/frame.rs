@@ -429,13 +429,17 @@ impl Renderer {
         let texture_bytes = slot_config
             .as_ref()
             .map_or(0, |c| c.slots as u64 * c.slot_bytes());
-        let index_arrays = if gpu.storage_16bit {
+        let slot_count = options.frames_in_flight.max(1);
+        let builds_per_frame = builds_per_frame(terrain);
+        // The builder's lookups would take more than an eighth of a small GPU budget (under
+        // about 17 MB): there, index arrays are sent.
+        let affordable =
+            IndexBuilder::bytes_for(slot_count, builds_per_frame) <= options.gpu_budget_bytes / 8;
+        let index_arrays = if gpu.storage_16bit && affordable {
             options.index_arrays
         } else {
             IndexArrays::Sent
         };
-        let slot_count = options.frames_in_flight.max(1);
-        let builds_per_frame = builds_per_frame(terrain);
         let builder_bytes = match index_arrays {
             IndexArrays::Built => IndexBuilder::bytes_for(slot_count, builds_per_frame),
             IndexArrays::Sent => 0,

@@ -204,6 +204,8 @@ fn tight_budgets_draw_coarser_never_crack() {
     // Smaller than single views: tiles are drawn coarser, and counted.
     let s = tight(&puget(dir.path()), 2, 4, "256x192", 6);
     assert!(s["tiles_coarser"].as_u64().expect("coarser") > 0, "{s}");
+    // The index builder would take more than an eighth of 2 MB: arrays are sent.
+    assert_eq!(s["index_arrays"], "sent", "{s}");
     let srtm = ["N41E001.hgt", "N42E001.hgt"].map(|f| data(&format!("srtm/{f}")));
     let mosaic = tileset_of(dir.path(), &srtm, dem::ReadOptions::default());
     let s = tight(&mosaic, 4, 4, "256x192", 6);
@@ -226,7 +228,8 @@ fn a_348_mb_tile_set_flies_in_64_mb() {
     assert!(bytes > 300 << 20, "the 4K set is {bytes} bytes");
     // Uploads fast enough that the pool, not the bus, is what the flight runs out of (each
     // view at tau 1 fits in 64 MB; the flight as a whole does not, so tiles are evicted).
-    tight(&set, 64, 16, "1024x768", 12);
+    let s = tight(&set, 64, 16, "1024x768", 12);
+    assert_eq!(s["index_arrays"], "built", "{s}");
 }
 
 #[test]
@@ -828,7 +831,8 @@ fn prefetching_under_a_tight_budget_stays_crack_free() {
     assert!(s["prefetch_hits"].as_u64() > Some(0), "{s}");
 }
 
-/// The measure prefetching exists for: on the Puget orbit under 1 MiB a frame, tiles arrive late
+/// The measure prefetching exists for: on the Puget orbit under 0.25 MiB a frame (index arrays
+/// built on the GPU, so the budget pays for blocks only), tiles arrive late
 /// after the cold start without prefetching (the control), and with it (our predictor, and the
 /// next level's index array sent ahead as a spare) far fewer do, validation silent. The CPU
 /// limit is lifted so a loaded machine cannot change what is predicted.
@@ -850,7 +854,7 @@ fn prefetching_draws_fewer_tiles_coarser_after_the_cold_start() {
             "--tau",
             "1",
             "--upload-budget-mb",
-            "1",
+            "0.25",
             "--prefetch-ms",
             "1000",
         ];
@@ -864,6 +868,7 @@ fn prefetching_draws_fewer_tiles_coarser_after_the_cold_start() {
     let on = run(&[]);
     let off = run(&["--no-prefetch"]);
     let warm = |v: &serde_json::Value| v["tiles_coarser_warm"].as_u64().expect("count");
+    assert_eq!(on["index_arrays"], "built", "{on}");
     assert_eq!(on["warmup_frames"], off["warmup_frames"], "{on}\n{off}");
     assert!(warm(&off) >= 10, "the budget must make tiles late: {off}");
     assert!(
