@@ -431,18 +431,21 @@ impl Renderer {
             .map_or(0, |c| c.slots as u64 * c.slot_bytes());
         let slot_count = options.frames_in_flight.max(1);
         let builds_per_frame = builds_per_frame(terrain);
-        // The builder's lookups would take more than an eighth of a small GPU budget (under
-        // about 17 MB): there, index arrays are sent.
-        let affordable =
-            IndexBuilder::bytes_for(slot_count, builds_per_frame) <= options.gpu_budget_bytes / 8;
-        let index_arrays = if gpu.storage_16bit && affordable {
-            options.index_arrays
-        } else {
-            IndexArrays::Sent
+        // The index builder takes at most an eighth of the GPU budget: as many lookups (arrays
+        // built at once) as fit, up to eight (2.1 MB); under about 2.5 MB not even one fits,
+        // and index arrays are sent.
+        let lookups = [8, 4, 2, 1].into_iter().find(|&n| {
+            IndexBuilder::bytes_for(slot_count, builds_per_frame, n) <= options.gpu_budget_bytes / 8
+        });
+        let index_arrays = match lookups {
+            Some(_) if gpu.storage_16bit => options.index_arrays,
+            _ => IndexArrays::Sent,
         };
-        let builder_bytes = match index_arrays {
-            IndexArrays::Built => IndexBuilder::bytes_for(slot_count, builds_per_frame),
-            IndexArrays::Sent => 0,
+        let builder_bytes = match (index_arrays, lookups) {
+            (IndexArrays::Built, Some(n)) => {
+                IndexBuilder::bytes_for(slot_count, builds_per_frame, n)
+            }
+            _ => 0,
         };
         let config = Config {
             pool_bytes: options
@@ -512,7 +515,8 @@ impl Renderer {
         }
         let mut builder = None;
         if let (IndexArrays::Built, None) = (index_arrays, &failure) {
-            match IndexBuilder::new(gpu, &pool.buffer, slot_count, builds_per_frame) {
+            let lookups = lookups.unwrap_or(1);
+            match IndexBuilder::new(gpu, &pool.buffer, slot_count, builds_per_frame, lookups) {
                 Ok(b) => builder = Some(b),
                 Err(e) => failure = Some(e.to_string()),
             }

@@ -32,7 +32,8 @@ impl Bench {
         assert!(gpu.storage_16bit, "lavapipe stores 16-bit values");
         let pool = TilePool::new(&gpu, POOL_BYTES, false).expect("pool");
         assert!(pool.direct(), "the test writes the pool from the CPU");
-        let builder = IndexBuilder::new(&gpu, &pool.buffer, 1, 64).expect("builder");
+        let builder =
+            IndexBuilder::new(&gpu, &pool.buffer, 1, 64, MAX_BUILDS_PER_DISPATCH).expect("builder");
         Bench { gpu, pool, builder }
     }
 

@@ -1,8 +1,8 @@
 //! Index arrays built on the GPU (`spirv/shaders/indices.comp`) from the vertex blocks already
 //! in the tile pool: a level's index array then crosses no bus, and the upload budget pays for
 //! blocks only (`memory::IndexArrays::Built`). One workgroup builds one array, with a scratch
-//! lookup of its own; a frame's builds go in dispatches of [`MAX_BUILDS_PER_DISPATCH`]
-//! workgroups, after the frame's copies and before its draws. Each frame slot has its own
+//! lookup of its own; a frame's builds go in dispatches of as many workgroups as there are
+//! lookups (at most [`MAX_BUILDS_PER_DISPATCH`]), after the frame's copies and before its draws. Each frame slot has its own
 //! build list and a status word the shader raises when a built array does not have the count
 //! the file gives (a tile set whose vertices do not make the mesh it claims).
 
@@ -13,7 +13,7 @@ use gpu_allocator::MemoryLocation;
 use super::buffer::BufferDesc;
 use super::{Buffer, Gpu, VkError, VkResult};
 
-/// Workgroups (arrays) per dispatch, each with its own lookup of 257 x 257 words.
+/// Workgroups (arrays) per dispatch at most, each with its own lookup of 257 x 257 words.
 pub const MAX_BUILDS_PER_DISPATCH: u32 = 8;
 const LOOKUP_BYTES: u64 = 257 * 257 * 4;
 const STATUS_BYTES: u64 = 16;
@@ -60,11 +60,21 @@ pub struct IndexBuilder {
     scratch: Buffer,
     /// Builds a slot's list holds.
     capacity: usize,
+    /// Lookups in `scratch`: workgroups per dispatch.
+    lookups: u32,
 }
 
 impl IndexBuilder {
-    /// A builder writing into `pool`, for `slots` frame slots of up to `capacity` builds each.
-    pub fn new(gpu: &Gpu, pool: &Buffer, slots: usize, capacity: usize) -> VkResult<Self> {
+    /// A builder writing into `pool`, for `slots` frame slots of up to `capacity` builds each,
+    /// with `lookups` (1 to [`MAX_BUILDS_PER_DISPATCH`]) arrays built at once.
+    pub fn new(
+        gpu: &Gpu,
+        pool: &Buffer,
+        slots: usize,
+        capacity: usize,
+        lookups: u32,
+    ) -> VkResult<Self> {
+        let lookups = lookups.clamp(1, MAX_BUILDS_PER_DISPATCH);
         if !gpu.storage_16bit {
             return Err(VkError::Unsupported(
                 "building index arrays on the GPU needs storageBuffer16BitAccess".into(),
@@ -94,13 +104,14 @@ impl IndexBuilder {
             scratch: Buffer::new(
                 gpu,
                 BufferDesc {
-                    size: LOOKUP_BYTES * u64::from(MAX_BUILDS_PER_DISPATCH),
+                    size: LOOKUP_BYTES * u64::from(lookups),
                     usage: vk::BufferUsageFlags::STORAGE_BUFFER,
                     location: MemoryLocation::GpuOnly,
                 },
                 "index build lookup",
             )?,
             capacity: capacity.max(1),
+            lookups,
         };
         // On failure the partly made builder is destroyed (null handles are skipped).
         match builder.create(gpu, pool, slots.max(1)) {
@@ -215,9 +226,10 @@ impl IndexBuilder {
         Ok(())
     }
 
-    /// Bytes [`IndexBuilder::bytes`] will be for `slots` slots of `capacity` builds.
-    pub fn bytes_for(slots: usize, capacity: usize) -> u64 {
-        LOOKUP_BYTES * u64::from(MAX_BUILDS_PER_DISPATCH)
+    /// Bytes [`IndexBuilder::bytes`] will be for `slots` slots of `capacity` builds and
+    /// `lookups` lookups.
+    pub fn bytes_for(slots: usize, capacity: usize, lookups: u32) -> u64 {
+        LOOKUP_BYTES * u64::from(lookups.clamp(1, MAX_BUILDS_PER_DISPATCH))
             + slots.max(1) as u64
                 * ((capacity.max(1) * std::mem::size_of::<Build>()) as u64 + STATUS_BYTES)
     }
@@ -296,7 +308,7 @@ impl IndexBuilder {
                         &[],
                     );
                 }
-                let n = (count - first).min(MAX_BUILDS_PER_DISPATCH);
+                let n = (count - first).min(self.lookups);
                 gpu.device.cmd_push_constants(
                     cmd,
                     self.layout,
