@@ -11,6 +11,7 @@ use bytemuck::{Pod, Zeroable};
 use gpu_allocator::MemoryLocation;
 
 use super::buffer::BufferDesc;
+use super::sync;
 use super::{Buffer, Gpu, VkError, VkResult};
 
 /// Workgroups (arrays) per dispatch at most, each with its own lookup of 257 x 257 words.
@@ -257,33 +258,16 @@ impl IndexBuilder {
         if count == 0 {
             return;
         }
-        let before = vk::MemoryBarrier::default()
-            .src_access_mask(vk::AccessFlags::TRANSFER_WRITE | vk::AccessFlags::SHADER_WRITE)
-            .dst_access_mask(vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE);
-        let between = vk::MemoryBarrier::default()
-            .src_access_mask(vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE)
-            .dst_access_mask(vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE);
-        let after = vk::MemoryBarrier::default()
-            .src_access_mask(vk::AccessFlags::SHADER_WRITE)
-            .dst_access_mask(
-                vk::AccessFlags::INDEX_READ
-                    | vk::AccessFlags::TRANSFER_READ
-                    | vk::AccessFlags::HOST_READ,
-            );
+        let compute = vk::PipelineStageFlags::COMPUTE_SHADER;
+        let shader = vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE;
+        let earlier = vk::PipelineStageFlags::VERTEX_INPUT
+            | vk::PipelineStageFlags::VERTEX_SHADER
+            | vk::PipelineStageFlags::TRANSFER
+            | compute;
+        let written = vk::AccessFlags::TRANSFER_WRITE | vk::AccessFlags::SHADER_WRITE;
+        sync::memory_barrier(gpu, cmd, (earlier, written), (compute, shader));
         // SAFETY: recording outside rendering; the set's buffers outlive the command buffer.
         unsafe {
-            gpu.device.cmd_pipeline_barrier(
-                cmd,
-                vk::PipelineStageFlags::VERTEX_INPUT
-                    | vk::PipelineStageFlags::VERTEX_SHADER
-                    | vk::PipelineStageFlags::TRANSFER
-                    | vk::PipelineStageFlags::COMPUTE_SHADER,
-                vk::PipelineStageFlags::COMPUTE_SHADER,
-                vk::DependencyFlags::empty(),
-                &[before],
-                &[],
-                &[],
-            );
             gpu.device
                 .cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.pipeline);
             gpu.device.cmd_bind_descriptor_sets(
@@ -294,21 +278,16 @@ impl IndexBuilder {
                 &[self.sets[s]],
                 &[],
             );
-            let mut first = 0;
-            while first < count {
-                if first > 0 {
-                    // The next dispatch reuses the lookups.
-                    gpu.device.cmd_pipeline_barrier(
-                        cmd,
-                        vk::PipelineStageFlags::COMPUTE_SHADER,
-                        vk::PipelineStageFlags::COMPUTE_SHADER,
-                        vk::DependencyFlags::empty(),
-                        &[between],
-                        &[],
-                        &[],
-                    );
-                }
-                let n = (count - first).min(self.lookups);
+        }
+        let mut first = 0;
+        while first < count {
+            if first > 0 {
+                // The next dispatch reuses the lookups.
+                sync::memory_barrier(gpu, cmd, (compute, shader), (compute, shader));
+            }
+            let n = (count - first).min(self.lookups);
+            // SAFETY: as above; the pipeline and set are bound.
+            unsafe {
                 gpu.device.cmd_push_constants(
                     cmd,
                     self.layout,
@@ -317,20 +296,21 @@ impl IndexBuilder {
                     bytemuck::bytes_of(&[first, u32::MAX]),
                 );
                 gpu.device.cmd_dispatch(cmd, n, 1, 1);
-                first += n;
             }
-            gpu.device.cmd_pipeline_barrier(
-                cmd,
-                vk::PipelineStageFlags::COMPUTE_SHADER,
-                vk::PipelineStageFlags::VERTEX_INPUT
-                    | vk::PipelineStageFlags::TRANSFER
-                    | vk::PipelineStageFlags::HOST,
-                vk::DependencyFlags::empty(),
-                &[after],
-                &[],
-                &[],
-            );
+            first += n;
         }
+        let readers = vk::PipelineStageFlags::VERTEX_INPUT
+            | vk::PipelineStageFlags::TRANSFER
+            | vk::PipelineStageFlags::HOST;
+        let reads = vk::AccessFlags::INDEX_READ
+            | vk::AccessFlags::TRANSFER_READ
+            | vk::AccessFlags::HOST_READ;
+        sync::memory_barrier(
+            gpu,
+            cmd,
+            (compute, vk::AccessFlags::SHADER_WRITE),
+            (readers, reads),
+        );
     }
 
     /// After slot `s`'s frame completed: its first failed build, if any (and the status is

@@ -173,32 +173,22 @@ pub fn record_transfers(
     if moves.is_empty() && staged.is_empty() {
         return;
     }
-    let before = vk::MemoryBarrier::default()
-        .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-        .dst_access_mask(vk::AccessFlags::TRANSFER_READ | vk::AccessFlags::TRANSFER_WRITE);
-    let after = vk::MemoryBarrier::default()
-        .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-        .dst_access_mask(
-            vk::AccessFlags::INDEX_READ
-                | vk::AccessFlags::VERTEX_ATTRIBUTE_READ
-                | vk::AccessFlags::SHADER_READ,
-        );
+    let transfer = vk::PipelineStageFlags::TRANSFER;
+    // Write-after-read against earlier frames' draws (vertex input, vertex shader) needs only
+    // the execution dependency; earlier transfers' writes are made visible.
+    let draws = vk::PipelineStageFlags::VERTEX_INPUT | vk::PipelineStageFlags::VERTEX_SHADER;
+    sync::memory_barrier(
+        gpu,
+        cmd,
+        (draws | transfer, vk::AccessFlags::TRANSFER_WRITE),
+        (
+            transfer,
+            vk::AccessFlags::TRANSFER_READ | vk::AccessFlags::TRANSFER_WRITE,
+        ),
+    );
     // SAFETY: recording outside rendering; regions lie in the pool and the staging slot (the
     // manager never overlaps a move's source and destination).
     unsafe {
-        // Write-after-read against earlier frames' draws (vertex input, vertex shader) needs
-        // only the execution dependency; earlier transfers' writes are made visible.
-        gpu.device.cmd_pipeline_barrier(
-            cmd,
-            vk::PipelineStageFlags::VERTEX_INPUT
-                | vk::PipelineStageFlags::VERTEX_SHADER
-                | vk::PipelineStageFlags::TRANSFER,
-            vk::PipelineStageFlags::TRANSFER,
-            vk::DependencyFlags::empty(),
-            &[before],
-            &[],
-            &[],
-        );
         if !moves.is_empty() {
             gpu.device
                 .cmd_copy_buffer(cmd, pool.buffer.raw, pool.buffer.raw, moves);
@@ -207,32 +197,26 @@ pub fn record_transfers(
             gpu.device
                 .cmd_copy_buffer(cmd, staging.buffer.raw, pool.buffer.raw, staged);
         }
-        gpu.device.cmd_pipeline_barrier(
-            cmd,
-            vk::PipelineStageFlags::TRANSFER,
-            vk::PipelineStageFlags::VERTEX_INPUT | vk::PipelineStageFlags::VERTEX_SHADER,
-            vk::DependencyFlags::empty(),
-            &[after],
-            &[],
-            &[],
-        );
     }
+    let reads = vk::AccessFlags::INDEX_READ
+        | vk::AccessFlags::VERTEX_ATTRIBUTE_READ
+        | vk::AccessFlags::SHADER_READ;
+    sync::memory_barrier(
+        gpu,
+        cmd,
+        (transfer, vk::AccessFlags::TRANSFER_WRITE),
+        (draws, reads),
+    );
 }
 
 fn host_read_barrier(gpu: &Gpu, cmd: vk::CommandBuffer) {
-    let barrier = vk::MemoryBarrier::default()
-        .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-        .dst_access_mask(vk::AccessFlags::HOST_READ);
-    // SAFETY: recording outside rendering.
-    unsafe {
-        gpu.device.cmd_pipeline_barrier(
-            cmd,
+    sync::memory_barrier(
+        gpu,
+        cmd,
+        (
             vk::PipelineStageFlags::TRANSFER,
-            vk::PipelineStageFlags::HOST,
-            vk::DependencyFlags::empty(),
-            &[barrier],
-            &[],
-            &[],
-        );
-    }
+            vk::AccessFlags::TRANSFER_WRITE,
+        ),
+        (vk::PipelineStageFlags::HOST, vk::AccessFlags::HOST_READ),
+    );
 }

@@ -158,3 +158,26 @@ pub fn run_once(gpu: &Gpu, name: &str, record: impl FnOnce(vk::CommandBuffer)) -
     commands.destroy(gpu);
     result
 }
+
+/// A stage and the memory accesses in it: one side of a barrier.
+pub type Scope = (vk::PipelineStageFlags, vk::AccessFlags);
+
+/// Records a global memory barrier: `before`'s accesses happen before `after`'s (buffers only;
+/// images need their layout barriers). Must be recorded outside rendering.
+pub fn memory_barrier(gpu: &Gpu, cmd: vk::CommandBuffer, before: Scope, after: Scope) {
+    let barrier = vk::MemoryBarrier::default()
+        .src_access_mask(before.1)
+        .dst_access_mask(after.1);
+    // SAFETY: a recording command buffer; a global barrier names no resource.
+    unsafe {
+        gpu.device.cmd_pipeline_barrier(
+            cmd,
+            before.0,
+            after.0,
+            vk::DependencyFlags::empty(),
+            &[barrier],
+            &[],
+            &[],
+        );
+    }
+}
