@@ -98,34 +98,13 @@ impl Bench {
     }
 }
 
-/// Indices as u32, restarts as `u32::MAX`.
-fn widen(bytes: &[u8], width: u32) -> Vec<u32> {
-    match width {
-        2 => bytes
-            .chunks_exact(2)
-            .map(|c| u16::from_le_bytes([c[0], c[1]]))
-            .map(|i| {
-                if i == u16::MAX {
-                    u32::MAX
-                } else {
-                    u32::from(i)
-                }
-            })
-            .collect(),
-        _ => bytes
-            .chunks_exact(4)
-            .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-            .collect(),
-    }
-}
-
 /// What the GPU must build for `level` of tile `t`: the file's array, rings rotated.
 fn expected(terrain: &Terrain, t: usize, level: u32) -> Vec<u32> {
     let l = &terrain.tiles[t].levels[level as usize];
     let positions: Vec<u32> = (0..=level)
-        .flat_map(|j| widen(terrain.part(t, Part::Positions(j)).expect("positions"), 4))
+        .flat_map(|j| common::widen(terrain.part(t, Part::Positions(j)).expect("positions"), 4))
         .collect();
-    let file = widen(
+    let file = common::widen(
         terrain.part(t, Part::Indices(level)).expect("indices"),
         l.index_width,
     );
@@ -169,7 +148,7 @@ fn check_every_level(bench: &mut Bench, terrain: &Terrain) -> (usize, usize, usi
                 );
                 let what = format!("tile {t} level {level}");
                 same(
-                    &widen(got, l.index_width),
+                    &common::widen(got, l.index_width),
                     &expected(terrain, t, level),
                     &what,
                 );
@@ -204,7 +183,11 @@ fn every_level_of_the_puget_sample_builds_as_the_file_says() {
             common::fans(want, l.index_width),
             "level {level}, 32-bit"
         );
-        same(&widen(got, 4), &expected(&terrain, t, level), "32-bit");
+        same(
+            &common::widen(got, 4),
+            &expected(&terrain, t, level),
+            "32-bit",
+        );
     }
     // Control: the same builds told the wrong expected count fail, and report it.
     let (_, failure) = bench.build(&terrain, 5, &[3], false, |b| b.index_count -= 1);

@@ -193,17 +193,7 @@ pub fn is_sky(p: &image::Rgba<u8>) -> bool {
 /// The fans of an index array (`width` 2 or 4 bytes): (centre, ring without its closing vertex, rotated to start at
 /// its smallest index), in order. Panics on a fan that is not closed.
 pub fn fans(bytes: &[u8], width: u32) -> Vec<(u32, Vec<u32>)> {
-    let indices: Vec<u32> = match width {
-        2 => bytes
-            .chunks_exact(2)
-            .map(|c| u32::from(u16::from_le_bytes([c[0], c[1]])))
-            .map(|i| if i == 0xffff { u32::MAX } else { i })
-            .collect(),
-        _ => bytes
-            .chunks_exact(4)
-            .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-            .collect(),
-    };
+    let indices = widen(bytes, width);
     indices
         .split(|&i| i == u32::MAX)
         .map(|fan| {
@@ -218,4 +208,25 @@ pub fn fans(bytes: &[u8], width: u32) -> Vec<(u32, Vec<u32>)> {
             (centre, ring)
         })
         .collect()
+}
+
+/// An index array's bytes (`width` 2 or 4) as u32, restarts as `u32::MAX`.
+pub fn widen(bytes: &[u8], width: u32) -> Vec<u32> {
+    match width {
+        2 => bytes
+            .chunks_exact(2)
+            .map(|c| u16::from_le_bytes([c[0], c[1]]))
+            .map(|i| {
+                if i == u16::MAX {
+                    u32::MAX
+                } else {
+                    u32::from(i)
+                }
+            })
+            .collect(),
+        _ => bytes
+            .chunks_exact(4)
+            .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect(),
+    }
 }
