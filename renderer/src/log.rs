@@ -89,8 +89,9 @@ pub struct FrameRecord {
     pub prefetch_hits: u64,
     /// Prefetched bytes evicted this frame before anything drew them.
     pub prefetch_wasted_bytes: u64,
-    /// The distance, metres, between where the shortest horizon (0.25 s) predicted the camera
-    /// and where it was when that time came (NaN when no prediction fell due this frame).
+    /// The distance, metres, between where the shortest horizon (0.25 s or one frame, the
+    /// longer) predicted the camera and where it was when that time came (NaN when no
+    /// prediction fell due this frame).
     pub prediction_error_m: f64,
     /// Predicting the camera, culling and choosing levels for it, and advising the kernel.
     pub cpu_prefetch_ms: f64,

@@ -189,7 +189,8 @@ struct Cli {
     #[arg(long)]
     record: Option<PathBuf>,
     /// Do not upload tiles predicted to become visible (the camera is predicted from the
-    /// poses flown, 0.25, 0.5 and 1 s ahead); nor read them ahead from the file.
+    /// poses flown, at least 0.25 to 2 s and 1 to 8 frames ahead); nor read them ahead from
+    /// the file.
     #[arg(long)]
     no_prefetch: bool,
     /// CPU time per frame for predicting the camera and culling and choosing levels for it.

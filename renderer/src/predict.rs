@@ -1,5 +1,5 @@
 //! Camera prediction for prefetching (paper, section 6, last paragraph): a quadratic fitted by
-//! least squares through the last poses flown, extrapolated a few tenths of a second ahead.
+//! least squares through the last poses flown, extrapolated up to a few seconds ahead.
 //!
 //! The predictor sees only what [`Predictor::observe`] was given, one pose per frame as it is
 //! drawn, so a flight never reads its own future. Each channel (x, y, z, heading unwrapped,
@@ -8,10 +8,19 @@
 //! so a still camera is predicted exactly, and a decelerating channel stops where the fit says
 //! its speed reaches zero rather than turning back (a camera that brakes does not reverse).
 //!
-//! Error bounds (the unit tests check them):
+//! How far ahead: the horizons are at least 0.25, 0.5, 1 and 2 s, and at least 1, 2, 4 and 8
+//! frames at the pace the poses arrive ([`Predictor::horizons`]), capped at 4 s. The seconds
+//! matter at interactive frame rates and for the page cache; the frames matter because the
+//! upload budget is per frame: a tile that needs k frames of budget is only in time if it is
+//! predicted k frames ahead, and at a few frames per second (lavapipe, or a headless flight of
+//! 120 frames over 48 s) one second is only two or three frames.
+//!
+//! Error bounds (the unit tests check them, at 30 and at 2.5 frames per second):
 //! - straight line at constant speed: exact (to rounding) at every horizon;
 //! - constant turn of radius `r` at speed `v`: within `v^3 h^3 / (6 r^2)` plus the window's
-//!   share of the same term, a few centimetres at 100 m/s, r = 2 km, h = 1 s; heading exact;
+//!   share of the same term (`v^3 (h + window)^3 / (6 r^2)`), and at least five times closer
+//!   than a straight line; at 100 m/s on r = 2 km a few centimetres 1 s ahead at 30 frames per
+//!   second, under 3 m 3.2 s ahead at 2.5 frames per second; heading exact;
 //! - stop and go: never more than `v h` (a constant-velocity guess's worst), and exact again
 //!   once the window holds only still poses.
 
@@ -24,8 +33,14 @@ use crate::camera::Camera;
 /// Poses kept for the fit.
 pub const DEFAULT_POSES: usize = 6;
 
-/// Horizons the prefetcher looks ahead, seconds, soonest first.
-pub const HORIZONS: [f64; 3] = [0.25, 0.5, 1.0];
+/// The shortest horizons the prefetcher looks ahead, seconds, soonest first.
+pub const HORIZONS_S: [f64; 4] = [0.25, 0.5, 1.0, 2.0];
+
+/// The shortest horizons in frames at the pace poses arrive, soonest first.
+pub const HORIZON_FRAMES: [f64; 4] = [1.0, 2.0, 4.0, 8.0];
+
+/// No horizon is longer than this, seconds: beyond it a fit of the last few poses says little.
+pub const MAX_HORIZON_S: f64 = 4.0;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Pose {
@@ -79,6 +94,22 @@ impl Predictor {
             time,
             channels: [c.x, c.y, c.z, yaw, camera.pitch, camera.fov_y],
         });
+    }
+
+    /// The horizons to look ahead, seconds, soonest first: each the longer of
+    /// [`HORIZONS_S`] and [`HORIZON_FRAMES`] at the mean interval between the poses kept, at
+    /// most [`MAX_HORIZON_S`].
+    pub fn horizons(&self) -> [f64; 4] {
+        let n = self.poses.len();
+        let interval = match (self.poses.front(), self.poses.back()) {
+            (Some(a), Some(b)) if n >= 2 => (b.time - a.time) / (n - 1) as f64,
+            _ => 0.0,
+        };
+        std::array::from_fn(|i| {
+            HORIZONS_S[i]
+                .max(HORIZON_FRAMES[i] * interval)
+                .min(MAX_HORIZON_S)
+        })
     }
 
     /// The camera predicted `dt` seconds after the newest pose; None before the first pose.
@@ -294,35 +325,60 @@ mod tests {
         }
     }
 
-    /// Feeds `pose(t)` at 30 frames per second up to `until` (a prefix of the path only) and
-    /// returns the largest error at each horizon over the prefix's last second.
-    fn errors(pose: impl Fn(f64) -> Camera, until: f64) -> [(f64, f64); 3] {
+    /// Feeds `pose(t)` at `fps` frames per second up to `until` (a prefix of the path only)
+    /// and returns each horizon with the largest error there (metres, heading radians) over
+    /// the prefix's last three seconds.
+    fn errors(pose: impl Fn(f64) -> Camera, fps: f64, until: f64) -> Vec<(f64, f64, f64)> {
         let mut p = Predictor::default();
-        let mut worst = [(0.0f64, 0.0f64); 3];
-        let frames = (until * 30.0) as u32;
+        let mut worst: Vec<(f64, f64, f64)> = Vec::new();
+        let frames = (until * fps) as u32;
         for k in 0..=frames {
-            let t = f64::from(k) / 30.0;
+            let t = f64::from(k) / fps;
             p.observe(t, &pose(t));
-            if t < until - 1.0 || k < 3 {
+            if t < until - 3.0 || (k as usize) < DEFAULT_POSES {
                 continue;
             }
-            for (i, &h) in HORIZONS.iter().enumerate() {
+            let horizons = p.horizons();
+            worst.resize(horizons.len(), (0.0, 0.0, 0.0));
+            for (w, h) in worst.iter_mut().zip(horizons) {
                 let predicted = p.predict(h).unwrap();
                 let actual = pose(t + h);
                 let e = predicted.position.distance(actual.position);
                 let yaw = wrap(predicted.yaw - actual.yaw).abs();
-                worst[i] = (worst[i].0.max(e), worst[i].1.max(yaw));
+                *w = (h, w.1.max(e), w.2.max(yaw));
             }
         }
+        assert!(!worst.is_empty(), "nothing predicted");
         worst
+    }
+
+    #[test]
+    fn horizons_are_the_longer_of_seconds_and_frames_at_most_four_seconds() {
+        let line = |t: f64| camera(DVec3::new(10.0 * t, 0.0, 0.0), 0.0);
+        let at = |fps: f64| {
+            let mut p = Predictor::default();
+            assert_eq!(p.horizons(), HORIZONS_S, "no poses yet");
+            for k in 0..10 {
+                let t = f64::from(k) / fps;
+                p.observe(t, &line(t));
+            }
+            p.horizons()
+        };
+        let near = |a: [f64; 4], b: [f64; 4]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-9);
+        // Interactive rates: the seconds; a few frames per second: the frames; slower: capped.
+        assert!(near(at(60.0), [0.25, 0.5, 1.0, 2.0]), "{:?}", at(60.0));
+        assert!(near(at(2.5), [0.4, 0.8, 1.6, 3.2]), "{:?}", at(2.5));
+        assert!(near(at(1.0), [1.0, 2.0, 4.0, 4.0]), "{:?}", at(1.0));
     }
 
     #[test]
     fn a_straight_line_is_predicted_exactly() {
         let v = DVec3::new(80.0, -35.0, 4.0);
         let line = |t: f64| camera(DVec3::new(100.0, 200.0, 900.0) + v * t, 0.7);
-        for (h, (e, yaw)) in HORIZONS.iter().zip(errors(line, 5.0)) {
-            assert!(e < 1e-6 && yaw < 1e-9, "horizon {h}: {e} m, {yaw} rad");
+        for fps in [30.0, 2.5] {
+            for (h, e, yaw) in errors(line, fps, 6.0) {
+                assert!(e < 1e-6 && yaw < 1e-9, "{fps} fps, horizon {h}: {e} m, {yaw} rad");
+            }
         }
     }
 
@@ -338,48 +394,55 @@ mod tests {
                 a + std::f64::consts::FRAC_PI_2,
             )
         };
-        let window = (DEFAULT_POSES - 1) as f64 / 30.0;
-        for (h, (e, yaw)) in HORIZONS.iter().zip(errors(turn, 8.0)) {
-            // The cubic term the quadratic misses, over the horizon and the fitted window.
-            let bound = v * w * w * (h + window).powi(3) / 6.0;
-            assert!(e <= bound, "horizon {h}: {e} m > {bound} m");
-            assert!(yaw < 1e-9, "horizon {h}: heading off by {yaw} rad");
+        for fps in [30.0, 2.5] {
+            let window = (DEFAULT_POSES - 1) as f64 / fps;
+            let worst = errors(turn, fps, 10.0);
+            for &(h, e, yaw) in &worst {
+                // The cubic term the quadratic misses, over the horizon and the fitted window.
+                let bound = v * w * w * (h + window).powi(3) / 6.0;
+                assert!(e <= bound, "{fps} fps, horizon {h}: {e} m > {bound} m");
+                assert!(yaw < 1e-9, "{fps} fps, horizon {h}: heading off by {yaw} rad");
+                // A straight line through the same samples would be off by about v w h^2 / 2:
+                // the quadratic is at least five times closer.
+                let straight = v * w * h * h / 2.0;
+                assert!(e < 0.2 * straight, "{fps} fps, horizon {h}: {e} m vs {straight} m");
+            }
         }
-        // A straight line through the same samples would be off by about v w h^2 / 2.
-        let (e1, _) = errors(turn, 8.0)[2];
-        assert!(e1 < 0.1 * v * w / 2.0, "{e1}");
     }
 
     #[test]
     fn stop_and_go_never_overshoots_past_a_constant_velocity_guess() {
-        // Moves east at 60 m/s, stops dead at t = 2 s, waits, goes again at t = 4 s.
+        // Moves east at 60 m/s, stops dead at t = 2 s, waits, goes again at t = 6 s.
         let v = 60.0;
         let x = |t: f64| {
             if t < 2.0 {
                 v * t
-            } else if t < 4.0 {
+            } else if t < 6.0 {
                 2.0 * v
             } else {
-                2.0 * v + v * (t - 4.0)
+                2.0 * v + v * (t - 6.0)
             }
         };
         let path = |t: f64| camera(DVec3::new(x(t), 0.0, 500.0), 0.0);
-        let mut p = Predictor::default();
-        for k in 0..=180u32 {
-            let t = f64::from(k) / 30.0;
-            p.observe(t, &path(t));
-            for h in HORIZONS {
-                let c = p.predict(h).unwrap();
-                let e = c.position.distance(path(t + h).position);
-                assert!(e <= v * h + 1e-6, "t {t}, horizon {h}: {e} m");
-                // Braking never turns into going back.
-                assert!(c.position.x >= path(t).position.x - 1e-6, "t {t}: reversed");
-            }
-            // Still for the whole window: exact.
-            let still = t >= 2.0 + DEFAULT_POSES as f64 / 30.0 && t + 1.0 < 4.0;
-            if still {
-                let e = p.predict(1.0).unwrap().position.distance(path(t).position);
-                assert!(e < 1e-9, "t {t}: {e} m while still");
+        for fps in [30.0, 2.5] {
+            let mut p = Predictor::default();
+            for k in 0..=(8.0 * fps) as u32 {
+                let t = f64::from(k) / fps;
+                p.observe(t, &path(t));
+                for h in p.horizons() {
+                    let c = p.predict(h).unwrap();
+                    let e = c.position.distance(path(t + h).position);
+                    assert!(e <= v * h + 1e-6, "{fps} fps, t {t}, horizon {h}: {e} m");
+                    // Braking never turns into going back.
+                    let x = path(t).position.x;
+                    assert!(c.position.x >= x - 1e-6, "{fps} fps, t {t}: reversed");
+                }
+                // Still for the whole window: exact.
+                let still = t >= 2.0 + DEFAULT_POSES as f64 / fps && t + 1.0 < 6.0;
+                if still {
+                    let e = p.predict(1.0).unwrap().position.distance(path(t).position);
+                    assert!(e < 1e-9, "{fps} fps, t {t}: {e} m while still");
+                }
             }
         }
     }

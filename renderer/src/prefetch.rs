@@ -12,7 +12,7 @@ use memory::Request;
 
 use crate::camera::Camera;
 use crate::plan::{self, LevelRule};
-use crate::predict::{Predictor, HORIZONS};
+use crate::predict::Predictor;
 use crate::terrain::Terrain;
 
 /// How prefetching runs (`vkterrain --no-prefetch`, `--prefetch-ms`, `--prefetch-free`,
@@ -81,7 +81,7 @@ impl Prefetcher {
     pub fn observe(&mut self, time: f64, camera: &Camera) -> f64 {
         self.predictor.observe(time, camera);
         let error = self.predictor.score();
-        self.predictor.remember(HORIZONS[0]);
+        self.predictor.remember(self.predictor.horizons()[0]);
         error
     }
 
@@ -97,7 +97,7 @@ impl Prefetcher {
         let started = Instant::now();
         let mut out = Predicted::default();
         let mut listed: Vec<Option<u32>> = vec![None; terrain.tiles.len()];
-        for h in HORIZONS {
+        for h in self.predictor.horizons() {
             if started.elapsed().as_secs_f64() * 1000.0 > self.options.cpu_ms {
                 break;
             }
