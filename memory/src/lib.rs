@@ -68,8 +68,8 @@ pub mod trace;
 pub use classes::ClassPlan;
 pub use cost::{Layout, LevelCost, TileCost};
 pub use manager::{
-    Config, FramePlan, Grant, IndexArrays, Manager, Move, Part, Request, Scheme, Stats, TileId,
-    Upload, Victim, DEFAULT_DOWNGRADE_SLACK, DEFAULT_PREFETCH_FREE, DEFAULT_UPLOAD_BUDGET,
+    gpu_builds, Config, FramePlan, Grant, IndexArrays, Manager, Move, Part, Request, Scheme, Stats,
+    TileId, Upload, Victim, DEFAULT_DOWNGRADE_SLACK, DEFAULT_PREFETCH_FREE, DEFAULT_UPLOAD_BUDGET,
     DEFAULT_WEIGHT,
 };
 pub use textures::{

@@ -148,6 +148,22 @@ impl Upload {
     }
 }
 
+/// The index arrays a frame builds on the GPU, in plan order. A build whose destination a
+/// later build of the same frame overlaps is left out: the later array is the one drawn (a
+/// tile granted its level 0 and its wanted level in one frame), and two builds must not write
+/// the same indices.
+pub fn gpu_builds(uploads: &[Upload]) -> Vec<&Upload> {
+    let mut kept: Vec<&Upload> = Vec::new();
+    for u in uploads.iter().rev().filter(|u| u.built) {
+        let overlaps = |k: &&Upload| u.dst < k.dst + k.bytes && k.dst < u.dst + u.bytes;
+        if !kept.iter().any(overlaps) {
+            kept.push(u);
+        }
+    }
+    kept.reverse();
+    kept
+}
+
 /// A copy inside the pool (a tile moving to a larger chunk).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Move {
@@ -773,17 +789,15 @@ impl Manager {
     fn summarise(&self, plan: &mut FramePlan) {
         let s = &mut plan.stats;
         (s.upload_bytes_blocks, s.upload_bytes_indices) = (0, 0);
-        (s.index_builds, s.index_build_bytes) = (0, 0);
-        for u in &plan.uploads {
+        for u in plan.uploads.iter().filter(|u| !u.built) {
             match u.part {
-                Part::Indices(_) if u.built => {
-                    s.index_builds += 1;
-                    s.index_build_bytes += u.bytes;
-                }
                 Part::Indices(_) => s.upload_bytes_indices += u.bytes,
                 _ => s.upload_bytes_blocks += u.bytes,
             }
         }
+        let builds = gpu_builds(&plan.uploads);
+        s.index_builds = builds.len() as u64;
+        s.index_build_bytes = builds.iter().map(|u| u.bytes).sum();
         s.chunk_move_bytes = plan.moves.iter().map(|m| m.bytes).sum();
         s.chunks_free = (self.chunks.len() - self.owned) as u64;
         (s.resident_bytes, s.used_bytes) = (0, 0);

@@ -52,6 +52,42 @@ fn progressive_refinement_sends_only_new_blocks_and_one_index_array() {
     m.check().unwrap();
 }
 
+/// A tile granted its level 0 and its wanted level in one frame gets both arrays planned into
+/// the same place; only the later is built (and counted), since two builds must not write the
+/// same indices. Builds elsewhere are all kept.
+#[test]
+fn a_build_overwritten_in_the_same_frame_is_left_out() {
+    let t = tile(6, 50);
+    let mut c = config(64 << 20, 1 << 30);
+    c.index_arrays = IndexArrays::Built;
+    let mut m = Manager::new(vec![t.clone(), t.clone()], c);
+    let p = m.plan_frame(0, None, &[req(0, 4), req(1, 0)], true);
+    let planned: Vec<&Upload> = p.uploads.iter().filter(|u| u.built).collect();
+    let kept = gpu_builds(&p.uploads);
+    let parts = |us: &[&Upload]| us.iter().map(|u| (u.tile, u.part)).collect::<Vec<_>>();
+    let all = parts(&planned);
+    assert_eq!(all.len(), 3, "{all:?}");
+    for p in [
+        (0, Part::Indices(0)),
+        (0, Part::Indices(4)),
+        (1, Part::Indices(0)),
+    ] {
+        assert!(all.contains(&p), "{p:?} not in {all:?}");
+    }
+    // In plan order, tile 0's level 0 left out.
+    let later = |p| all.iter().position(|&q| q == p);
+    assert!(later((0, Part::Indices(4))) > later((0, Part::Indices(0))));
+    let mut want = vec![(0, Part::Indices(4)), (1, Part::Indices(0))];
+    want.sort_by_key(|&p| later(p));
+    assert_eq!(parts(&kept), want);
+    assert_eq!(p.stats.index_builds, 2);
+    let bytes = t.levels[4].indices + t.levels[0].indices;
+    assert_eq!(p.stats.index_build_bytes, bytes);
+    // The next frame refines tile 0 again: one build, nothing left out.
+    let p = m.plan_frame(1, Some(0), &[req(0, 5), req(1, 0)], true);
+    assert_eq!(parts(&gpu_builds(&p.uploads)), [(0, Part::Indices(5))]);
+}
+
 /// Index arrays built on the GPU take their pool space but none of the upload budget: a
 /// budget that holds the blocks of a step but not its index array refines at once when the
 /// arrays are built, and waits a frame per step when they are sent (the control).

@@ -1097,9 +1097,8 @@ impl Renderer {
         Ok((moves, staged, builds))
     }
 
-    /// Writes the plan's index array builds into slot `s`'s list; returns how many. A build
-    /// whose destination a later one in the plan overlaps is dropped (the later write is the
-    /// one that counts, and two workgroups must not write the same indices).
+    /// Writes the plan's index array builds ([`memory::gpu_builds`]: a build overlapped by a
+    /// later one is left out) into slot `s`'s list; returns how many.
     fn write_builds(
         &mut self,
         terrain: &Terrain,
@@ -1109,15 +1108,9 @@ impl Renderer {
         let Some(builder) = self.builder.as_mut() else {
             return Ok(0);
         };
-        let mut kept: Vec<&memory::Upload> = Vec::new();
-        for u in plan.uploads.iter().rev().filter(|u| u.built) {
-            let overlaps = |k: &&memory::Upload| u.dst < k.dst + k.bytes && k.dst < u.dst + u.bytes;
-            if !kept.iter().any(overlaps) {
-                kept.push(u);
-            }
-        }
+        let kept = memory::gpu_builds(&plan.uploads);
         let mut builds = Vec::with_capacity(kept.len());
-        for u in kept.iter().rev() {
+        for u in kept {
             let memory::Part::Indices(level) = u.part else {
                 return Err(FrameError::Internal(format!(
                     "tile {}: {:?} built",
