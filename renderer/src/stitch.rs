@@ -128,36 +128,165 @@ pub fn stitch_side(out: &mut Stitch, a: Side, b: Side, k: usize, slivers: bool) 
         out.pulled
             .extend(indices.iter().map(|&i| pulled(side.record, i)));
     }
-    let q0 = base + mine.len() as u32;
-    let (mut i, mut j) = (0usize, 0usize);
-    let push = |out: &mut Stitch, t: [u32; 3], v: &[u32]| {
+    let all: Vec<u32> = mine.iter().chain(&theirs).copied().collect();
+    zip(mine, &theirs, k, |t| {
         // Two equal vertices make a triangle with no area even in 3D, unless morphing may
         // move the two tiles' copies apart: skip it then.
-        let p = t.map(|i| v[(i - base) as usize]);
+        let p = t.map(|i| all[i]);
         if slivers || (p[0] != p[1] && p[1] != p[2] && p[0] != p[2]) {
-            out.indices.extend_from_slice(&[t[0], t[1], t[2], RESTART]);
+            let [i, j, l] = t.map(|i| base + i as u32);
+            out.indices.extend_from_slice(&[i, j, l, RESTART]);
             out.triangles += 1;
         }
-    };
-    let all: Vec<u32> = mine.iter().chain(&theirs).copied().collect();
+    });
+    true
+}
+
+/// Walks two polylines along side `k` that share their first and last vertex, `mine` and
+/// `theirs`, and emits the triangles between them: each has an edge of one polyline and the
+/// vertex of the other that is next along the side. Triangle corners index `mine` then
+/// `theirs` (offset by `mine.len()`), wound as tile A draws them.
+fn zip(mine: &[u32], theirs: &[u32], k: usize, mut emit: impl FnMut([usize; 3])) {
+    let q0 = mine.len();
+    let (mut i, mut j) = (0usize, 0usize);
     while i + 1 < mine.len() || j + 1 < theirs.len() {
         let advance_theirs = j + 1 < theirs.len()
             && (i + 1 >= mine.len() || along(theirs[j + 1], k) <= along(mine[i + 1], k));
         if advance_theirs {
-            push(
-                out,
-                [base + i as u32, q0 + j as u32, q0 + j as u32 + 1],
-                &all,
-            );
+            emit([i, q0 + j, q0 + j + 1]);
             j += 1;
         } else {
-            push(
-                out,
-                [base + i as u32, base + i as u32 + 1, q0 + j as u32],
-                &all,
-            );
+            emit([i, i + 1, q0 + j]);
             i += 1;
         }
     }
-    true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::test_rng::Rng;
+
+    /// A border along side `k` through the grid points `at` (0 and 256 included), with heights
+    /// that differ between the two tiles' copies only where `code` says.
+    fn border(k: usize, at: &[u32], code: impl Fn(u32) -> u16) -> Vec<u32> {
+        // N: y = 0, E: x = 256, S: y = 256, W: x = 0.
+        let fixed = if k == 1 || k == 2 { 256 } else { 0 };
+        at.iter()
+            .map(|&a| match k % 2 {
+                0 => pack(a, fixed, code(a)),
+                _ => pack(fixed, a, code(a)),
+            })
+            .collect()
+    }
+
+    /// Random points on a side: 0 and 256 and each other multiple of `step` with chance 1/2.
+    fn points(rng: &mut Rng, step: u32) -> Vec<u32> {
+        (0..=256 / step)
+            .map(|i| i * step)
+            .filter(|&a| a == 0 || a == 256 || rng.next() < 0.5)
+            .collect()
+    }
+
+    /// The zipped triangles between `mine` and `theirs` close the seam: one triangle per
+    /// segment of either polyline, each segment in exactly one, each triangle sharing an edge
+    /// with the next (one strip, no gap), and the vertices the strip advances to in order
+    /// along the side (the two polylines merged, so no triangle folds back over another).
+    fn check(mine: &[u32], theirs: &[u32], k: usize, zipped_along: usize) -> Result<(), String> {
+        let all: Vec<u32> = mine.iter().chain(theirs).copied().collect();
+        let mut triangles = Vec::new();
+        zip(mine, theirs, zipped_along, |t| triangles.push(t));
+        let segments = mine.len() + theirs.len() - 2;
+        if triangles.len() != segments {
+            return Err(format!(
+                "{} triangles, {segments} segments",
+                triangles.len()
+            ));
+        }
+        let q0 = mine.len();
+        let mut seen = vec![0u32; all.len()];
+        let mut reached = 0;
+        for (n, t) in triangles.iter().enumerate() {
+            // The segment is the two corners on one polyline; the apex is on the other.
+            let (edge, apex) = if t[0] < q0 && t[1] < q0 {
+                ([t[0], t[1]], t[2])
+            } else {
+                ([t[1], t[2]], t[0])
+            };
+            let ok_edge = edge[1] == edge[0] + 1 && (edge[0] < q0) == (edge[1] < q0);
+            if !ok_edge || (apex < q0) == (edge[0] < q0) {
+                return Err(format!("triangle {n} {t:?} is not a segment and an apex"));
+            }
+            seen[edge[0]] += 1;
+            let to = along(all[edge[1]], k);
+            if to < reached {
+                return Err(format!(
+                    "triangle {n} {t:?} goes back to {to} after {reached}"
+                ));
+            }
+            reached = to;
+            if let Some(next) = triangles.get(n + 1) {
+                if t.iter().filter(|v| next.contains(v)).count() != 2 {
+                    return Err(format!("triangles {n} and {} share no edge", n + 1));
+                }
+            }
+        }
+        let once = (0..all.len()).all(|i| i + 1 == q0 || i + 1 == all.len() || seen[i] == 1);
+        if !once {
+            return Err("a segment is in no triangle or in two".into());
+        }
+        Ok(())
+    }
+
+    #[test]
+    fn zipped_triangles_close_every_t_junction_on_every_side() {
+        let mut rng = Rng(0x5717_c4ed_9e37_0001);
+        for round in 0..400 {
+            let k = round % 4;
+            let steps = [1, 2, 4, 8, 16, 32, 64, 128];
+            let (sa, sb) = (steps[round % 8], steps[(round / 8) % 8]);
+            let (pa, pb) = (points(&mut rng, sa), points(&mut rng, sb));
+            let (mine, theirs) = (border(k, &pa, |_| 7), border(k, &pb, |_| 7));
+            check(&mine, &theirs, k, k)
+                .unwrap_or_else(|e| panic!("side {k}, {pa:?} / {pb:?}: {e}"));
+        }
+    }
+
+    #[test]
+    fn walking_along_the_wrong_axis_is_caught() {
+        // The negative control: the same borders zipped by the other axis (constant along
+        // them) walk all of one polyline before the other, folding back.
+        let mut rng = Rng(0xbad_a715);
+        let caught = (0..50).filter(|round| {
+            let k = round % 4;
+            let (pa, pb) = (points(&mut rng, 8), points(&mut rng, 16));
+            let (mine, theirs) = (border(k, &pa, |_| 7), border(k, &pb, |_| 7));
+            check(&mine, &theirs, k, (k + 1) % 4).is_err()
+        });
+        assert!(caught.count() >= 45);
+    }
+
+    #[test]
+    fn identical_borders_make_only_triangles_without_area() {
+        // Same vertices on both sides: every zipped triangle repeats a vertex, so without
+        // slivers none is kept; different heights at a shared grid point (independent sides
+        // morphing apart) give triangles with area in 3D, the slivers.
+        let pa = [0, 32, 64, 160, 256];
+        let mine = border(0, &pa, |_| 5);
+        let mut kept = 0;
+        let all: Vec<u32> = mine.iter().chain(&mine).copied().collect();
+        zip(&mine, &mine, 0, |t| {
+            let p = t.map(|i| all[i]);
+            kept += usize::from(p[0] != p[1] && p[1] != p[2] && p[0] != p[2]);
+        });
+        assert_eq!(kept, 0);
+        let moved = border(0, &pa, |a| if a == 64 { 6 } else { 5 });
+        let all: Vec<u32> = mine.iter().chain(&moved).copied().collect();
+        let mut slivers = 0;
+        zip(&mine, &moved, 0, |t| {
+            let p = t.map(|i| all[i]);
+            slivers += usize::from(p[0] != p[1] && p[1] != p[2] && p[0] != p[2]);
+        });
+        assert_eq!(slivers, 2, "the two triangles at the moved vertex");
+    }
 }
