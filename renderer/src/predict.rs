@@ -377,7 +377,10 @@ mod tests {
         let line = |t: f64| camera(DVec3::new(100.0, 200.0, 900.0) + v * t, 0.7);
         for fps in [30.0, 2.5] {
             for (h, e, yaw) in errors(line, fps, 6.0) {
-                assert!(e < 1e-6 && yaw < 1e-9, "{fps} fps, horizon {h}: {e} m, {yaw} rad");
+                assert!(
+                    e < 1e-6 && yaw < 1e-9,
+                    "{fps} fps, horizon {h}: {e} m, {yaw} rad"
+                );
             }
         }
     }
@@ -401,11 +404,17 @@ mod tests {
                 // The cubic term the quadratic misses, over the horizon and the fitted window.
                 let bound = v * w * w * (h + window).powi(3) / 6.0;
                 assert!(e <= bound, "{fps} fps, horizon {h}: {e} m > {bound} m");
-                assert!(yaw < 1e-9, "{fps} fps, horizon {h}: heading off by {yaw} rad");
+                assert!(
+                    yaw < 1e-9,
+                    "{fps} fps, horizon {h}: heading off by {yaw} rad"
+                );
                 // A straight line through the same samples would be off by about v w h^2 / 2:
                 // the quadratic is at least five times closer.
                 let straight = v * w * h * h / 2.0;
-                assert!(e < 0.2 * straight, "{fps} fps, horizon {h}: {e} m vs {straight} m");
+                assert!(
+                    e < 0.2 * straight,
+                    "{fps} fps, horizon {h}: {e} m vs {straight} m"
+                );
             }
         }
     }
