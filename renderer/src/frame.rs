@@ -1639,7 +1639,8 @@ struct Pass<'a> {
 impl Pass<'_> {
     fn record(&self) -> DrawCounts {
         let (gpu, cmd) = (self.gpu, self.cmd);
-        begin_rendering(self.gpu, self.cmd, self.target, self.settings.sky);
+        self.target
+            .begin_rendering(self.gpu, self.cmd, self.settings.sky);
         let pipeline = match (self.settings.wireframe, self.settings.morph_shader) {
             (true, _) => self.pipeline.wireframe.unwrap_or(self.pipeline.fill),
             (false, MorphShader::Branches) => self.pipeline.branches,
@@ -1741,101 +1742,6 @@ impl Pass<'_> {
             pad: 0,
             texture_map,
         }
-    }
-}
-
-/// Clears the slot's target and begins dynamic rendering into it, viewport and scissor set.
-fn begin_rendering(gpu: &Gpu, cmd: vk::CommandBuffer, target: &Target, sky: [f32; 3]) {
-    let colour_range = vk::ImageSubresourceRange::default()
-        .aspect_mask(vk::ImageAspectFlags::COLOR)
-        .level_count(1)
-        .layer_count(1);
-    let depth_range = vk::ImageSubresourceRange::default()
-        .aspect_mask(vk::ImageAspectFlags::DEPTH)
-        .level_count(1)
-        .layer_count(1);
-    // The slot's target was last used by its previous frame, whose fence was waited on.
-    let barriers = [
-        vk::ImageMemoryBarrier::default()
-            .dst_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
-            .old_layout(vk::ImageLayout::UNDEFINED)
-            .new_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .image(target.color.raw)
-            .subresource_range(colour_range),
-        // DEPTH_STENCIL_ATTACHMENT_OPTIMAL: the depth-only layouts need the
-        // separateDepthStencilLayouts feature, which is not enabled.
-        vk::ImageMemoryBarrier::default()
-            .dst_access_mask(
-                vk::AccessFlags::DEPTH_STENCIL_ATTACHMENT_WRITE
-                    | vk::AccessFlags::DEPTH_STENCIL_ATTACHMENT_READ,
-            )
-            .old_layout(vk::ImageLayout::UNDEFINED)
-            .new_layout(vk::ImageLayout::DEPTH_STENCIL_ATTACHMENT_OPTIMAL)
-            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .image(target.depth.raw)
-            .subresource_range(depth_range),
-    ];
-    let extent = target.extent();
-    let colour = [vk::RenderingAttachmentInfo::default()
-        .image_view(target.color.view)
-        .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-        .load_op(vk::AttachmentLoadOp::CLEAR)
-        .store_op(vk::AttachmentStoreOp::STORE)
-        .clear_value(vk::ClearValue {
-            color: vk::ClearColorValue {
-                float32: [sky[0], sky[1], sky[2], 1.0],
-            },
-        })];
-    // Reversed Z: clear to 0 (infinitely far).
-    let depth = vk::RenderingAttachmentInfo::default()
-        .image_view(target.depth.view)
-        .image_layout(vk::ImageLayout::DEPTH_STENCIL_ATTACHMENT_OPTIMAL)
-        .load_op(vk::AttachmentLoadOp::CLEAR)
-        .store_op(vk::AttachmentStoreOp::DONT_CARE)
-        .clear_value(vk::ClearValue {
-            depth_stencil: vk::ClearDepthStencilValue {
-                depth: 0.0,
-                stencil: 0,
-            },
-        });
-    let area = vk::Rect2D {
-        offset: vk::Offset2D::default(),
-        extent,
-    };
-    let info = vk::RenderingInfo::default()
-        .render_area(area)
-        .layer_count(1)
-        .color_attachments(&colour)
-        .depth_attachment(&depth);
-    let viewport = vk::Viewport {
-        x: 0.0,
-        y: 0.0,
-        width: extent.width as f32,
-        height: extent.height as f32,
-        min_depth: 0.0,
-        max_depth: 1.0,
-    };
-    // SAFETY: recording; the images are the slot's and transition from UNDEFINED (their
-    // previous contents are not needed). The colour image's previous reads (read-back,
-    // blit) were by this slot's earlier frame, finished before this one was recorded.
-    unsafe {
-        gpu.device.cmd_pipeline_barrier(
-            cmd,
-            vk::PipelineStageFlags::TOP_OF_PIPE,
-            vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT
-                | vk::PipelineStageFlags::EARLY_FRAGMENT_TESTS
-                | vk::PipelineStageFlags::LATE_FRAGMENT_TESTS,
-            vk::DependencyFlags::empty(),
-            &[],
-            &[],
-            &barriers,
-        );
-        gpu.device.cmd_begin_rendering(cmd, &info);
-        gpu.device.cmd_set_viewport(cmd, 0, &[viewport]);
-        gpu.device.cmd_set_scissor(cmd, 0, &[area]);
     }
 }
 

@@ -4,10 +4,21 @@
 use ash::vk;
 
 use crate::vulkan::buffer::BufferDesc;
-use crate::vulkan::{Buffer, Gpu, Image, VkResult};
+use crate::vulkan::{sync, Buffer, Gpu, Image, VkResult};
 
 pub const COLOR_FORMAT: vk::Format = vk::Format::R8G8B8A8_UNORM;
 pub const DEPTH_FORMAT: vk::Format = vk::Format::D32_SFLOAT;
+
+/// The colour image after rendering.
+const RENDERED: sync::Layout = (
+    vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+    vk::AccessFlags::COLOR_ATTACHMENT_WRITE,
+);
+
+/// A colour image's one mip and one layer.
+fn colour() -> vk::ImageSubresourceRange {
+    sync::subresources(vk::ImageAspectFlags::COLOR, (0, 1), (0, 1))
+}
 
 pub struct Target {
     pub color: Image,
@@ -50,22 +61,100 @@ impl Target {
         self.color.extent
     }
 
+    /// Clears the target and begins dynamic rendering into it, viewport and scissor set. The
+    /// target was last used by its slot's previous frame, whose fence was waited on.
+    pub fn begin_rendering(&self, gpu: &Gpu, cmd: vk::CommandBuffer, sky: [f32; 3]) {
+        let unused = (vk::ImageLayout::UNDEFINED, vk::AccessFlags::empty());
+        let depth_written = (
+            // DEPTH_STENCIL_ATTACHMENT_OPTIMAL: the depth-only layouts need the
+            // separateDepthStencilLayouts feature, which is not enabled.
+            vk::ImageLayout::DEPTH_STENCIL_ATTACHMENT_OPTIMAL,
+            vk::AccessFlags::DEPTH_STENCIL_ATTACHMENT_WRITE
+                | vk::AccessFlags::DEPTH_STENCIL_ATTACHMENT_READ,
+        );
+        let depth = sync::subresources(vk::ImageAspectFlags::DEPTH, (0, 1), (0, 1));
+        // From UNDEFINED: the previous contents are not needed. The colour image's previous
+        // reads (read-back, blit) were by this slot's earlier frame, finished before this one
+        // was recorded.
+        sync::layout_barrier(
+            gpu,
+            cmd,
+            vk::PipelineStageFlags::TOP_OF_PIPE,
+            vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT
+                | vk::PipelineStageFlags::EARLY_FRAGMENT_TESTS
+                | vk::PipelineStageFlags::LATE_FRAGMENT_TESTS,
+            &[
+                sync::transition(self.color.raw, colour(), unused, RENDERED),
+                sync::transition(self.depth.raw, depth, unused, depth_written),
+            ],
+        );
+        let extent = self.extent();
+        let colour = [vk::RenderingAttachmentInfo::default()
+            .image_view(self.color.view)
+            .image_layout(RENDERED.0)
+            .load_op(vk::AttachmentLoadOp::CLEAR)
+            .store_op(vk::AttachmentStoreOp::STORE)
+            .clear_value(vk::ClearValue {
+                color: vk::ClearColorValue {
+                    float32: [sky[0], sky[1], sky[2], 1.0],
+                },
+            })];
+        // Reversed Z: clear to 0 (infinitely far).
+        let depth = vk::RenderingAttachmentInfo::default()
+            .image_view(self.depth.view)
+            .image_layout(depth_written.0)
+            .load_op(vk::AttachmentLoadOp::CLEAR)
+            .store_op(vk::AttachmentStoreOp::DONT_CARE)
+            .clear_value(vk::ClearValue {
+                depth_stencil: vk::ClearDepthStencilValue {
+                    depth: 0.0,
+                    stencil: 0,
+                },
+            });
+        let area = vk::Rect2D {
+            offset: vk::Offset2D::default(),
+            extent,
+        };
+        let info = vk::RenderingInfo::default()
+            .render_area(area)
+            .layer_count(1)
+            .color_attachments(&colour)
+            .depth_attachment(&depth);
+        let viewport = vk::Viewport {
+            x: 0.0,
+            y: 0.0,
+            width: extent.width as f32,
+            height: extent.height as f32,
+            min_depth: 0.0,
+            max_depth: 1.0,
+        };
+        // SAFETY: recording outside rendering; the images are in the attachment layouts.
+        unsafe {
+            gpu.device.cmd_begin_rendering(cmd, &info);
+            gpu.device.cmd_set_viewport(cmd, 0, &[viewport]);
+            gpu.device.cmd_set_scissor(cmd, 0, &[area]);
+        }
+    }
+
     /// Records the copy of the rendered colour image into the readback buffer (the image is in
     /// COLOR_ATTACHMENT_OPTIMAL after rendering).
     pub fn record_readback(&self, gpu: &Gpu, cmd: vk::CommandBuffer) {
-        let range = vk::ImageSubresourceRange::default()
-            .aspect_mask(vk::ImageAspectFlags::COLOR)
-            .level_count(1)
-            .layer_count(1);
-        let to_src = vk::ImageMemoryBarrier::default()
-            .src_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
-            .dst_access_mask(vk::AccessFlags::TRANSFER_READ)
-            .old_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-            .new_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL)
-            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .image(self.color.raw)
-            .subresource_range(range);
+        let to_src = sync::transition(
+            self.color.raw,
+            colour(),
+            RENDERED,
+            (
+                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                vk::AccessFlags::TRANSFER_READ,
+            ),
+        );
+        sync::layout_barrier(
+            gpu,
+            cmd,
+            vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
+            vk::PipelineStageFlags::TRANSFER,
+            &[to_src],
+        );
         let extent = self.extent();
         let region = vk::BufferImageCopy::default()
             .image_subresource(
@@ -78,24 +167,8 @@ impl Target {
                 height: extent.height,
                 depth: 1,
             });
-        let to_host = vk::BufferMemoryBarrier::default()
-            .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-            .dst_access_mask(vk::AccessFlags::HOST_READ)
-            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .buffer(self.readback.raw)
-            .size(vk::WHOLE_SIZE);
         // SAFETY: cmd is recording outside a render pass; image and buffer are ours.
         unsafe {
-            gpu.device.cmd_pipeline_barrier(
-                cmd,
-                vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
-                vk::PipelineStageFlags::TRANSFER,
-                vk::DependencyFlags::empty(),
-                &[],
-                &[],
-                &[to_src],
-            );
             gpu.device.cmd_copy_image_to_buffer(
                 cmd,
                 self.color.raw,
@@ -103,16 +176,17 @@ impl Target {
                 self.readback.raw,
                 &[region],
             );
-            gpu.device.cmd_pipeline_barrier(
-                cmd,
-                vk::PipelineStageFlags::TRANSFER,
-                vk::PipelineStageFlags::HOST,
-                vk::DependencyFlags::empty(),
-                &[],
-                &[to_host],
-                &[],
-            );
         }
+        // The copy's writes made visible to the host's read after the fence.
+        sync::memory_barrier(
+            gpu,
+            cmd,
+            (
+                vk::PipelineStageFlags::TRANSFER,
+                vk::AccessFlags::TRANSFER_WRITE,
+            ),
+            (vk::PipelineStageFlags::HOST, vk::AccessFlags::HOST_READ),
+        );
     }
 
     /// Records a copy of the rendered image into a swapchain image and leaves that ready to
@@ -125,55 +199,26 @@ impl Target {
         dst_extent: vk::Extent2D,
         after_readback: bool,
     ) {
-        let range = vk::ImageSubresourceRange::default()
-            .aspect_mask(vk::ImageAspectFlags::COLOR)
-            .level_count(1)
-            .layer_count(1);
-        let barrier = |image, old, new, src, dst_access| {
-            vk::ImageMemoryBarrier::default()
-                .src_access_mask(src)
-                .dst_access_mask(dst_access)
-                .old_layout(old)
-                .new_layout(new)
-                .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                .image(image)
-                .subresource_range(range)
-        };
-        let (src_old, src_access) = if after_readback {
-            (
-                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
-                vk::AccessFlags::TRANSFER_READ,
-            )
-        } else {
-            (
-                vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
-                vk::AccessFlags::COLOR_ATTACHMENT_WRITE,
-            )
-        };
-        let before = [
-            barrier(
-                self.color.raw,
-                src_old,
-                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
-                src_access,
-                vk::AccessFlags::TRANSFER_READ,
-            ),
-            barrier(
-                dst,
-                vk::ImageLayout::UNDEFINED,
-                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
-                vk::AccessFlags::empty(),
-                vk::AccessFlags::TRANSFER_WRITE,
-            ),
-        ];
-        let after = [barrier(
-            dst,
+        let read = (
+            vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+            vk::AccessFlags::TRANSFER_READ,
+        );
+        let written = (
             vk::ImageLayout::TRANSFER_DST_OPTIMAL,
-            vk::ImageLayout::PRESENT_SRC_KHR,
             vk::AccessFlags::TRANSFER_WRITE,
-            vk::AccessFlags::empty(),
-        )];
+        );
+        let unused = (vk::ImageLayout::UNDEFINED, vk::AccessFlags::empty());
+        let before = [
+            sync::transition(
+                self.color.raw,
+                colour(),
+                if after_readback { read } else { RENDERED },
+                read,
+            ),
+            sync::transition(dst, colour(), unused, written),
+        ];
+        let presented = (vk::ImageLayout::PRESENT_SRC_KHR, vk::AccessFlags::empty());
+        let after = [sync::transition(dst, colour(), written, presented)];
         let layers = vk::ImageSubresourceLayers::default()
             .aspect_mask(vk::ImageAspectFlags::COLOR)
             .layer_count(1);
@@ -193,17 +238,15 @@ impl Target {
             .src_offsets(corner(e.width, e.height))
             .dst_subresource(layers)
             .dst_offsets(corner(dst_extent.width, dst_extent.height));
+        sync::layout_barrier(
+            gpu,
+            cmd,
+            vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT | vk::PipelineStageFlags::TRANSFER,
+            vk::PipelineStageFlags::TRANSFER,
+            &before,
+        );
         // SAFETY: recording outside rendering; both images are live for the frame.
         unsafe {
-            gpu.device.cmd_pipeline_barrier(
-                cmd,
-                vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT | vk::PipelineStageFlags::TRANSFER,
-                vk::PipelineStageFlags::TRANSFER,
-                vk::DependencyFlags::empty(),
-                &[],
-                &[],
-                &before,
-            );
             gpu.device.cmd_blit_image(
                 cmd,
                 self.color.raw,
@@ -213,16 +256,14 @@ impl Target {
                 &[blit],
                 vk::Filter::NEAREST,
             );
-            gpu.device.cmd_pipeline_barrier(
-                cmd,
-                vk::PipelineStageFlags::TRANSFER,
-                vk::PipelineStageFlags::BOTTOM_OF_PIPE,
-                vk::DependencyFlags::empty(),
-                &[],
-                &[],
-                &after,
-            );
         }
+        sync::layout_barrier(
+            gpu,
+            cmd,
+            vk::PipelineStageFlags::TRANSFER,
+            vk::PipelineStageFlags::BOTTOM_OF_PIPE,
+            &after,
+        );
     }
 
     /// The last read-back image as RGBA8 rows (after the frame's fence).

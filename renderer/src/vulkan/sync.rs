@@ -181,3 +181,62 @@ pub fn memory_barrier(gpu: &Gpu, cmd: vk::CommandBuffer, before: Scope, after: S
         );
     }
 }
+
+/// A change of an image's layout, one side of it: the layout and the accesses before or after.
+pub type Layout = (vk::ImageLayout, vk::AccessFlags);
+
+/// The subresources of one aspect of an image: `mips` levels from `mip`, `layers` from `layer`.
+pub fn subresources(
+    aspect: vk::ImageAspectFlags,
+    (mip, mips): (u32, u32),
+    (layer, layers): (u32, u32),
+) -> vk::ImageSubresourceRange {
+    vk::ImageSubresourceRange::default()
+        .aspect_mask(aspect)
+        .base_mip_level(mip)
+        .level_count(mips)
+        .base_array_layer(layer)
+        .layer_count(layers)
+}
+
+/// One image layout transition for [`layout_barrier`]: `range` of `image` goes from `from` to
+/// `to` (from UNDEFINED, the old contents are dropped).
+pub fn transition(
+    image: vk::Image,
+    range: vk::ImageSubresourceRange,
+    from: Layout,
+    to: Layout,
+) -> vk::ImageMemoryBarrier<'static> {
+    vk::ImageMemoryBarrier::default()
+        .src_access_mask(from.1)
+        .dst_access_mask(to.1)
+        .old_layout(from.0)
+        .new_layout(to.0)
+        .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+        .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+        .image(image)
+        .subresource_range(range)
+}
+
+/// Records image layout transitions between the stages `before` and `after`. Must be recorded
+/// outside rendering, with every image live until the command buffer completes.
+pub fn layout_barrier(
+    gpu: &Gpu,
+    cmd: vk::CommandBuffer,
+    before: vk::PipelineStageFlags,
+    after: vk::PipelineStageFlags,
+    transitions: &[vk::ImageMemoryBarrier],
+) {
+    // SAFETY: a recording command buffer; the images are the caller's, live (as documented).
+    unsafe {
+        gpu.device.cmd_pipeline_barrier(
+            cmd,
+            before,
+            after,
+            vk::DependencyFlags::empty(),
+            &[],
+            &[],
+            transitions,
+        );
+    }
+}

@@ -130,27 +130,24 @@ impl TextureArray {
         gpu.name(self.raw, name);
         gpu.name(self.view, name);
         gpu.name(self.sampler, name);
-        let barrier = vk::ImageMemoryBarrier::default()
-            .dst_access_mask(vk::AccessFlags::SHADER_READ)
-            .old_layout(vk::ImageLayout::UNDEFINED)
-            .new_layout(vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL)
-            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .image(self.raw)
-            .subresource_range(range);
+        // The image is new and unused.
+        let barrier = sync::transition(
+            self.raw,
+            range,
+            (vk::ImageLayout::UNDEFINED, vk::AccessFlags::empty()),
+            (
+                vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL,
+                vk::AccessFlags::SHADER_READ,
+            ),
+        );
         sync::run_once(gpu, "texture array layout", |cmd| {
-            // SAFETY: recording; the image is new and unused.
-            unsafe {
-                gpu.device.cmd_pipeline_barrier(
-                    cmd,
-                    vk::PipelineStageFlags::TOP_OF_PIPE,
-                    vk::PipelineStageFlags::FRAGMENT_SHADER,
-                    vk::DependencyFlags::empty(),
-                    &[],
-                    &[],
-                    &[barrier],
-                );
-            }
+            sync::layout_barrier(
+                gpu,
+                cmd,
+                vk::PipelineStageFlags::TOP_OF_PIPE,
+                vk::PipelineStageFlags::FRAGMENT_SHADER,
+                &[barrier],
+            );
         })
     }
 
@@ -204,44 +201,38 @@ pub fn record_uploads(
     if copies.is_empty() {
         return;
     }
-    let barrier = |c: &vk::BufferImageCopy, to_transfer: bool| {
-        let range = vk::ImageSubresourceRange::default()
-            .aspect_mask(vk::ImageAspectFlags::COLOR)
-            .base_mip_level(c.image_subresource.mip_level)
-            .level_count(1)
-            .base_array_layer(c.image_subresource.base_array_layer)
-            .layer_count(1);
-        let b = vk::ImageMemoryBarrier::default()
-            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .image(array.raw)
-            .subresource_range(range);
-        if to_transfer {
-            // The mip's old contents (another tile's, or nothing) are not needed.
-            b.dst_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                .old_layout(vk::ImageLayout::UNDEFINED)
-                .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
-        } else {
-            b.src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                .dst_access_mask(vk::AccessFlags::SHADER_READ)
-                .old_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
-                .new_layout(vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL)
-        }
+    // The mip's old contents (another tile's, or nothing) are not needed.
+    let unused = (vk::ImageLayout::UNDEFINED, vk::AccessFlags::empty());
+    let written = (
+        vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+        vk::AccessFlags::TRANSFER_WRITE,
+    );
+    let sampled = (
+        vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL,
+        vk::AccessFlags::SHADER_READ,
+    );
+    let mip = |c: &vk::BufferImageCopy| {
+        let s = c.image_subresource;
+        sync::subresources(
+            vk::ImageAspectFlags::COLOR,
+            (s.mip_level, 1),
+            (s.base_array_layer, 1),
+        )
     };
-    let before: Vec<_> = copies.iter().map(|c| barrier(c, true)).collect();
-    let after: Vec<_> = copies.iter().map(|c| barrier(c, false)).collect();
+    let barriers = |from, to| -> Vec<_> {
+        let t = |c| sync::transition(array.raw, mip(c), from, to);
+        copies.iter().map(t).collect()
+    };
+    sync::layout_barrier(
+        gpu,
+        cmd,
+        vk::PipelineStageFlags::FRAGMENT_SHADER,
+        vk::PipelineStageFlags::TRANSFER,
+        &barriers(unused, written),
+    );
     // SAFETY: recording outside rendering; every region lies in the staging buffer and in the
     // array, each (layer, mip) written once, and no frame in flight samples those mips.
     unsafe {
-        gpu.device.cmd_pipeline_barrier(
-            cmd,
-            vk::PipelineStageFlags::FRAGMENT_SHADER,
-            vk::PipelineStageFlags::TRANSFER,
-            vk::DependencyFlags::empty(),
-            &[],
-            &[],
-            &before,
-        );
         gpu.device.cmd_copy_buffer_to_image(
             cmd,
             staging,
@@ -249,14 +240,12 @@ pub fn record_uploads(
             vk::ImageLayout::TRANSFER_DST_OPTIMAL,
             copies,
         );
-        gpu.device.cmd_pipeline_barrier(
-            cmd,
-            vk::PipelineStageFlags::TRANSFER,
-            vk::PipelineStageFlags::FRAGMENT_SHADER,
-            vk::DependencyFlags::empty(),
-            &[],
-            &[],
-            &after,
-        );
     }
+    sync::layout_barrier(
+        gpu,
+        cmd,
+        vk::PipelineStageFlags::TRANSFER,
+        vk::PipelineStageFlags::FRAGMENT_SHADER,
+        &barriers(written, sampled),
+    );
 }
