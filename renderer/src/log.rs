@@ -270,6 +270,8 @@ pub struct RunInfo {
     pub index_arrays: &'static str,
     /// Device memory of the texture slots (0: none).
     pub texture_bytes: u64,
+    /// The tile set's mapping resident in the process when the flight ended (None: unknown).
+    pub file_mapped_bytes: Option<u64>,
 }
 
 #[derive(Serialize, Debug)]
@@ -342,6 +344,10 @@ pub struct Summary {
     pub prediction_error_m_median: Option<f64>,
     pub prediction_error_m_max: Option<f64>,
     pub cpu_prefetch_ms_median: f64,
+    /// The file side: bytes advised `DONTNEED` (`--file-cache-mb`), and how much of the tile
+    /// set's mapping the process held when the flight ended.
+    pub file_released_mb: f64,
+    pub file_mapped_mb_end: Option<f64>,
     /// The texture slots' memory, the texture bytes sent, and the tile-frames whose texture
     /// was coarser than wanted or missing.
     pub texture_mb: f64,
@@ -447,6 +453,8 @@ impl Summary {
                 &sorted(records.iter().map(|r| r.cpu_prefetch_ms)),
                 50.0,
             ),
+            file_released_mb: sum(|r| r.file_released_bytes) as f64 / 1e6,
+            file_mapped_mb_end: run.file_mapped_bytes.map(|b| b as f64 / 1e6),
             texture_mb: run.texture_bytes as f64 / 1e6,
             upload_mb_textures: sum(|r| r.upload_bytes_textures) as f64 / 1e6,
             tiles_texture_coarser: sum(|r| r.tiles_texture_coarser),

@@ -880,6 +880,52 @@ fn prefetching_draws_fewer_tiles_coarser_after_the_cold_start() {
     assert!(on["prefetch_hits"].as_u64() > Some(0), "{on}");
 }
 
+/// `--file-cache-mb`: once the run has paged in more of the tile set than the budget, tiles
+/// behind the camera are advised `DONTNEED`, and the process ends the flyover holding less of
+/// the mapping than without the budget (the control, which releases nothing and holds more
+/// than the budget).
+#[test]
+fn a_file_cache_budget_gives_back_the_tiles_behind_the_camera() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = common::puget(dir.path());
+    let run = |extra: &[&str]| -> serde_json::Value {
+        let mut args = vec![
+            s(&set),
+            "--headless",
+            "--validation",
+            "--path",
+            "flyover",
+            "--frames",
+            "40",
+            "--size",
+            "256x192",
+        ];
+        args.extend(extra);
+        let o = vkterrain(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{err}");
+        assert!(!err.contains("validation"), "validation messages: {err}");
+        serde_json::from_slice(&o.stdout).expect("summary")
+    };
+    let (budget_mb, budget) = ("2", 2.0 * 1048576.0 / 1e6);
+    let held = |v: &serde_json::Value| v["file_mapped_mb_end"].as_f64().expect("mapped");
+    let released = |v: &serde_json::Value| v["file_released_mb"].as_f64().expect("released");
+    let free = run(&[]);
+    let capped = run(&["--file-cache-mb", budget_mb]);
+    assert_eq!(released(&free), 0.0, "{free}");
+    assert!(
+        held(&free) > 2.0 * budget,
+        "the control must hold more: {free}"
+    );
+    assert!(released(&capped) > 0.0, "{capped}");
+    assert!(
+        held(&capped) * 2.0 < held(&free),
+        "with the budget {} MB held, without {} MB",
+        held(&capped),
+        held(&free)
+    );
+}
+
 /// The predictor sees only the poses flown: two paths that share their first keyframes and
 /// then part give identical predictions (the trace's `predicted` rows) over the shared part,
 /// and different ones after (the control: the rows do follow the path).
