@@ -75,10 +75,10 @@ fn a_build_overwritten_in_the_same_frame_is_left_out() {
         assert!(all.contains(&p), "{p:?} not in {all:?}");
     }
     // In plan order, tile 0's level 0 left out.
-    let later = |p| all.iter().position(|&q| q == p);
-    assert!(later((0, Part::Indices(4))) > later((0, Part::Indices(0))));
+    let order = |p| all.iter().position(|&q| q == p);
+    assert!(order((0, Part::Indices(4))) > order((0, Part::Indices(0))));
     let mut want = vec![(0, Part::Indices(4)), (1, Part::Indices(0))];
-    want.sort_by_key(|&p| later(p));
+    want.sort_by_key(|&p| order(p));
     assert_eq!(parts(&kept), want);
     assert_eq!(p.stats.index_builds, 2);
     let bytes = t.levels[4].indices + t.levels[0].indices;

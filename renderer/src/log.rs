@@ -272,6 +272,9 @@ pub struct RunInfo {
     pub texture_bytes: u64,
     /// The tile set's mapping resident in the process when the flight ended (None: unknown).
     pub file_mapped_bytes: Option<u64>,
+    /// Of the mapping, what opening the set had paged in and `--file-cache-mb` gave back
+    /// before the flight.
+    pub file_released_at_open_bytes: u64,
 }
 
 #[derive(Serialize, Debug)]
@@ -344,8 +347,10 @@ pub struct Summary {
     pub prediction_error_m_median: Option<f64>,
     pub prediction_error_m_max: Option<f64>,
     pub cpu_prefetch_ms_median: f64,
-    /// The file side: bytes advised `DONTNEED` (`--file-cache-mb`), and how much of the tile
-    /// set's mapping the process held when the flight ended.
+    /// The file side (`--file-cache-mb`): the mapping given back after opening the set, the
+    /// tiles advised `DONTNEED` during the flight, and how much of the mapping the process
+    /// held when the flight ended.
+    pub file_released_at_open_mb: f64,
     pub file_released_mb: f64,
     pub file_mapped_mb_end: Option<f64>,
     /// The texture slots' memory, the texture bytes sent, and the tile-frames whose texture
@@ -453,6 +458,7 @@ impl Summary {
                 &sorted(records.iter().map(|r| r.cpu_prefetch_ms)),
                 50.0,
             ),
+            file_released_at_open_mb: run.file_released_at_open_bytes as f64 / 1e6,
             file_released_mb: sum(|r| r.file_released_bytes) as f64 / 1e6,
             file_mapped_mb_end: run.file_mapped_bytes.map(|b| b as f64 / 1e6),
             texture_mb: run.texture_bytes as f64 / 1e6,

@@ -434,10 +434,14 @@ fn run(cli: Cli) -> Result<ExitCode> {
     // Opening read every tile's positions (borders, height bounds): with a file cache budget
     // smaller than the set, the process gives those pages back before flying, and holds what
     // the flight pages in (advice only: a kernel that ignores it costs the budget, not the run).
+    let mut released_at_open = 0;
     if let Some(budget) = prefetch.file_cache_bytes {
         let len = terrain.set.file_len();
         if len > budget {
-            let _ = terrain.set.dont_need(0..len);
+            let held = terrain.set.mapped_bytes().unwrap_or(0);
+            if terrain.set.dont_need(0..len).is_ok() {
+                released_at_open = held;
+            }
         }
     }
     if cli.cold_file_cache {
@@ -501,7 +505,15 @@ fn run(cli: Cli) -> Result<ExitCode> {
         };
         let (result, device, validation) =
             window::run(&terrain, options).map_err(anyhow::Error::msg)?;
-        return finish(&cli, &terrain, &result, &memory, &device, validation);
+        return finish(
+            &cli,
+            &terrain,
+            &result,
+            &memory,
+            &device,
+            validation,
+            released_at_open,
+        );
     }
     if let Some(record) = &cli.record {
         std::fs::write(record, path.to_csv())
@@ -530,7 +542,15 @@ fn run(cli: Cli) -> Result<ExitCode> {
     let validation = gpu.validation_messages();
     let device = gpu.device_name.clone();
     drop(gpu);
-    let code = finish(&cli, &terrain, &result, &memory, &device, validation)?;
+    let code = finish(
+        &cli,
+        &terrain,
+        &result,
+        &memory,
+        &device,
+        validation,
+        released_at_open,
+    )?;
     match &result.error {
         // The log of the frames before the failure is written; the failure is the one line.
         Some(e) => bail!(
@@ -550,6 +570,7 @@ fn finish(
     memory: &MemoryOptions,
     device: &str,
     validation: u64,
+    released_at_open: u64,
 ) -> Result<ExitCode> {
     let run = RunInfo {
         device: device.to_string(),
@@ -569,6 +590,7 @@ fn finish(
         },
         // Unknown rather than a failed run where /proc is not mounted.
         file_mapped_bytes: terrain.set.mapped_bytes().ok(),
+        file_released_at_open_bytes: released_at_open,
         index_arrays: if result.built_indices {
             "built"
         } else {

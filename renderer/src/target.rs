@@ -65,14 +65,14 @@ impl Target {
     /// target was last used by its slot's previous frame, whose fence was waited on.
     pub fn begin_rendering(&self, gpu: &Gpu, cmd: vk::CommandBuffer, sky: [f32; 3]) {
         let unused = (vk::ImageLayout::UNDEFINED, vk::AccessFlags::empty());
-        let depth_written = (
+        let depth_attachment_rw = (
             // DEPTH_STENCIL_ATTACHMENT_OPTIMAL: the depth-only layouts need the
             // separateDepthStencilLayouts feature, which is not enabled.
             vk::ImageLayout::DEPTH_STENCIL_ATTACHMENT_OPTIMAL,
             vk::AccessFlags::DEPTH_STENCIL_ATTACHMENT_WRITE
                 | vk::AccessFlags::DEPTH_STENCIL_ATTACHMENT_READ,
         );
-        let depth = sync::subresources(vk::ImageAspectFlags::DEPTH, (0, 1), (0, 1));
+        let depth_range = sync::subresources(vk::ImageAspectFlags::DEPTH, (0, 1), (0, 1));
         // From UNDEFINED: the previous contents are not needed. The colour image's previous
         // reads (read-back, blit) were by this slot's earlier frame, finished before this one
         // was recorded.
@@ -85,11 +85,11 @@ impl Target {
                 | vk::PipelineStageFlags::LATE_FRAGMENT_TESTS,
             &[
                 sync::transition(self.color.raw, colour(), unused, RENDERED),
-                sync::transition(self.depth.raw, depth, unused, depth_written),
+                sync::transition(self.depth.raw, depth_range, unused, depth_attachment_rw),
             ],
         );
         let extent = self.extent();
-        let colour = [vk::RenderingAttachmentInfo::default()
+        let colour_attachment = [vk::RenderingAttachmentInfo::default()
             .image_view(self.color.view)
             .image_layout(RENDERED.0)
             .load_op(vk::AttachmentLoadOp::CLEAR)
@@ -100,9 +100,9 @@ impl Target {
                 },
             })];
         // Reversed Z: clear to 0 (infinitely far).
-        let depth = vk::RenderingAttachmentInfo::default()
+        let depth_attachment = vk::RenderingAttachmentInfo::default()
             .image_view(self.depth.view)
-            .image_layout(depth_written.0)
+            .image_layout(depth_attachment_rw.0)
             .load_op(vk::AttachmentLoadOp::CLEAR)
             .store_op(vk::AttachmentStoreOp::DONT_CARE)
             .clear_value(vk::ClearValue {
@@ -118,8 +118,8 @@ impl Target {
         let info = vk::RenderingInfo::default()
             .render_area(area)
             .layer_count(1)
-            .color_attachments(&colour)
-            .depth_attachment(&depth);
+            .color_attachments(&colour_attachment)
+            .depth_attachment(&depth_attachment);
         let viewport = vk::Viewport {
             x: 0.0,
             y: 0.0,

@@ -880,10 +880,11 @@ fn prefetching_draws_fewer_tiles_coarser_after_the_cold_start() {
     assert!(on["prefetch_hits"].as_u64() > Some(0), "{on}");
 }
 
-/// `--file-cache-mb`: once the run has paged in more of the tile set than the budget, tiles
-/// behind the camera are advised `DONTNEED`, and the process ends the flyover holding less of
-/// the mapping than without the budget (the control, which releases nothing and holds more
-/// than the budget).
+/// `--file-cache-mb`: the pages opening the set read are given back before the flight; once
+/// the flight has paged in more of the tile set than the budget, tiles behind the camera are
+/// advised `DONTNEED` (counted apart); and the process ends the flyover holding less of the
+/// mapping than without the budget (the control, which releases nothing and holds more than
+/// the budget).
 #[test]
 fn a_file_cache_budget_gives_back_the_tiles_behind_the_camera() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -910,9 +911,11 @@ fn a_file_cache_budget_gives_back_the_tiles_behind_the_camera() {
     let (budget_mb, budget) = ("2", 2.0 * 1048576.0 / 1e6);
     let held = |v: &serde_json::Value| v["file_mapped_mb_end"].as_f64().expect("mapped");
     let released = |v: &serde_json::Value| v["file_released_mb"].as_f64().expect("released");
+    let at_open = |v: &serde_json::Value| v["file_released_at_open_mb"].as_f64().expect("open");
     let free = run(&[]);
     let capped = run(&["--file-cache-mb", budget_mb]);
-    assert_eq!(released(&free), 0.0, "{free}");
+    assert_eq!((released(&free), at_open(&free)), (0.0, 0.0), "{free}");
+    assert!(at_open(&capped) > budget, "{capped}");
     assert!(
         held(&free) > 2.0 * budget,
         "the control must hold more: {free}"

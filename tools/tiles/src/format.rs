@@ -789,23 +789,23 @@ impl TileSet {
     /// `/proc/self/smaps`): what [`TileSet::dont_need`] gives back. The page cache may keep the
     /// pages after that ([`TileSet::cached_bytes`] counts those).
     pub fn mapped_bytes(&self) -> std::io::Result<u64> {
-        let (start, end) = (
-            self.map.as_ptr() as u64,
-            self.map.as_ptr() as u64 + self.map.len() as u64,
-        );
+        if self.map.is_empty() {
+            return Ok(0);
+        }
+        let start = self.map.as_ptr() as u64;
+        let end = start + self.map.len() as u64;
         let smaps = std::fs::read_to_string("/proc/self/smaps")?;
         let (mut inside, mut kib) = (false, 0u64);
+        // The file is read in pieces: an area that changed meanwhile may be listed twice.
+        let mut seen = std::collections::HashSet::new();
         for line in smaps.lines() {
             let first = line.split_whitespace().next().unwrap_or("");
             // An area's header: "start-end perms offset dev inode path".
-            let area = first.split_once('-').and_then(|(a, b)| {
-                Some((
-                    u64::from_str_radix(a, 16).ok()?,
-                    u64::from_str_radix(b, 16).ok()?,
-                ))
-            });
-            if let Some((a, b)) = area {
-                inside = a >= start && a < end.max(start + 1) && b > a;
+            let area = first
+                .split_once('-')
+                .and_then(|(a, _)| u64::from_str_radix(a, 16).ok());
+            if let Some(a) = area {
+                inside = (start..end).contains(&a) && seen.insert(a);
             } else if inside && first == "Rss:" {
                 let value = line.split_whitespace().nth(1).unwrap_or("");
                 kib += value.parse::<u64>().map_err(|_| {
