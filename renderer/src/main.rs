@@ -203,8 +203,9 @@ struct Cli {
     /// Do not advise the kernel to read predicted tiles ahead of use (madvise WILLNEED).
     #[arg(long)]
     no_madvise: bool,
-    /// When the tile set file is larger than this, let the kernel drop tiles far behind the
-    /// camera from memory (madvise DONTNEED) once this run has paged in more than this.
+    /// When the tile set file is larger than this, give back the pages that opening it read,
+    /// and let the kernel drop tiles far behind the camera from this process's memory (madvise
+    /// DONTNEED) once the flight has paged in more than this.
     #[arg(long, value_name = "MB")]
     file_cache_mb: Option<u64>,
     /// Benchmark: drop the tile set from the page cache after opening it (which reads it
