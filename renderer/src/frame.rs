@@ -434,19 +434,17 @@ impl Renderer {
         // The index builder takes at most an eighth of the GPU budget: as many lookups (arrays
         // built at once) as fit, up to eight (2.1 MB); under about 2.5 MB not even one fits,
         // and index arrays are sent.
-        let lookups = [8, 4, 2, 1].into_iter().find(|&n| {
-            IndexBuilder::bytes_for(slot_count, builds_per_frame, n) <= options.gpu_budget_bytes / 8
-        });
-        let index_arrays = match lookups {
-            Some(_) if gpu.storage_16bit => options.index_arrays,
-            _ => IndexArrays::Sent,
+        // (lookups, bytes) of the builder, when arrays are built.
+        let builder_size = [8, 4, 2, 1]
+            .into_iter()
+            .map(|n| (n, IndexBuilder::bytes_for(slot_count, builds_per_frame, n)))
+            .find(|&(_, bytes)| bytes <= options.gpu_budget_bytes / 8)
+            .filter(|_| gpu.storage_16bit && options.index_arrays == IndexArrays::Built);
+        let index_arrays = match builder_size {
+            Some(_) => IndexArrays::Built,
+            None => IndexArrays::Sent,
         };
-        let builder_bytes = match (index_arrays, lookups) {
-            (IndexArrays::Built, Some(n)) => {
-                IndexBuilder::bytes_for(slot_count, builds_per_frame, n)
-            }
-            _ => 0,
-        };
+        let builder_bytes = builder_size.map_or(0, |(_, bytes)| bytes);
         let config = Config {
             pool_bytes: options
                 .gpu_budget_bytes
@@ -514,8 +512,7 @@ impl Renderer {
             }
         }
         let mut builder = None;
-        if let (IndexArrays::Built, None) = (index_arrays, &failure) {
-            let lookups = lookups.unwrap_or(1);
+        if let (Some((lookups, _)), None) = (builder_size, &failure) {
             match IndexBuilder::new(gpu, &pool.buffer, slot_count, builds_per_frame, lookups) {
                 Ok(b) => builder = Some(b),
                 Err(e) => failure = Some(e.to_string()),

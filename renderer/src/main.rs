@@ -491,7 +491,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
     if windowed && !cli.measure_error.is_empty() {
         bail!("--measure-error runs headless (add --headless)");
     }
-    if windowed {
+    let (result, device, validation) = if windowed {
         let options = WindowOptions {
             gpu: gpu_options,
             size: cli.size,
@@ -504,45 +504,37 @@ fn run(cli: Cli) -> Result<ExitCode> {
             record: cli.record.clone(),
             start: path.at(path.keys[0].time),
         };
-        let (result, device, validation) =
-            window::run(&terrain, options).map_err(anyhow::Error::msg)?;
-        return finish(
-            &cli,
-            &terrain,
-            &result,
-            &memory,
-            &device,
-            validation,
-            released_at_open,
-        );
-    }
-    if let Some(record) = &cli.record {
-        std::fs::write(record, path.to_csv())
-            .with_context(|| format!("{}: cannot write", record.display()))?;
-    }
-    let gpu = Gpu::new(&gpu_options)?;
-    let flight = Flight {
-        terrain: &terrain,
-        path: &path,
-        frames: cli.frames.unwrap_or(120),
-        size: cli.size,
-        settings,
-        memory,
-        trace: cli.trace.is_some(),
-        out: cli.out.clone(),
-        screenshot_every: cli.screenshot_every,
-        draw_only: cli.draw_only,
-        warmup: cli.warmup,
-        forget_after_warmup: cli.warmup_driver,
+        window::run(&terrain, options).map_err(anyhow::Error::msg)?
+    } else {
+        if let Some(record) = &cli.record {
+            std::fs::write(record, path.to_csv())
+                .with_context(|| format!("{}: cannot write", record.display()))?;
+        }
+        let gpu = Gpu::new(&gpu_options)?;
+        let flight = Flight {
+            terrain: &terrain,
+            path: &path,
+            frames: cli.frames.unwrap_or(120),
+            size: cli.size,
+            settings,
+            memory,
+            trace: cli.trace.is_some(),
+            out: cli.out.clone(),
+            screenshot_every: cli.screenshot_every,
+            draw_only: cli.draw_only,
+            warmup: cli.warmup,
+            forget_after_warmup: cli.warmup_driver,
+        };
+        let meter = match cli.measure_error.as_slice() {
+            [] => None,
+            sources => Some((error_meter(&cli, &terrain, sources)?, cli.measure_every)),
+        };
+        let result = fly(&gpu, &flight, meter)?;
+        let (validation, device) = (gpu.validation_messages(), gpu.device_name.clone());
+        drop(gpu);
+        (result, device, validation)
     };
-    let meter = match cli.measure_error.as_slice() {
-        [] => None,
-        sources => Some((error_meter(&cli, &terrain, sources)?, cli.measure_every)),
-    };
-    let result = fly(&gpu, &flight, meter)?;
-    let validation = gpu.validation_messages();
-    let device = gpu.device_name.clone();
-    drop(gpu);
+    // A window fails through `window::run`; a headless flight may stop early with its log kept.
     let code = finish(
         &cli,
         &terrain,

@@ -177,16 +177,7 @@ impl Target {
                 &[region],
             );
         }
-        // The copy's writes made visible to the host's read after the fence.
-        sync::memory_barrier(
-            gpu,
-            cmd,
-            (
-                vk::PipelineStageFlags::TRANSFER,
-                vk::AccessFlags::TRANSFER_WRITE,
-            ),
-            (vk::PipelineStageFlags::HOST, vk::AccessFlags::HOST_READ),
-        );
+        sync::host_read_barrier(gpu, cmd);
     }
 
     /// Records a copy of the rendered image into a swapchain image and leaves that ready to

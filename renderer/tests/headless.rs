@@ -859,11 +859,7 @@ fn prefetching_draws_fewer_tiles_coarser_after_the_cold_start() {
             "1000",
         ];
         args.extend(extra);
-        let o = vkterrain(&args);
-        let err = String::from_utf8_lossy(&o.stderr);
-        assert!(o.status.success(), "{err}");
-        assert!(!err.contains("validation"), "validation messages: {err}");
-        serde_json::from_slice(&o.stdout).expect("summary")
+        common::summary(&args)
     };
     let on = run(&[]);
     let off = run(&["--no-prefetch"]);
@@ -902,11 +898,7 @@ fn a_file_cache_budget_gives_back_the_tiles_behind_the_camera() {
             "256x192",
         ];
         args.extend(extra);
-        let o = vkterrain(&args);
-        let err = String::from_utf8_lossy(&o.stderr);
-        assert!(o.status.success(), "{err}");
-        assert!(!err.contains("validation"), "validation messages: {err}");
-        serde_json::from_slice(&o.stdout).expect("summary")
+        common::summary(&args)
     };
     let (budget_mb, budget) = ("2", 2.0 * 1048576.0 / 1e6);
     let held = |v: &serde_json::Value| v["file_mapped_mb_end"].as_f64().expect("mapped");

@@ -72,7 +72,7 @@ impl TilePool {
                 gpu.device
                     .cmd_copy_buffer(cmd, self.buffer.raw, readback.raw, &[region]);
             }
-            host_read_barrier(gpu, cmd);
+            sync::host_read_barrier(gpu, cmd);
         })
         .map(|()| {
             readback
@@ -206,17 +206,5 @@ pub fn record_transfers(
         cmd,
         (transfer, vk::AccessFlags::TRANSFER_WRITE),
         (draws, reads),
-    );
-}
-
-fn host_read_barrier(gpu: &Gpu, cmd: vk::CommandBuffer) {
-    sync::memory_barrier(
-        gpu,
-        cmd,
-        (
-            vk::PipelineStageFlags::TRANSFER,
-            vk::AccessFlags::TRANSFER_WRITE,
-        ),
-        (vk::PipelineStageFlags::HOST, vk::AccessFlags::HOST_READ),
     );
 }

@@ -182,6 +182,19 @@ pub fn memory_barrier(gpu: &Gpu, cmd: vk::CommandBuffer, before: Scope, after: S
     }
 }
 
+/// Makes transfer writes visible to host reads after the command buffer's fence (read-backs).
+pub fn host_read_barrier(gpu: &Gpu, cmd: vk::CommandBuffer) {
+    memory_barrier(
+        gpu,
+        cmd,
+        (
+            vk::PipelineStageFlags::TRANSFER,
+            vk::AccessFlags::TRANSFER_WRITE,
+        ),
+        (vk::PipelineStageFlags::HOST, vk::AccessFlags::HOST_READ),
+    );
+}
+
 /// A change of an image's layout, one side of it: the layout and the accesses before or after.
 pub type Layout = (vk::ImageLayout, vk::AccessFlags);
 

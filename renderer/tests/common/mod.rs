@@ -118,6 +118,15 @@ pub fn vkterrain(args: &[&str]) -> Output {
         .expect("vkterrain runs")
 }
 
+/// Runs vkterrain, which must succeed with no validation message, and returns its summary.
+pub fn summary(args: &[&str]) -> serde_json::Value {
+    let o = vkterrain(args);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(!err.contains("validation"), "validation messages: {err}");
+    serde_json::from_slice(&o.stdout).expect("summary")
+}
+
 pub fn s(p: &Path) -> &str {
     p.to_str().expect("utf-8 path")
 }
