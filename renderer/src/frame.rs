@@ -19,12 +19,16 @@
 use std::time::Instant;
 
 use ash::vk;
-use bytemuck::{Pod, Zeroable};
+use bytemuck::Zeroable;
 use glam::DVec3;
 use memory::textures::{TextureConfig, TextureSlots};
 use memory::{Config, IndexArrays, Manager, Scheme, Victim};
 
 use crate::camera::Camera;
+use crate::interface::{
+    FrameConstants, TileRecord, FLAG_GEOMORPH, FLAG_LEVEL_COLOURS, FLAG_RELIEF, FLAG_TEXTURE,
+    FLAG_TILES, RECORD_BYTES,
+};
 use crate::log::FrameRecord;
 use crate::measure::State;
 use crate::morph::MAX_LEVELS;
@@ -210,62 +214,6 @@ pub enum FrameError {
     #[error("{0}")]
     Internal(String),
 }
-
-/// Per-frame constants, laid out as the shaders' push-constant block.
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct FrameConstants {
-    view_proj: [f32; 16],
-    camera: [f32; 4],
-    spacing_y: f32,
-    height_step: f32,
-    flags: u32,
-    pad: u32,
-    /// Texture coordinate of tile-local sample coordinate `s`: `x + s * y` (the texture
-    /// layout's `(g + s * T / 256) / S`); `z`: `S`, texels across a layer.
-    texture_map: [f32; 4],
-}
-
-const _: () = assert!(
-    std::mem::size_of::<FrameConstants>() == crate::vulkan::pipeline::PUSH_CONSTANT_BYTES as usize
-);
-
-/// `FrameConstants::flags`.
-const FLAG_GEOMORPH: u32 = 1;
-const FLAG_LEVEL_COLOURS: u32 = 2;
-const FLAG_TEXTURE: u32 = 4;
-const FLAG_RELIEF: u32 = 8;
-const FLAG_TILES: u32 = 16;
-
-/// One drawn tile as the vertex shader reads it (`TileRecord` in `terrain.vert`, std430).
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct TileRecord {
-    tile_offset: [i32; 2],
-    height_base: i32,
-    /// Pool word of block 0's first vertex.
-    positions: u32,
-    corners: [f32; 4],
-    /// First vertex of blocks 1..=8 (u32::MAX past the last block).
-    starts: [u32; 8],
-    /// Metres per morph offset unit of levels 0..8.
-    units: [f32; 8],
-    level: u32,
-    /// Pool byte of block 0's morph rows.
-    morph: u32,
-    /// The tile's texture layer (u32::MAX: none) and finest resident mip.
-    texture_layer: u32,
-    texture_finest: f32,
-    block_start: [u32; 9],
-    block_len: [u32; 9],
-    morph_start: [u32; 9],
-    /// Samples the texture is moved by (0; `VKTERRAIN_FAULT=texture-seam` moves every other
-    /// tile's, the seam test's negative control).
-    texture_shift: f32,
-}
-
-const RECORD_BYTES: u64 = std::mem::size_of::<TileRecord>() as u64;
-const _: () = assert!(RECORD_BYTES == 224);
 
 /// A frame submitted from a slot and not yet collected.
 struct Pending {
@@ -1518,7 +1466,8 @@ fn write_records(
             r.height_base = info.header.height_base;
             r.positions = (d.vertex_offset / 4) as u32;
             r.corners = d.corners;
-            r.starts = [u32::MAX; 8];
+            let mut starts = [u32::MAX; 8];
+            let mut units = [0.0f32; 8];
             r.level = d.level;
             r.morph = d.morph_offset as u32;
             let (mut start, mut morph) = (0u32, 0u32);
@@ -1527,14 +1476,16 @@ fn write_records(
                 r.block_len[j] = l.block_len;
                 r.morph_start[j] = morph;
                 if j > 0 {
-                    r.starts[j - 1] = start;
+                    starts[j - 1] = start;
                 }
                 if j < 8 {
-                    r.units[j] = l.morph_unit;
+                    units[j] = l.morph_unit;
                 }
                 start += l.block_len;
                 morph += (j as u32 * l.block_len).div_ceil(4) * 4;
             }
+            (r.starts_lo, r.starts_hi) = split(starts);
+            (r.units_lo, r.units_hi) = split(units);
             r
         })
         .collect();
@@ -1546,6 +1497,14 @@ fn write_records(
         )));
     }
     Ok(())
+}
+
+/// The halves of an eight-element array (a record's `_lo` and `_hi` vectors).
+fn split<T: Copy + Default>(a: [T; 8]) -> ([T; 4], [T; 4]) {
+    (
+        std::array::from_fn(|i| a[i]),
+        std::array::from_fn(|i| a[i + 4]),
+    )
 }
 
 /// What the terrain pass drew.

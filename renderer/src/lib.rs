@@ -11,6 +11,7 @@ pub mod camera;
 pub mod cull;
 pub mod frame;
 pub mod headless;
+pub mod interface;
 pub mod lod;
 pub mod log;
 pub mod measure;

@@ -18,15 +18,7 @@
 // anisotropic filtering: how far an anisotropic sampler lowers the level is up to the
 // implementation, and lavapipe lowers it by the full anisotropy.)
 
-layout(push_constant) uniform Frame {
-    mat4 view_proj;
-    vec4 camera;
-    float spacing_y;
-    float height_step;
-    uint flags;
-    uint pad;
-    vec4 texture_map;        // texture coordinate of tile-local sample s: x + s * y; z: texels across a layer; w: tile grid offset (samples) for the tiles shading
-} frame;
+#include "interface.glsl"
 
 layout(set = 0, binding = 2) uniform sampler2DArray textures;
 
@@ -39,10 +31,6 @@ layout(location = 5) flat in vec4 texture_tile;
 
 layout(location = 0) out vec4 colour;
 
-const uint LEVEL_COLOURS = 2u;
-const uint TEXTURE = 4u;
-const uint RELIEF = 8u;
-const uint TILES = 16u;
 
 vec3 ground(float h) {
     if (h <= 0.5) return vec3(0.16, 0.32, 0.50);            // water and tidal flats
@@ -77,7 +65,7 @@ void main() {
     vec2 dv = dFdy(uv);
     vec3 n = normalize(cross(dFdx(relative), dFdy(relative)));
 
-    if ((flags & TEXTURE) != 0u && texture_tile.z >= 0.0) {
+    if ((flags & FLAG_TEXTURE) != 0u && texture_tile.z >= 0.0) {
         vec3 at = vec3(uv, texture_tile.z);
 #ifdef MIN_LOD
         colour = vec4(textureGradClampARB(textures, at, du, dv, texture_tile.w).rgb, 1.0);
@@ -88,7 +76,7 @@ void main() {
 #endif
         return;
     }
-    if ((flags & TILES) != 0u) {
+    if ((flags & FLAG_TILES) != 0u) {
         // The tile's column and row from the fragment's sample position (texture_map.w moves
         // the grid, for tests: lines that are not tile borders): neighbours differ in red or
         // green.
@@ -101,7 +89,7 @@ void main() {
     if (any(isnan(n))) n = vec3(0.0, 0.0, 1.0);
     vec3 sun = normalize(vec3(-0.45, 0.55, 0.70));
     float light = 0.25 + 0.75 * max(dot(n, sun), 0.0);
-    vec3 base = (flags & RELIEF) != 0u ? vec3(0.82) : ground(height);
-    if ((flags & LEVEL_COLOURS) != 0u) base = mix(base, level_colour(level), 0.65);
+    vec3 base = (flags & FLAG_RELIEF) != 0u ? vec3(0.82) : ground(height);
+    if ((flags & FLAG_LEVEL_COLOURS) != 0u) base = mix(base, level_colour(level), 0.65);
     colour = vec4(base * light, 1.0);
 }

@@ -24,41 +24,8 @@
 // MORPH_BRANCHES (a second build of this file) finds the two levels to blend with branches
 // instead, the reference the paper measured forward differences against.
 
-layout(push_constant) uniform Frame {
-    mat4 view_proj;          // camera at the origin, world axes x east, y north, z up
-    vec4 camera;             // xyz: camera relative to its tile's north-west corner (m); w: metres per column
-    float spacing_y;         // metres per row (rows run south)
-    float height_step;       // metres per height code, one for the tile set
-    uint flags;              // 1: geomorph, 2: level colours, 4: texture, 8: grey relief
-    uint pad;
-    vec4 texture_map;        // texture coordinate of tile-local sample s: x + s * y
-} frame;
-
-const uint GEOMORPH = 1u;
-const uint LEVEL_COLOURS = 2u;
-
-// One drawn tile (renderer/src/frame.rs, TileRecord).
-struct TileRecord {
-    ivec2 tile_offset;       // the tile's first sample relative to the camera tile's (columns, rows)
-    int height_base;         // the tile's lowest code on the shared lattice
-    uint positions;          // pool word of block 0's first packed vertex
-    vec4 corners;            // continuous level at the NW, NE, SW, SE corners
-    uvec4 starts_lo;         // first vertex of blocks 1..4 (0xffffffff past the last block)
-    uvec4 starts_hi;         // first vertex of blocks 5..8
-    vec4 units_lo;           // metres per morph offset unit, levels 0..3
-    vec4 units_hi;           // levels 4..7
-    uint level;              // the level drawn
-    uint morph;              // pool byte of block 0's morph rows
-    uint texture_layer;      // the tile's texture slot (0xffffffff: none)
-    float texture_finest;    // its finest resident mip
-    uint block_start[9];     // first vertex of each block
-    uint block_len[9];       // vertices of each block
-    uint morph_start[9];     // byte of each block's morph rows, from `morph`
-    float texture_shift;     // samples the texture is moved by (0; a test's fault injection)
-};
-
-layout(std430, set = 0, binding = 0) readonly buffer Pool { uint words[]; } pool;
-layout(std430, set = 0, binding = 1) readonly buffer Records { TileRecord tiles[]; } records;
+#define TERRAIN_VERTEX
+#include "interface.glsl"
 
 layout(location = 0) out vec3 relative;   // position relative to the camera (m)
 layout(location = 1) out float height;    // absolute height (m)
@@ -97,7 +64,7 @@ void main() {
     float own = float(records.tiles[r].height_base + int(code)) * frame.height_step;
 
     float l = float(records.tiles[r].level);
-    if ((frame.flags & GEOMORPH) != 0u) {
+    if ((frame.flags & FLAG_GEOMORPH) != 0u) {
         l = vertex_level(records.tiles[r].corners, x, y);
     }
     // The vertex's block j: how many block starts it has passed.

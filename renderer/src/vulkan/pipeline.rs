@@ -10,8 +10,7 @@ use ash::vk;
 
 use super::{Gpu, VkResult};
 
-/// Size of the per-frame push constants.
-pub const PUSH_CONSTANT_BYTES: u32 = 112;
+use crate::interface::PUSH_CONSTANT_BYTES;
 
 pub struct TerrainPipeline {
     /// Binding 0: the tile pool; binding 1: the frame's tile records (both storage buffers);
