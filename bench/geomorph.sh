@@ -13,5 +13,5 @@ echo "name frame_ms_median triangles max_error_px pop_px"
 for p in flyover; do
   run puget-$p-tau1-discrete out/puget.vkt --path $p --tau 1 --no-geomorph $PF
   for t in 1 2 3 5; do run puget-$p-tau$t-morph out/puget.vkt --path $p --tau $t $PF; done
-  run puget-$p-tau1-morph-branches out/puget.vkt --path $p --tau 1 --morph-shader branches $PF
+  run puget-$p-tau1-morph-all-rows out/puget.vkt --path $p --tau 1 --morph-shader forward-differences $PF
 done

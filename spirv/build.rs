@@ -13,7 +13,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 /// (constant, file, stage, macro defined for this build).
-const SHADERS: [(&str, &str, shaderc::ShaderKind, Option<&str>); 5] = [
+const SHADERS: [(&str, &str, shaderc::ShaderKind, Option<&str>); 8] = [
     (
         "TERRAIN_VERT",
         "terrain.vert",
@@ -21,10 +21,16 @@ const SHADERS: [(&str, &str, shaderc::ShaderKind, Option<&str>); 5] = [
         None,
     ),
     (
-        "TERRAIN_VERT_BRANCHES",
+        "TERRAIN_VERT_ALL_ROWS",
         "terrain.vert",
         shaderc::ShaderKind::Vertex,
-        Some("MORPH_BRANCHES"),
+        Some("MORPH_ALL_ROWS"),
+    ),
+    (
+        "TERRAIN_VERT_READ_BACK",
+        "terrain.vert",
+        shaderc::ShaderKind::Vertex,
+        Some("READ_BACK"),
     ),
     (
         "TERRAIN_FRAG",
@@ -39,6 +45,18 @@ const SHADERS: [(&str, &str, shaderc::ShaderKind, Option<&str>); 5] = [
         Some("MIN_LOD"),
     ),
     (
+        "LIMIT_VERT",
+        "limit.vert",
+        shaderc::ShaderKind::Vertex,
+        None,
+    ),
+    (
+        "LIMIT_FRAG",
+        "limit.frag",
+        shaderc::ShaderKind::Fragment,
+        None,
+    ),
+    (
         "INDICES_COMP",
         "indices.comp",
         shaderc::ShaderKind::Compute,
@@ -48,7 +66,7 @@ const SHADERS: [(&str, &str, shaderc::ShaderKind, Option<&str>); 5] = [
 
 /// The shared interface, and the structs of it whose layout the host mirrors.
 const INTERFACE: &str = "interface.glsl";
-const MIRRORED: [&str; 2] = ["FrameConstants", "TileRecord"];
+const MIRRORED: [&str; 4] = ["FrameConstants", "MorphFrame", "Records", "TileRecord"];
 
 fn main() {
     let dir =

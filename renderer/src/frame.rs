@@ -20,18 +20,17 @@ use std::time::Instant;
 
 use ash::vk;
 use bytemuck::Zeroable;
-use glam::DVec3;
 use memory::textures::{TextureConfig, TextureSlots};
 use memory::{Config, IndexArrays, Manager, Scheme, Victim};
 
 use crate::camera::Camera;
 use crate::interface::{
-    FrameConstants, TileRecord, FLAG_GEOMORPH, FLAG_LEVEL_COLOURS, FLAG_RELIEF, FLAG_TEXTURE,
-    FLAG_TILES, RECORD_BYTES,
+    FrameConstants, MorphFrame, TileRecord, FLAG_GEOMORPH, FLAG_LEVEL_COLOURS, FLAG_RELIEF,
+    FLAG_TEXTURE, FLAG_TILES, RECORDS_OFFSET, RECORD_BYTES,
 };
 use crate::log::FrameRecord;
 use crate::measure::State;
-use crate::morph::MAX_LEVELS;
+use crate::morph::{self, LevelTable, TileMorph, MAX_LEVELS};
 use crate::plan::{self, BorderMismatch, LevelRule, Plan, TexturePlan};
 use crate::prefetch::{Predicted, PrefetchOptions, Prefetcher};
 use crate::stitch::{pulled, Stitch, MAX_RECORDS};
@@ -106,11 +105,12 @@ impl Shading {
 /// Which vertex shader blends the levels.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum MorphShader {
-    /// Clamped forward differences and dot products (the paper's, the default).
+    /// The two levels around each vertex's level, two bytes read (the default).
     #[default]
+    TwoLevels,
+    /// The paper's clamped forward differences as dot products over every stored level (the
+    /// reference, `--morph-shader forward-differences`).
     ForwardDifferences,
-    /// The reference that finds the two levels with branches (`--morph-shader branches`).
-    Branches,
 }
 
 impl Settings {
@@ -153,6 +153,9 @@ pub struct MemoryOptions {
     /// Build index arrays on the GPU from the resident blocks (the default; sent from the
     /// file instead when the device cannot store 16-bit values from a shader).
     pub index_arrays: IndexArrays,
+    /// Read every drawn vertex's height back from the vertex shader (a buffer per frame slot),
+    /// for the check against the CPU mirror (`vkterrain --read-back-heights`).
+    pub read_back_heights: bool,
 }
 
 impl Default for MemoryOptions {
@@ -170,6 +173,7 @@ impl Default for MemoryOptions {
             texture_share: DEFAULT_TEXTURE_SHARE,
             anisotropy: 16.0,
             index_arrays: IndexArrays::Built,
+            read_back_heights: false,
         }
     }
 }
@@ -203,6 +207,16 @@ pub struct Finished {
     pub record: FrameRecord,
     pub pixels: Option<Vec<u8>>,
     pub extent: (u32, u32),
+    /// With `read_back_heights`: what the vertex shader computed for every drawn vertex.
+    pub heights: Option<ReadBack>,
+}
+
+/// The heights the vertex shader wrote in one frame, and what each draw was.
+pub struct ReadBack {
+    /// Per draw: the tile, its level, where its vertices start in `values`, and how it morphed
+    /// (None: discrete).
+    pub draws: Vec<DrawnTile>,
+    pub values: Vec<f32>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -219,6 +233,9 @@ pub enum FrameError {
 struct Pending {
     record: FrameRecord,
     screenshot: bool,
+    /// With read-back: the draws whose heights the slot's buffer receives, and how many
+    /// heights they write.
+    read_back: Option<(Vec<DrawnTile>, usize)>,
     started: Instant,
     submitted: Instant,
     /// When the next frame started (the end of this frame's CPU interval).
@@ -232,6 +249,8 @@ struct Slot {
     timestamps: Timestamps,
     stitch: Buffer,
     records: Buffer,
+    /// The vertex shader's heights (read-back; 16 bytes unused otherwise).
+    heights: Buffer,
     staging: Staging,
     target: Target,
     pending: Option<Pending>,
@@ -254,6 +273,11 @@ impl Slot {
                 BufferDesc::upload(sizes.records, vk::BufferUsageFlags::STORAGE_BUFFER),
                 &format!("frame slot {i} tile records"),
             )?,
+            heights: Buffer::new(
+                gpu,
+                BufferDesc::readback_storage(sizes.heights),
+                &format!("frame slot {i} heights read back"),
+            )?,
             staging: Staging::new(gpu, sizes.staging, &format!("frame slot {i} staging"))?,
             target: Target::new(gpu, sizes.extent.0, sizes.extent.1)?,
             pending: None,
@@ -266,6 +290,7 @@ impl Slot {
         self.timestamps.destroy(gpu);
         self.stitch.destroy(gpu);
         self.records.destroy(gpu);
+        self.heights.destroy(gpu);
         self.staging.destroy(gpu);
         self.target.destroy(gpu);
     }
@@ -275,6 +300,7 @@ impl Slot {
 struct SlotSizes {
     stitch: u64,
     records: u64,
+    heights: u64,
     staging: u64,
     extent: (u32, u32),
 }
@@ -311,6 +337,8 @@ pub struct Renderer {
     prefetcher: Prefetcher,
     /// Builds index arrays on the GPU (None: they are sent from the file).
     builder: Option<IndexBuilder>,
+    /// The set's errors per level for the vertex level rule ([`crate::morph`]).
+    level_table: LevelTable,
 }
 
 /// Faults the tests inject through the `VKTERRAIN_FAULT` environment variable, to check the
@@ -334,6 +362,9 @@ pub enum Fault {
     /// `texture-no-clamp`: the shader is told every tile has all its mips, so tiles whose fine
     /// mips are not resident sample memory nothing was copied to (the clamp test's control).
     TextureNoClamp,
+    /// `mirror-bias`: the CPU mirror the read-back heights are checked against adds one unit
+    /// to every stored morph offset (the read-back test's control).
+    MirrorBias,
 }
 
 impl Fault {
@@ -343,6 +374,7 @@ impl Fault {
             "validation" => Some(Fault::Validation),
             "texture-seam" => Some(Fault::TextureSeam),
             "texture-no-clamp" => Some(Fault::TextureNoClamp),
+            "mirror-bias" => Some(Fault::MirrorBias),
             _ => {
                 let number = |prefix: &str| v.strip_prefix(prefix).and_then(|n| n.parse().ok());
                 number("device-lost-at-")
@@ -359,6 +391,8 @@ pub struct StaticFrame {
     cmd: vk::CommandBuffer,
     stitch: Option<Buffer>,
     records: Option<Buffer>,
+    /// Nothing reads heights back from a replayed frame: a placeholder for the set.
+    heights: Option<Buffer>,
     sets: Option<TerrainSets>,
     record: FrameRecord,
 }
@@ -432,7 +466,20 @@ impl Renderer {
         };
         let sizes = SlotSizes {
             stitch: stitch_bound(terrain),
-            records: RECORD_BYTES * terrain.tiles.len().clamp(1, MAX_RECORDS) as u64,
+            records: RECORDS_OFFSET
+                + RECORD_BYTES * terrain.tiles.len().clamp(1, MAX_RECORDS) as u64,
+            // Every tile at most once a frame, at its finest level at most.
+            heights: if options.read_back_heights {
+                4 * terrain
+                    .tiles
+                    .iter()
+                    .filter_map(|t| t.levels.last())
+                    .map(|l| u64::from(l.vertex_count()))
+                    .sum::<u64>()
+                    .max(4)
+            } else {
+                16
+            },
             staging: staging_bound(&manager, options.upload_budget)
                 + slot_config
                     .as_ref()
@@ -447,7 +494,16 @@ impl Renderer {
                 return Err(e);
             }
         };
-        let pipeline = TerrainPipeline::new(gpu, COLOR_FORMAT, DEPTH_FORMAT);
+        let read_back = options.read_back_heights;
+        let pipeline = if read_back && !gpu.vertex_stores {
+            Err(VkError::Unsupported(
+                "reading heights back needs vertexPipelineStoresAndAtomics, which this device \
+                 lacks"
+                    .into(),
+            ))
+        } else {
+            TerrainPipeline::new(gpu, COLOR_FORMAT, DEPTH_FORMAT, read_back)
+        };
         let mut slots = Vec::new();
         let mut failure = pipeline.as_ref().err().map(|e| e.to_string());
         for i in 0..slot_count {
@@ -468,7 +524,8 @@ impl Renderer {
         }
         let mut sets = None;
         if let (Ok(p), None) = (&pipeline, &failure) {
-            let records: Vec<&Buffer> = slots.iter().map(|s| &s.records).collect();
+            let records: Vec<(&Buffer, &Buffer)> =
+                slots.iter().map(|s| (&s.records, &s.heights)).collect();
             match TerrainSets::new(
                 gpu,
                 p,
@@ -501,6 +558,7 @@ impl Renderer {
                 collected: Vec::new(),
                 prefetcher: Prefetcher::new(options.prefetch, terrain.tiles.len()),
                 builder,
+                level_table: LevelTable::for_terrain(terrain),
             }),
             (pipeline, failure) => {
                 gpu.wait_idle();
@@ -654,11 +712,18 @@ impl Renderer {
         } else {
             None
         };
+        let heights = p.read_back.map(|(draws, n)| {
+            let values = slot.heights.mapped().map_or_else(Vec::new, |m| {
+                bytemuck::cast_slice::<u8, f32>(&m[..(4 * n).min(m.len()) / 4 * 4]).to_vec()
+            });
+            ReadBack { draws, values }
+        });
         let e = slot.target.extent();
         Ok(Finished {
             record,
             pixels,
             extent: (e.width, e.height),
+            heights,
         })
     }
 
@@ -784,11 +849,16 @@ impl Renderer {
         let t = Instant::now();
         let slot = &mut self.slots[s];
         let stitch_ranges = write_stitches(&mut slot.stitch, &plan.stitches)?;
-        write_records(
+        let textured = self.texture_slots.is_some();
+        let constants = frame_constants(terrain, input.camera, &plan.view, settings, textured);
+        let morph = matches!(settings.rule(), LevelRule::Morph(..))
+            .then(|| morph::frame_constants(&plan.view, settings.tau, &self.level_table));
+        let drawn = write_records(
             &mut slot.records,
             terrain,
             input.camera,
             (&plan, &textures),
+            morph.as_ref().map(|m| (m, &constants)),
             self.fault,
         )?;
         let set = self
@@ -819,9 +889,9 @@ impl Renderer {
             stitch: slot.stitch.raw,
             set,
             terrain,
-            camera: input.camera,
             settings,
-            textured: self.texture_slots.is_some(),
+            constants: &constants,
+            read_back: self.options.read_back_heights,
             plan: &plan,
             stitch_ranges: &stitch_ranges,
         };
@@ -838,6 +908,9 @@ impl Renderer {
             }
         }
         let counts = pass.record();
+        if self.options.read_back_heights {
+            sync::vertex_to_host_barrier(gpu, cmd);
+        }
         slot.timestamps.pass_end(gpu, cmd);
         if input.screenshot {
             slot.target.record_readback(gpu, cmd);
@@ -860,20 +933,9 @@ impl Renderer {
         let mut record = frame_record(&plan, &textures, counts, terrain.levels);
         if let Some((meter, every)) = &mut self.meter {
             if input.label.is_multiple_of(*every) {
-                let morphing = matches!(settings.rule(), LevelRule::Morph(..));
-                let draws: Vec<(usize, State)> = plan
-                    .draws
+                let draws: Vec<(usize, State)> = drawn
                     .iter()
-                    .map(|d| {
-                        let corners = morphing.then_some(d.corners);
-                        (
-                            d.tile,
-                            State {
-                                level: d.level,
-                                corners,
-                            },
-                        )
-                    })
+                    .map(|&(tile, level, _, morph)| (tile, State { level, morph }))
                     .collect();
                 let m = meter.frame(terrain, input.camera, extent, &draws);
                 (record.max_error_px, record.pop_px) = (m.max_error_px, m.pop_px);
@@ -892,6 +954,12 @@ impl Renderer {
         slot.pending = Some(Pending {
             record,
             screenshot: input.screenshot,
+            read_back: self.options.read_back_heights.then(|| {
+                let n = drawn.last().map_or(0, |&(tile, level, start, _)| {
+                    start + terrain.tiles[tile].levels[level as usize].vertex_count() as usize
+                });
+                (drawn, n)
+            }),
             started,
             submitted: Instant::now(),
             ended: None,
@@ -1127,6 +1195,7 @@ impl Renderer {
             cmd: vk::CommandBuffer::null(),
             stitch: None,
             records: None,
+            heights: None,
             sets: None,
             record: FrameRecord::default(),
         };
@@ -1138,19 +1207,35 @@ impl Renderer {
                 "static stitches",
             )?);
             let ranges = write_stitches(stitch, &plan.stitches)?;
-            let record_bytes = RECORD_BYTES * plan.draws.len().max(1) as u64;
+            let record_bytes = RECORDS_OFFSET + RECORD_BYTES * plan.draws.len().max(1) as u64;
             let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
             let records = frame.records.insert(Buffer::new(
                 gpu,
                 BufferDesc::upload(record_bytes, usage),
                 "static tile records",
             )?);
-            write_records(records, terrain, camera, (&plan, &textures), None)?;
+            let textured = self.texture_slots.is_some();
+            let constants = frame_constants(terrain, camera, &plan.view, settings, textured);
+            let morph = matches!(settings.rule(), LevelRule::Morph(..))
+                .then(|| morph::frame_constants(&plan.view, settings.tau, &self.level_table));
+            write_records(
+                records,
+                terrain,
+                camera,
+                (&plan, &textures),
+                morph.as_ref().map(|m| (m, &constants)),
+                None,
+            )?;
+            let heights = frame.heights.insert(Buffer::new(
+                gpu,
+                BufferDesc::readback_storage(16),
+                "static frame heights (unused)",
+            )?);
             let sets = frame.sets.insert(TerrainSets::new(
                 gpu,
                 &self.pipeline,
                 &self.pool.buffer,
-                &[records],
+                &[(&*records, &*heights)],
                 &self.textures,
                 "static frame descriptor set",
             )?);
@@ -1171,9 +1256,9 @@ impl Renderer {
                 stitch,
                 set,
                 terrain,
-                camera,
                 settings,
-                textured: self.texture_slots.is_some(),
+                constants: &constants,
+                read_back: false,
                 plan: &plan,
                 stitch_ranges: &ranges,
             }
@@ -1215,6 +1300,9 @@ impl Renderer {
             b.destroy(gpu);
         }
         if let Some(b) = frame.records {
+            b.destroy(gpu);
+        }
+        if let Some(b) = frame.heights {
             b.destroy(gpu);
         }
         if let Some(s) = frame.sets {
@@ -1415,34 +1503,29 @@ fn write_stitches(
     Ok(ranges)
 }
 
-/// Where the camera is for the shader: its tile (column, row of tiles) and its position
-/// relative to that tile's north-west corner. Positions are expressed relative to that tile,
-/// from integers, so a grid point shared by two tiles lands on the same f32 in both.
-fn camera_tile(terrain: &Terrain, camera: &Camera) -> ((f64, f64), DVec3) {
-    let (sx, sy) = terrain.spacing;
-    let cells = f64::from(tiles::mesh::TILE_CELLS);
-    let p = camera.position;
-    let tile = ((p.x / (cells * sx)).floor(), (-p.y / (cells * sy)).floor());
-    let relative = DVec3::new(p.x - tile.0 * cells * sx, p.y + tile.1 * cells * sy, p.z);
-    (tile, relative)
-}
+/// One draw as its record describes it: the tile, its level, where its vertices' heights go
+/// in the read-back buffer, and how it morphs (None: discrete).
+pub type DrawnTile = (usize, u32, usize, Option<TileMorph>);
 
-/// Writes the frame's tile records, one per draw in order (a draw's record is its index).
+/// Writes the frame's morph constants and tile records, one per draw in order (a draw's record
+/// is its index); returns each draw as written.
 fn write_records(
     buffer: &mut Buffer,
     terrain: &Terrain,
     camera: &Camera,
     (plan, textures): (&Plan, &TexturePlan),
+    morph: Option<(&MorphFrame, &FrameConstants)>,
     fault: Option<Fault>,
-) -> Result<(), FrameError> {
+) -> Result<Vec<DrawnTile>, FrameError> {
     if plan.draws.len() > MAX_RECORDS {
         return Err(FrameError::Internal(format!(
             "{} tiles in view; at most {MAX_RECORDS} can be drawn in one frame",
             plan.draws.len()
         )));
     }
-    let cells = f64::from(tiles::mesh::TILE_CELLS);
-    let (cam_tile, _) = camera_tile(terrain, camera);
+    let (cam_tile, _) = terrain.camera_tile(camera.position);
+    let mut drawn = Vec::with_capacity(plan.draws.len());
+    let mut heights = 0usize;
     let records: Vec<TileRecord> = plan
         .draws
         .iter()
@@ -1459,44 +1542,52 @@ fn write_records(
                 Some(Fault::TextureNoClamp) => r.texture_finest = 0.0,
                 _ => {}
             }
-            r.tile_offset = [
-                ((f64::from(info.tx) - cam_tile.0) * cells) as i32,
-                ((f64::from(info.ty) - cam_tile.1) * cells) as i32,
-            ];
+            r.tile_offset = Terrain::tile_offset(cam_tile, info);
             r.height_base = info.header.height_base;
             r.positions = (d.vertex_offset / 4) as u32;
-            r.corners = d.corners;
-            let mut starts = [u32::MAX; 8];
-            let mut units = [0.0f32; 8];
             r.level = d.level;
-            r.morph = d.morph_offset as u32;
-            let (mut start, mut morph) = (0u32, 0u32);
+            r.cap = d.level as f32;
+            r.heights = heights as u32;
+            let mut starts = [u32::MAX; 8];
+            let (mut start, mut rows) = (0u32, d.morph_offset as u32);
             for (j, l) in info.levels.iter().enumerate().take(MAX_LEVELS) {
-                r.block_start[j] = start;
-                r.block_len[j] = l.block_len;
-                r.morph_start[j] = morph;
+                r.blocks[j] = [start, l.block_len, rows, 0];
                 if j > 0 {
                     starts[j - 1] = start;
                 }
                 if j < 8 {
-                    units[j] = l.morph_unit;
+                    r.units[j] = l.morph_unit;
                 }
                 start += l.block_len;
-                morph += (j as u32 * l.block_len).div_ceil(4) * 4;
+                rows += (j as u32 * l.block_len).div_ceil(4) * 4;
             }
             (r.starts_lo, r.starts_hi) = split(starts);
-            (r.units_lo, r.units_hi) = split(units);
+            let tile_morph = morph.map(|(frame, c)| TileMorph {
+                view_proj: glam::Mat4::from_cols_array(&c.view_proj),
+                camera: glam::Vec4::from_array(c.camera),
+                spacing_y: c.spacing_y,
+                height_step: c.height_step,
+                frame: *frame,
+                tile_offset: r.tile_offset,
+                cap: r.cap,
+            });
+            drawn.push((d.tile, d.level, heights, tile_morph));
+            heights += info.levels[d.level as usize].vertex_count() as usize;
             r
         })
         .collect();
-    if !records.is_empty() && !buffer.write(0, bytemuck::cast_slice(&records)) {
+    let frame = morph.map_or_else(MorphFrame::zeroed, |(m, _)| *m);
+    let written = buffer.write(0, bytemuck::bytes_of(&frame))
+        && (records.is_empty()
+            || buffer.write(RECORDS_OFFSET as usize, bytemuck::cast_slice(&records)));
+    if !written {
         return Err(FrameError::Internal(format!(
             "{} tile records do not fit their buffer ({} bytes)",
             records.len(),
             buffer.size
         )));
     }
-    Ok(())
+    Ok(drawn)
 }
 
 /// The halves of an eight-element array (a record's `_lo` and `_hi` vectors).
@@ -1567,6 +1658,7 @@ fn frame_record(
         max_error_px: f64::NAN,
         pop_px: f64::NAN,
         prediction_error_m: f64::NAN,
+        heights_max_diff_m: f64::NAN,
         ..Default::default()
     }
 }
@@ -1584,10 +1676,10 @@ struct Pass<'a> {
     /// The pool and this frame's records.
     set: vk::DescriptorSet,
     terrain: &'a Terrain,
-    camera: &'a Camera,
     settings: &'a Settings,
-    /// The renderer has texture slots (the shading may sample them).
-    textured: bool,
+    constants: &'a FrameConstants,
+    /// Draw with the pipeline that writes every vertex's height.
+    read_back: bool,
     plan: &'a Plan,
     stitch_ranges: &'a [(u32, u32)],
 }
@@ -1599,10 +1691,11 @@ impl Pass<'_> {
             .begin_rendering(self.gpu, self.cmd, self.settings.sky);
         let pipeline = match (self.settings.wireframe, self.settings.morph_shader) {
             (true, _) => self.pipeline.wireframe.unwrap_or(self.pipeline.fill),
-            (false, MorphShader::Branches) => self.pipeline.branches,
-            (false, MorphShader::ForwardDifferences) => self.pipeline.fill,
+            (false, _) if self.read_back => self.pipeline.read_back.unwrap_or(self.pipeline.fill),
+            (false, MorphShader::ForwardDifferences) => self.pipeline.all_rows,
+            (false, MorphShader::TwoLevels) => self.pipeline.fill,
         };
-        let constants = self.constants();
+        let constants = *self.constants;
         let mut counts = DrawCounts::default();
         // SAFETY: recording inside dynamic rendering; the pool, the records and the stitch
         // buffer outlive the frame, and every range drawn was written before (the manager's
@@ -1657,47 +1750,54 @@ impl Pass<'_> {
         }
         counts
     }
+}
 
-    fn constants(&self) -> FrameConstants {
-        let (sx, sy) = self.terrain.spacing;
-        let (_, cam_rel) = camera_tile(self.terrain, self.camera);
-        let mut flags = 0;
-        if matches!(self.settings.rule(), LevelRule::Morph(..)) {
-            flags |= FLAG_GEOMORPH;
+/// The frame's push constants: the camera, the spacing, the flags for `settings`.
+fn frame_constants(
+    terrain: &Terrain,
+    camera: &Camera,
+    view: &crate::camera::View,
+    settings: &Settings,
+    textured: bool,
+) -> FrameConstants {
+    let (sx, sy) = terrain.spacing;
+    let (_, cam_rel) = terrain.camera_tile(camera.position);
+    let mut flags = 0;
+    if matches!(settings.rule(), LevelRule::Morph(..)) {
+        flags |= FLAG_GEOMORPH;
+    }
+    match settings.shading {
+        Shading::Photo if textured => flags |= FLAG_TEXTURE,
+        Shading::Photo | Shading::Tint => {}
+        Shading::Relief => flags |= FLAG_RELIEF,
+        Shading::Level => flags |= FLAG_LEVEL_COLOURS,
+        Shading::Tiles => flags |= FLAG_TILES,
+    }
+    let texture_map = match terrain.texture {
+        Some(l) => {
+            let size = f64::from(l.size);
+            [
+                (f64::from(l.gutter) / size) as f32,
+                (f64::from(l.interior) / (f64::from(tiles::mesh::TILE_CELLS) * size)) as f32,
+                l.size as f32,
+                settings.tile_grid_offset,
+            ]
         }
-        match self.settings.shading {
-            Shading::Photo if self.textured => flags |= FLAG_TEXTURE,
-            Shading::Photo | Shading::Tint => {}
-            Shading::Relief => flags |= FLAG_RELIEF,
-            Shading::Level => flags |= FLAG_LEVEL_COLOURS,
-            Shading::Tiles => flags |= FLAG_TILES,
-        }
-        let texture_map = match self.terrain.texture {
-            Some(l) => {
-                let size = f64::from(l.size);
-                [
-                    (f64::from(l.gutter) / size) as f32,
-                    (f64::from(l.interior) / (f64::from(tiles::mesh::TILE_CELLS) * size)) as f32,
-                    l.size as f32,
-                    self.settings.tile_grid_offset,
-                ]
-            }
-            None => [0.0, 0.0, 0.0, self.settings.tile_grid_offset],
-        };
-        FrameConstants {
-            view_proj: self.plan.view.view_proj.to_cols_array(),
-            camera: [
-                cam_rel.x as f32,
-                cam_rel.y as f32,
-                cam_rel.z as f32,
-                sx as f32,
-            ],
-            spacing_y: sy as f32,
-            height_step: self.terrain.height_step,
-            flags,
-            pad: 0,
-            texture_map,
-        }
+        None => [0.0, 0.0, 0.0, settings.tile_grid_offset],
+    };
+    FrameConstants {
+        view_proj: view.view_proj.to_cols_array(),
+        camera: [
+            cam_rel.x as f32,
+            cam_rel.y as f32,
+            cam_rel.z as f32,
+            sx as f32,
+        ],
+        spacing_y: sy as f32,
+        height_step: terrain.height_step,
+        flags,
+        pad: 0,
+        texture_map,
     }
 }
 

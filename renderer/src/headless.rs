@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::camera::Camera;
-use crate::frame::{Finished, FrameError, FrameInput, MemoryOptions, Renderer, Settings};
+use crate::frame::{Fault, Finished, FrameError, FrameInput, MemoryOptions, Renderer, Settings};
 use crate::log::FrameRecord;
 use crate::path::CameraPath;
 use crate::terrain::Terrain;
@@ -43,6 +43,19 @@ pub enum FlightError {
     Frame(#[from] FrameError),
     #[error("{}: {error}", path.display())]
     Write { path: PathBuf, error: String },
+    /// The vertex shader drew a height the CPU mirror does not compute
+    /// (`--read-back-heights`).
+    #[error(
+        "tile {},{} vertex {}: the vertex shader's height differs from the CPU mirror's by {diff:.3e} m \
+         ({over} of {vertices} vertices beyond float rounding)",
+        tile.0, tile.1, tile.2
+    )]
+    MirrorMismatch {
+        tile: (u32, u32, usize),
+        diff: f64,
+        over: u64,
+        vertices: u64,
+    },
     /// A timed frame failed.
     #[error("frame {frame}: {error}")]
     AtFrame { frame: u64, error: Box<FlightError> },
@@ -168,10 +181,29 @@ fn keep(
     finished: Vec<Finished>,
     records: &mut Vec<FrameRecord>,
 ) -> Result<(), FlightError> {
-    for f in finished {
+    for mut f in finished {
         if let (Some(dir), Some(pixels)) = (&flight.out, f.pixels) {
             let file = dir.join(format!("frame_{:06}.png", f.record.frame));
             write_png(&file, f.extent.0, f.extent.1, pixels)?;
+        }
+        if let Some(heights) = &f.heights {
+            let bias = i8::from(Fault::from_env() == Some(Fault::MirrorBias));
+            let check = crate::measure::check_heights(flight.terrain, heights, bias);
+            f.record.heights_read_back = check.vertices;
+            f.record.heights_max_diff_m = check.max_diff_m;
+            if let (true, Some(tile)) = (check.over > 0, check.worst) {
+                let frame = f.record.frame;
+                records.push(f.record);
+                return Err(FlightError::AtFrame {
+                    frame,
+                    error: Box::new(FlightError::MirrorMismatch {
+                        tile,
+                        diff: check.max_diff_m,
+                        over: check.over,
+                        vertices: check.vertices,
+                    }),
+                });
+            }
         }
         records.push(f.record);
     }

@@ -1,5 +1,5 @@
 //! The terrain shaders' interface as the host writes it: the per-frame push constants, their
-//! flag bits and the per-draw tile records. The one definition is the GLSL include
+//! flag bits, the frame's constants of the morph level rule and the per-draw tile records. The one definition is the GLSL include
 //! `spirv/shaders/interface.glsl`; the flag values here are the ones the spirv crate read out of
 //! it at build time, and the structs below are `#[repr(C)]` mirrors whose every field offset a
 //! test compares with the layout the compiler gave the GLSL (the SPIR-V's `Offset`
@@ -37,6 +37,23 @@ pub struct FrameConstants {
 /// Size of the push-constant block.
 pub const PUSH_CONSTANT_BYTES: u32 = std::mem::size_of::<FrameConstants>() as u32;
 
+/// The frame's constants of the vertex level rule (`MorphFrame`, at the start of the records
+/// buffer; [`crate::morph::frame_constants`] makes them).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct MorphFrame {
+    /// `|J z| = |xy * d + zw * clip.xy| / d²` at a clip position of depth `d`.
+    pub jacobian: [f32; 4],
+    pub tau: f32,
+    pub near: f32,
+    pub pad: [f32; 2],
+    /// `Λ(r) = Σ_k clamp(a_k - r b_k, 0, 1)`, levels 0..3 and 4..7.
+    pub a_lo: [f32; 4],
+    pub a_hi: [f32; 4],
+    pub b_lo: [f32; 4],
+    pub b_hi: [f32; 4],
+}
+
 /// One drawn tile as the vertex shader reads it (`TileRecord`, std430).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
@@ -45,29 +62,33 @@ pub struct TileRecord {
     pub height_base: i32,
     /// Pool word of block 0's first vertex.
     pub positions: u32,
-    pub corners: [f32; 4],
     /// First vertex of blocks 1..=8 (u32::MAX past the last block).
     pub starts_lo: [u32; 4],
     pub starts_hi: [u32; 4],
+    /// Per block: its first vertex, its vertices, the pool byte of its morph rows, 0.
+    pub blocks: [[u32; 4]; 9],
     /// Metres per morph offset unit of levels 0..8.
-    pub units_lo: [f32; 4],
-    pub units_hi: [f32; 4],
+    pub units: [f32; 8],
     pub level: u32,
-    /// Pool byte of block 0's morph rows.
-    pub morph: u32,
+    /// The level the draw's vertices morph to at most.
+    pub cap: f32,
+    /// With `--read-back-heights`: where in the heights buffer the tile's vertex 0 goes.
+    pub heights: u32,
     /// The tile's texture layer (u32::MAX: none) and finest resident mip.
     pub texture_layer: u32,
     pub texture_finest: f32,
-    pub block_start: [u32; 9],
-    pub block_len: [u32; 9],
-    pub morph_start: [u32; 9],
     /// Samples the texture is moved by (0; `VKTERRAIN_FAULT=texture-seam` moves every other
     /// tile's, the seam test's negative control).
     pub texture_shift: f32,
+    pub pad0: u32,
+    pub pad1: u32,
 }
 
 /// Bytes of one record.
 pub const RECORD_BYTES: u64 = std::mem::size_of::<TileRecord>() as u64;
+
+/// Where the records start in the records buffer, after the frame's [`MorphFrame`].
+pub const RECORDS_OFFSET: u64 = std::mem::size_of::<MorphFrame>() as u64;
 
 /// `(field, offset)` of a `#[repr(C)]` struct, for the layout test.
 macro_rules! fields {
@@ -81,15 +102,20 @@ macro_rules! fields {
 pub fn host_layout() -> Vec<(&'static str, &'static str, u32)> {
     let frame = fields!(FrameConstants: view_proj, camera, spacing_y, height_step, flags, pad,
         texture_map);
-    let record = fields!(TileRecord: tile_offset, height_base, positions, corners, starts_lo,
-        starts_hi, units_lo, units_hi, level, morph, texture_layer, texture_finest, block_start,
-        block_len, morph_start, texture_shift);
-    let mut layout: Vec<_> = frame
-        .into_iter()
-        .map(|(f, o)| ("FrameConstants", f, o))
-        .chain(record.into_iter().map(|(f, o)| ("TileRecord", f, o)))
+    let morph = fields!(MorphFrame: jacobian, tau, near, pad, a_lo, a_hi, b_lo, b_hi);
+    let record = fields!(TileRecord: tile_offset, height_base, positions, starts_lo, starts_hi,
+        blocks, units, level, cap, heights, texture_layer, texture_finest, texture_shift, pad0,
+        pad1);
+    let named = |name: &'static str, fields: Vec<(&'static str, u32)>| {
+        fields.into_iter().map(move |(f, o)| (name, f, o))
+    };
+    let mut layout: Vec<_> = named("FrameConstants", frame)
+        .chain(named("MorphFrame", morph))
+        .chain(named("TileRecord", record))
         .collect();
     layout.push(("TileRecord", "stride", RECORD_BYTES as u32));
+    layout.push(("Records", "morph", 0));
+    layout.push(("Records", "tiles", RECORDS_OFFSET as u32));
     layout.sort();
     layout
 }

@@ -124,19 +124,12 @@ fn sub_boxes(lo: DVec3, hi: DVec3, n: u32) -> impl Iterator<Item = (DVec3, DVec3
     })
 }
 
-/// `|J z|` over a tile under `rule`, the guaranteed rule splitting its box with `split` (one of
-/// [`subdivided_bound`] and [`continuous_bound`]).
-fn tile_bound(
-    view: &View,
-    camera: DVec3,
-    tile: &TileInfo,
-    rule: Bound,
-    split: fn(&View, DVec3, DVec3, u32) -> f64,
-) -> f64 {
+/// `|J z|` over a tile's on-screen part under `rule` (the guaranteed rule splits its box).
+fn tile_bound(view: &View, camera: DVec3, tile: &TileInfo, rule: Bound) -> f64 {
     match rule {
         Bound::Guaranteed => {
             let (lo, hi) = tile_box(tile);
-            split(view, lo - camera, hi - camera, SPLIT)
+            subdivided_bound(view, lo - camera, hi - camera, SPLIT)
         }
         Bound::Sampled => sampled_pixels_per_metre(view, tile.min - camera, tile.max - camera),
     }
@@ -171,7 +164,7 @@ pub fn sampled_pixels_per_metre(view: &View, lo: DVec3, hi: DVec3) -> f64 {
 /// The largest vertical error, metres, that projects to at most `tau` pixels anywhere on the
 /// tile (0 when the camera is in or at the tile's box: the finest level).
 pub fn tolerable_error(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: Bound) -> f64 {
-    error_for(tile_bound(view, camera, tile, rule, subdivided_bound), tau)
+    error_for(tile_bound(view, camera, tile, rule), tau)
 }
 
 /// The level a tile is drawn at for `tau`: the coarsest whose measured error projects to at
@@ -189,28 +182,27 @@ pub fn level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: Bound)
     level_for(tile, tolerable_error(view, camera, tile, tau, rule))
 }
 
-/// [`bound`] over all `n x n` sub-boxes, off-screen ones included: a bound that changes
-/// continuously with the camera (skipping sub-boxes as they leave the frustum would make it
-/// jump, and a jump in a geomorphing level is a pop).
-pub fn continuous_bound(view: &View, lo: DVec3, hi: DVec3, n: u32) -> f64 {
-    sub_boxes(lo, hi, n)
-        .map(|(a, b)| bound(view, a, b))
-        .fold(0.0, f64::max)
-}
-
-/// The continuous level a tile morphs to for `tau` (geomorphing): where its error, linear
-/// between its levels, projects to `tau` pixels under a bound continuous in the camera. Between
-/// levels `k` and `k + 1` with weight `f` the morphed surface is `(1 - f) S_k + f S_(k+1)` (the
-/// levels are nested), whose error is at most `(1 - f) e_k + f e_(k+1)`; a finer vertex at level
-/// `k` sits within half a morph unit of `S_k`, which the errors include.
-pub fn continuous_level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: Bound) -> f64 {
-    let r = error_for(tile_bound(view, camera, tile, rule, continuous_bound), tau);
-    let errors: Vec<f32> = tile
-        .levels
-        .iter()
-        .map(|l| l.max_error.max(0.0) + 0.5 * l.morph_unit)
-        .collect();
-    crate::morph::continuous_level(&errors, r)
+/// The level a tile is drawn at while geomorphing ([`crate::morph`], "The level a tile is
+/// drawn at"): the ceiling of the vertex rule's level `Λ(τ / S)` for `S` the bound over the
+/// tile's on-screen sub-boxes, so it covers the level of every vertex on screen. `table` is the
+/// set's error table the vertices take their levels from.
+pub fn morph_level(
+    view: &View,
+    camera: DVec3,
+    tile: &TileInfo,
+    tau: f64,
+    rule: Bound,
+    table: &crate::morph::LevelTable,
+) -> u32 {
+    let finest = tile.levels.len().saturating_sub(1) as u32;
+    let within = |r: f64| (table.level_f64(r).ceil() as u32).min(finest);
+    if rule == Bound::Guaranteed {
+        let (lo, hi) = tile_box(tile);
+        if within(error_for(bound(view, lo - camera, hi - camera), tau)) == 0 {
+            return 0;
+        }
+    }
+    within(tolerable_error(view, camera, tile, tau, rule))
 }
 
 /// The coarsest level whose measured error is within `r` metres (the finest if none is).

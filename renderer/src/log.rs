@@ -11,7 +11,8 @@
 //! `prefetch_bytes, prefetch_hits, prefetch_wasted_bytes, prediction_error_m, cpu_prefetch_ms,
 //! file_advised_bytes, file_released_bytes`, then the textures'
 //! `upload_bytes_textures, texture_slots_free, tiles_texture_coarser`, then the index arrays
-//! built on the GPU `index_builds, index_build_bytes`,
+//! built on the GPU `index_builds, index_build_bytes`, the heights read back from the vertex
+//! shader `heights_read_back, heights_max_diff_m`,
 //! and last `tiles_level_0 .. tiles_level_{n-1}`.
 
 use std::io::Write;
@@ -56,6 +57,10 @@ pub struct FrameRecord {
     /// `upload_bytes`).
     pub index_builds: u64,
     pub index_build_bytes: u64,
+    /// With `--read-back-heights`: drawn vertices whose height the vertex shader wrote and the
+    /// CPU mirror recomputed, and the largest difference between the two (m; NaN: none).
+    pub heights_read_back: u64,
+    pub heights_max_diff_m: f64,
     /// Of `upload_bytes_indices`: coarser index arrays for tiles whose wanted level dropped.
     pub upload_bytes_coarser: u64,
     /// With `--measure-error`: the largest screen distance, pixels, between the drawn surface
@@ -107,7 +112,7 @@ pub struct FrameRecord {
     pub tiles_per_level: Vec<u64>,
 }
 
-pub const BASE_COLUMNS: [&str; 48] = [
+pub const BASE_COLUMNS: [&str; 50] = [
     "frame",
     "time_s",
     "frame_ms",
@@ -156,6 +161,8 @@ pub const BASE_COLUMNS: [&str; 48] = [
     "tiles_texture_coarser",
     "index_builds",
     "index_build_bytes",
+    "heights_read_back",
+    "heights_max_diff_m",
 ];
 
 pub fn header(levels: u32) -> String {
@@ -226,6 +233,12 @@ impl FrameRecord {
             n(self.tiles_texture_coarser),
             n(self.index_builds),
             n(self.index_build_bytes),
+            n(self.heights_read_back),
+            if self.heights_max_diff_m.is_nan() {
+                String::new()
+            } else {
+                format!("{:.3e}", self.heights_max_diff_m)
+            },
         ];
         let levels = self.tiles_per_level.iter().map(|&v| n(v));
         cells
@@ -325,6 +338,10 @@ pub struct Summary {
     /// Index arrays built on the GPU, and their megabytes (written in GPU memory, not sent).
     pub index_builds: u64,
     pub index_build_mb: f64,
+    /// With `--read-back-heights`: vertices compared over the flight, and the largest
+    /// difference between the GPU's height and the CPU mirror's (m).
+    pub heights_read_back: u64,
+    pub heights_max_diff_m: Option<f64>,
     /// GPU allocations after the first frame (the pool is allocated once: 0).
     pub gpu_allocations_after_first_frame: u64,
     pub hits: u64,
@@ -435,6 +452,12 @@ impl Summary {
             index_arrays: run.index_arrays,
             index_builds: sum(|r| r.index_builds),
             index_build_mb: sum(|r| r.index_build_bytes) as f64 / 1e6,
+            heights_read_back: sum(|r| r.heights_read_back),
+            heights_max_diff_m: records
+                .iter()
+                .map(|r| r.heights_max_diff_m)
+                .filter(|e| !e.is_nan())
+                .reduce(f64::max),
             gpu_allocations_after_first_frame: records
                 .iter()
                 .skip(1)

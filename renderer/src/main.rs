@@ -104,10 +104,17 @@ struct Cli {
     /// change in one frame, which pops).
     #[arg(long)]
     no_geomorph: bool,
-    /// The vertex shader that blends levels: forward-differences (clamped forward
-    /// differences and dot products, the paper's) or branches (the reference it beat).
-    #[arg(long, value_enum, default_value_t = MorphShaderArg::ForwardDifferences)]
+    /// The vertex shader that blends levels: two-levels (reads the two levels around each
+    /// vertex's level) or forward-differences (the paper's clamped forward differences as dot
+    /// products over every level; the reference).
+    #[arg(long, value_enum, default_value_t = MorphShaderArg::TwoLevels)]
     morph_shader: MorphShaderArg,
+    /// Diagnostic (headless): the vertex shader writes every drawn vertex's height to a buffer
+    /// that is read back and compared with the CPU mirror the error meter uses (log columns
+    /// heights_read_back, heights_max_diff_m); a difference beyond float rounding stops the
+    /// flight with one line naming the tile and vertex.
+    #[arg(long)]
+    read_back_heights: bool,
     /// How tile levels travel: progressive (new blocks and one index array per refinement),
     /// per-level (each level from scratch) or whole-tile (every level at once, the old scheme).
     /// --draw-only uses whole-tile, so that every pre-recorded frame finds its levels.
@@ -169,6 +176,11 @@ struct Cli {
     /// draw-only limit of the same flight).
     #[arg(long)]
     draw_only: bool,
+    /// Benchmark: instead of flying, draw a static grid of terrain-like fans with at least
+    /// this many triangles with the simplest shaders, --frames times at --size, and print the
+    /// frame times (the static-mesh limit; the tile set is not read).
+    #[arg(long, value_name = "TRIANGLES", value_parser = clap::value_parser!(u64).range(1..=100_000_000))]
+    static_grid: Option<u64>,
     /// Benchmark: fly the path once untimed first, so the timed flight starts warm.
     #[arg(long)]
     warmup: bool,
@@ -302,8 +314,8 @@ enum ShadingArg {
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 enum MorphShaderArg {
+    TwoLevels,
     ForwardDifferences,
-    Branches,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -345,7 +357,40 @@ fn main() -> ExitCode {
     }
 }
 
+/// `--static-grid N`: the static-mesh limit's frame times, as a JSON summary on stdout.
+fn static_limit(cli: &Cli, triangles: u64) -> Result<ExitCode> {
+    let gpu = Gpu::new(&GpuOptions {
+        validation: cli.validation,
+        device: cli.device.clone(),
+        display: None,
+    })?;
+    let frames = cli.frames.unwrap_or(60).min(100_000) as u32;
+    let (drawn, times) = renderer::limit::static_grid(&gpu, triangles, cli.size, frames)?;
+    // The first frames warm the driver up, as a flight's do; the median is over the rest.
+    let warm: Vec<f64> = times.iter().skip(5.min(times.len() - 1)).copied().collect();
+    let median = frametimes::stats::percentile(&warm, 50.0);
+    let summary = serde_json::json!({
+        "device": gpu.device_name,
+        "width": cli.size.0,
+        "height": cli.size.1,
+        "frames": times.len(),
+        "triangles": drawn,
+        "frame_ms_median": median,
+        "mtri_per_s": drawn as f64 / median / 1000.0,
+        "validation_messages": gpu.validation_messages(),
+    });
+    println!("{}", serde_json::to_string_pretty(&summary)?);
+    Ok(if cli.validation && gpu.validation_messages() > 0 {
+        ExitCode::from(EXIT_VALIDATION)
+    } else {
+        ExitCode::SUCCESS
+    })
+}
+
 fn run(cli: Cli) -> Result<ExitCode> {
+    if let Some(n) = cli.static_grid {
+        return static_limit(&cli, n);
+    }
     let mut terrain = Terrain::open(&cli.tileset)?;
     terrain.shared_sides |= cli.no_slivers;
     let path = match cli.path.as_str() {
@@ -402,8 +447,8 @@ fn run(cli: Cli) -> Result<ExitCode> {
         },
         geomorph: !cli.no_geomorph,
         morph_shader: match cli.morph_shader {
+            MorphShaderArg::TwoLevels => MorphShader::TwoLevels,
             MorphShaderArg::ForwardDifferences => MorphShader::ForwardDifferences,
-            MorphShaderArg::Branches => MorphShader::Branches,
         },
     };
     if !(cli.tau.is_finite() && cli.tau > 0.0) {
@@ -482,6 +527,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             IndexArraysArg::Built => memory::IndexArrays::Built,
             IndexArraysArg::Sent => memory::IndexArrays::Sent,
         },
+        read_back_heights: cli.read_back_heights,
     };
     let gpu_options = GpuOptions {
         validation: cli.validation,

@@ -9,7 +9,8 @@
 //!   source sample are projected with the frame's camera; their distance on the image is that
 //!   sample's error. The frame's value is the largest.
 //! - `pop_px`: for every tile drawn in this frame and the previous one with a different LOD
-//!   state (level, or corner levels when morphing), the surface point at each sample under
+//!   state (level, or the camera its vertices took their levels from when morphing), the
+//!   surface point at each sample under
 //!   the previous state and under the current one, both projected with the *current* camera
 //!   (so camera motion is factored out): the largest distance is the frame's pop. A tile newly
 //!   in view has no previous state: no pop.
@@ -52,11 +53,11 @@ pub struct ErrorMeter {
 /// A tile's state in a measured frame, and its surface when morphed (not cached).
 type Drawn = (State, Option<Vec<f32>>);
 
-/// What a tile's drawn surface depends on: its level, and its corner levels when morphing.
+/// What a tile's drawn surface depends on: its level, and how it morphs.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct State {
     pub level: u32,
-    pub corners: Option<[f32; 4]>,
+    pub morph: Option<morph::TileMorph>,
 }
 
 impl ErrorMeter {
@@ -111,7 +112,7 @@ impl ErrorMeter {
         for &(tile, state) in draws {
             let before = previous.remove(&tile).filter(|(s, _)| *s != state);
             let mut fetch = |s: State| {
-                if s.corners.is_some() {
+                if s.morph.is_some() {
                     return None;
                 }
                 self.surfaces
@@ -180,7 +181,7 @@ fn surface(terrain: &Terrain, tile: usize, state: State) -> Vec<f32> {
     let Ok(t) = terrain.set.tile(info.tx, info.ty) else {
         return grid;
     };
-    let vertices = morph::tile_vertices(&t, state.level, state.corners);
+    let vertices = morph::tile_vertices(&t, state.level, state.morph.as_ref());
     let Some(l) = t.level(state.level) else {
         return grid;
     };
@@ -199,4 +200,63 @@ fn surface(terrain: &Terrain, tile: usize, state: State) -> Vec<f32> {
         }
     }
     grid
+}
+
+/// The comparison of the heights the vertex shader wrote with the CPU mirror's.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct HeightCheck {
+    /// Vertices compared.
+    pub vertices: u64,
+    /// The largest difference (m) and where: (tile column, row, vertex index).
+    pub max_diff_m: f64,
+    pub worst: Option<(u32, u32, usize)>,
+    /// Vertices further apart than [`height_tolerance`].
+    pub over: u64,
+}
+
+/// How far the GPU's vertex level may be from the mirror's, in levels: the shader's
+/// `inversesqrt` is within 2 ulp, and `a_k - r b_k` cancels by up to the table's ratio of an
+/// error to its step (2 where errors double; up to 1000 where two levels' errors nearly agree).
+pub const LEVEL_TOLERANCE: f64 = 1e-4;
+
+/// How far a GPU height may be from the mirror's: four float steps at its magnitude (the two
+/// round their products and sums in different orders), the height a level difference of
+/// [`LEVEL_TOLERANCE`] makes at the vertex's `slope` (metres per level), and a micrometre.
+pub fn height_tolerance(h: f32, slope: f32) -> f64 {
+    4.0 * f64::from(f32::EPSILON) * f64::from(h.abs())
+        + LEVEL_TOLERANCE * f64::from(slope.abs())
+        + 1e-6
+}
+
+/// Compares every read-back height of a frame with [`morph::tile_vertices`] for the same draw;
+/// `bias` is added to every stored morph offset of the mirror (0; the check's control uses 1).
+pub fn check_heights(
+    terrain: &Terrain,
+    read_back: &crate::frame::ReadBack,
+    bias: i8,
+) -> HeightCheck {
+    let mut check = HeightCheck::default();
+    for &(tile, level, start, morph) in &read_back.draws {
+        let info = &terrain.tiles[tile];
+        let Ok(t) = terrain.set.tile(info.tx, info.ty) else {
+            continue;
+        };
+        let mirror = morph::tile_heights(&t, level, morph.as_ref(), bias);
+        let gpu = read_back
+            .values
+            .get(start..start + mirror.len())
+            .unwrap_or(&[]);
+        for (i, (&g, &(_, _, h, slope))) in gpu.iter().zip(&mirror).enumerate() {
+            let d = (f64::from(g) - f64::from(h)).abs();
+            check.vertices += 1;
+            if d.is_nan() || d > height_tolerance(h, slope) {
+                check.over += 1;
+            }
+            if d.is_nan() || d > check.max_diff_m {
+                check.max_diff_m = d;
+                check.worst = Some((info.tx, info.ty, i));
+            }
+        }
+    }
+    check
 }

@@ -1,159 +1,384 @@
-//! Geomorphing arithmetic (paper, section 5, figure 6), in plain Rust: the CPU mirror of what
-//! the vertex shader will compute, so that tests and the error meter can check it.
+//! Geomorphing (paper, section 5, figure 6): the per-vertex level rule and the CPU mirror of
+//! what `spirv/shaders/terrain.vert` computes with it, so that tests and the error meter can
+//! check the surface the GPU draws (and a test reads that surface back to check this mirror).
 //!
-//! A tile is given a continuous LOD value `l` at each of its four corners; a vertex at `(x, y)`
-//! gets `l(v)` by bilinear interpolation. Its height blends the nested levels' heights `H_k`
-//! with the clamped forward differences
+//! # The level of a vertex
+//!
+//! Every vertex `v` gets a continuous level from where it is and from the camera alone:
 //!
 //! ```text
-//! h = clamp((l, l, ..., l) - (0, 1, ..., n-1), 0, 1)
-//! h'_0 = 1 - h_0,   h'_k = h_{k-1} - h_k
-//! H(l) = sum_k h'_k H_k
+//! l(v) = Λ(τ / S(v)),   S(v) = |J z| at v = (x, y, own height), relative to the camera,
 //! ```
 //!
-//! For a vertex of block `j`, `H_k = height + offset_k * unit_k` for the coarser levels
-//! `k < j` (the stored offsets) and `H_k = height` for `k >= j`, so `H(l) = height + sum_{k<j}
-//! h'_k offset_k unit_k`: at `l >= j` every `h'_k` with `k < j` is exactly 0 and the vertex sits
-//! at its own height, bit for bit.
+//! `|J z|` being the pixels a vertical metre at `v` spans on screen (the Jacobian of the
+//! projection applied to world up; formula in [`crate::lod`]), and `Λ` the inverse of the
+//! set's error function below. Two tiles holding the same grid point compute `l` from the same
+//! integers (its sample column and row relative to the camera's tile, its height code on the
+//! set's shared lattice) with the same instructions, so they get the same level bit for bit,
+//! with no maximum over neighbours and nothing carried between tiles. Where `|J z|` is small
+//! (far away, or seen from above) the level is coarse, where it is large it is fine, within
+//! one tile as across tiles: a tile's far side morphs towards coarser levels while its near
+//! side does not.
 //!
-//! Continuity across tiles: on an edge, the bilinear `l(v)` depends only on the edge's two
-//! corner values, and a grid corner's value is one number shared by every tile that touches it
-//! ([`corner_levels`]), so both tiles compute the same `l(v)` for a shared edge vertex.
+//! # The error of a blend, and `Λ`
+//!
+//! Between levels `k` and `k + 1` at weight `t` (`l = k + t`) a vertex sits at
+//! `(1 - t) S_k(v) + t S_(k+1)(v)`, `S_k` the level-`k` surface (levels are nested: `S_k(v)`
+//! is `v`'s own height from its own level on, and the stored offset below it). Each surface is
+//! within its error of the source, so the blend is within
+//!
+//! ```text
+//! E(l) = (1 - t) E_k + t E_(k+1),
+//! ```
+//!
+//! linear in `t`. That is more than the error "at the fractional level" on the levels' own
+//! geometric scale: with errors doubling per level, `E_(k+1) (2 - t)` against
+//! `E_(k+1) 2^(1 - t)`, up to 6% more near `t = 0.56`. So `Λ` inverts the linear `E`, not the
+//! geometric one: `E(l(v)) <= τ / S(v)`, the vertex's error projects to at most `τ` pixels.
+//! `E_k` is one table for the whole set (a vertex's level may not depend on its tile): the
+//! largest measured error of level `k` over all tiles plus half its morph unit (the stored
+//! offsets are rounded to whole units), made strictly decreasing so `Λ` is continuous:
+//!
+//! ```text
+//! Λ(r) = Σ_k clamp((E_k - r) / (E_k - E_(k+1)), 0, 1)    (k = 0 .. n-2),
+//! ```
+//!
+//! which is `k + t` where `E_k > r >= E_(k+1)`, `0` above `E_0` and the finest level below
+//! `E_(n-1)`: eight clamped multiply-adds on the GPU, no search, no branch.
+//!
+//! # Between the vertices of a triangle
+//!
+//! A point `q` of a drawn triangle with vertices `v_i` (barycentric `b_i`, levels `l_i`) is at
+//! `D(q) = Σ_i b_i Σ_m w_m(l_i) S_m(v_i)`, `w(l)` the blend weights. Every drawn triangle lies
+//! inside one triangle of each coarser level (a fan's diagonals are its children's), so each
+//! `S_m` is linear over it. With `w̄ = Σ_i b_i w(l_i)`:
+//!
+//! ```text
+//! D(q) = Σ_m w̄_m S_m(q) + R,   R = Σ_i b_i Σ_m (w_m(l_i) - w̄_m) o_m(v_i),
+//! ```
+//!
+//! `o_m(v) = S_m(v) - own(v)` the morph offsets. The first term is within
+//! `Σ_i b_i E(l_i) <= max_i τ / S(v_i)` metres of the source; `R` is zero when the three levels
+//! agree and at most `2 Δl · max |o_m|` when they spread by `Δl` (the weight vectors of two
+//! levels are `2 |l_i - l_j|` apart in L1). In pixels the error at `q` is at most
+//! `τ max_i S(q) / S(v_i) + S(q) |R|`. Both excesses over `τ` grow with how much `|J z|` and
+//! the level change across one triangle, about its diameter over its distance; this rule adds
+//! no margin for them. What the GPU's surface delivers is measured instead: the error meter
+//! rasterises this mirror's surface against the source on every measured frame
+//! (`max_error_px`), and a test reads the vertex shader's heights back and compares them with
+//! this mirror vertex for vertex.
+//!
+//! # The level a tile is drawn at
+//!
+//! A tile is drawn at `G = ceil(Λ(τ / S_box))`, `S_box` the proved bound of [`crate::lod`]
+//! over the sub-boxes of the tile that touch the frustum ([`crate::lod::morph_level`]). The
+//! bound covers `S(v)` at every on-screen vertex, so every on-screen vertex's level is at most
+//! `G`: off-screen parts do not raise it, and with the same error table a tile is drawn at the
+//! level discrete LOD would draw it at. (The table is the set's largest error per level; a
+//! tile smoother than the roughest is drawn a little finer than its own errors would need, so
+//! that no on-screen vertex ever wants more than the drawn mesh has: such a vertex would start
+//! off the coarser surface when the finer level arrives.) Vertices whose level reaches their
+//! own block `j` sit at their own height, bit for bit (every weight below `j` is exactly 0),
+//! so a vertex off screen whose level exceeds `G` is simply on level `G`'s surface.
+//!
+//! # Continuity
+//!
+//! `l(v)` is continuous in the camera, so a vertex moves continuously while the camera does,
+//! and new ground coming on screen needs nothing: its vertices already have their levels. The
+//! mesh changes when a tile's drawn level does. A vertex the finer level adds (block `G + 1`)
+//! has `l <= G` wherever it is on screen (the drawn level covers it), so it starts at
+//! `Σ_m w_m(l) S_m(v)`, on the coarser surfaces, and the surface it joins differs from the
+//! one drawn before by `R` above only. The error meter's `pop_px` measures those jumps.
 
-/// Levels the weights cover (the tile format's maximum).
+use glam::{Mat4, Vec3, Vec4};
+
+use crate::camera::{View, NEAR};
+use crate::interface::MorphFrame;
+use crate::terrain::Terrain;
+
+/// Levels a tile has at most (the tile format's maximum).
 pub const MAX_LEVELS: usize = 9;
 
-/// The basis weights `h'_k` for the continuous level `l`: non-negative, summing to 1, the
-/// `k`-th one-hot at integer `l = k`, piecewise linear and continuous in `l`.
+/// The set's error per level for the vertex rule, `E_k` of the module header, and the
+/// coefficients of `Λ(r) = Σ_k clamp(a_k - r b_k, 0, 1)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LevelTable {
+    /// Coarsest first; strictly decreasing over the set's levels.
+    pub errors: [f32; MAX_LEVELS],
+    pub a: [f32; MAX_LEVELS - 1],
+    pub b: [f32; MAX_LEVELS - 1],
+}
+
+impl LevelTable {
+    /// The table for per-level errors `errors` (coarsest first, at most [`MAX_LEVELS`]): made
+    /// non-increasing from the finest up (a coarser level is never taken as better than a
+    /// finer one), then strictly decreasing by at least 0.1% a level so that `Λ` is
+    /// continuous.
+    pub fn new(errors: &[f32]) -> LevelTable {
+        let n = errors.len().clamp(1, MAX_LEVELS);
+        let mut e = [0.0f32; MAX_LEVELS];
+        let mut below = 0.0f32;
+        for k in (0..n).rev() {
+            let own = if errors[k].is_finite() {
+                errors[k].max(0.0)
+            } else {
+                f32::MAX / 4.0
+            };
+            e[k] = if k == n - 1 {
+                own.max(1e-6)
+            } else {
+                own.max(below * 1.001)
+            };
+            below = e[k];
+        }
+        let (mut a, mut b) = ([0.0f32; MAX_LEVELS - 1], [0.0f32; MAX_LEVELS - 1]);
+        for k in 0..n - 1 {
+            b[k] = 1.0 / (e[k] - e[k + 1]);
+            a[k] = e[k] * b[k];
+        }
+        LevelTable { errors: e, a, b }
+    }
+
+    /// The table of a tile set: per level, the largest measured error over its tiles plus half
+    /// that level's morph unit ([`Terrain::level_errors`]).
+    pub fn for_terrain(terrain: &Terrain) -> LevelTable {
+        LevelTable::new(&terrain.level_errors)
+    }
+
+    /// `Λ(r)`, in f32 as the vertex shader evaluates it.
+    pub fn level(&self, r: f32) -> f32 {
+        self.a
+            .iter()
+            .zip(&self.b)
+            .map(|(&a, &b)| (a - r * b).clamp(0.0, 1.0))
+            .sum()
+    }
+
+    /// `Λ(r)` in f64, for the CPU's own decisions (not the shader's mirror).
+    pub fn level_f64(&self, r: f64) -> f64 {
+        self.a
+            .iter()
+            .zip(&self.b)
+            .map(|(&a, &b)| (f64::from(a) - r * f64::from(b)).clamp(0.0, 1.0))
+            .sum()
+    }
+}
+
+/// The frame's constants of the vertex rule for `view` at tolerance `tau` (`MorphFrame` of the
+/// shader interface). With `clip = view_proj * p` for `p` relative to the camera, `d = clip.w`
+/// is the depth and `clip.xy = (f / aspect · x, -f · y)` in view coordinates, so the lod.rs
+/// formula `j_x = f_x (w_x d + x w_z) / d²`, `j_y = f_y (w_y d + y w_z) / d²` reads
+/// `|J z| = |A d + B ⊙ clip.xy| / d²` with `A = (f_x w_x, f_y w_y)` and
+/// `B = (width / 2 · w_z, -height / 2 · w_z)`.
+pub fn frame_constants(view: &View, tau: f64, table: &LevelTable) -> MorphFrame {
+    let w = (view.right.z, view.up.z);
+    let wz = view.back.z;
+    let (fx, fy) = view.focal;
+    MorphFrame {
+        jacobian: [
+            (fx * w.0) as f32,
+            (fy * w.1) as f32,
+            (f64::from(view.width) * 0.5 * wz) as f32,
+            (-f64::from(view.height) * 0.5 * wz) as f32,
+        ],
+        tau: tau as f32,
+        near: NEAR as f32,
+        pad: [0.0; 2],
+        a_lo: std::array::from_fn(|k| table.a[k]),
+        a_hi: std::array::from_fn(|k| table.a[k + 4]),
+        b_lo: std::array::from_fn(|k| table.b[k]),
+        b_hi: std::array::from_fn(|k| table.b[k + 4]),
+    }
+}
+
+/// `l(v)` for a vertex whose unmorphed position is at `clip` (`view_proj` times the position
+/// relative to the camera), as the vertex shader computes it: the finest level behind the
+/// near plane.
+pub fn vertex_level(m: &MorphFrame, clip: Vec4) -> f32 {
+    let r = if clip.w < m.near {
+        0.0
+    } else {
+        let d = clip.w;
+        let g = (
+            m.jacobian[0] * d + m.jacobian[2] * clip.x,
+            m.jacobian[1] * d + m.jacobian[3] * clip.y,
+        );
+        m.tau * d * d / (g.0 * g.0 + g.1 * g.1).max(1e-30).sqrt()
+    };
+    let term = |a: f32, b: f32| (a - r * b).clamp(0.0, 1.0);
+    (0..4)
+        .map(|k| term(m.a_lo[k], m.b_lo[k]) + term(m.a_hi[k], m.b_hi[k]))
+        .sum()
+}
+
+/// The blend weights `h'_k` for the continuous level `l` (the paper's clamped forward
+/// differences): non-negative, summing to 1, one-hot at integer `l`, piecewise linear.
 pub fn weights(l: f32) -> [f32; MAX_LEVELS] {
     let h: [f32; MAX_LEVELS] = std::array::from_fn(|k| (l - k as f32).clamp(0.0, 1.0));
     std::array::from_fn(|k| if k == 0 { 1.0 - h[0] } else { h[k - 1] - h[k] })
 }
 
 /// The morphed height of a vertex of block `offsets.len()` (one stored offset per coarser
-/// level) with its own `height`, the tile's morph `units` per level, at continuous level `l`.
-pub fn morphed_height(height: f32, offsets: &[i8], units: &[f32], l: f32) -> f32 {
-    let w = weights(l);
-    let shift: f32 = offsets
-        .iter()
-        .zip(units)
-        .zip(w)
-        .map(|((&o, &u), w)| w * (f32::from(o) * u))
-        .sum();
-    height + shift
+/// level) with its own height `own`, the tile's morph `units` per level, at level `l`, as the
+/// vertex shader computes it: only the two levels around `l` are read (`k = floor(l)` and
+/// `k + 1`, clamped below the vertex's block), and from its own block on the vertex is at its
+/// own height, bit for bit.
+pub fn morphed_height(own: f32, offsets: &[i8], units: &[f32], l: f32) -> f32 {
+    let j = offsets.len();
+    if j == 0 {
+        return own;
+    }
+    let k = ((l.max(0.0)) as usize).min(j - 1);
+    let t = (l - k as f32).clamp(0.0, 1.0);
+    let unit = |k: usize| units.get(k).copied().unwrap_or(0.0);
+    let lower = f32::from(offsets[k]) * unit(k);
+    let upper = if k + 1 < j {
+        f32::from(offsets[k + 1]) * unit(k + 1)
+    } else {
+        0.0
+    };
+    own + (lower * (1.0 - t) + upper * t)
 }
 
-/// The bilinear `l(v)` at tile-local sample `(x, y)` (0..=256) from the corner values
-/// `[north-west, north-east, south-west, south-east]`. On an edge it depends only on that
-/// edge's two corners, evaluated the same way from either side.
-pub fn vertex_level(corners: [f32; 4], x: u32, y: u32) -> f32 {
-    let cells = tiles::mesh::TILE_CELLS as f32;
-    let (fx, fy) = (x as f32 / cells, y as f32 / cells);
-    // Exact at both ends (t = 0 gives a, t = 1 gives b, bit for bit), so a corner reads the
-    // same whichever edge of whichever tile reaches it.
-    let lerp = |a: f32, b: f32, t: f32| a * (1.0 - t) + b * t;
-    match (y, x) {
-        // The edges use their two corners alone (the same expression from both tiles).
-        (0, _) => lerp(corners[0], corners[1], fx),
-        (256, _) => lerp(corners[2], corners[3], fx),
-        (_, 0) => lerp(corners[0], corners[2], fy),
-        (_, 256) => lerp(corners[1], corners[3], fy),
-        _ => lerp(
-            lerp(corners[0], corners[1], fx),
-            lerp(corners[2], corners[3], fx),
-            fy,
-        ),
+/// How fast [`morphed_height`] changes with the level near `l` (metres per level, the larger
+/// of the two pieces around `l`): what a small difference in the level costs in height, for the
+/// read-back check's tolerance.
+pub fn height_slope(offsets: &[i8], units: &[f32], l: f32) -> f32 {
+    let d = |m: usize| {
+        if m < offsets.len() {
+            f32::from(offsets[m]) * units.get(m).copied().unwrap_or(0.0)
+        } else {
+            0.0
+        }
+    };
+    let k = l.max(0.0) as usize;
+    let right = (d(k) - d(k + 1)).abs();
+    let left = if k > 0 { (d(k - 1) - d(k)).abs() } else { 0.0 };
+    right.max(left)
+}
+
+/// What a morphing draw of one tile depends on, as its record and the frame's constants give
+/// it to the vertex shader.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TileMorph {
+    pub view_proj: Mat4,
+    /// The camera relative to its tile's north-west corner (m), and metres per column.
+    pub camera: Vec4,
+    pub spacing_y: f32,
+    pub height_step: f32,
+    pub frame: MorphFrame,
+    /// The tile's first sample relative to the camera's tile (columns, rows).
+    pub tile_offset: [i32; 2],
+    /// The level the draw's vertices morph to at most.
+    pub cap: f32,
+}
+
+impl TileMorph {
+    /// How the renderer morphs tile `tile` seen from `camera` at `extent` pixels for `tau`,
+    /// with no cap below its finest level: the frame's constants and the tile's record as
+    /// `crate::frame` writes them.
+    pub fn from_camera(
+        terrain: &Terrain,
+        camera: &crate::camera::Camera,
+        extent: (u32, u32),
+        tau: f64,
+        table: &LevelTable,
+        tile: usize,
+    ) -> TileMorph {
+        let view = camera.view(extent.0, extent.1);
+        let (cam_tile, rel) = terrain.camera_tile(camera.position);
+        TileMorph {
+            view_proj: view.view_proj,
+            camera: Vec4::new(
+                rel.x as f32,
+                rel.y as f32,
+                rel.z as f32,
+                terrain.spacing.0 as f32,
+            ),
+            spacing_y: terrain.spacing.1 as f32,
+            height_step: terrain.height_step,
+            frame: frame_constants(&view, tau, table),
+            tile_offset: Terrain::tile_offset(cam_tile, &terrain.tiles[tile]),
+            cap: terrain.levels.saturating_sub(1) as f32,
+        }
+    }
+
+    /// The vertex's unmorphed position relative to the camera and its level, from its
+    /// tile-local sample and its own height, as the vertex shader computes them.
+    pub fn vertex(&self, x: u32, y: u32, own: f32) -> (Vec3, f32) {
+        let (sx, sy) = (
+            self.tile_offset[0].wrapping_add(x as i32),
+            self.tile_offset[1].wrapping_add(y as i32),
+        );
+        let relative = Vec3::new(
+            sx as f32 * self.camera.w,
+            -(sy as f32) * self.spacing_y,
+            own,
+        ) - self.camera.truncate();
+        let clip = self.view_proj * relative.extend(1.0);
+        (relative, vertex_level(&self.frame, clip).min(self.cap))
     }
 }
 
 /// The vertices of a tile's blocks `0..=level`, decoded: `(x, y, height)` in index order,
-/// each height geomorphed at the vertex's continuous level when `corners` are given (the
-/// tile's corner levels), as the vertex shader places it.
+/// each height geomorphed as the vertex shader places it when `morph` is given.
 pub fn tile_vertices(
     tile: &tiles::format::Tile,
     level: u32,
-    corners: Option<[f32; 4]>,
+    morph: Option<&TileMorph>,
 ) -> Vec<(u32, u32, f32)> {
-    let mut vertices = tile.vertices();
+    tile_heights(tile, level, morph, 0)
+        .into_iter()
+        .map(|(x, y, h, _)| (x, y, h))
+        .collect()
+}
+
+/// [`tile_vertices`] with each vertex's [`height_slope`] (0 unmorphed), and `bias` added to
+/// every stored morph offset: the read-back check's negative control (a mirror one morph unit
+/// off must be told apart from the GPU; 0 otherwise).
+pub fn tile_heights(
+    tile: &tiles::format::Tile,
+    level: u32,
+    morph: Option<&TileMorph>,
+    bias: i8,
+) -> Vec<(u32, u32, f32, f32)> {
+    let mut vertices: Vec<(u32, u32, f32, f32)> = tile
+        .vertices()
+        .into_iter()
+        .map(|(x, y, h)| (x, y, h, 0.0))
+        .collect();
     let blocks = (0..=level).map_while(|j| tile.level(j));
     let end = blocks.clone().map(|b| b.positions.len()).sum::<usize>();
     vertices.truncate(end);
-    let Some(corners) = corners else {
+    let Some(morph) = morph else {
         return vertices;
     };
     let units: Vec<f32> = tile.levels().iter().map(|l| l.morph_unit).collect();
+    let base = tile.header.height_base;
     let mut offsets = Vec::with_capacity(MAX_LEVELS);
     let mut start = 0usize;
     for (j, block) in blocks.enumerate() {
         let n = block.positions.len();
         for (i, v) in vertices[start..start + n].iter_mut().enumerate() {
+            let (_, _, code) = tiles::pack::unpack(block.positions[i]);
+            let own = (base + code as i32) as f32 * morph.height_step;
+            let (_, l) = morph.vertex(v.0, v.1, own);
             offsets.clear();
-            offsets.extend((0..j).map(|k| block.morph[k * n + i]));
-            v.2 = morphed_height(v.2, &offsets, &units, vertex_level(corners, v.0, v.1));
+            offsets.extend((0..j).map(|k| block.morph[k * n + i].saturating_add(bias)));
+            v.2 = morphed_height(own, &offsets, &units, l);
+            v.3 = height_slope(&offsets, &units, l);
         }
         start += n;
     }
     vertices
 }
 
-/// The continuous level at which a tile's error, interpolated linearly between its levels'
-/// measured errors `errors` (coarsest first), equals `r` metres: 0 when even level 0 is within
-/// `r`, the finest level when none is. Non-increasing in `r`.
-pub fn continuous_level(errors: &[f32], r: f64) -> f64 {
-    let Some(first) = errors.first() else {
-        return 0.0;
-    };
-    if f64::from(*first) <= r {
-        return 0.0;
-    }
-    for (k, pair) in errors.windows(2).enumerate() {
-        let (a, b) = (f64::from(pair[0]), f64::from(pair[1]));
-        if b <= r {
-            // a > r >= b: the crossing inside [k, k + 1] (a == b cannot happen here).
-            return k as f64 + (a - r) / (a - b);
-        }
-    }
-    (errors.len() - 1) as f64
-}
-
-/// Corner values of a grid of tiles: each grid corner `(i, j)` (0..=tiles_x, 0..=tiles_y) takes
-/// the largest level of the tiles touching it, so every tile's corners are at least its own
-/// level and two tiles sharing a corner read the same value. `level(tx, ty)` is a tile's
-/// continuous level (None for tiles not considered). Returns the corner grid, row-major.
-pub fn corner_levels(
-    tiles_x: u32,
-    tiles_y: u32,
-    level: impl Fn(u32, u32) -> Option<f32>,
-) -> Vec<f32> {
-    let (w, h) = (tiles_x as usize + 1, tiles_y as usize + 1);
-    let mut corners = vec![0.0f32; w * h];
-    for ty in 0..tiles_y {
-        for tx in 0..tiles_x {
-            let Some(l) = level(tx, ty) else { continue };
-            for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-                let c = &mut corners[(ty + dy) as usize * w + (tx + dx) as usize];
-                *c = c.max(l);
-            }
-        }
-    }
-    corners
-}
-
-/// A tile's four corner values `[NW, NE, SW, SE]` from [`corner_levels`]' grid.
-pub fn tile_corners(corners: &[f32], tiles_x: u32, tx: u32, ty: u32) -> [f32; 4] {
-    let w = tiles_x as usize + 1;
-    let at = |i: u32, j: u32| corners[j as usize * w + i as usize];
-    [
-        at(tx, ty),
-        at(tx + 1, ty),
-        at(tx, ty + 1),
-        at(tx + 1, ty + 1),
-    ]
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::camera::Camera;
+    use crate::test_rng::Rng;
+    use glam::DVec3;
 
     #[test]
     fn weights_are_a_partition_of_unity_one_hot_at_integers() {
@@ -169,96 +394,115 @@ mod tests {
                 assert_eq!(x, if k == d { 1.0 } else { 0.0 }, "l = {d}: {w:?}");
             }
         }
-        // Continuous: a small step in l moves every weight by at most that step.
-        for i in 0..800 {
-            let (a, b) = (weights(i as f32 / 100.0), weights((i + 1) as f32 / 100.0));
-            assert!(a.iter().zip(&b).all(|(x, y)| (x - y).abs() <= 0.0101));
-        }
     }
 
+    /// The two-level blend is the forward differences' dot product (the paper's formula), to
+    /// rounding, at every level; from the vertex's own block on it is its own height, bit for
+    /// bit; at integer levels below, the stored coarser height.
     #[test]
-    fn a_vertex_sits_at_its_own_height_from_its_level_on_and_at_a_coarser_level_below() {
+    fn two_levels_equal_the_forward_differences() {
         let offsets = [37i8, -100, 5, 127];
         let units = [0.8f32, 0.4, 0.2, 0.1];
         let h = 1234.5f32;
-        for l in [4.0f32, 4.3, 5.0, 8.0] {
-            assert_eq!(
-                morphed_height(h, &offsets, &units, l).to_bits(),
-                h.to_bits(),
-                "{l}"
+        for i in 0..=800 {
+            let l = i as f32 / 100.0;
+            let w = weights(l);
+            let fd: f32 = (0..4)
+                .map(|k| w[k] * f32::from(offsets[k]) * units[k])
+                .sum();
+            let two = morphed_height(h, &offsets, &units, l);
+            assert!(
+                (two - (h + fd)).abs() <= 1e-3,
+                "l = {l}: {two} vs {}",
+                h + fd
             );
+        }
+        for l in [4.0f32, 4.3, 5.0, 8.0] {
+            let got = morphed_height(h, &offsets, &units, l);
+            assert_eq!(got.to_bits(), h.to_bits(), "{l}");
         }
         for k in 0..4 {
             let want = h + f32::from(offsets[k]) * units[k];
             let got = morphed_height(h, &offsets, &units, k as f32);
             assert!((got - want).abs() <= 1e-3, "level {k}: {got} vs {want}");
         }
-        // Half way between levels 1 and 2: the mean of the two heights.
-        let mid = morphed_height(h, &offsets, &units, 1.5);
-        let (h1, h2) = (h + -100.0 * 0.4, h + 5.0 * 0.2);
-        assert!((mid - 0.5 * (h1 + h2)).abs() <= 1e-3, "{mid}");
     }
 
-    /// Two tiles sharing an edge list its corners in different slots (east edge of one, west
-    /// edge of the other); a vertex on it gets bit-identical l(v) from both, hence the same
-    /// weights and, for equal stored heights, the same morphed height.
+    /// `Λ` inverts the linear blend of the errors: `E(Λ(r)) = r` inside the table's range, 0
+    /// above it, the finest level below it; continuous and non-increasing in `r`.
     #[test]
-    fn shared_edge_vertices_get_bit_identical_levels_from_both_tiles() {
-        let mut seed = 0x1234_5678_9abc_def0u64;
-        let mut next = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 40) as f32 / (1u64 << 24) as f32 * 8.0
+    fn the_level_inverts_the_linear_blend_of_the_errors() {
+        let table = LevelTable::new(&[16.0, 8.0, 4.0, 2.0, 1.0]);
+        let e = |l: f64| {
+            let k = (l.floor() as usize).min(3);
+            let t = l - k as f64;
+            (1.0 - t) * f64::from(table.errors[k]) + t * f64::from(table.errors[k + 1])
         };
-        for _ in 0..500 {
-            let grid: Vec<f32> = (0..9).map(|_| next()).collect(); // 2 x 2 tiles, 3 x 3 corners
-            let west = tile_corners(&grid, 2, 0, 0);
-            let east = tile_corners(&grid, 2, 1, 0);
-            let south = tile_corners(&grid, 2, 0, 1);
-            for t in 0..=256u32 {
-                let a = vertex_level(west, 256, t);
-                let b = vertex_level(east, 0, t);
-                assert_eq!(a.to_bits(), b.to_bits(), "east-west edge at {t}");
-                let c = vertex_level(west, t, 256);
-                let d = vertex_level(south, t, 0);
-                assert_eq!(c.to_bits(), d.to_bits(), "north-south edge at {t}");
+        assert_eq!(table.level(20.0), 0.0);
+        assert_eq!(table.level(0.5), 4.0);
+        let mut last = f32::INFINITY;
+        for i in 1..400 {
+            let r = f64::from(i) * 0.04 + 1.0;
+            if r >= 16.0 {
+                break;
             }
+            let l = table.level_f64(r);
+            assert!((e(l) - r).abs() < 1e-6 * r, "r = {r}: E(Λ) = {}", e(l));
+            let l32 = table.level(r as f32);
+            assert!(l32 <= last + 1e-6, "not monotone at {r}");
+            assert!((f64::from(l32) - l).abs() < 1e-4, "f32 {l32} vs f64 {l}");
+            last = l32;
         }
-    }
-
-    #[test]
-    fn corner_values_cover_every_tile_and_are_shared() {
-        let levels = [[1.5f32, 3.0, 0.0], [2.2, 0.5, 7.9]];
-        let grid = corner_levels(3, 2, |tx, ty| Some(levels[ty as usize][tx as usize]));
-        for (ty, row) in levels.iter().enumerate() {
-            for (tx, &l) in row.iter().enumerate() {
-                let c = tile_corners(&grid, 3, tx as u32, ty as u32);
-                assert!(c.iter().all(|&v| v >= l), "tile {tx},{ty}: {c:?} below {l}");
-                // Bilinear interpolation of values >= l stays >= l inside the tile.
-                for (x, y) in [(0, 0), (128, 77), (256, 256), (3, 250)] {
-                    assert!(vertex_level(c, x, y) >= l - 1e-6);
-                }
-            }
-        }
-        assert_eq!(
-            grid[1], 3.0,
-            "the corner between tiles 0,0 and 1,0 takes the larger"
+        // Equal errors are made strictly decreasing (no jump in Λ), and never below a finer
+        // level's.
+        let flat = LevelTable::new(&[4.0, 4.0, 1.0, 2.0]);
+        assert!(
+            flat.errors.windows(2).take(3).all(|p| p[0] > p[1]),
+            "{flat:?}"
         );
+        assert!(flat.errors[2] >= 2.0, "{flat:?}");
     }
 
+    /// The frame's constants give `|J z|` from the clip position, as the lod.rs formula gives it
+    /// from the view (random cameras and points in front of them).
     #[test]
-    fn continuous_level_interpolates_the_measured_errors() {
-        let errors = [16.0f32, 8.0, 4.0, 2.0, 1.0];
-        assert_eq!(continuous_level(&errors, 20.0), 0.0);
-        assert_eq!(continuous_level(&errors, 8.0), 1.0);
-        assert!((continuous_level(&errors, 6.0) - 1.5).abs() < 1e-12);
-        assert_eq!(continuous_level(&errors, 0.5), 4.0);
-        let mut last = f64::INFINITY;
-        for i in 0..400 {
-            let l = continuous_level(&errors, f64::from(i) * 0.05);
-            assert!(l <= last, "not monotone at r = {}", f64::from(i) * 0.05);
-            last = l;
+    fn the_clip_space_jacobian_is_the_views() {
+        let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+        let table = LevelTable::new(&[16.0, 8.0, 4.0, 2.0, 1.0]);
+        for _ in 0..500 {
+            let camera = Camera {
+                position: DVec3::ZERO,
+                yaw: rng.range(-3.0, 3.0),
+                pitch: rng.range(-1.4, 0.6),
+                fov_y: rng.range(0.3, 1.6),
+            };
+            let view = camera.view(640, 480);
+            let p = camera.forward() * rng.range(2.0, 3000.0)
+                + DVec3::new(
+                    rng.range(-300.0, 300.0),
+                    rng.range(-300.0, 300.0),
+                    rng.range(-300.0, 300.0),
+                );
+            if -view.to_view(p).z < 1.0 {
+                continue;
+            }
+            let m = frame_constants(&view, 1.0, &table);
+            let clip = view.view_proj * p.as_vec3().extend(1.0);
+            let d = clip.w;
+            let g = (
+                m.jacobian[0] * d + m.jacobian[2] * clip.x,
+                m.jacobian[1] * d + m.jacobian[3] * clip.y,
+            );
+            let s = f64::from((g.0 * g.0 + g.1 * g.1).sqrt() / (d * d));
+            let want = view.pixels_per_vertical_metre(p);
+            assert!(
+                (s - want).abs() <= 1e-3 * want + 1e-9,
+                "{s} vs {want} at {p:?}"
+            );
+            // And the vertex's level is Λ of tau over it.
+            let l = vertex_level(&m, clip);
+            let expected = table.level_f64(1.0 / want);
+            assert!((f64::from(l) - expected).abs() < 2e-3, "{l} vs {expected}");
         }
     }
 }

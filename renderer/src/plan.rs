@@ -12,7 +12,7 @@ use memory::textures::{TextureRequest, TextureSlots, TextureStats, TextureUpload
 use memory::{Manager, Request, Stats};
 
 use crate::camera::{Camera, View};
-use crate::morph;
+use crate::morph::LevelTable;
 use crate::stitch::{stitch_side, Side, Stitch};
 use crate::terrain::Terrain;
 use crate::{cull, lod};
@@ -26,10 +26,9 @@ pub enum LevelRule {
     Forced(u32),
     /// Every visible tile at its finest level (the baseline).
     Finest,
-    /// Geomorphing (paper, section 5): a continuous level per tile, the smallest whose
-    /// interpolated error projects to at most `tau` pixels under a bound that is continuous in
-    /// the camera ([`lod::continuous_level`]); corner levels shared by neighbours; each tile
-    /// drawn at the ceiling of its largest corner.
+    /// Geomorphing (paper, section 5): each vertex blends the levels at a continuous level of
+    /// its own, from its position and the camera ([`crate::morph`]); each tile is drawn at the
+    /// coarsest level that covers its on-screen vertices' levels ([`lod::morph_level`]).
     Morph(f64, lod::Bound),
 }
 
@@ -39,9 +38,6 @@ pub struct Draw {
     pub tile: usize,
     pub wanted: u32,
     pub level: u32,
-    /// Continuous levels at the NW, NE, SW, SE corners (all `level` without geomorphing),
-    /// never above `level`, each shared with every drawn tile at that corner.
-    pub corners: [f32; 4],
     /// Pool byte offsets of block 0's positions, of block 0's morph rows and of the level's
     /// index array.
     pub vertex_offset: u64,
@@ -116,7 +112,7 @@ pub fn plan(
 
     let t = Instant::now();
     let morphing = matches!(rule, LevelRule::Morph(..));
-    let (requests, corner_grid) = wanted_levels(terrain, &view, camera.position, &visible, rule);
+    let requests = wanted_levels(terrain, &view, camera.position, &visible, rule);
     let cpu_lod_ms = ms(t);
 
     let t = Instant::now();
@@ -133,7 +129,6 @@ pub fn plan(
                 tile: g.tile as usize,
                 wanted: g.wanted,
                 level,
-                corners: [level as f32; 4],
                 vertex_offset: g.vertex_offset,
                 morph_offset: g.morph_offset,
                 index_offset: g.index_offset,
@@ -142,10 +137,6 @@ pub fn plan(
             })
         })
         .collect();
-    let mut draws = draws;
-    if morphing {
-        granted_corners(terrain, &corner_grid, &mut draws);
-    }
     let cpu_residency_ms = ms(t);
 
     let t = Instant::now();
@@ -187,108 +178,36 @@ pub fn visible_tiles(terrain: &Terrain, view: &View, camera: DVec3) -> Vec<usize
 }
 
 /// The level each of `visible` (front to back) wants from `camera`, as requests in the same
-/// order, and for geomorphing the grid of corner levels they came from (empty otherwise).
-/// Used for the frame and for predicted cameras alike, so a prediction wants what the frame
-/// will.
+/// order. Used for the frame and for predicted cameras alike, so a prediction wants what the
+/// frame will.
 pub fn wanted_levels(
     terrain: &Terrain,
     view: &View,
     camera: DVec3,
     visible: &[usize],
     rule: LevelRule,
-) -> (Vec<Request>, Vec<f32>) {
-    let LevelRule::Morph(tau, bound) = rule else {
-        let requests = visible
-            .iter()
-            .map(|&i| Request {
-                tile: i as u32,
-                wanted: wanted_level(terrain, i, view, camera, rule),
-            })
-            .collect();
-        return (requests, Vec::new());
-    };
-    // The visible tiles and their neighbours: a tile leaving the view keeps shaping its
-    // visible neighbours' corners until it is no longer next to any, so no corner jumps.
-    let mut near: Vec<usize> = visible
-        .iter()
-        .flat_map(|&i| {
-            let t = &terrain.tiles[i];
-            (0..9).filter_map(move |n| {
-                let (x, y) = (
-                    (t.tx + n % 3).checked_sub(1)?,
-                    (t.ty + n / 3).checked_sub(1)?,
-                );
-                terrain.tile_index(x, y)
-            })
-        })
-        .collect();
-    near.sort_unstable();
-    near.dedup();
-    let levels: HashMap<usize, f32> = near
-        .iter()
-        .map(|&i| {
-            let l = lod::continuous_level(view, camera, &terrain.tiles[i], tau, bound);
-            (i, l as f32)
-        })
-        .collect();
-    let corner_grid = morph::corner_levels(terrain.tiles_x, terrain.tiles_y, |tx, ty| {
-        terrain
-            .tile_index(tx, ty)
-            .and_then(|i| levels.get(&i).copied())
-    });
+) -> Vec<Request> {
+    let table = matches!(rule, LevelRule::Morph(..)).then(|| LevelTable::for_terrain(terrain));
     let finest = terrain.levels - 1;
-    let requests = visible
+    visible
         .iter()
         .map(|&i| {
-            let t = &terrain.tiles[i];
-            let c = morph::tile_corners(&corner_grid, terrain.tiles_x, t.tx, t.ty);
-            let top = c.iter().fold(0.0f32, |a, &b| a.max(b));
+            let tile = &terrain.tiles[i];
+            let wanted = match (rule, &table) {
+                (LevelRule::Finest, _) => finest,
+                (LevelRule::Forced(l), _) => l.min(finest),
+                (LevelRule::Tau(tau, bound), _) => lod::level(view, camera, tile, tau, bound),
+                (LevelRule::Morph(tau, bound), Some(table)) => {
+                    lod::morph_level(view, camera, tile, tau, bound, table)
+                }
+                (LevelRule::Morph(..), None) => finest,
+            };
             Request {
                 tile: i as u32,
-                wanted: (top.ceil() as u32).min(finest),
+                wanted: wanted.min(finest),
             }
         })
-        .collect();
-    (requests, corner_grid)
-}
-
-fn wanted_level(terrain: &Terrain, i: usize, view: &View, camera: DVec3, rule: LevelRule) -> u32 {
-    let finest = terrain.levels - 1;
-    let tile = &terrain.tiles[i];
-    match rule {
-        LevelRule::Finest => finest,
-        LevelRule::Forced(l) => l.min(finest),
-        LevelRule::Tau(tau, bound) | LevelRule::Morph(tau, bound) => {
-            lod::level(view, camera, tile, tau, bound).min(finest)
-        }
-    }
-}
-
-/// Each draw's corner levels: the shared corner values of `wanted` (the largest continuous
-/// level of the visible tiles at each corner), lowered where a tile at that corner is drawn
-/// coarser than that (its data is not resident yet), so no tile morphs past its level and the
-/// corners stay shared.
-fn granted_corners(terrain: &Terrain, wanted: &[f32], draws: &mut [Draw]) {
-    let mut cap = vec![f32::INFINITY; wanted.len()];
-    let w = terrain.tiles_x as usize + 1;
-    let corners_of = |tile: usize| {
-        let t = &terrain.tiles[tile];
-        let (x, y) = (t.tx as usize, t.ty as usize);
-        [
-            y * w + x,
-            y * w + x + 1,
-            (y + 1) * w + x,
-            (y + 1) * w + x + 1,
-        ]
-    };
-    for d in draws.iter() {
-        for c in corners_of(d.tile) {
-            cap[c] = cap[c].min(d.level as f32);
-        }
-    }
-    for d in draws.iter_mut() {
-        d.corners = corners_of(d.tile).map(|c| wanted[c].min(cap[c]));
-    }
+        .collect()
 }
 
 /// Stitches between drawn neighbours at their granted levels, each pair once (from the tile

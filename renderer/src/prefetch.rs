@@ -107,8 +107,7 @@ impl Prefetcher {
             out.horizons += 1;
             let view = predicted.view(extent.0, extent.1);
             let visible = plan::visible_tiles(terrain, &view, predicted.position);
-            let (wanted, _) =
-                plan::wanted_levels(terrain, &view, predicted.position, &visible, rule);
+            let wanted = plan::wanted_levels(terrain, &view, predicted.position, &visible, rule);
             for r in wanted {
                 let i = r.tile as usize;
                 if listed[i].is_some_and(|l| l >= r.wanted) {

@@ -14,7 +14,7 @@
 //! it with that tile's record, see [`pulled`]). A border vertex's morphed height comes from its
 //! tile's coarser levels along that border. In tile sets built with shared sides
 //! ([`tiles::format::FLAG_SHARED_SIDES`]) those are the same in both tiles, and so is the
-//! vertex's continuous level (it depends on the edge's two shared corners alone), so both
+//! vertex's continuous level (it depends on the vertex's position and the camera alone), so both
 //! copies of a shared vertex land on the same position, bit for bit, and stitching is as
 //! without morphing. In sets built with independent sides the two copies may sit at two
 //! heights; stitching with `slivers` then keeps the triangles at shared vertices: vertical

@@ -42,6 +42,10 @@ pub struct Terrain {
     /// geomorphing gives a shared side vertex the same height from both tiles, so stitches
     /// need no slivers between two copies of it.
     pub shared_sides: bool,
+    /// Per level, coarsest first, the largest measured error over all tiles plus half the
+    /// level's morph unit: what a geomorphing vertex's level is taken from (one table for the
+    /// whole set, so a vertex shared by two tiles gets one level; see `crate::morph`).
+    pub level_errors: Vec<f32>,
     /// The texture tiles' layout (None: the set has none) and what they show
     /// (`tiles::texture::SOURCE_*`).
     pub texture: Option<tiles::texture::Layout>,
@@ -136,6 +140,7 @@ impl Terrain {
             spacing: (sx, sy),
             height_step: h.height_step,
             shared_sides: false,
+            level_errors: Vec::new(),
             texture,
             texture_source: h.texture_source,
         };
@@ -143,6 +148,16 @@ impl Terrain {
         // one without: the seams stay closed by slivers.
         terrain.shared_sides =
             h.flags & tiles::format::FLAG_SHARED_SIDES != 0 && terrain.sides_agree();
+        terrain.level_errors = (0..h.levels as usize)
+            .map(|k| {
+                terrain
+                    .tiles
+                    .iter()
+                    .filter_map(|t| t.levels.get(k))
+                    .map(|l| l.max_error.max(0.0) + 0.5 * l.morph_unit.max(0.0))
+                    .fold(0.0f32, f32::max)
+            })
+            .collect();
         Ok(terrain)
     }
 
@@ -222,6 +237,28 @@ impl Terrain {
         let info = self.tiles.get(tile)?;
         let range = info.texture_mips.get(mip as usize)?.clone();
         self.set.texture_blob(info.tx, info.ty)?.get(range)
+    }
+
+    /// Where the camera at `p` is for the shader: its tile (column, row of tiles) and its
+    /// position relative to that tile's north-west corner. Positions are expressed relative to
+    /// that tile, from integers, so a grid point shared by two tiles lands on the same f32 in
+    /// both.
+    pub fn camera_tile(&self, p: DVec3) -> ((f64, f64), DVec3) {
+        let (sx, sy) = self.spacing;
+        let cells = f64::from(TILE_CELLS);
+        let tile = ((p.x / (cells * sx)).floor(), (-p.y / (cells * sy)).floor());
+        let relative = DVec3::new(p.x - tile.0 * cells * sx, p.y + tile.1 * cells * sy, p.z);
+        (tile, relative)
+    }
+
+    /// A tile's first sample relative to the camera's tile `camera_tile` (columns, rows): its
+    /// record's `tile_offset`.
+    pub fn tile_offset(camera_tile: (f64, f64), tile: &TileInfo) -> [i32; 2] {
+        let cells = f64::from(TILE_CELLS);
+        [
+            ((f64::from(tile.tx) - camera_tile.0) * cells) as i32,
+            ((f64::from(tile.ty) - camera_tile.1) * cells) as i32,
+        ]
     }
 
     pub fn tile_index(&self, tx: u32, ty: u32) -> Option<usize> {

@@ -23,26 +23,47 @@ layout(push_constant) uniform FrameConstants {
 } frame;
 
 #ifdef TERRAIN_VERTEX
+// The frame's constants of the vertex level rule (renderer/src/morph.rs): a vertex whose
+// unmorphed position relative to the camera is at clip position c has |J z| =
+// |jacobian.xy * c.w + jacobian.zw * c.xy| / c.w^2 pixels per vertical metre, and level
+// l = sum_k clamp(a_k - r * b_k, 0, 1) for r = tau / |J z| (the finest behind `near`).
+struct MorphFrame {
+    vec4 jacobian;
+    float tau;               // pixels
+    float near;              // the near plane's depth (m)
+    vec2 pad;
+    vec4 a_lo;               // a_k, levels 0..3
+    vec4 a_hi;               // levels 4..7
+    vec4 b_lo;               // b_k, levels 0..3
+    vec4 b_hi;               // levels 4..7
+};
+
 // One drawn tile (std430).
 struct TileRecord {
     ivec2 tile_offset;       // the tile's first sample relative to the camera tile's (columns, rows)
     int height_base;         // the tile's lowest code on the shared lattice
     uint positions;          // pool word of block 0's first packed vertex
-    vec4 corners;            // continuous level at the NW, NE, SW, SE corners
     uvec4 starts_lo;         // first vertex of blocks 1..4 (0xffffffff past the last block)
     uvec4 starts_hi;         // first vertex of blocks 5..8
-    vec4 units_lo;           // metres per morph offset unit, levels 0..3
-    vec4 units_hi;           // levels 4..7
+    uvec4 blocks[9];         // per block: first vertex, vertices, pool byte of its morph rows, 0
+    float units[8];          // metres per morph offset unit of levels 0..7
     uint level;              // the level drawn
-    uint morph;              // pool byte of block 0's morph rows
+    float cap;               // the level the vertices morph to at most
+    uint heights;            // read-back: where the tile's first vertex's height goes
     uint texture_layer;      // the tile's texture slot (0xffffffff: none)
     float texture_finest;    // its finest resident mip
-    uint block_start[9];     // first vertex of each block
-    uint block_len[9];       // vertices of each block
-    uint morph_start[9];     // byte of each block's morph rows, from `morph`
     float texture_shift;     // samples the texture is moved by (0; a test's fault injection)
+    uint pad0;
+    uint pad1;
 };
 
 layout(std430, set = 0, binding = 0) readonly buffer Pool { uint words[]; } pool;
-layout(std430, set = 0, binding = 1) readonly buffer Records { TileRecord tiles[]; } records;
+layout(std430, set = 0, binding = 1) readonly buffer Records {
+    MorphFrame morph;
+    TileRecord tiles[];
+} records;
+#ifdef READ_BACK
+// Each drawn vertex's height (m), at its record's `heights` plus its index in the tile.
+layout(std430, set = 0, binding = 3) writeonly buffer Heights { float values[]; } heights;
+#endif
 #endif

@@ -1,6 +1,6 @@
 #version 450
 // The terrain's vertex shader: pulls its vertex from the tile pool and geomorphs it (paper,
-// section 5, figure 6).
+// section 5, figure 6). The interface with the host is interface.glsl.
 //
 // Vertices are pulled, not fed: gl_VertexIndex is (draw record << 17) | the vertex's index in
 // its tile (blocks 0.. in order). A tile's draw sets vertexOffset = record << 17 and indexes
@@ -13,16 +13,19 @@
 // column/row relative to the camera's tile is the same integer, and its height the same
 // integer code on the tile set's height lattice.
 //
-// Geomorphing: the vertex's continuous level l(v) is the bilinear interpolation of the tile's
-// corner levels (exact on the tile's edges, where it depends on the edge's two corners alone,
-// which neighbouring tiles share). Its height blends the nested levels' heights H_k with the
-// clamped forward differences h = clamp(l - (0, 1, 2, ...), 0, 1), h'_0 = 1 - h_0,
-// h'_k = h_{k-1} - h_k: H(l) = sum h'_k H_k, as dot products without branches. For a vertex of
-// block j, H_k = own height + offset_k * unit_k for k < j (one stored byte per coarser level)
-// and H_k = own height for k >= j. renderer/src/morph.rs is the CPU mirror of this arithmetic.
+// Geomorphing (renderer/src/morph.rs has the rule, its bound, and the CPU mirror of this
+// arithmetic): the vertex's continuous level l depends on its own unmorphed position and the
+// camera only, l = sum_k clamp(a_k - r b_k, 0, 1) with r = tau / |J z| at the vertex, so two
+// tiles holding a grid point give it one level. Its height blends the two nested levels
+// around l, k = floor(l) and k + 1: H = own + (1 - t) o_k u_k + t o_(k+1) u_(k+1), from the
+// stored offsets o (one byte per coarser level) and the morph units u; from the vertex's own
+// block j on, t = 1 against a zero offset and the vertex is at its own height, bit for bit.
+// Two bytes are read, whatever the number of levels.
 //
-// MORPH_BRANCHES (a second build of this file) finds the two levels to blend with branches
-// instead, the reference the paper measured forward differences against.
+// MORPH_ALL_ROWS (a second build) blends with the paper's clamped forward differences
+// h = clamp(l - (0, 1, 2, ...), 0, 1), h'_0 = 1 - h_0, h'_k = h_{k-1} - h_k as dot products
+// over every stored row: the reference. READ_BACK (a third) also writes each vertex's height
+// to the Heights buffer, for the test that compares it with the CPU mirror.
 
 #define TERRAIN_VERTEX
 #include "interface.glsl"
@@ -43,13 +46,16 @@ float pool_byte(uint byte) {
     return float(bitfieldExtract(int(pool.words[byte >> 2]), int((byte & 3u) * 8u), 8));
 }
 
-// Bilinear in the corners; t in {0, 1} gives the end values exactly.
-float vertex_level(vec4 c, uint x, uint y) {
-    float fx = float(x) / 256.0;
-    float fy = float(y) / 256.0;
-    float top = c.x * (1.0 - fx) + c.y * fx;
-    float bottom = c.z * (1.0 - fx) + c.w * fx;
-    return top * (1.0 - fy) + bottom * fy;
+// l(v) for a vertex whose unmorphed position is at `clip`: the finest level behind the near
+// plane (r = 0).
+float vertex_level(vec4 clip) {
+    float d = clip.w;
+    vec2 g = records.morph.jacobian.xy * d + records.morph.jacobian.zw * clip.xy;
+    float r = d < records.morph.near ? 0.0
+        : records.morph.tau * d * d * inversesqrt(max(dot(g, g), 1e-30));
+    vec4 lo = clamp(records.morph.a_lo - r * records.morph.b_lo, 0.0, 1.0);
+    vec4 hi = clamp(records.morph.a_hi - r * records.morph.b_hi, 0.0, 1.0);
+    return dot(lo + hi, vec4(1.0));
 }
 
 void main() {
@@ -62,53 +68,49 @@ void main() {
     uint code = v >> 18;
     ivec2 sample_pos = records.tiles[r].tile_offset + ivec2(int(x), int(y));
     float own = float(records.tiles[r].height_base + int(code)) * frame.height_step;
+    relative = vec3(float(sample_pos.x) * frame.camera.w, -float(sample_pos.y) * frame.spacing_y, own) - frame.camera.xyz;
 
     float l = float(records.tiles[r].level);
+    height = own;
     if ((frame.flags & FLAG_GEOMORPH) != 0u) {
-        l = vertex_level(records.tiles[r].corners, x, y);
-    }
-    // The vertex's block j: how many block starts it has passed.
-    uvec4 passed_lo = uvec4(greaterThanEqual(uvec4(local), records.tiles[r].starts_lo));
-    uvec4 passed_hi = uvec4(greaterThanEqual(uvec4(local), records.tiles[r].starts_hi));
-    uvec4 sum = passed_lo + passed_hi;
-    uint j = sum.x + sum.y + sum.z + sum.w;
-    uint in_block = local - records.tiles[r].block_start[j];
-    uint rows = records.tiles[r].morph + records.tiles[r].morph_start[j] + in_block;
-    uint len = records.tiles[r].block_len[j];
-    // Row k of the block for k < j; rows past the block's last read its last row, masked to 0.
-    uint last = max(j, 1u) - 1u;
-    vec4 o_lo, o_hi;
-    for (uint k = 0u; k < 4u; ++k) {
-        o_lo[k] = pool_byte(rows + min(k, last) * len) * float(k < j);
-        o_hi[k] = pool_byte(rows + min(k + 4u, last) * len) * float(k + 4u < j);
-    }
-    vec4 d_lo = o_lo * records.tiles[r].units_lo;
-    vec4 d_hi = o_hi * records.tiles[r].units_hi;
-
-#ifdef MORPH_BRANCHES
-    // The two levels around l, found by branching.
-    float shift = 0.0;
-    if (l < float(j)) {
-        float lower = floor(l);
-        uint k = uint(lower);
-        float f = l - lower;
-        float dk = k < 4u ? d_lo[k] : d_hi[k - 4u];
-        float dk1 = 0.0;
-        if (k + 1u < j) {
-            dk1 = k + 1u < 4u ? d_lo[k + 1u] : d_hi[k - 3u];
+        vec4 clip = frame.view_proj * vec4(relative, 1.0);
+        l = min(vertex_level(clip), records.tiles[r].cap);
+        // The vertex's block j: how many block starts it has passed.
+        uvec4 passed = uvec4(greaterThanEqual(uvec4(local), records.tiles[r].starts_lo))
+                     + uvec4(greaterThanEqual(uvec4(local), records.tiles[r].starts_hi));
+        uint j = passed.x + passed.y + passed.z + passed.w;
+        uvec4 block = records.tiles[r].blocks[j];
+        uint rows = block.z + (local - block.x);   // row k of the block is at rows + k * block.y
+        uint last = max(j, 1u) - 1u;
+#ifdef MORPH_ALL_ROWS
+        vec4 o_lo, o_hi, u_lo, u_hi;
+        for (uint k = 0u; k < 4u; ++k) {
+            // Rows past the block's last read its last row, masked to 0.
+            o_lo[k] = pool_byte(rows + min(k, last) * block.y) * float(k < j);
+            o_hi[k] = pool_byte(rows + min(k + 4u, last) * block.y) * float(k + 4u < j);
+            u_lo[k] = records.tiles[r].units[k];
+            u_hi[k] = records.tiles[r].units[k + 4u];
         }
-        shift = dk * (1.0 - f) + dk1 * f;
-    }
+        vec4 h_lo = clamp(vec4(l) - vec4(0.0, 1.0, 2.0, 3.0), 0.0, 1.0);
+        vec4 h_hi = clamp(vec4(l) - vec4(4.0, 5.0, 6.0, 7.0), 0.0, 1.0);
+        vec4 w_lo = vec4(1.0, h_lo.xyz) - h_lo;
+        vec4 w_hi = vec4(h_lo.w, h_hi.xyz) - h_hi;
+        float shift = dot(w_lo, o_lo * u_lo) + dot(w_hi, o_hi * u_hi);
 #else
-    vec4 h_lo = clamp(vec4(l) - vec4(0.0, 1.0, 2.0, 3.0), 0.0, 1.0);
-    vec4 h_hi = clamp(vec4(l) - vec4(4.0, 5.0, 6.0, 7.0), 0.0, 1.0);
-    vec4 w_lo = vec4(1.0, h_lo.xyz) - h_lo;
-    vec4 w_hi = vec4(h_lo.w, h_hi.xyz) - h_hi;
-    float shift = dot(w_lo, d_lo) + dot(w_hi, d_hi);
+        // k = floor(l) below the block (l >= j gives k = j - 1 and t = 1 on a zero offset).
+        uint k = min(uint(l), last);
+        float t = clamp(l - float(k), 0.0, 1.0);
+        float lower = pool_byte(rows + k * block.y) * records.tiles[r].units[k] * float(j > 0u);
+        uint above = min(k + 1u, last);
+        float upper = pool_byte(rows + above * block.y) * records.tiles[r].units[above] * float(k + 1u < j);
+        float shift = lower * (1.0 - t) + upper * t;
 #endif
-
-    height = own + shift;
-    relative = vec3(float(sample_pos.x) * frame.camera.w, -float(sample_pos.y) * frame.spacing_y, height) - frame.camera.xyz;
+        height = own + shift;
+        relative.z = height - frame.camera.z;
+    }
+#ifdef READ_BACK
+    heights.values[records.tiles[r].heights + local] = height;
+#endif
     level = l;
     flags = frame.flags;
     sample_xy = vec2(sample_pos);

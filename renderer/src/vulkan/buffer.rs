@@ -33,6 +33,15 @@ impl BufferDesc {
         }
     }
 
+    /// Host-visible memory shaders write and the CPU reads back.
+    pub fn readback_storage(size: u64) -> Self {
+        BufferDesc {
+            size,
+            usage: vk::BufferUsageFlags::STORAGE_BUFFER,
+            location: MemoryLocation::GpuToCpu,
+        }
+    }
+
     /// Host-visible memory the CPU reads back.
     pub fn readback(size: u64) -> Self {
         BufferDesc {

@@ -52,6 +52,10 @@ pub struct Gpu {
     /// Shaders may store 16-bit values in storage buffers (`storageBuffer16BitAccess`,
     /// enabled): the index arrays are built on the GPU (`vulkan::indices`).
     pub storage_16bit: bool,
+    /// Vertex shaders may write storage buffers (`vertexPipelineStoresAndAtomics`, enabled):
+    /// the terrain shader can write the heights it computed for a read-back
+    /// (`vkterrain --read-back-heights`).
+    pub vertex_stores: bool,
     /// Every device-local memory type is also host-visible and coherent (lavapipe, most
     /// integrated GPUs): the CPU can write tile data where the GPU reads it.
     unified_memory: bool,
@@ -218,6 +222,7 @@ impl Gpu {
                     | vk::FormatFeatureFlags::TRANSFER_DST,
             );
         let min_lod = supported.shader_resource_min_lod == vk::TRUE;
+        let vertex_stores = supported.vertex_pipeline_stores_and_atomics == vk::TRUE;
         let storage_16bit = {
             let mut v11 = vk::PhysicalDeviceVulkan11Features::default();
             let mut features = vk::PhysicalDeviceFeatures2::default().push_next(&mut v11);
@@ -242,7 +247,8 @@ impl Gpu {
             .fill_mode_non_solid(wireframe_supported)
             .texture_compression_bc(bc_textures)
             .sampler_anisotropy(anisotropy)
-            .shader_resource_min_lod(min_lod);
+            .shader_resource_min_lod(min_lod)
+            .vertex_pipeline_stores_and_atomics(vertex_stores);
         let device_extensions: Vec<*const i8> = if options.display.is_some() {
             vec![ash::khr::swapchain::NAME.as_ptr()]
         } else {
@@ -302,6 +308,7 @@ impl Gpu {
             max_anisotropy,
             min_lod,
             storage_16bit,
+            vertex_stores,
             unified_memory,
             allocations: AtomicU64::new(0),
         };

@@ -1,8 +1,9 @@
 //! The terrain pipeline: vertices pulled from the tile pool (a storage buffer) with each draw's
 //! tile record (another), triangle fans with primitive restart, one push-constant block per
-//! frame, reversed-Z depth, dynamic rendering. Two vertex shaders: geomorphing by forward
-//! differences (the default) and the branching reference. The fragment shader samples the
-//! texture array (one layer per texture slot).
+//! frame, reversed-Z depth, dynamic rendering. Vertex shaders: geomorphing from the two levels
+//! around each vertex's level (the default), the paper's forward differences over every level
+//! (the reference), and, for `--read-back-heights`, the default writing every vertex's height
+//! to a buffer. The fragment shader samples the texture array (one layer per texture slot).
 
 use std::ffi::CStr;
 
@@ -14,12 +15,15 @@ use crate::interface::PUSH_CONSTANT_BYTES;
 
 pub struct TerrainPipeline {
     /// Binding 0: the tile pool; binding 1: the frame's tile records (both storage buffers);
-    /// binding 2: the texture array and its sampler.
+    /// binding 2: the texture array and its sampler; binding 3: the heights read back.
     pub set_layout: vk::DescriptorSetLayout,
     pub layout: vk::PipelineLayout,
     pub fill: vk::Pipeline,
-    /// The same with the branching morph shader (`--morph-shader branches`).
-    pub branches: vk::Pipeline,
+    /// The same with the forward-differences morph (`--morph-shader forward-differences`).
+    pub all_rows: vk::Pipeline,
+    /// The default writing each vertex's height (`--read-back-heights`; needs
+    /// `vertexPipelineStoresAndAtomics`).
+    pub read_back: Option<vk::Pipeline>,
     /// Present when the device supports `fillModeNonSolid`.
     pub wireframe: Option<vk::Pipeline>,
 }
@@ -33,7 +37,14 @@ fn shader(gpu: &Gpu, words: &[u32], name: &str) -> VkResult<vk::ShaderModule> {
 }
 
 impl TerrainPipeline {
-    pub fn new(gpu: &Gpu, color: vk::Format, depth: vk::Format) -> VkResult<TerrainPipeline> {
+    /// The pipelines, with the read-back one when `read_back` (the device must support
+    /// vertex stores, [`Gpu::vertex_stores`]).
+    pub fn new(
+        gpu: &Gpu,
+        color: vk::Format,
+        depth: vk::Format,
+        read_back: bool,
+    ) -> VkResult<TerrainPipeline> {
         let ranges = [vk::PushConstantRange::default()
             .stage_flags(vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT)
             .size(PUSH_CONSTANT_BYTES)];
@@ -52,6 +63,7 @@ impl TerrainPipeline {
                 .descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER)
                 .descriptor_count(1)
                 .stage_flags(vk::ShaderStageFlags::FRAGMENT),
+            buffer(3),
         ];
         let set_info = vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings);
         // SAFETY: valid create info.
@@ -72,7 +84,12 @@ impl TerrainPipeline {
         };
         gpu.name(layout, "terrain pipeline layout");
         let vert = shader(gpu, spirv::TERRAIN_VERT, "terrain.vert")?;
-        let vert_branches = shader(gpu, spirv::TERRAIN_VERT_BRANCHES, "terrain.vert (branches)")?;
+        let vert_all_rows = shader(gpu, spirv::TERRAIN_VERT_ALL_ROWS, "terrain.vert (all rows)")?;
+        let vert_read_back = shader(
+            gpu,
+            spirv::TERRAIN_VERT_READ_BACK,
+            "terrain.vert (read-back)",
+        )?;
         let frag = if gpu.min_lod {
             shader(gpu, spirv::TERRAIN_FRAG_MIN_LOD, "terrain.frag (MinLod)")?
         } else {
@@ -88,16 +105,28 @@ impl TerrainPipeline {
             vk::PolygonMode::FILL,
             "terrain (fill)",
         );
-        let branches = Self::build(
+        let all_rows = Self::build(
             gpu,
             layout,
-            vert_branches,
+            vert_all_rows,
             frag,
             color,
             depth,
             vk::PolygonMode::FILL,
-            "terrain (fill, branching morph)",
+            "terrain (fill, forward differences over all rows)",
         );
+        let read_back = read_back.then(|| {
+            Self::build(
+                gpu,
+                layout,
+                vert_read_back,
+                frag,
+                color,
+                depth,
+                vk::PolygonMode::FILL,
+                "terrain (fill, heights read back)",
+            )
+        });
         let wireframe = if gpu.wireframe_supported {
             Some(Self::build(
                 gpu,
@@ -115,23 +144,26 @@ impl TerrainPipeline {
         // SAFETY: modules are only needed during pipeline creation.
         unsafe {
             gpu.device.destroy_shader_module(vert, None);
-            gpu.device.destroy_shader_module(vert_branches, None);
+            gpu.device.destroy_shader_module(vert_all_rows, None);
+            gpu.device.destroy_shader_module(vert_read_back, None);
             gpu.device.destroy_shader_module(frag, None);
         }
         let fill = fill?;
-        let branches = branches?;
+        let all_rows = all_rows?;
+        let read_back = read_back.transpose()?;
         let wireframe = wireframe.transpose()?;
         Ok(TerrainPipeline {
             set_layout,
             layout,
             fill,
-            branches,
+            all_rows,
+            read_back,
             wireframe,
         })
     }
 
     #[allow(clippy::too_many_arguments)]
-    fn build(
+    pub(crate) fn build(
         gpu: &Gpu,
         layout: vk::PipelineLayout,
         vert: vk::ShaderModule,
@@ -211,13 +243,75 @@ impl TerrainPipeline {
         // SAFETY: no command buffer in flight uses them.
         unsafe {
             gpu.device.destroy_pipeline(self.fill, None);
-            gpu.device.destroy_pipeline(self.branches, None);
+            gpu.device.destroy_pipeline(self.all_rows, None);
+            if let Some(p) = self.read_back {
+                gpu.device.destroy_pipeline(p, None);
+            }
             if let Some(w) = self.wireframe {
                 gpu.device.destroy_pipeline(w, None);
             }
             gpu.device.destroy_pipeline_layout(self.layout, None);
             gpu.device
                 .destroy_descriptor_set_layout(self.set_layout, None);
+        }
+    }
+}
+
+/// The static-mesh limit's pipeline (`crate::limit`): the terrain's fixed-function state
+/// (fans with primitive restart, reversed-Z depth, the same attachments) with the simplest
+/// shaders: grid positions from the vertex index, one colour.
+pub struct LimitPipeline {
+    pub layout: vk::PipelineLayout,
+    pub pipeline: vk::Pipeline,
+}
+
+/// Size of the limit's push constants: a matrix, the grid's side and its spacing.
+pub const LIMIT_PUSH_BYTES: u32 = 64 + 8;
+
+impl LimitPipeline {
+    pub fn new(gpu: &Gpu, color: vk::Format, depth: vk::Format) -> VkResult<LimitPipeline> {
+        let ranges = [vk::PushConstantRange::default()
+            .stage_flags(vk::ShaderStageFlags::VERTEX)
+            .size(LIMIT_PUSH_BYTES)];
+        let layout_info = vk::PipelineLayoutCreateInfo::default().push_constant_ranges(&ranges);
+        // SAFETY: valid create info.
+        let layout = unsafe { gpu.device.create_pipeline_layout(&layout_info, None) }?;
+        gpu.name(layout, "static-mesh limit pipeline layout");
+        let modules = shader(gpu, spirv::LIMIT_VERT, "limit.vert")
+            .and_then(|v| shader(gpu, spirv::LIMIT_FRAG, "limit.frag").map(|f| (v, f)));
+        let pipeline = modules.and_then(|(vert, frag)| {
+            let p = TerrainPipeline::build(
+                gpu,
+                layout,
+                vert,
+                frag,
+                color,
+                depth,
+                vk::PolygonMode::FILL,
+                "static-mesh limit",
+            );
+            // SAFETY: modules are only needed during pipeline creation.
+            unsafe {
+                gpu.device.destroy_shader_module(vert, None);
+                gpu.device.destroy_shader_module(frag, None);
+            }
+            p
+        });
+        match pipeline {
+            Ok(pipeline) => Ok(LimitPipeline { layout, pipeline }),
+            Err(e) => {
+                // SAFETY: unused.
+                unsafe { gpu.device.destroy_pipeline_layout(layout, None) };
+                Err(e)
+            }
+        }
+    }
+
+    pub fn destroy(self, gpu: &Gpu) {
+        // SAFETY: no command buffer in flight uses them.
+        unsafe {
+            gpu.device.destroy_pipeline(self.pipeline, None);
+            gpu.device.destroy_pipeline_layout(self.layout, None);
         }
     }
 }
@@ -229,13 +323,13 @@ pub struct TerrainSets {
 }
 
 impl TerrainSets {
-    /// `count` sets, each pointing at the tile pool, at its own records buffer and at the
-    /// texture array.
+    /// `count` sets, each pointing at the tile pool, at its own records and heights buffers
+    /// and at the texture array.
     pub fn new(
         gpu: &Gpu,
         pipeline: &TerrainPipeline,
         tile_pool: &super::Buffer,
-        records: &[&super::Buffer],
+        records: &[(&super::Buffer, &super::Buffer)],
         textures: &super::texture::TextureArray,
         name: &str,
     ) -> VkResult<TerrainSets> {
@@ -243,7 +337,7 @@ impl TerrainSets {
         let sizes = [
             vk::DescriptorPoolSize::default()
                 .ty(vk::DescriptorType::STORAGE_BUFFER)
-                .descriptor_count(2 * count),
+                .descriptor_count(3 * count),
             vk::DescriptorPoolSize::default()
                 .ty(vk::DescriptorType::COMBINED_IMAGE_SAMPLER)
                 .descriptor_count(count),
@@ -270,12 +364,15 @@ impl TerrainSets {
         let range = tile_pool
             .size
             .min(u64::from(gpu.properties.limits.max_storage_buffer_range));
-        for (&set, r) in sets.iter().zip(records) {
+        for (&set, (r, heights)) in sets.iter().zip(records) {
             let pool_info = [vk::DescriptorBufferInfo::default()
                 .buffer(tile_pool.raw)
                 .range(range)];
             let record_info = [vk::DescriptorBufferInfo::default()
                 .buffer(r.raw)
+                .range(vk::WHOLE_SIZE)];
+            let heights_info = [vk::DescriptorBufferInfo::default()
+                .buffer(heights.raw)
                 .range(vk::WHOLE_SIZE)];
             let texture_info = [vk::DescriptorImageInfo::default()
                 .sampler(textures.sampler)
@@ -297,6 +394,11 @@ impl TerrainSets {
                     .dst_binding(2)
                     .descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER)
                     .image_info(&texture_info),
+                vk::WriteDescriptorSet::default()
+                    .dst_set(set)
+                    .dst_binding(3)
+                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .buffer_info(&heights_info),
             ];
             // SAFETY: the set is not in use; the buffers, view and sampler are live.
             unsafe { gpu.device.update_descriptor_sets(&writes, &[]) };

@@ -195,6 +195,20 @@ pub fn host_read_barrier(gpu: &Gpu, cmd: vk::CommandBuffer) {
     );
 }
 
+/// Makes vertex-shader writes visible to host reads after the command buffer's fence (the
+/// heights read back).
+pub fn vertex_to_host_barrier(gpu: &Gpu, cmd: vk::CommandBuffer) {
+    memory_barrier(
+        gpu,
+        cmd,
+        (
+            vk::PipelineStageFlags::VERTEX_SHADER,
+            vk::AccessFlags::SHADER_WRITE,
+        ),
+        (vk::PipelineStageFlags::HOST, vk::AccessFlags::HOST_READ),
+    );
+}
+
 /// A change of an image's layout, one side of it: the layout and the accesses before or after.
 pub type Layout = (vk::ImageLayout, vk::AccessFlags);
 

@@ -118,6 +118,15 @@ pub fn vkterrain(args: &[&str]) -> Output {
         .expect("vkterrain runs")
 }
 
+/// Runs vkterrain with one environment variable set (a fault to inject).
+pub fn vkterrain_with_env(args: &[&str], (key, value): (&str, &str)) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_vkterrain"))
+        .args(args)
+        .env(key, value)
+        .output()
+        .expect("vkterrain runs")
+}
+
 /// Runs vkterrain, which must succeed with no validation message, and returns its summary.
 pub fn summary(args: &[&str]) -> serde_json::Value {
     let o = vkterrain(args);
