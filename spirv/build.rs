@@ -66,7 +66,13 @@ const SHADERS: [(&str, &str, shaderc::ShaderKind, Option<&str>); 8] = [
 
 /// The shared interface, and the structs of it whose layout the host mirrors.
 const INTERFACE: &str = "interface.glsl";
-const MIRRORED: [&str; 4] = ["FrameConstants", "MorphFrame", "Records", "TileRecord"];
+const MIRRORED: [&str; 5] = [
+    "FrameConstants",
+    "LevelCoefficients",
+    "MorphFrame",
+    "Records",
+    "TileRecord",
+];
 
 fn main() {
     let dir =

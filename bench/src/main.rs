@@ -13,6 +13,7 @@
 //!
 //! Each prints Markdown tables. Ratios are measured side by side in one run.
 
+mod limit_bench;
 mod martini;
 mod memory_bench;
 
@@ -48,15 +49,19 @@ fn run() -> Result<()> {
         "acmr" => acmr(),
         "frames" => frames(),
         "memory" => memory_bench::memory(),
+        "limit" => limit_bench::limit_table(),
         "all" => {
             throughput()?;
             economy()?;
             acmr()?;
             frames()?;
+            limit_bench::limit_table()?;
             memory_bench::memory()
         }
         other => {
-            bail!("unknown benchmark {other:?}: throughput, economy, acmr, frames, memory or all")
+            bail!(
+                "unknown benchmark {other:?}: throughput, economy, acmr, frames, memory, limit or all"
+            )
         }
     }
 }
@@ -418,12 +423,24 @@ fn acmr() -> Result<()> {
     Ok(())
 }
 
-/// A vkterrain flight's JSON summary.
+/// A vkterrain flight's JSON summary, at 1024 x 768.
 fn flight(
     vkterrain: &Path,
     set: &Path,
     path: &str,
     frames: u32,
+    extra: &[&str],
+) -> Result<serde_json::Value> {
+    flight_at(vkterrain, set, path, frames, "1024x768", extra)
+}
+
+/// A vkterrain flight's JSON summary at `size` (WxH).
+fn flight_at(
+    vkterrain: &Path,
+    set: &Path,
+    path: &str,
+    frames: u32,
+    size: &str,
     extra: &[&str],
 ) -> Result<serde_json::Value> {
     let frames = frames.to_string();
@@ -435,7 +452,7 @@ fn flight(
         "--frames",
         &frames,
         "--size",
-        "1024x768",
+        size,
     ];
     args.extend(extra);
     let o = Command::new(vkterrain).args(&args).output()?;

@@ -30,7 +30,7 @@ use crate::interface::{
 };
 use crate::log::FrameRecord;
 use crate::measure::State;
-use crate::morph::{self, LevelTable, TileMorph, MAX_LEVELS};
+use crate::morph::{self, TileMorph, MAX_LEVELS};
 use crate::plan::{self, BorderMismatch, LevelRule, Plan, TexturePlan};
 use crate::prefetch::{Predicted, PrefetchOptions, Prefetcher};
 use crate::stitch::{pulled, Stitch, MAX_RECORDS};
@@ -337,8 +337,6 @@ pub struct Renderer {
     prefetcher: Prefetcher,
     /// Builds index arrays on the GPU (None: they are sent from the file).
     builder: Option<IndexBuilder>,
-    /// The set's errors per level for the vertex level rule ([`crate::morph`]).
-    level_table: LevelTable,
 }
 
 /// Faults the tests inject through the `VKTERRAIN_FAULT` environment variable, to check the
@@ -558,7 +556,6 @@ impl Renderer {
                 collected: Vec::new(),
                 prefetcher: Prefetcher::new(options.prefetch, terrain.tiles.len()),
                 builder,
-                level_table: LevelTable::for_terrain(terrain),
             }),
             (pipeline, failure) => {
                 gpu.wait_idle();
@@ -852,7 +849,7 @@ impl Renderer {
         let textured = self.texture_slots.is_some();
         let constants = frame_constants(terrain, input.camera, &plan.view, settings, textured);
         let morph = matches!(settings.rule(), LevelRule::Morph(..))
-            .then(|| morph::frame_constants(&plan.view, settings.tau, &self.level_table));
+            .then(|| morph::frame_constants(&plan.view, settings.tau));
         let drawn = write_records(
             &mut slot.records,
             terrain,
@@ -1217,7 +1214,7 @@ impl Renderer {
             let textured = self.texture_slots.is_some();
             let constants = frame_constants(terrain, camera, &plan.view, settings, textured);
             let morph = matches!(settings.rule(), LevelRule::Morph(..))
-                .then(|| morph::frame_constants(&plan.view, settings.tau, &self.level_table));
+                .then(|| morph::frame_constants(&plan.view, settings.tau));
             write_records(
                 records,
                 terrain,
@@ -1562,6 +1559,9 @@ fn write_records(
                 rows += (j as u32 * l.block_len).div_ceil(4) * 4;
             }
             (r.starts_lo, r.starts_hi) = split(starts);
+            if morph.is_some() {
+                r.tables = info.tables.map(|t| t.coefficients());
+            }
             let tile_morph = morph.map(|(frame, c)| TileMorph {
                 view_proj: glam::Mat4::from_cols_array(&c.view_proj),
                 camera: glam::Vec4::from_array(c.camera),
@@ -1570,6 +1570,7 @@ fn write_records(
                 frame: *frame,
                 tile_offset: r.tile_offset,
                 cap: r.cap,
+                tables: r.tables,
             });
             drawn.push((d.tile, d.level, heights, tile_morph));
             heights += info.levels[d.level as usize].vertex_count() as usize;

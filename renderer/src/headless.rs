@@ -33,6 +33,10 @@ pub struct Flight<'a> {
     /// After the warm-up, empty the pool: the timed flight streams its tiles from cold while
     /// the driver is warm (separates the streaming cold start from the driver's first use).
     pub forget_after_warmup: bool,
+    /// Draw the first view once, untimed, before the timed flight (`--prime`): the driver
+    /// compiles its shader variants and grows its memory then, and the first view's tiles
+    /// arrive, as a loading screen would have it, instead of in the first frames.
+    pub prime: bool,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -88,6 +92,8 @@ pub struct FlightResult {
     pub staging: bool,
     /// Index arrays were built on the GPU (else sent from the file).
     pub built_indices: bool,
+    /// How long drawing the first view before the flight took (ms; None: not primed).
+    pub prime_ms: Option<f64>,
     /// Why the flight stopped early (the device was lost, a tile set changed under it, ...):
     /// `records` holds the frames that completed before.
     pub error: Option<FlightError>,
@@ -108,7 +114,8 @@ pub fn fly(
         renderer.measure_error(meter, every);
     }
     let mut records = Vec::with_capacity(flight.frames.min(1 << 16) as usize);
-    let error = run(gpu, flight, &mut renderer, &mut records).err();
+    let mut prime_ms = None;
+    let error = run(gpu, flight, &mut renderer, &mut records, &mut prime_ms).err();
     if error.is_some() {
         // Frames submitted before the failure still count if the device can finish them.
         if let Ok(finished) = renderer.finish_all(gpu) {
@@ -128,6 +135,7 @@ pub fn fly(
         texture_bytes,
         staging,
         built_indices,
+        prime_ms,
         error,
     })
 }
@@ -139,6 +147,7 @@ fn run(
     flight: &Flight,
     renderer: &mut Renderer,
     records: &mut Vec<FrameRecord>,
+    prime_ms: &mut Option<f64>,
 ) -> Result<(), FlightError> {
     if flight.draw_only {
         *records = draw_only(gpu, flight, renderer)?;
@@ -146,6 +155,10 @@ fn run(
     }
     if flight.warmup || flight.forget_after_warmup {
         warm_up(gpu, flight, renderer)?;
+    } else if flight.prime {
+        let begun = Instant::now();
+        untimed(gpu, flight, renderer, 1)?;
+        *prime_ms = Some(begun.elapsed().as_secs_f64() * 1000.0);
     }
     if flight.forget_after_warmup {
         renderer.forget_tiles(gpu)?;
@@ -218,17 +231,32 @@ fn camera_at(flight: &Flight, k: u64) -> (f64, Camera) {
 
 /// Flies the path once, untimed, so every tile it needs is resident.
 fn warm_up(gpu: &Gpu, flight: &Flight, renderer: &mut Renderer) -> Result<(), FlightError> {
-    // Not measured: the timed flight's first frame has nothing before it to pop from.
+    untimed(gpu, flight, renderer, flight.frames)
+}
+
+/// Flies the path's first `frames` frames untimed and unmeasured (the timed flight's first
+/// frame has nothing before it to pop from).
+fn untimed(
+    gpu: &Gpu,
+    flight: &Flight,
+    renderer: &mut Renderer,
+    frames: u64,
+) -> Result<(), FlightError> {
     let meter = renderer.take_meter();
-    let result = warm_up_frames(gpu, flight, renderer);
+    let result = untimed_frames(gpu, flight, renderer, frames);
     if let Some((meter, every)) = meter {
         renderer.measure_error(meter, every);
     }
     result
 }
 
-fn warm_up_frames(gpu: &Gpu, flight: &Flight, renderer: &mut Renderer) -> Result<(), FlightError> {
-    for k in 0..flight.frames {
+fn untimed_frames(
+    gpu: &Gpu,
+    flight: &Flight,
+    renderer: &mut Renderer,
+    frames: u64,
+) -> Result<(), FlightError> {
+    for k in 0..frames.min(flight.frames) {
         let (t, camera) = camera_at(flight, k);
         let input = FrameInput {
             camera: &camera,

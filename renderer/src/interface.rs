@@ -47,7 +47,13 @@ pub struct MorphFrame {
     pub tau: f32,
     pub near: f32,
     pub pad: [f32; 2],
-    /// `Λ(r) = Σ_k clamp(a_k - r b_k, 0, 1)`, levels 0..3 and 4..7.
+}
+
+/// One level table's coefficients (`LevelCoefficients`): `Λ(r) = Σ_k clamp(a_k - r b_k, 0, 1)`,
+/// levels 0..3 and 4..7 ([`crate::morph::LevelTable`]).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct LevelCoefficients {
     pub a_lo: [f32; 4],
     pub a_hi: [f32; 4],
     pub b_lo: [f32; 4],
@@ -82,6 +88,9 @@ pub struct TileRecord {
     pub texture_shift: f32,
     pub pad0: u32,
     pub pad1: u32,
+    /// The level tables of the tile's vertices: inside, the N, E, S, W sides, the NW, NE, SW,
+    /// SE corners ([`crate::terrain::TileInfo::tables`]).
+    pub tables: [LevelCoefficients; 9],
 }
 
 /// Bytes of one record.
@@ -102,18 +111,22 @@ macro_rules! fields {
 pub fn host_layout() -> Vec<(&'static str, &'static str, u32)> {
     let frame = fields!(FrameConstants: view_proj, camera, spacing_y, height_step, flags, pad,
         texture_map);
-    let morph = fields!(MorphFrame: jacobian, tau, near, pad, a_lo, a_hi, b_lo, b_hi);
+    let morph = fields!(MorphFrame: jacobian, tau, near, pad);
+    let coefficients = fields!(LevelCoefficients: a_lo, a_hi, b_lo, b_hi);
     let record = fields!(TileRecord: tile_offset, height_base, positions, starts_lo, starts_hi,
         blocks, units, level, cap, heights, texture_layer, texture_finest, texture_shift, pad0,
-        pad1);
+        pad1, tables);
     let named = |name: &'static str, fields: Vec<(&'static str, u32)>| {
         fields.into_iter().map(move |(f, o)| (name, f, o))
     };
     let mut layout: Vec<_> = named("FrameConstants", frame)
         .chain(named("MorphFrame", morph))
+        .chain(named("LevelCoefficients", coefficients))
         .chain(named("TileRecord", record))
         .collect();
     layout.push(("TileRecord", "stride", RECORD_BYTES as u32));
+    let stride = std::mem::size_of::<LevelCoefficients>() as u32;
+    layout.push(("LevelCoefficients", "stride", stride));
     layout.push(("Records", "morph", 0));
     layout.push(("Records", "tiles", RECORDS_OFFSET as u32));
     layout.sort();

@@ -12,6 +12,7 @@ pub mod cull;
 pub mod frame;
 pub mod headless;
 pub mod interface;
+pub mod levels;
 pub mod limit;
 pub mod lod;
 pub mod log;

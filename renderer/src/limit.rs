@@ -162,6 +162,7 @@ impl Run<'_> {
         for _ in 0..frames {
             sync::begin(gpu, cmd, true)?;
             self.timestamps.begin(gpu, cmd);
+            self.timestamps.pass_begin(gpu, cmd);
             self.target.begin_rendering(gpu, cmd, [0.5, 0.7, 0.9]);
             // SAFETY: recording inside dynamic rendering; the index buffer outlives the frame,
             // which is waited for below.
@@ -183,6 +184,7 @@ impl Run<'_> {
                 gpu.device.cmd_draw_indexed(cmd, self.indices.1, 1, 0, 0, 0);
                 gpu.device.cmd_end_rendering(cmd);
             }
+            self.timestamps.pass_end(gpu, cmd);
             self.timestamps.end(gpu, cmd);
             sync::end(gpu, cmd)?;
             sync::submit(gpu, cmd, fence, None, None)?;

@@ -184,18 +184,13 @@ pub fn level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: Bound)
 
 /// The level a tile is drawn at while geomorphing ([`crate::morph`], "The level a tile is
 /// drawn at"): the ceiling of the vertex rule's level `Λ(τ / S)` for `S` the bound over the
-/// tile's on-screen sub-boxes, so it covers the level of every vertex on screen. `table` is the
-/// set's error table the vertices take their levels from.
-pub fn morph_level(
-    view: &View,
-    camera: DVec3,
-    tile: &TileInfo,
-    tau: f64,
-    rule: Bound,
-    table: &crate::morph::LevelTable,
-) -> u32 {
+/// tile's on-screen sub-boxes and the largest of the tile's level tables
+/// (`TileInfo::drawn_table`), so it covers the level of every vertex on screen.
+pub fn morph_level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: Bound) -> u32 {
     let finest = tile.levels.len().saturating_sub(1) as u32;
-    let within = |r: f64| (table.level_f64(r).ceil() as u32).min(finest);
+    let within = |r: f64| (tile.drawn_table.level_f64(r).ceil() as u32).min(finest);
+    // The vertices aim at a margin below tau (crate::morph::TAU_MARGIN); so does the tile.
+    let tau = tau * crate::morph::TAU_MARGIN;
     if rule == Bound::Guaranteed {
         let (lo, hi) = tile_box(tile);
         if within(error_for(bound(view, lo - camera, hi - camera), tau)) == 0 {

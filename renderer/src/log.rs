@@ -288,6 +288,8 @@ pub struct RunInfo {
     /// Of the mapping, what opening the set had paged in and `--file-cache-mb` gave back
     /// before the flight.
     pub file_released_at_open_bytes: u64,
+    /// Drawing the first view once before the timed flight (ms; None: not primed).
+    pub prime_ms: Option<f64>,
 }
 
 #[derive(Serialize, Debug)]
@@ -305,6 +307,10 @@ pub struct Summary {
     pub frame_ms_max: f64,
     /// The first frame against the median: what a cold start costs.
     pub first_frame_ratio: f64,
+    /// The slowest of the first three frames against the median.
+    pub first_frames_ratio: f64,
+    /// Drawing the first view once, untimed, before the flight (ms; None: not primed).
+    pub prime_ms: Option<f64>,
     pub gpu_ms_median: Option<f64>,
     pub gpu_draw_ms_median: Option<f64>,
     pub cpu_ms_median: f64,
@@ -417,6 +423,13 @@ impl Summary {
             frame_ms_p99: percentile(&ms, 99.0),
             frame_ms_max: ms.last().copied().unwrap_or(f64::NAN),
             first_frame_ratio: records.first().map_or(f64::NAN, |r| r.frame_ms / median),
+            first_frames_ratio: records
+                .iter()
+                .take(3)
+                .map(|r| r.frame_ms / median)
+                .reduce(f64::max)
+                .unwrap_or(f64::NAN),
+            prime_ms: run.prime_ms,
             gpu_ms_median: (!gpu.is_empty()).then(|| percentile(&gpu, 50.0)),
             gpu_draw_ms_median: (!draw.is_empty()).then(|| percentile(&draw, 50.0)),
             cpu_ms_median: percentile(&cpu, 50.0),

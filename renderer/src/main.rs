@@ -181,6 +181,12 @@ struct Cli {
     /// frame times (the static-mesh limit; the tile set is not read).
     #[arg(long, value_name = "TRIANGLES", value_parser = clap::value_parser!(u64).range(1..=100_000_000))]
     static_grid: Option<u64>,
+    /// Draw the first view once, untimed, before the timed flight: the driver compiles its
+    /// shader variants and the first view's tiles arrive then (reported as prime_ms), as behind
+    /// a loading screen, not in the first frames. (The primed frame counts in --trace and in the
+    /// frame numbers of VKTERRAIN_FAULT.)
+    #[arg(long, conflicts_with_all = ["warmup", "warmup_driver"])]
+    prime: bool,
     /// Benchmark: fly the path once untimed first, so the timed flight starts warm.
     #[arg(long)]
     warmup: bool,
@@ -570,6 +576,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             draw_only: cli.draw_only,
             warmup: cli.warmup,
             forget_after_warmup: cli.warmup_driver,
+            prime: cli.prime,
         };
         let meter = match cli.measure_error.as_slice() {
             [] => None,
@@ -630,6 +637,7 @@ fn finish(
         // Unknown rather than a failed run where /proc is not mounted.
         file_mapped_bytes: terrain.set.mapped_bytes().ok(),
         file_released_at_open_bytes: released_at_open,
+        prime_ms: result.prime_ms,
         index_arrays: if result.built_indices {
             "built"
         } else {

@@ -35,9 +35,12 @@
 //! geometric scale: with errors doubling per level, `E_(k+1) (2 - t)` against
 //! `E_(k+1) 2^(1 - t)`, up to 6% more near `t = 0.56`. So `Λ` inverts the linear `E`, not the
 //! geometric one: `E(l(v)) <= τ / S(v)`, the vertex's error projects to at most `τ` pixels.
-//! `E_k` is one table for the whole set (a vertex's level may not depend on its tile): the
-//! largest measured error of level `k` over all tiles plus half its morph unit (the stored
-//! offsets are rounded to whole units), made strictly decreasing so `Λ` is continuous:
+//! `E_k` is the level table of where the vertex lies ([`crate::levels`]): inside a tile, that
+//! tile's measured error of level `k` plus half its morph unit (the stored offsets are rounded
+//! to whole units); on a side, the larger of the two tiles'; at a corner, the largest of the
+//! tiles there. So the table, too, is the same in every tile holding the vertex. Each table
+//! falls by at least [`crate::levels::MIN_RATIO`] a level (a coarser level is taken as worse
+//! where the spacing rule left it better than a finer one), so `Λ` is continuous:
 //!
 //! ```text
 //! Λ(r) = Σ_k clamp((E_k - r) / (E_k - E_(k+1)), 0, 1)    (k = 0 .. n-2),
@@ -62,8 +65,8 @@
 //! agree and at most `2 Δl · max |o_m|` when they spread by `Δl` (the weight vectors of two
 //! levels are `2 |l_i - l_j|` apart in L1). In pixels the error at `q` is at most
 //! `τ max_i S(q) / S(v_i) + S(q) |R|`. Both excesses over `τ` grow with how much `|J z|` and
-//! the level change across one triangle, about its diameter over its distance; this rule adds
-//! no margin for them. What the GPU's surface delivers is measured instead: the error meter
+//! the level change across one triangle, about its diameter over its distance; they are not
+//! bounded here, and the rule aims at [`TAU_MARGIN`] of `τ` (2% below) to leave room for them. What the GPU's surface delivers is measured instead: the error meter
 //! rasterises this mirror's surface against the source on every measured frame
 //! (`max_error_px`), and a test reads the vertex shader's heights back and compares them with
 //! this mirror vertex for vertex.
@@ -73,11 +76,11 @@
 //! A tile is drawn at `G = ceil(Λ(τ / S_box))`, `S_box` the proved bound of [`crate::lod`]
 //! over the sub-boxes of the tile that touch the frustum ([`crate::lod::morph_level`]). The
 //! bound covers `S(v)` at every on-screen vertex, so every on-screen vertex's level is at most
-//! `G`: off-screen parts do not raise it, and with the same error table a tile is drawn at the
-//! level discrete LOD would draw it at. (The table is the set's largest error per level; a
-//! tile smoother than the roughest is drawn a little finer than its own errors would need, so
-//! that no on-screen vertex ever wants more than the drawn mesh has: such a vertex would start
-//! off the coarser surface when the finer level arrives.) Vertices whose level reaches their
+//! `G`: off-screen parts do not raise it. `Λ` here is the largest of the tile's nine tables
+//! (`TileInfo::drawn_table`), which covers every one of its vertices' tables: a tile next to a
+//! rougher one is drawn a little finer than its own errors need, so that no on-screen vertex
+//! ever wants more than the drawn mesh has (such a vertex would start off the coarser surface
+//! when the finer level arrives). Vertices whose level reaches their
 //! own block `j` sit at their own height, bit for bit (every weight below `j` is exactly 0),
 //! so a vertex off screen whose level exceeds `G` is simply on level `G`'s surface.
 //!
@@ -93,76 +96,15 @@
 use glam::{Mat4, Vec3, Vec4};
 
 use crate::camera::{View, NEAR};
-use crate::interface::MorphFrame;
+use crate::interface::{LevelCoefficients, MorphFrame};
+pub use crate::levels::{LevelTable, MAX_LEVELS};
 use crate::terrain::Terrain;
 
-/// Levels a tile has at most (the tile format's maximum).
-pub const MAX_LEVELS: usize = 9;
-
-/// The set's error per level for the vertex rule, `E_k` of the module header, and the
-/// coefficients of `Λ(r) = Σ_k clamp(a_k - r b_k, 0, 1)`.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct LevelTable {
-    /// Coarsest first; strictly decreasing over the set's levels.
-    pub errors: [f32; MAX_LEVELS],
-    pub a: [f32; MAX_LEVELS - 1],
-    pub b: [f32; MAX_LEVELS - 1],
-}
-
-impl LevelTable {
-    /// The table for per-level errors `errors` (coarsest first, at most [`MAX_LEVELS`]): made
-    /// non-increasing from the finest up (a coarser level is never taken as better than a
-    /// finer one), then strictly decreasing by at least 0.1% a level so that `Λ` is
-    /// continuous.
-    pub fn new(errors: &[f32]) -> LevelTable {
-        let n = errors.len().clamp(1, MAX_LEVELS);
-        let mut e = [0.0f32; MAX_LEVELS];
-        let mut below = 0.0f32;
-        for k in (0..n).rev() {
-            let own = if errors[k].is_finite() {
-                errors[k].max(0.0)
-            } else {
-                f32::MAX / 4.0
-            };
-            e[k] = if k == n - 1 {
-                own.max(1e-6)
-            } else {
-                own.max(below * 1.001)
-            };
-            below = e[k];
-        }
-        let (mut a, mut b) = ([0.0f32; MAX_LEVELS - 1], [0.0f32; MAX_LEVELS - 1]);
-        for k in 0..n - 1 {
-            b[k] = 1.0 / (e[k] - e[k + 1]);
-            a[k] = e[k] * b[k];
-        }
-        LevelTable { errors: e, a, b }
-    }
-
-    /// The table of a tile set: per level, the largest measured error over its tiles plus half
-    /// that level's morph unit ([`Terrain::level_errors`]).
-    pub fn for_terrain(terrain: &Terrain) -> LevelTable {
-        LevelTable::new(&terrain.level_errors)
-    }
-
-    /// `Λ(r)`, in f32 as the vertex shader evaluates it.
-    pub fn level(&self, r: f32) -> f32 {
-        self.a
-            .iter()
-            .zip(&self.b)
-            .map(|(&a, &b)| (a - r * b).clamp(0.0, 1.0))
-            .sum()
-    }
-
-    /// `Λ(r)` in f64, for the CPU's own decisions (not the shader's mirror).
-    pub fn level_f64(&self, r: f64) -> f64 {
-        self.a
-            .iter()
-            .zip(&self.b)
-            .map(|(&a, &b)| (f64::from(a) - r * f64::from(b)).clamp(0.0, 1.0))
-            .sum()
-    }
-}
+/// The share of `tau` the vertex rule and the drawn level aim at: the excess over the blend's
+/// bound between a triangle's vertices (module header, "Between the vertices of a triangle")
+/// is not bounded by the rule, and measured at up to 0.2% of tau on the test flights; 2% is
+/// kept for it.
+pub const TAU_MARGIN: f64 = 0.98;
 
 /// The frame's constants of the vertex rule for `view` at tolerance `tau` (`MorphFrame` of the
 /// shader interface). With `clip = view_proj * p` for `p` relative to the camera, `d = clip.w`
@@ -170,7 +112,7 @@ impl LevelTable {
 /// formula `j_x = f_x (w_x d + x w_z) / d²`, `j_y = f_y (w_y d + y w_z) / d²` reads
 /// `|J z| = |A d + B ⊙ clip.xy| / d²` with `A = (f_x w_x, f_y w_y)` and
 /// `B = (width / 2 · w_z, -height / 2 · w_z)`.
-pub fn frame_constants(view: &View, tau: f64, table: &LevelTable) -> MorphFrame {
+pub fn frame_constants(view: &View, tau: f64) -> MorphFrame {
     let w = (view.right.z, view.up.z);
     let wz = view.back.z;
     let (fx, fy) = view.focal;
@@ -181,20 +123,32 @@ pub fn frame_constants(view: &View, tau: f64, table: &LevelTable) -> MorphFrame 
             (f64::from(view.width) * 0.5 * wz) as f32,
             (-f64::from(view.height) * 0.5 * wz) as f32,
         ],
-        tau: tau as f32,
+        tau: (tau * TAU_MARGIN) as f32,
         near: NEAR as f32,
         pad: [0.0; 2],
-        a_lo: std::array::from_fn(|k| table.a[k]),
-        a_hi: std::array::from_fn(|k| table.a[k + 4]),
-        b_lo: std::array::from_fn(|k| table.b[k]),
-        b_hi: std::array::from_fn(|k| table.b[k + 4]),
     }
 }
 
+/// Which of a tile's nine level tables a vertex at tile-local `(x, y)` takes: 0 inside, 1..=4
+/// on the N, E, S, W sides, 5..=8 at the NW, NE, SW, SE corners (`table_of` in the shader).
+pub fn table_of(x: u32, y: u32) -> usize {
+    let column = match x {
+        0 => 0,
+        256 => 2,
+        _ => 1,
+    };
+    let row = match y {
+        0 => 0,
+        256 => 2,
+        _ => 1,
+    };
+    [5, 1, 6, 4, 0, 2, 7, 3, 8][row * 3 + column]
+}
+
 /// `l(v)` for a vertex whose unmorphed position is at `clip` (`view_proj` times the position
-/// relative to the camera), as the vertex shader computes it: the finest level behind the
-/// near plane.
-pub fn vertex_level(m: &MorphFrame, clip: Vec4) -> f32 {
+/// relative to the camera) with the level table `c`, as the vertex shader computes it: the
+/// finest level behind the near plane.
+pub fn vertex_level(m: &MorphFrame, c: &LevelCoefficients, clip: Vec4) -> f32 {
     let r = if clip.w < m.near {
         0.0
     } else {
@@ -207,7 +161,7 @@ pub fn vertex_level(m: &MorphFrame, clip: Vec4) -> f32 {
     };
     let term = |a: f32, b: f32| (a - r * b).clamp(0.0, 1.0);
     (0..4)
-        .map(|k| term(m.a_lo[k], m.b_lo[k]) + term(m.a_hi[k], m.b_hi[k]))
+        .map(|k| term(c.a_lo[k], c.b_lo[k]) + term(c.a_hi[k], c.b_hi[k]))
         .sum()
 }
 
@@ -271,6 +225,8 @@ pub struct TileMorph {
     pub tile_offset: [i32; 2],
     /// The level the draw's vertices morph to at most.
     pub cap: f32,
+    /// The tile's nine level tables ([`table_of`]).
+    pub tables: [LevelCoefficients; 9],
 }
 
 impl TileMorph {
@@ -282,7 +238,6 @@ impl TileMorph {
         camera: &crate::camera::Camera,
         extent: (u32, u32),
         tau: f64,
-        table: &LevelTable,
         tile: usize,
     ) -> TileMorph {
         let view = camera.view(extent.0, extent.1);
@@ -297,9 +252,10 @@ impl TileMorph {
             ),
             spacing_y: terrain.spacing.1 as f32,
             height_step: terrain.height_step,
-            frame: frame_constants(&view, tau, table),
+            frame: frame_constants(&view, tau),
             tile_offset: Terrain::tile_offset(cam_tile, &terrain.tiles[tile]),
             cap: terrain.levels.saturating_sub(1) as f32,
+            tables: terrain.tiles[tile].tables.map(|t| t.coefficients()),
         }
     }
 
@@ -316,7 +272,11 @@ impl TileMorph {
             own,
         ) - self.camera.truncate();
         let clip = self.view_proj * relative.extend(1.0);
-        (relative, vertex_level(&self.frame, clip).min(self.cap))
+        let table = &self.tables[table_of(x, y)];
+        (
+            relative,
+            vertex_level(&self.frame, table, clip).min(self.cap),
+        )
     }
 }
 
@@ -428,41 +388,6 @@ mod tests {
         }
     }
 
-    /// `Λ` inverts the linear blend of the errors: `E(Λ(r)) = r` inside the table's range, 0
-    /// above it, the finest level below it; continuous and non-increasing in `r`.
-    #[test]
-    fn the_level_inverts_the_linear_blend_of_the_errors() {
-        let table = LevelTable::new(&[16.0, 8.0, 4.0, 2.0, 1.0]);
-        let e = |l: f64| {
-            let k = (l.floor() as usize).min(3);
-            let t = l - k as f64;
-            (1.0 - t) * f64::from(table.errors[k]) + t * f64::from(table.errors[k + 1])
-        };
-        assert_eq!(table.level(20.0), 0.0);
-        assert_eq!(table.level(0.5), 4.0);
-        let mut last = f32::INFINITY;
-        for i in 1..400 {
-            let r = f64::from(i) * 0.04 + 1.0;
-            if r >= 16.0 {
-                break;
-            }
-            let l = table.level_f64(r);
-            assert!((e(l) - r).abs() < 1e-6 * r, "r = {r}: E(Λ) = {}", e(l));
-            let l32 = table.level(r as f32);
-            assert!(l32 <= last + 1e-6, "not monotone at {r}");
-            assert!((f64::from(l32) - l).abs() < 1e-4, "f32 {l32} vs f64 {l}");
-            last = l32;
-        }
-        // Equal errors are made strictly decreasing (no jump in Λ), and never below a finer
-        // level's.
-        let flat = LevelTable::new(&[4.0, 4.0, 1.0, 2.0]);
-        assert!(
-            flat.errors.windows(2).take(3).all(|p| p[0] > p[1]),
-            "{flat:?}"
-        );
-        assert!(flat.errors[2] >= 2.0, "{flat:?}");
-    }
-
     /// The frame's constants give `|J z|` from the clip position, as the lod.rs formula gives it
     /// from the view (random cameras and points in front of them).
     #[test]
@@ -486,7 +411,7 @@ mod tests {
             if -view.to_view(p).z < 1.0 {
                 continue;
             }
-            let m = frame_constants(&view, 1.0, &table);
+            let m = frame_constants(&view, 1.0);
             let clip = view.view_proj * p.as_vec3().extend(1.0);
             let d = clip.w;
             let g = (
@@ -500,8 +425,8 @@ mod tests {
                 "{s} vs {want} at {p:?}"
             );
             // And the vertex's level is Λ of tau over it.
-            let l = vertex_level(&m, clip);
-            let expected = table.level_f64(1.0 / want);
+            let l = vertex_level(&m, &table.coefficients(), clip);
+            let expected = table.level_f64(TAU_MARGIN / want);
             assert!((f64::from(l) - expected).abs() < 2e-3, "{l} vs {expected}");
         }
     }

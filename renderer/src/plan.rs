@@ -12,7 +12,6 @@ use memory::textures::{TextureRequest, TextureSlots, TextureStats, TextureUpload
 use memory::{Manager, Request, Stats};
 
 use crate::camera::{Camera, View};
-use crate::morph::LevelTable;
 use crate::stitch::{stitch_side, Side, Stitch};
 use crate::terrain::Terrain;
 use crate::{cull, lod};
@@ -187,20 +186,16 @@ pub fn wanted_levels(
     visible: &[usize],
     rule: LevelRule,
 ) -> Vec<Request> {
-    let table = matches!(rule, LevelRule::Morph(..)).then(|| LevelTable::for_terrain(terrain));
     let finest = terrain.levels - 1;
     visible
         .iter()
         .map(|&i| {
             let tile = &terrain.tiles[i];
-            let wanted = match (rule, &table) {
-                (LevelRule::Finest, _) => finest,
-                (LevelRule::Forced(l), _) => l.min(finest),
-                (LevelRule::Tau(tau, bound), _) => lod::level(view, camera, tile, tau, bound),
-                (LevelRule::Morph(tau, bound), Some(table)) => {
-                    lod::morph_level(view, camera, tile, tau, bound, table)
-                }
-                (LevelRule::Morph(..), None) => finest,
+            let wanted = match rule {
+                LevelRule::Finest => finest,
+                LevelRule::Forced(l) => l.min(finest),
+                LevelRule::Tau(tau, bound) => lod::level(view, camera, tile, tau, bound),
+                LevelRule::Morph(tau, bound) => lod::morph_level(view, camera, tile, tau, bound),
             };
             Request {
                 tile: i as u32,

@@ -8,6 +8,8 @@ use glam::DVec3;
 use tiles::format::{LevelEntry, TileHeader, TileSet};
 use tiles::mesh::TILE_CELLS;
 
+use crate::levels::LevelTable;
+
 /// Cells per side of each tile's coarse height map (for ground-following paths).
 const HEIGHT_CELLS: usize = 8;
 
@@ -27,6 +29,13 @@ pub struct TileInfo {
     /// Per texture mip, finest first: its BC1 blocks' place in the tile's texture blob
     /// (validated at open; empty when the set has no textures).
     texture_mips: Vec<std::ops::Range<usize>>,
+    /// The level tables geomorphing takes its vertices' levels from ([`crate::levels`]):
+    /// inside the tile (its own errors), on its N, E, S, W sides (the larger errors of it and
+    /// that neighbour), at its NW, NE, SW, SE corners (the largest of the tiles there).
+    pub tables: [LevelTable; 9],
+    /// The largest of the nine: the table the tile's drawn level comes from, so it covers every
+    /// vertex's level.
+    pub drawn_table: LevelTable,
 }
 
 pub struct Terrain {
@@ -42,10 +51,6 @@ pub struct Terrain {
     /// geomorphing gives a shared side vertex the same height from both tiles, so stitches
     /// need no slivers between two copies of it.
     pub shared_sides: bool,
-    /// Per level, coarsest first, the largest measured error over all tiles plus half the
-    /// level's morph unit: what a geomorphing vertex's level is taken from (one table for the
-    /// whole set, so a vertex shared by two tiles gets one level; see `crate::morph`).
-    pub level_errors: Vec<f32>,
     /// The texture tiles' layout (None: the set has none) and what they show
     /// (`tiles::texture::SOURCE_*`).
     pub texture: Option<tiles::texture::Layout>,
@@ -107,6 +112,13 @@ impl Terrain {
                         .collect(),
                     None => Vec::new(),
                 };
+                // Its levels' errors as the morph sees them: measured, plus half a morph unit
+                // (the stored offsets are rounded to whole units).
+                let errors: Vec<f32> = levels
+                    .iter()
+                    .map(|l| l.max_error.max(0.0) + 0.5 * l.morph_unit.max(0.0))
+                    .collect();
+                let own_table = LevelTable::new(&errors);
                 let q = tile.quantiser();
                 let mut heights = [f32::NEG_INFINITY; HEIGHT_CELLS * HEIGHT_CELLS];
                 for &p in &packed {
@@ -126,6 +138,8 @@ impl Terrain {
                     border_indices,
                     heights,
                     texture_mips,
+                    tables: [own_table; 9],
+                    drawn_table: own_table,
                 });
             }
         }
@@ -140,7 +154,6 @@ impl Terrain {
             spacing: (sx, sy),
             height_step: h.height_step,
             shared_sides: false,
-            level_errors: Vec::new(),
             texture,
             texture_source: h.texture_source,
         };
@@ -148,17 +161,49 @@ impl Terrain {
         // one without: the seams stay closed by slivers.
         terrain.shared_sides =
             h.flags & tiles::format::FLAG_SHARED_SIDES != 0 && terrain.sides_agree();
-        terrain.level_errors = (0..h.levels as usize)
-            .map(|k| {
-                terrain
-                    .tiles
-                    .iter()
-                    .filter_map(|t| t.levels.get(k))
-                    .map(|l| l.max_error.max(0.0) + 0.5 * l.morph_unit.max(0.0))
-                    .fold(0.0f32, f32::max)
+        terrain.share_tables();
+        Ok(terrain)
+    }
+
+    /// Gives every tile its side and corner level tables: the larger errors of the tiles that
+    /// hold the side or corner, the same table in each of them.
+    fn share_tables(&mut self) {
+        let own: Vec<LevelTable> = self.tiles.iter().map(|t| t.tables[0]).collect();
+        let at = |tx: i64, ty: i64| {
+            (tx >= 0 && ty >= 0)
+                .then(|| self.tile_index(tx as u32, ty as u32))
+                .flatten()
+                .map(|i| own[i])
+        };
+        let around = |t: &TileInfo, cells: &[(i64, i64)]| {
+            cells
+                .iter()
+                .filter_map(|&(dx, dy)| at(i64::from(t.tx) + dx, i64::from(t.ty) + dy))
+                .fold(own[self.tile_index(t.tx, t.ty).unwrap_or(0)], |a, b| {
+                    a.max(&b)
+                })
+        };
+        let tables: Vec<[LevelTable; 9]> = self
+            .tiles
+            .iter()
+            .map(|t| {
+                [
+                    own[self.tile_index(t.tx, t.ty).unwrap_or(0)],
+                    around(t, &[(0, -1)]),
+                    around(t, &[(1, 0)]),
+                    around(t, &[(0, 1)]),
+                    around(t, &[(-1, 0)]),
+                    around(t, &[(-1, -1), (0, -1), (-1, 0)]),
+                    around(t, &[(1, -1), (0, -1), (1, 0)]),
+                    around(t, &[(-1, 1), (0, 1), (-1, 0)]),
+                    around(t, &[(1, 1), (0, 1), (1, 0)]),
+                ]
             })
             .collect();
-        Ok(terrain)
+        for (t, tables) in self.tiles.iter_mut().zip(tables) {
+            t.drawn_table = tables[1..].iter().fold(tables[0], |a, b| a.max(b));
+            t.tables = tables;
+        }
     }
 
     /// Whether every two neighbouring tiles hold the same border vertices at every level, and

@@ -150,6 +150,7 @@ pub fn run(
         texture_bytes: app.texture_bytes,
         staging: app.staging,
         built_indices: app.built_indices,
+        prime_ms: None,
         error: None,
     };
     Ok((result, app.gpu.device_name.clone(), validation))

@@ -298,7 +298,7 @@ fn stitches_close_every_seam_at_every_level_pair() {
 #[test]
 fn shared_side_vertices_morph_to_one_height_from_both_tiles() {
     use renderer::camera::Camera;
-    use renderer::morph::{tile_vertices, LevelTable, TileMorph};
+    use renderer::morph::{tile_vertices, TileMorph};
     let (a, b) = (
         tempfile::tempdir().expect("tempdir"),
         tempfile::tempdir().expect("tempdir"),
@@ -315,7 +315,6 @@ fn shared_side_vertices_morph_to_one_height_from_both_tiles() {
     };
     for (terrain, name) in [(&shared, "shared"), (&alone, "independent")] {
         let finest = terrain.levels - 1;
-        let table = LevelTable::for_terrain(terrain);
         let (lo, hi) = terrain.bounds();
         let (mut compared, mut differing, mut morphed) = (0usize, 0usize, 0usize);
         for _trial in 0..6 {
@@ -331,8 +330,7 @@ fn shared_side_vertices_morph_to_one_height_from_both_tiles() {
                 fov_y: 1.0,
             };
             let tau = 0.5 + 4.0 * random();
-            let morph =
-                |i: usize| TileMorph::from_camera(terrain, &camera, (640, 480), tau, &table, i);
+            let morph = |i: usize| TileMorph::from_camera(terrain, &camera, (640, 480), tau, i);
             for (i, a) in terrain.tiles.iter().enumerate() {
                 let ta = terrain.set.tile(a.tx, a.ty).expect("tile");
                 let va = tile_vertices(&ta, finest, Some(&morph(i)));

@@ -26,16 +26,21 @@ layout(push_constant) uniform FrameConstants {
 // The frame's constants of the vertex level rule (renderer/src/morph.rs): a vertex whose
 // unmorphed position relative to the camera is at clip position c has |J z| =
 // |jacobian.xy * c.w + jacobian.zw * c.xy| / c.w^2 pixels per vertical metre, and level
-// l = sum_k clamp(a_k - r * b_k, 0, 1) for r = tau / |J z| (the finest behind `near`).
+// l = sum_k clamp(a_k - r * b_k, 0, 1) for r = tau / |J z| (the finest behind `near`), with
+// the coefficients of its level table.
 struct MorphFrame {
     vec4 jacobian;
     float tau;               // pixels
     float near;              // the near plane's depth (m)
     vec2 pad;
-    vec4 a_lo;               // a_k, levels 0..3
-    vec4 a_hi;               // levels 4..7
-    vec4 b_lo;               // b_k, levels 0..3
-    vec4 b_hi;               // levels 4..7
+};
+
+// The coefficients of one level table: a_k and b_k for levels 0..3 and 4..7.
+struct LevelCoefficients {
+    vec4 a_lo;
+    vec4 a_hi;
+    vec4 b_lo;
+    vec4 b_hi;
 };
 
 // One drawn tile (std430).
@@ -55,6 +60,10 @@ struct TileRecord {
     float texture_shift;     // samples the texture is moved by (0; a test's fault injection)
     uint pad0;
     uint pad1;
+    // The level tables of the tile's vertices: its own (interior), the N, E, S, W sides (the
+    // larger errors of the tile and that neighbour) and the NW, NE, SW, SE corners (of the
+    // tiles there), so that every tile holding a vertex gives it the same table.
+    LevelCoefficients tables[9];
 };
 
 layout(std430, set = 0, binding = 0) readonly buffer Pool { uint words[]; } pool;

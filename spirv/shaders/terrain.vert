@@ -15,8 +15,9 @@
 //
 // Geomorphing (renderer/src/morph.rs has the rule, its bound, and the CPU mirror of this
 // arithmetic): the vertex's continuous level l depends on its own unmorphed position and the
-// camera only, l = sum_k clamp(a_k - r b_k, 0, 1) with r = tau / |J z| at the vertex, so two
-// tiles holding a grid point give it one level. Its height blends the two nested levels
+// camera only, l = sum_k clamp(a_k - r b_k, 0, 1) with r = tau / |J z| at the vertex and the
+// level table of where it lies (its tile's inside, a side, a corner: the same table in every
+// tile holding it), so two tiles holding a grid point give it one level. Its height blends the two nested levels
 // around l, k = floor(l) and k + 1: H = own + (1 - t) o_k u_k + t o_(k+1) u_(k+1), from the
 // stored offsets o (one byte per coarser level) and the morph units u; from the vertex's own
 // block j on, t = 1 against a zero offset and the vertex is at its own height, bit for bit.
@@ -46,15 +47,24 @@ float pool_byte(uint byte) {
     return float(bitfieldExtract(int(pool.words[byte >> 2]), int((byte & 3u) * 8u), 8));
 }
 
-// l(v) for a vertex whose unmorphed position is at `clip`: the finest level behind the near
-// plane (r = 0).
-float vertex_level(vec4 clip) {
+// Which of the record's level tables a vertex at tile-local (x, y) takes: 0 inside, 1..4 on
+// the N, E, S, W sides, 5..8 at the NW, NE, SW, SE corners.
+uint table_of(uint x, uint y) {
+    uint column = x == 0u ? 0u : (x == 256u ? 2u : 1u);
+    uint row = y == 0u ? 0u : (y == 256u ? 2u : 1u);
+    const uint tables[9] = uint[](5u, 1u, 6u, 4u, 0u, 2u, 7u, 3u, 8u);
+    return tables[row * 3u + column];
+}
+
+// l(v) for a vertex whose unmorphed position is at `clip`, with level table `t` of record
+// `r`: the finest level behind the near plane (r = 0).
+float vertex_level(vec4 clip, uint r, uint t) {
     float d = clip.w;
     vec2 g = records.morph.jacobian.xy * d + records.morph.jacobian.zw * clip.xy;
-    float r = d < records.morph.near ? 0.0
+    float e = d < records.morph.near ? 0.0
         : records.morph.tau * d * d * inversesqrt(max(dot(g, g), 1e-30));
-    vec4 lo = clamp(records.morph.a_lo - r * records.morph.b_lo, 0.0, 1.0);
-    vec4 hi = clamp(records.morph.a_hi - r * records.morph.b_hi, 0.0, 1.0);
+    vec4 lo = clamp(records.tiles[r].tables[t].a_lo - e * records.tiles[r].tables[t].b_lo, 0.0, 1.0);
+    vec4 hi = clamp(records.tiles[r].tables[t].a_hi - e * records.tiles[r].tables[t].b_hi, 0.0, 1.0);
     return dot(lo + hi, vec4(1.0));
 }
 
@@ -74,7 +84,7 @@ void main() {
     height = own;
     if ((frame.flags & FLAG_GEOMORPH) != 0u) {
         vec4 clip = frame.view_proj * vec4(relative, 1.0);
-        l = min(vertex_level(clip), records.tiles[r].cap);
+        l = min(vertex_level(clip, r, table_of(x, y)), records.tiles[r].cap);
         // The vertex's block j: how many block starts it has passed.
         uvec4 passed = uvec4(greaterThanEqual(uvec4(local), records.tiles[r].starts_lo))
                      + uvec4(greaterThanEqual(uvec4(local), records.tiles[r].starts_hi));

@@ -1,0 +1,175 @@
+//! Level tables: the errors per level a geomorphing vertex takes its level from
+//! ([`crate::morph`], "The error of a blend, and `Λ`"), and the coefficients of `Λ`, the inverse
+//! of their linear blend, as the vertex shader evaluates it.
+//!
+//! A tile's own table is its levels' measured errors plus half a morph unit. A vertex on a side
+//! takes the larger errors of the two tiles there, a corner those of the tiles around it
+//! ([`crate::terrain::TileInfo::tables`]): every tile holding a vertex gives it one table, and a
+//! tile is drawn at the level its roughest table asks for. Errors are made to fall by at least
+//! [`MIN_RATIO`] a level: where the spacing rule left a level's error above the next coarser
+//! one's, the coarser is taken as worse than it is rather than `Λ` jumping across two levels at
+//! once (a jump in a vertex's level is a pop).
+//!
+//! ```
+//! use renderer::levels::LevelTable;
+//! let t = LevelTable::new(&[16.0, 8.0, 4.0, 2.0, 1.0]);
+//! assert_eq!(t.level(20.0), 0.0);
+//! assert!((t.level(6.0) - 1.5).abs() < 1e-5);
+//! assert_eq!(t.level(0.5), 4.0);
+//! ```
+
+use crate::interface::LevelCoefficients;
+
+/// Levels a tile has at most (the tile format's maximum).
+pub const MAX_LEVELS: usize = 9;
+
+/// The least ratio of a level's error to the next finer level's in a table.
+pub const MIN_RATIO: f32 = 1.25;
+
+/// Errors per level (`E_k`) and the coefficients of `Λ(r) = Σ_k clamp(a_k - r b_k, 0, 1)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LevelTable {
+    /// Coarsest first; falling by at least [`MIN_RATIO`] a level over the table's levels.
+    pub errors: [f32; MAX_LEVELS],
+    /// How many levels the table has.
+    pub levels: usize,
+    pub a: [f32; MAX_LEVELS - 1],
+    pub b: [f32; MAX_LEVELS - 1],
+}
+
+impl LevelTable {
+    /// The table for per-level errors `errors` (coarsest first, at most [`MAX_LEVELS`]): from
+    /// the finest up, each level's error is at least [`MIN_RATIO`] times the next finer one's
+    /// (never below its own), so the table falls strictly and `Λ` is continuous with a bounded
+    /// slope.
+    pub fn new(errors: &[f32]) -> LevelTable {
+        let n = errors.len().clamp(1, MAX_LEVELS);
+        let mut e = [0.0f32; MAX_LEVELS];
+        let mut below = 0.0f32;
+        for k in (0..n).rev() {
+            let own = match errors.get(k) {
+                Some(x) if x.is_finite() => x.max(0.0),
+                _ => f32::MAX / 4.0,
+            };
+            e[k] = if k == n - 1 {
+                own.max(1e-6)
+            } else {
+                own.max(below * MIN_RATIO)
+            };
+            below = e[k];
+        }
+        let (mut a, mut b) = ([0.0f32; MAX_LEVELS - 1], [0.0f32; MAX_LEVELS - 1]);
+        for k in 0..n - 1 {
+            b[k] = 1.0 / (e[k] - e[k + 1]);
+            a[k] = e[k] * b[k];
+        }
+        LevelTable {
+            errors: e,
+            levels: n,
+            a,
+            b,
+        }
+    }
+
+    /// The table of the larger error at every level of `self` and `other`.
+    pub fn max(&self, other: &LevelTable) -> LevelTable {
+        let n = self.levels.max(other.levels);
+        let errors: Vec<f32> = (0..n)
+            .map(|k| self.errors[k].max(other.errors[k]))
+            .collect();
+        LevelTable::new(&errors)
+    }
+
+    /// `Λ(r)`, in f32 as the vertex shader evaluates it.
+    pub fn level(&self, r: f32) -> f32 {
+        self.a
+            .iter()
+            .zip(&self.b)
+            .map(|(&a, &b)| (a - r * b).clamp(0.0, 1.0))
+            .sum()
+    }
+
+    /// `Λ(r)` in f64, for the CPU's own decisions (not the shader's mirror).
+    pub fn level_f64(&self, r: f64) -> f64 {
+        self.a
+            .iter()
+            .zip(&self.b)
+            .map(|(&a, &b)| (f64::from(a) - r * f64::from(b)).clamp(0.0, 1.0))
+            .sum()
+    }
+
+    /// The coefficients as the shader reads them.
+    pub fn coefficients(&self) -> LevelCoefficients {
+        LevelCoefficients {
+            a_lo: std::array::from_fn(|k| self.a[k]),
+            a_hi: std::array::from_fn(|k| self.a[k + 4]),
+            b_lo: std::array::from_fn(|k| self.b[k]),
+            b_hi: std::array::from_fn(|k| self.b[k + 4]),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `Λ` inverts the linear blend of the errors: `E(Λ(r)) = r` inside the table's range, 0
+    /// above it, the finest level below it; continuous and non-increasing in `r`.
+    #[test]
+    fn the_level_inverts_the_linear_blend_of_the_errors() {
+        let table = LevelTable::new(&[16.0, 8.0, 4.0, 2.0, 1.0]);
+        let e = |l: f64| {
+            let k = (l.floor() as usize).min(3);
+            let t = l - k as f64;
+            (1.0 - t) * f64::from(table.errors[k]) + t * f64::from(table.errors[k + 1])
+        };
+        assert_eq!(table.level(20.0), 0.0);
+        assert_eq!(table.level(0.5), 4.0);
+        let mut last = f32::INFINITY;
+        for i in 1..400 {
+            let r = f64::from(i) * 0.04 + 1.0;
+            if r >= 16.0 {
+                break;
+            }
+            let l = table.level_f64(r);
+            assert!((e(l) - r).abs() < 1e-6 * r, "r = {r}: E(Λ) = {}", e(l));
+            let l32 = table.level(r as f32);
+            assert!(l32 <= last + 1e-6, "not monotone at {r}");
+            assert!((f64::from(l32) - l).abs() < 1e-4, "f32 {l32} vs f64 {l}");
+            last = l32;
+        }
+    }
+
+    /// A level whose error the spacing rule left above the next coarser one's is not allowed to
+    /// make `Λ` jump: the table falls by the least ratio everywhere, never below a level's own
+    /// error; the larger of two tables is above both.
+    #[test]
+    fn tables_fall_by_the_least_ratio_and_never_understate_an_error() {
+        let raw = [256.0, 128.0, 143.25, 112.0, 16.0, 8.0];
+        let t = LevelTable::new(&raw);
+        for (k, (&e, &r)) in t.errors.iter().zip(&raw).enumerate() {
+            assert!(e >= r, "{k}: {t:?}");
+        }
+        for k in 0..raw.len() - 1 {
+            assert!(
+                t.errors[k] >= MIN_RATIO * t.errors[k + 1] * 0.9999,
+                "{k}: {t:?}"
+            );
+        }
+        let other = LevelTable::new(&[100.0, 90.0, 30.0, 20.0, 30.0, 2.0]);
+        let m = t.max(&other);
+        for ((&e, &a), &b) in m.errors.iter().zip(&t.errors).zip(&other.errors) {
+            assert!(e >= a && e >= b, "{m:?}");
+        }
+        // Larger errors never ask for a coarser level.
+        for i in 1..200 {
+            let r = f64::from(i) * 2.0;
+            assert!(
+                m.level_f64(r) >= t.level_f64(r) - 1e-6,
+                "{r}: {} < {}\n{m:?}\n{t:?}",
+                m.level_f64(r),
+                t.level_f64(r)
+            );
+        }
+    }
+}
