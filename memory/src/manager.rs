@@ -409,6 +409,12 @@ impl Manager {
         self.resident[tile as usize].map(|r| (self.chunks[r.chunk].offset, r.layout))
     }
 
+    /// Pool offset of the index array `tile` is drawn with: the index region's start, or where a
+    /// spare that became the drawn array lies.
+    pub fn drawn_index_offset(&self, tile: TileId) -> Option<u64> {
+        self.resident[tile as usize].map(|r| self.chunks[r.chunk].offset + r.index_at)
+    }
+
     /// Pool offset and chunk size of the chunk `tile` owns.
     pub fn chunk_of(&self, tile: TileId) -> Option<(u64, u64)> {
         self.resident[tile as usize].map(|r| {

@@ -63,9 +63,11 @@ fn check_pool(gpu: &Gpu, renderer: &Renderer, terrain: &Terrain) -> (usize, u64,
             expect(offset + layout.morph + cost.morph_before(j), Part::Morph(j));
         }
         let level = index.expect("index array");
+        // Where the drawn array is: the index region's start, or a promoted spare's place.
+        let index_at = m.drawn_index_offset(t as u32).expect("resident");
         if renderer.builds_indices() {
             let want = terrain.part(t, Part::Indices(level)).expect("part");
-            let at = (offset + layout.index) as usize;
+            let at = index_at as usize;
             let width = cost.levels[level as usize].index_width;
             assert_eq!(
                 common::fans(&pool[at..at + want.len()], width),
@@ -74,7 +76,7 @@ fn check_pool(gpu: &Gpu, renderer: &Renderer, terrain: &Terrain) -> (usize, u64,
             );
             bytes += want.len() as u64;
         } else {
-            expect(offset + layout.index, Part::Indices(level));
+            expect(index_at, Part::Indices(level));
         }
         tiles += 1;
         // Negative control: another resident tile's chunk does not hold this tile's data.
