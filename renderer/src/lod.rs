@@ -211,7 +211,6 @@ pub fn level_for(tile: &TileInfo, r: f64) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::camera::Camera;
     use crate::test_rng::Rng;
 
     /// Random cameras and boxes in front of them: `|J z|` at every on-screen point of a dense
@@ -223,12 +222,7 @@ mod tests {
         let (mut worst_bound, mut worst_sampled) = (0.0f64, 0.0f64);
         let mut on_screen = 0u64;
         for _ in 0..400 {
-            let camera = Camera {
-                position: DVec3::ZERO,
-                yaw: rng.range(-3.0, 3.0),
-                pitch: rng.range(-1.4, 0.6),
-                fov_y: rng.range(0.3, 1.6),
-            };
+            let camera = rng.camera();
             let view = camera.view(640, 480);
             let centre = camera.forward() * rng.range(5.0, 3000.0)
                 + DVec3::new(

@@ -336,7 +336,6 @@ pub fn tile_heights(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::camera::Camera;
     use crate::test_rng::Rng;
     use glam::DVec3;
 
@@ -395,12 +394,7 @@ mod tests {
         let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
         let table = LevelTable::new(&[16.0, 8.0, 4.0, 2.0, 1.0]);
         for _ in 0..500 {
-            let camera = Camera {
-                position: DVec3::ZERO,
-                yaw: rng.range(-3.0, 3.0),
-                pitch: rng.range(-1.4, 0.6),
-                fov_y: rng.range(0.3, 1.6),
-            };
+            let camera = rng.camera();
             let view = camera.view(640, 480);
             let p = camera.forward() * rng.range(2.0, 3000.0)
                 + DVec3::new(

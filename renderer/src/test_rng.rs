@@ -15,4 +15,15 @@ impl Rng {
     pub fn range(&mut self, a: f64, b: f64) -> f64 {
         a + (b - a) * self.next()
     }
+
+    /// A camera at the origin looking anywhere: yaw in (-3, 3), pitch in (-1.4, 0.6) and a
+    /// vertical field of view in (0.3, 1.6) radians.
+    pub fn camera(&mut self) -> crate::camera::Camera {
+        crate::camera::Camera {
+            position: glam::DVec3::ZERO,
+            yaw: self.range(-3.0, 3.0),
+            pitch: self.range(-1.4, 0.6),
+            fov_y: self.range(0.3, 1.6),
+        }
+    }
 }
