@@ -847,9 +847,10 @@ impl Renderer {
         let slot = &mut self.slots[s];
         let stitch_ranges = write_stitches(&mut slot.stitch, &plan.stitches)?;
         let textured = self.texture_slots.is_some();
-        let constants = frame_constants(terrain, input.camera, &plan.view, settings, textured);
-        let morph = matches!(settings.rule(), LevelRule::Morph(..))
-            .then(|| morph::frame_constants(&plan.view, settings.tau));
+        let (constants, morph) =
+            pass_constants(terrain, input.camera, &plan.view, settings, textured);
+        // The meter and the read-back need each draw's morph inputs; nothing else does.
+        let describe = self.meter.is_some() || self.options.read_back_heights;
         let drawn = write_records(
             &mut slot.records,
             terrain,
@@ -857,6 +858,7 @@ impl Renderer {
             (&plan, &textures),
             morph.as_ref().map(|m| (m, &constants)),
             self.fault,
+            describe,
         )?;
         let set = self
             .sets
@@ -1212,9 +1214,8 @@ impl Renderer {
                 "static tile records",
             )?);
             let textured = self.texture_slots.is_some();
-            let constants = frame_constants(terrain, camera, &plan.view, settings, textured);
-            let morph = matches!(settings.rule(), LevelRule::Morph(..))
-                .then(|| morph::frame_constants(&plan.view, settings.tau));
+            let (constants, morph) =
+                pass_constants(terrain, camera, &plan.view, settings, textured);
             write_records(
                 records,
                 terrain,
@@ -1222,6 +1223,7 @@ impl Renderer {
                 (&plan, &textures),
                 morph.as_ref().map(|m| (m, &constants)),
                 None,
+                false,
             )?;
             let heights = frame.heights.insert(Buffer::new(
                 gpu,
@@ -1504,8 +1506,23 @@ fn write_stitches(
 /// in the read-back buffer, and how it morphs (None: discrete).
 pub type DrawnTile = (usize, u32, usize, Option<TileMorph>);
 
+/// The frame's push constants, and its morph constants when it morphs.
+fn pass_constants(
+    terrain: &Terrain,
+    camera: &Camera,
+    view: &crate::camera::View,
+    settings: &Settings,
+    textured: bool,
+) -> (FrameConstants, Option<MorphFrame>) {
+    let constants = frame_constants(terrain, camera, view, settings, textured);
+    let morph = matches!(settings.rule(), LevelRule::Morph(..))
+        .then(|| morph::frame_constants(view, settings.tau));
+    (constants, morph)
+}
+
 /// Writes the frame's morph constants and tile records, one per draw in order (a draw's record
-/// is its index); returns each draw as written.
+/// is its index); returns each draw as written, with how it morphs only when `describe` (for
+/// the error meter and the read-back).
 fn write_records(
     buffer: &mut Buffer,
     terrain: &Terrain,
@@ -1513,6 +1530,7 @@ fn write_records(
     (plan, textures): (&Plan, &TexturePlan),
     morph: Option<(&MorphFrame, &FrameConstants)>,
     fault: Option<Fault>,
+    describe: bool,
 ) -> Result<Vec<DrawnTile>, FrameError> {
     if plan.draws.len() > MAX_RECORDS {
         return Err(FrameError::Internal(format!(
@@ -1562,7 +1580,7 @@ fn write_records(
             if morph.is_some() {
                 r.tables = info.tables.map(|t| t.coefficients());
             }
-            let tile_morph = morph.map(|(frame, c)| TileMorph {
+            let tile_morph = morph.filter(|_| describe).map(|(frame, c)| TileMorph {
                 view_proj: glam::Mat4::from_cols_array(&c.view_proj),
                 camera: glam::Vec4::from_array(c.camera),
                 spacing_y: c.spacing_y,
