@@ -152,8 +152,16 @@ pub(crate) mod tests {
             assert!(l.index >= l.morph + t.morph_before(c + 1));
             assert_eq!(l.index % 4, 0);
             assert_eq!(l.bytes, l.index + t.levels[c as usize].indices);
-            assert!(t.need(c) < t.need(c + 1).max(t.need(c) + 1));
         }
+        // Each level's chunk holds the coarser level's and the next block besides.
+        for c in 0..4 {
+            assert!(
+                t.need(c + 1) >= t.need(c) + t.block_bytes(c + 1),
+                "level {c}"
+            );
+        }
+        // Capacity stops at the finest level.
+        assert_eq!(t.need(5), t.need(4));
         assert_eq!(t.capacity_in(t.need(3)), Some(3));
         assert_eq!(t.capacity_in(t.need(3) - 1), Some(2));
         assert_eq!(t.capacity_in(0), None);
