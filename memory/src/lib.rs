@@ -7,7 +7,8 @@
 //! tiles (front to back, with the level LOD wants for each) to [`Manager::plan_frame`] and gets
 //! back the level to draw for each, where its data sits in the pool, the uploads and in-pool
 //! moves to record, and the frame's counters. Chunks a frame still in flight may read are
-//! never reused before that frame completes (the caller says which frames have).
+//! never reused before that frame completes (the caller says which frames have). At start,
+//! [`budget`] splits the GPU budget between texture slots, the GPU index builder and the pool.
 //!
 //! # Chunk layout
 //!
@@ -57,6 +58,7 @@
 //! assert_eq!((plan.stats.hits, plan.uploads.len()), (1, 0));
 //! ```
 
+pub mod budget;
 pub mod classes;
 pub mod cost;
 mod lru;

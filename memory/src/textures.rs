@@ -258,11 +258,11 @@ impl TextureSlots {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     /// A 544-texel layer's chain (BC1), as tiletool lays out a 512-texel interior.
-    fn config(slots: usize) -> TextureConfig {
+    pub fn config(slots: usize) -> TextureConfig {
         let mip_texels: Vec<u32> = (0..8).map(|m| 544u32 >> m).collect();
         let mip_bytes = mip_texels
             .iter()
