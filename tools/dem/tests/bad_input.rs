@@ -286,22 +286,6 @@ fn garbage_with_a_known_extension() {
     }
 }
 
-/// A tiny xorshift: deterministic damage without a rand dependency.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n as u64) as usize
-    }
-}
-
 /// Randomly damaged copies of small valid files: reading may fail, but must not panic, hang or
 /// return NaN heights.
 #[test]
@@ -341,7 +325,7 @@ fn damaged_files_never_panic() {
     let mut originals: Vec<(&str, Vec<u8>)> = vec![("d.png", png), ("d.jpg", jpg)];
     originals.extend(tiffs.into_iter().map(|t| ("d.tif", t)));
 
-    let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
+    let mut rng = splitmix::Rng(0x9E37_79B9_7F4A_7C15);
     let mut outcomes = (0, 0);
     for (name, original) in &originals {
         for _ in 0..150 {
@@ -350,7 +334,7 @@ fn damaged_files_never_panic() {
                 0 => {
                     for _ in 0..1 + rng.below(4) {
                         let i = rng.below(bytes.len());
-                        bytes[i] = rng.next() as u8;
+                        bytes[i] = rng.next_u64() as u8;
                     }
                 }
                 1 => bytes.truncate(rng.below(bytes.len())),
