@@ -214,23 +214,12 @@ fn cold_start(vkterrain: &Path, set: &Path, dir: &Path) -> Result<()> {
             let mut args = vec!["--tau", "1", "--log", log.to_str().context("utf-8")?];
             args.extend(extra);
             let s = flight(vkterrain, set, "flyover", FRAMES, &args)?;
-            let csv = std::fs::read_to_string(&log)?;
-            let header: Vec<&str> = csv.lines().next().unwrap_or("").split(',').collect();
+            let frames = frametimes::log::read(&log)?;
             let col = |name: &str| -> Result<Vec<f64>> {
-                let i = header
-                    .iter()
-                    .position(|c| *c == name)
-                    .with_context(|| format!("{}: no column {name}", log.display()))?;
-                Ok(csv
-                    .lines()
-                    .skip(1)
-                    .map(|l| {
-                        l.split(',')
-                            .nth(i)
-                            .and_then(|v| v.parse().ok())
-                            .unwrap_or(f64::NAN)
-                    })
-                    .collect())
+                frames
+                    .column(name)
+                    .map(<[f64]>::to_vec)
+                    .with_context(|| format!("{}: no column {name}", log.display()))
             };
             let ms = col("frame_ms")?;
             let median = s["frame_ms_median"].as_f64().unwrap_or(f64::NAN);

@@ -17,6 +17,8 @@ use std::panic::AssertUnwindSafe;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+use splitmix::Rng;
+
 /// An input taking longer than this is reported as a hang.
 pub const SLOW: Duration = Duration::from_secs(10);
 
@@ -175,27 +177,6 @@ fn run_path(p: &Path) {
 fn run_log(p: &Path) {
     if let Ok(log) = frametimes::log::read(p) {
         let _ = frametimes::compare::compare(&log, &log);
-    }
-}
-
-/// SplitMix64, as everywhere in the project: the same sequence on every machine.
-pub struct Rng(pub u64);
-
-impl Rng {
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    pub fn below(&mut self, n: usize) -> usize {
-        if n == 0 {
-            0
-        } else {
-            (self.next_u64() % n as u64) as usize
-        }
     }
 }
 

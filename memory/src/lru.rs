@@ -97,15 +97,12 @@ mod tests {
         let (classes, chunks) = (3, 20);
         let mut lists = LruLists::new(classes, chunks);
         let mut model: Vec<Vec<usize>> = vec![Vec::new(); classes];
-        let mut rng = 0x9e37_79b9_7f4a_7c15u64;
+        let mut rng = splitmix::Rng(0x9e37_79b9_7f4a_7c15);
         for _ in 0..5000 {
-            rng ^= rng << 13;
-            rng ^= rng >> 7;
-            rng ^= rng << 17;
-            let chunk = (rng % chunks as u64) as usize;
+            let chunk = rng.below(chunks);
             let class = chunk % classes;
             let listed = model[class].contains(&chunk);
-            match (rng >> 32) % 3 {
+            match rng.below(3) {
                 0 if !listed => {
                     lists.push_back(class, chunk);
                     model[class].push(chunk);

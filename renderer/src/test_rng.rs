@@ -1,19 +1,18 @@
-//! A small deterministic generator for the unit tests' random cameras and boxes (xorshift64).
+//! The unit tests' random cameras and boxes, drawn from the project's one generator
+//! ([`splitmix::Rng`]) under the names these tests use: `Rng(seed)`, `next()` in [0, 1),
+//! `range` and `camera`.
 
 pub struct Rng(pub u64);
 
 impl Rng {
     /// Uniform in [0, 1).
     pub fn next(&mut self) -> f64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+        self.draw(splitmix::Rng::unit)
     }
 
     /// Uniform in [a, b).
     pub fn range(&mut self, a: f64, b: f64) -> f64 {
-        a + (b - a) * self.next()
+        self.draw(|rng| rng.range(a, b))
     }
 
     /// A camera at the origin looking anywhere: yaw in (-3, 3), pitch in (-1.4, 0.6) and a
@@ -25,5 +24,13 @@ impl Rng {
             pitch: self.range(-1.4, 0.6),
             fov_y: self.range(0.3, 1.6),
         }
+    }
+
+    /// One draw of the shared generator from this state (the state is one `u64` in both).
+    fn draw<T>(&mut self, f: impl FnOnce(&mut splitmix::Rng) -> T) -> T {
+        let mut rng = splitmix::Rng(self.0);
+        let value = f(&mut rng);
+        self.0 = rng.0;
+        value
     }
 }

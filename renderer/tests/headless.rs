@@ -142,23 +142,7 @@ fn compare_with_silhouettes(
     let brute = flight(set, &b, path, frames, &brute_args);
     // Tiles the budget kept coarser than LOD wanted void tau's promise for that frame; the
     // silhouette is checked on the others (and there must be some).
-    let csv = std::fs::read_to_string(a.join("frames.csv")).expect("log");
-    let header: Vec<&str> = csv.lines().next().expect("header").split(',').collect();
-    let col = header
-        .iter()
-        .position(|c| *c == "tiles_coarser")
-        .expect("column");
-    let coarser: Vec<u64> = csv
-        .lines()
-        .skip(1)
-        .map(|l| {
-            l.split(',')
-                .nth(col)
-                .expect("cell")
-                .parse()
-                .expect("number")
-        })
-        .collect();
+    let coarser = common::log_column(&a.join("frames.csv"), "tiles_coarser");
     let mut terrain_seen = false;
     let mut silhouettes = 0usize;
     for (k, (l, b)) in lod.iter().zip(&brute).enumerate() {
@@ -177,10 +161,10 @@ fn compare_with_silhouettes(
             .max()
             .unwrap_or(0);
         assert!(
-            f64::from(worst) <= tau + 1.0 || coarser[k] > 0,
+            f64::from(worst) <= tau + 1.0 || coarser[k] > 0.0,
             "{path} frame {k}: silhouette off by {worst} px (tau {tau})"
         );
-        silhouettes += usize::from(coarser[k] == 0);
+        silhouettes += usize::from(coarser[k] == 0.0);
         terrain_seen |= hl.iter().any(Option::is_some);
     }
     assert!(terrain_seen, "{path}: no frame showed terrain");
@@ -371,8 +355,8 @@ fn upload_schemes_draw_the_same_frames() {
             8,
             &["--upload-scheme", scheme, "--upload-budget-mb", "1000"],
         );
-        let csv = std::fs::read_to_string(out.join("frames.csv")).expect("log");
-        runs.push((scheme, shots, triangles(&csv)));
+        let triangles = common::log_column(&out.join("frames.csv"), "triangles");
+        runs.push((scheme, shots, triangles));
     }
     let (_, shots, tris) = &runs[0];
     for (scheme, other, other_tris) in &runs[1..] {
@@ -397,27 +381,11 @@ fn upload_schemes_draw_the_same_frames() {
         s(&log),
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let csv = std::fs::read_to_string(&log).expect("log");
-    assert_eq!(&triangles(&csv), tris, "draw-only triangles per frame");
-}
-
-/// The `triangles` column of a frame log.
-fn triangles(csv: &str) -> Vec<u64> {
-    let mut lines = csv.lines();
-    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
-    let col = header
-        .iter()
-        .position(|c| *c == "triangles")
-        .expect("triangles column");
-    lines
-        .map(|l| {
-            l.split(',')
-                .nth(col)
-                .expect("cell")
-                .parse()
-                .expect("number")
-        })
-        .collect()
+    assert_eq!(
+        &common::log_column(&log, "triangles"),
+        tris,
+        "draw-only triangles per frame"
+    );
 }
 
 /// Runs a flight with `--measure-error` against `source`; returns every frame's error in
@@ -450,22 +418,7 @@ fn measured(
     args.extend(extra);
     let o = vkterrain(&args);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let csv = std::fs::read_to_string(&log).expect("log");
-    let mut lines = csv.lines();
-    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
-    let col = header
-        .iter()
-        .position(|c| *c == "max_error_px")
-        .expect("max_error_px column");
-    lines
-        .map(|l| {
-            l.split(',')
-                .nth(col)
-                .expect("cell")
-                .parse()
-                .expect("measured")
-        })
-        .collect()
+    common::log_column(&log, "max_error_px")
 }
 
 /// The error actually delivered, measured against the source DEM on every frame, stays within
@@ -964,8 +917,10 @@ fn both_morph_shaders_draw_the_same_terrain() {
         ];
         args.extend(extra);
         let shots = flight(&set, &out, "orbit", 3, &args);
-        let csv = std::fs::read_to_string(out.join("frames.csv")).expect("log");
-        (shots, triangles(&csv))
+        (
+            shots,
+            common::log_column(&out.join("frames.csv"), "triangles"),
+        )
     };
     let (fd, fd_tris) = run("fd", &[]);
     let (br, br_tris) = run("all-rows", &["--morph-shader", "forward-differences"]);
@@ -1140,12 +1095,7 @@ fn predictions_never_read_the_path_ahead() {
             s(&log),
         ]);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let times: Vec<f64> = std::fs::read_to_string(&log)
-            .expect("log")
-            .lines()
-            .skip(1)
-            .map(|l| l.split(',').nth(1).unwrap().parse().unwrap())
-            .collect();
+        let times = common::log_column(&log, "time_s");
         std::fs::read_to_string(&trace)
             .expect("trace")
             .lines()

@@ -14,24 +14,9 @@ fn summary(out: &Path) -> serde_json::Value {
     serde_json::from_str(&text).expect("summary is JSON")
 }
 
-/// The log's rows as column name -> values.
+/// Column `name` of the run's frame log.
 fn column(out: &Path, name: &str) -> Vec<f64> {
-    let csv = std::fs::read_to_string(out.join("frames.csv")).expect("log");
-    let mut lines = csv.lines();
-    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
-    let k = header
-        .iter()
-        .position(|&h| h == name)
-        .unwrap_or_else(|| panic!("no column {name}"));
-    lines
-        .map(|l| {
-            l.split(',')
-                .nth(k)
-                .expect("cell")
-                .parse()
-                .unwrap_or(f64::NAN)
-        })
-        .collect()
+    common::log_column(&out.join("frames.csv"), name)
 }
 
 #[test]

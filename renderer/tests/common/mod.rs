@@ -204,6 +204,21 @@ pub fn flight_with_fault(
         .collect()
 }
 
+/// Column `name` of the frame log at `path`, one value per frame, read by the reader
+/// `frametimes` uses. Panics when the log does not read, the reader dropped a row, the column
+/// is missing, or a cell is empty (every column a test reads is written on every frame).
+pub fn log_column(path: &Path, name: &str) -> Vec<f64> {
+    let log = frametimes::log::read(path).unwrap_or_else(|e| panic!("{e}"));
+    assert!(log.notes.is_empty(), "{}: {:?}", path.display(), log.notes);
+    let values = log
+        .column(name)
+        .unwrap_or_else(|| panic!("{}: no column {name}", path.display()));
+    if let Some(k) = values.iter().position(|v| v.is_nan()) {
+        panic!("{}: frame {k} has no {name}", path.display());
+    }
+    values.to_vec()
+}
+
 pub fn is_sky(p: &image::Rgba<u8>) -> bool {
     p.0[0] == SKY[0] && p.0[1] == SKY[1] && p.0[2] == SKY[2]
 }

@@ -1,7 +1,7 @@
 //! What the user can tell the reader that a file does not say: how RGB pixels encode heights,
 //! the size of a raw file, the spacing, a vertical scale, and a window to keep. Parsers for the
 //! command-line spellings (`terrain-rgb`, `0,0,1025x1025`, `1025x1025`) live here too so that
-//! `tiletool` and the tests agree on them.
+//! `tiletool`, `vkterrain` and the tests agree on them.
 
 use std::fmt;
 use std::str::FromStr;
@@ -87,8 +87,8 @@ impl FromStr for Crop {
             .trim()
             .parse()
             .map_err(|_| bad("Y is not a whole number"))?;
-        let (width, height) = parse_dimensions(size.trim())
-            .ok_or_else(|| bad("expected X,Y,WxH (e.g. 0,0,1025x1025)"))?;
+        let (width, height) =
+            parse_size(size).map_err(|_| bad("expected X,Y,WxH (e.g. 0,0,1025x1025)"))?;
         if width == 0 || height == 0 {
             return Err(bad("the window must be at least 1x1"));
         }
@@ -107,21 +107,18 @@ impl fmt::Display for Crop {
     }
 }
 
-/// Parses a `--size` value, `WxH` (e.g. `1025x1025`), for [`ReadOptions::size`].
-pub fn parse_size(s: &str) -> Result<(usize, usize), DemError> {
-    match parse_dimensions(s.trim()) {
-        Some((w, h)) if w > 0 && h > 0 => Ok((w, h)),
-        _ => Err(DemError::BadArgument {
-            arg: "--size",
-            value: s.to_string(),
-            problem: "expected WxH with W and H at least 1 (e.g. 1025x1025)".to_string(),
-        }),
-    }
-}
-
-fn parse_dimensions(s: &str) -> Option<(usize, usize)> {
-    let (w, h) = s.split_once(['x', 'X'])?;
-    Some((w.trim().parse().ok()?, h.trim().parse().ok()?))
+/// Parses a `WxH` size (e.g. `1025x1025`, `X` also, spaces around each side allowed) into
+/// whole numbers of the caller's type: `tiletool --size` (`usize`, for [`ReadOptions::size`])
+/// and `vkterrain --size` (`u32` pixels) share the spelling. The error is the message a clap
+/// value parser shows after the value. Which sizes make sense is the caller's rule:
+/// [`ReadOptions`] refuses a zero side when it is used, `vkterrain` its own pixel range.
+pub fn parse_size<T: FromStr>(s: &str) -> Result<(T, T), &'static str> {
+    const EXPECTED: &str = "expected WxH";
+    let (w, h) = s.split_once(['x', 'X']).ok_or(EXPECTED)?;
+    Ok((
+        w.trim().parse().map_err(|_| EXPECTED)?,
+        h.trim().parse().map_err(|_| EXPECTED)?,
+    ))
 }
 
 /// Everything [`crate::read`] needs besides the files. `Default` means: no encoding, no size,
@@ -234,9 +231,16 @@ mod tests {
             Encoding::Terrarium
         );
         assert!("rgb".parse::<Encoding>().is_err());
-        assert_eq!(parse_size("1025x513").unwrap(), (1025, 513));
-        assert!(parse_size("1025").is_err());
-        assert!(parse_size("0x5").is_err());
+        assert_eq!(parse_size::<usize>("1025x513"), Ok((1025, 513)));
+        assert_eq!(parse_size::<u32>(" 64 X 48 "), Ok((64, 48)));
+        assert_eq!(parse_size::<usize>("1025"), Err("expected WxH"));
+        assert_eq!(parse_size::<u32>("-1x5"), Err("expected WxH"));
+        // A zero side parses; the options refuse it when they are used.
+        let zero = ReadOptions {
+            size: Some(parse_size("0x5").unwrap()),
+            ..ReadOptions::default()
+        };
+        assert!(zero.validate().is_err());
     }
 
     #[test]

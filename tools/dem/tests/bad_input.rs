@@ -7,22 +7,9 @@ mod common;
 use std::io::Cursor;
 use std::path::PathBuf;
 
-use common::{data, patch_png_size, read_err, temp_dir, write, Samples, TiffSpec};
+use common::{data, hgt3, patch_png_size, read_err, spacing, temp_dir, write, Samples, TiffSpec};
 use dem::{Encoding, ReadOptions};
 use image::{GrayImage, ImageFormat, Luma};
-
-fn spacing(s: f64) -> ReadOptions {
-    ReadOptions {
-        spacing: Some(s),
-        ..ReadOptions::default()
-    }
-}
-
-fn hgt3(value: i16) -> Vec<u8> {
-    std::iter::repeat_n(value.to_be_bytes(), 1201 * 1201)
-        .flatten()
-        .collect()
-}
 
 #[test]
 fn no_input() {
@@ -120,7 +107,7 @@ fn wrong_size_for_raw_files() {
 #[test]
 fn mismatched_mosaics() {
     let dir = temp_dir();
-    let a = write(dir.path(), "N41E001.hgt", &hgt3(1));
+    let a = write(dir.path(), "N41E001.hgt", &hgt3(1, |_, _| false));
     let b = write(dir.path(), "N42E001.hgt", &vec![0u8; 3601 * 3601 * 2]);
     let e = read_err(&[a.clone(), b], &ReadOptions::default());
     assert!(
@@ -130,18 +117,22 @@ fn mismatched_mosaics() {
     assert!(e.contains("N41E001.hgt is 1201² (3\")"), "{e}");
 
     // A gap: N41E001 and N41E003 without N41E002.
-    let c = write(dir.path(), "N41E003.hgt", &hgt3(3));
+    let c = write(dir.path(), "N41E003.hgt", &hgt3(3, |_, _| false));
     let e = read_err(&[a.clone(), c.clone()], &ReadOptions::default());
     assert!(e.contains("mismatched mosaic: the 2 tiles do not fill the rectangle N41E001..N41E003: N41E002 is missing"), "{e}");
     // An L shape is not a rectangle either.
-    let d = write(dir.path(), "N42E003.hgt", &hgt3(4));
-    let f = write(dir.path(), "N41E002.hgt", &hgt3(5));
+    let d = write(dir.path(), "N42E003.hgt", &hgt3(4, |_, _| false));
+    let f = write(dir.path(), "N41E002.hgt", &hgt3(5, |_, _| false));
     let e = read_err(&[a.clone(), f, c, d], &ReadOptions::default());
     assert!(e.contains("N42E001 is missing"), "{e}");
 
     // The same cell twice, from two folders.
     std::fs::create_dir(dir.path().join("other")).unwrap();
-    let dup = write(&dir.path().join("other"), "n41e001.HGT", &hgt3(1));
+    let dup = write(
+        &dir.path().join("other"),
+        "n41e001.HGT",
+        &hgt3(1, |_, _| false),
+    );
     let e = read_err(&[a.clone(), dup], &ReadOptions::default());
     assert!(
         e.contains("n41e001.HGT: mismatched mosaic: cell N41E001 is given twice"),
@@ -149,7 +140,7 @@ fn mismatched_mosaics() {
     );
 
     // A tile without a usable name, and a non-SRTM file.
-    let unnamed = write(dir.path(), "tile.hgt", &hgt3(1));
+    let unnamed = write(dir.path(), "tile.hgt", &hgt3(1, |_, _| false));
     let e = read_err(&[a.clone(), unnamed], &ReadOptions::default());
     assert!(
         e.contains("tile.hgt: mismatched mosaic: its name does not say where it lies"),
@@ -166,7 +157,7 @@ fn mismatched_mosaics() {
 #[test]
 fn all_void() {
     let dir = temp_dir();
-    let p = write(dir.path(), "S12W077.hgt", &hgt3(-32768));
+    let p = write(dir.path(), "S12W077.hgt", &hgt3(-32768, |_, _| false));
     let e = read_err(std::slice::from_ref(&p), &ReadOptions::default());
     assert!(
         e.ends_with("S12W077.hgt: no valid samples: every sample is void"),
@@ -286,22 +277,6 @@ fn garbage_with_a_known_extension() {
     }
 }
 
-/// A tiny xorshift: deterministic damage without a rand dependency.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n as u64) as usize
-    }
-}
-
 /// Randomly damaged copies of small valid files: reading may fail, but must not panic, hang or
 /// return NaN heights.
 #[test]
@@ -341,7 +316,7 @@ fn damaged_files_never_panic() {
     let mut originals: Vec<(&str, Vec<u8>)> = vec![("d.png", png), ("d.jpg", jpg)];
     originals.extend(tiffs.into_iter().map(|t| ("d.tif", t)));
 
-    let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
+    let mut rng = splitmix::Rng(0x9E37_79B9_7F4A_7C15);
     let mut outcomes = (0, 0);
     for (name, original) in &originals {
         for _ in 0..150 {
@@ -350,7 +325,7 @@ fn damaged_files_never_panic() {
                 0 => {
                     for _ in 0..1 + rng.below(4) {
                         let i = rng.below(bytes.len());
-                        bytes[i] = rng.next() as u8;
+                        bytes[i] = rng.next_u64() as u8;
                     }
                 }
                 1 => bytes.truncate(rng.below(bytes.len())),

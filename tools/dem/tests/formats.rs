@@ -4,9 +4,9 @@
 mod common;
 
 use std::io::Cursor;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use common::{assert_close, read_err, temp_dir, write};
+use common::{assert_close, hgt3, read, read_err, spacing, temp_dir, write};
 use dem::{Encoding, ReadOptions};
 use image::{GrayAlphaImage, GrayImage, ImageBuffer, ImageFormat, Luma, Rgb, RgbImage, RgbaImage};
 
@@ -20,17 +20,6 @@ where
     img.write_to(&mut Cursor::new(&mut out), ImageFormat::Png)
         .expect("encode PNG");
     out
-}
-
-fn spacing(s: f64) -> ReadOptions {
-    ReadOptions {
-        spacing: Some(s),
-        ..ReadOptions::default()
-    }
-}
-
-fn read(path: &Path, opts: &ReadOptions) -> dem::HeightGrid {
-    dem::read(&[path.to_path_buf()], opts).unwrap_or_else(|e| panic!("{e}"))
 }
 
 #[test]
@@ -235,18 +224,6 @@ fn raw_r16_and_f32() {
     };
     let g = read(&p, &opts);
     assert_eq!(g.heights, values.to_vec());
-}
-
-/// An SRTM3 tile: every sample `value`, voids where `void(x, y)`.
-fn hgt3(value: i16, void: impl Fn(usize, usize) -> bool) -> Vec<u8> {
-    let mut out = Vec::with_capacity(1201 * 1201 * 2);
-    for y in 0..1201 {
-        for x in 0..1201 {
-            let v = if void(x, y) { -32768 } else { value };
-            out.extend(v.to_be_bytes());
-        }
-    }
-    out
 }
 
 #[test]

@@ -4,9 +4,7 @@
 
 mod common;
 
-use std::path::Path;
-
-use common::{assert_close, read_err, temp_dir, write, Layout, Samples, TagValue, TiffSpec};
+use common::{assert_close, read, read_err, temp_dir, write, Layout, Samples, TagValue, TiffSpec};
 use dem::{metres_per_degree_lat, metres_per_degree_lon, ReadOptions};
 
 const W: u32 = 37;
@@ -34,10 +32,6 @@ where
 
 fn voids() -> u64 {
     (0..W * H).filter(|i| i % 11 == 5).count() as u64
-}
-
-fn read(path: &Path, opts: &ReadOptions) -> dem::HeightGrid {
-    dem::read(&[path.to_path_buf()], opts).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
 /// Valid samples must come back exactly (they are small integers in every type).

@@ -4,17 +4,11 @@
 
 mod common;
 
-use std::path::PathBuf;
-
-use common::{assert_close, data, read_err};
+use common::{assert_close, data, read, read_err, read_mosaic};
 use dem::{metres_per_degree_lat, metres_per_degree_lon, Crop, Encoding, ReadOptions};
 
-fn read(paths: &[PathBuf], opts: &ReadOptions) -> dem::HeightGrid {
-    dem::read(paths, opts).unwrap_or_else(|e| panic!("{e}"))
-}
-
 fn read_one(rel: &str) -> dem::HeightGrid {
-    read(&[data(rel)], &ReadOptions::default())
+    read(&data(rel), &ReadOptions::default())
 }
 
 /// The raw big-endian samples of an .hgt file.
@@ -109,9 +103,9 @@ fn srtm1_n48w125_half_void() {
 fn srtm3_mosaic_n41_n42() {
     let n41 = data("srtm/N41E001.hgt");
     let n42 = data("srtm/N42E001.hgt");
-    let g = read(&[n41.clone(), n42.clone()], &ReadOptions::default());
+    let g = read_mosaic(&[n41.clone(), n42.clone()], &ReadOptions::default());
     // The order the files are given in does not matter.
-    let g2 = read(&[n42, n41], &ReadOptions::default());
+    let g2 = read_mosaic(&[n42, n41], &ReadOptions::default());
     assert_eq!(g.heights, g2.heights);
     assert_eq!((g.width, g.height), (1201, 2401));
     assert_eq!(g.min_max(), (-20.0, 3100.0));
@@ -150,7 +144,7 @@ fn crop_of_a_mosaic() {
         ..ReadOptions::default()
     };
     let paths = [data("srtm/N41E001.hgt"), data("srtm/N42E001.hgt")];
-    let g = read(&paths, &opts);
+    let g = read_mosaic(&paths, &opts);
     assert_eq!((g.width, g.height), (1025, 1025));
     assert!(g.description.ends_with(", crop 100,1000,1025x1025"));
     let top = hgt_samples("srtm/N42E001.hgt");
@@ -185,7 +179,7 @@ fn puget_16bit_png() {
         vertical_scale: Some(0.1),
         ..ReadOptions::default()
     };
-    let g = read(&[path], &opts);
+    let g = read(&path, &opts);
     assert_eq!((g.width, g.height), (1025, 1025));
     assert_eq!(g.min_max(), (0.0, (43798.0f64 * 0.1) as f32));
     assert_eq!((g.spacing_x, g.spacing_y), (160.0, 160.0));
@@ -200,7 +194,7 @@ fn puget_8bit_jpeg() {
         vertical_scale: Some(25.7),
         ..ReadOptions::default()
     };
-    let g = read(&[data("puget/ps_height_4k_8bit.jpg")], &opts);
+    let g = read(&data("puget/ps_height_4k_8bit.jpg"), &opts);
     assert_eq!((g.width, g.height), (4096, 4096));
     let (lo, hi) = g.min_max();
     // README: 0..171 steps (JPEG noise may move the extremes by a step or two).
@@ -229,7 +223,7 @@ fn fuji_terrain_rgb() {
         spacing: Some(20.0),
         ..opts
     };
-    let g = read(&[path], &opts);
+    let g = read(&path, &opts);
     assert_eq!((g.width, g.height), (512, 512));
     let (lo, hi) = g.min_max();
     assert_close(f64::from(lo), 13.7, 0.06, "min");
@@ -245,7 +239,7 @@ fn berkeley_terrain_rgb_spacing_from_tile_name() {
         ..ReadOptions::default()
     };
     let g = read(
-        &[data("terrainrgb/berkeley_14-2625-6369_terrain_rgb.png")],
+        &data("terrainrgb/berkeley_14-2625-6369_terrain_rgb.png"),
         &opts,
     );
     assert_eq!((g.width, g.height), (512, 512));
@@ -283,7 +277,7 @@ fn berkeley_terrain_rgb_spacing_from_tile_name() {
         ..opts
     };
     let g = read(
-        &[data("terrainrgb/berkeley_14-2625-6369_terrain_rgb.png")],
+        &data("terrainrgb/berkeley_14-2625-6369_terrain_rgb.png"),
         &opts,
     );
     assert_eq!((g.spacing_x, g.spacing_y), (5.0, 5.0));
@@ -374,7 +368,7 @@ fn placements_of_srtm_tiles_mosaics_and_crops() {
         ..ReadOptions::default()
     };
     // The crop starts on row 1200 of the mosaic (43 N at the top): 42 N, and half a degree east.
-    let p = read(&paths, &opts).placement.unwrap();
+    let p = read_mosaic(&paths, &opts).placement.unwrap();
     assert!(
         (p.x0 - 1.5).abs() < 1e-12 && (p.y0 - 42.0).abs() < 1e-12,
         "{p:?}"
@@ -399,7 +393,7 @@ fn placements_of_projected_and_web_mercator_grids() {
         ..ReadOptions::default()
     };
     let tile = read(
-        &[data("terrainrgb/berkeley_14-2625-6369_terrain_rgb.png")],
+        &data("terrainrgb/berkeley_14-2625-6369_terrain_rgb.png"),
         &opts,
     );
     let p = tile.placement.unwrap();
@@ -415,13 +409,13 @@ fn placements_of_projected_and_web_mercator_grids() {
         ..ReadOptions::default()
     };
     let fuji = read(
-        &[data("terrainrgb/fuji_terrain_rgb.png")],
+        &data("terrainrgb/fuji_terrain_rgb.png"),
         &ReadOptions {
             spacing: Some(30.0),
             ..opts
         },
     );
     assert_eq!(fuji.placement, None);
-    let puget = read(&[data("puget/ps_height_1k.png")], &spaced);
+    let puget = read(&data("puget/ps_height_1k.png"), &spaced);
     assert_eq!(puget.placement, None);
 }

@@ -9,6 +9,7 @@
 //! guides, not proofs; logs of the same path with the same frame count compare best.
 
 use serde::Serialize;
+use splitmix::Rng;
 
 use crate::log::FrameLog;
 use crate::stats::{percentile, Stats};
@@ -51,48 +52,31 @@ impl Comparison {
     }
 }
 
-/// SplitMix64: small, fast, and the same sequence everywhere.
-struct Rng(u64);
+/// A standard normal draw (Box-Muller).
+fn normal(rng: &mut Rng) -> f64 {
+    let (u, v) = (rng.open_unit(), rng.open_unit());
+    (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+}
 
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in (0, 1).
-    fn uniform(&mut self) -> f64 {
-        ((self.next() >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-    }
-
-    fn normal(&mut self) -> f64 {
-        let (u, v) = (self.uniform(), self.uniform());
-        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
-    }
-
-    /// Gamma(shape, 1) for shape >= 1 (Marsaglia and Tsang).
-    fn gamma(&mut self, shape: f64) -> f64 {
-        let d = shape - 1.0 / 3.0;
-        let c = 1.0 / (9.0 * d).sqrt();
-        loop {
-            let x = self.normal();
-            let v = (1.0 + c * x).powi(3);
-            if v <= 0.0 {
-                continue;
-            }
-            if self.uniform().ln() < 0.5 * x * x + d - d * v + d * v.ln() {
-                return d * v;
-            }
+/// Gamma(shape, 1) for shape >= 1 (Marsaglia and Tsang).
+fn gamma(rng: &mut Rng, shape: f64) -> f64 {
+    let d = shape - 1.0 / 3.0;
+    let c = 1.0 / (9.0 * d).sqrt();
+    loop {
+        let x = normal(rng);
+        let v = (1.0 + c * x).powi(3);
+        if v <= 0.0 {
+            continue;
+        }
+        if rng.open_unit().ln() < 0.5 * x * x + d - d * v + d * v.ln() {
+            return d * v;
         }
     }
+}
 
-    fn beta(&mut self, a: f64, b: f64) -> f64 {
-        let x = self.gamma(a);
-        x / (x + self.gamma(b))
-    }
+fn beta(rng: &mut Rng, a: f64, b: f64) -> f64 {
+    let x = gamma(rng, a);
+    x / (x + gamma(rng, b))
 }
 
 /// The median of a bootstrap resample of `sorted` (n draws with replacement), drawn without
@@ -110,11 +94,11 @@ fn resampled_median(sorted: &[f64], rng: &mut Rng) -> f64 {
     // Percentile 50 of n values: the ((n + 1) / 2)-th for odd n, the mean of the (n / 2)-th
     // and the next for even n (1-based).
     let k = n.div_ceil(2);
-    let u_k = rng.beta(k as f64, (n - k + 1) as f64);
+    let u_k = beta(rng, k as f64, (n - k + 1) as f64);
     if n % 2 == 1 {
         return at(u_k);
     }
-    let v = rng.uniform();
+    let v = rng.open_unit();
     let u_next = u_k + (1.0 - u_k) * (1.0 - v.powf(1.0 / (n - k) as f64));
     0.5 * (at(u_k) + at(u_next))
 }
@@ -246,9 +230,7 @@ mod tests {
                 .collect();
             let mut slow: Vec<f64> = (0..draws)
                 .map(|_| {
-                    let mut r: Vec<f64> = (0..n)
-                        .map(|_| sorted[(rng.next() % n as u64) as usize])
-                        .collect();
+                    let mut r: Vec<f64> = (0..n).map(|_| sorted[rng.below(n)]).collect();
                     r.sort_unstable_by(f64::total_cmp);
                     percentile(&r, 50.0)
                 })

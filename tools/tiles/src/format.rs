@@ -196,24 +196,42 @@ fn align_up(n: u64, a: u64) -> u64 {
     n.div_ceil(a) * a
 }
 
-/// Writes a tile set to a temporary file and renames it into place on [`finish`](Self::finish).
-/// Dropped unfinished, it deletes the temporary file.
 /// The hidden temporary file a build of `path` writes before renaming it into place:
 /// `.NAME.tmp.PID` beside it (the PID of this process).
 pub fn temp_path(path: &Path) -> Result<PathBuf, FormatError> {
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let name = path.file_name().ok_or_else(|| FormatError::Invalid {
+    temp_beside(path).ok_or_else(|| FormatError::Invalid {
         path: path.to_path_buf(),
         what: "not a file name".into(),
-    })?;
-    Ok(dir.join(format!(
+    })
+}
+
+/// `.NAME.tmp.PID` in `path`'s folder, or `None` when `path` names no file (`/`, `..`).
+fn temp_beside(path: &Path) -> Option<PathBuf> {
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    let name = path.file_name()?;
+    Some(dir.join(format!(
         ".{}.tmp.{}",
         name.to_string_lossy(),
         std::process::id()
     )))
+}
+
+/// Writes `bytes` to `path` through its [`temp_path`], renamed into place, so that no reader
+/// (and no later run) ever finds a half-written file under the name; the temporary is removed
+/// when writing or renaming fails. For the small outputs of `tiletool export` and `vkterrain`
+/// (summaries, traces); a tile set streams through [`TileSetWriter`] instead. The error is the
+/// bare io error: callers say which file they could not write.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let tmp = temp_beside(path)
+        .ok_or_else(|| std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a file name"))?;
+    let written = std::fs::write(&tmp, bytes).and_then(|()| std::fs::rename(&tmp, path));
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    written
 }
 
 /// Removes temporaries of earlier builds of `path` whose process is provably gone (a build
@@ -251,6 +269,8 @@ fn remove_stale_temporaries(path: &Path) {
     }
 }
 
+/// Writes a tile set to a temporary file and renames it into place on [`finish`](Self::finish).
+/// Dropped unfinished, it deletes the temporary file.
 pub struct TileSetWriter {
     path: PathBuf,
     tmp_path: PathBuf,

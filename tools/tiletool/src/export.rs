@@ -48,7 +48,8 @@ pub fn run(file: &Path, (tx, ty): (u32, u32), level: u32, output: &Path) -> Resu
             let _ = writeln!(obj, "f {} {} {}", fan[0] + 1, w[0] + 1, w[1] + 1);
         }
     }
-    write_atomically(output, obj.as_bytes())?;
+    tiles::format::write_atomically(output, obj.as_bytes())
+        .with_context(|| format!("{}: cannot write", output.display()))?;
     println!(
         "{}: {} vertices, {} triangles",
         output.display(),
@@ -73,24 +74,6 @@ fn open_at(file: &Path, (tx, ty): (u32, u32)) -> Result<tiles::TileSet> {
     Ok(set)
 }
 
-/// Writes `bytes` to a temporary file beside `output` and renames it into place.
-fn write_atomically(output: &Path, bytes: &[u8]) -> Result<()> {
-    let tmp = output.with_file_name(format!(
-        ".{}.tmp.{}",
-        output
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default(),
-        std::process::id()
-    ));
-    std::fs::write(&tmp, bytes).with_context(|| format!("{}: cannot write", output.display()))?;
-    if let Err(e) = std::fs::rename(&tmp, output) {
-        let _ = std::fs::remove_file(&tmp);
-        bail!("{}: cannot write: {e}", output.display());
-    }
-    Ok(())
-}
-
 /// Mip `mip` of tile `(tx, ty)`'s texture, BC1-decoded, as a PNG (gutter included).
 pub fn texture(file: &Path, (tx, ty): (u32, u32), mip: u32, output: &Path) -> Result<ExitCode> {
     let set = open_at(file, (tx, ty))?;
@@ -111,7 +94,8 @@ pub fn texture(file: &Path, (tx, ty): (u32, u32), mip: u32, output: &Path) -> Re
     image
         .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
         .with_context(|| format!("{}: cannot encode", output.display()))?;
-    write_atomically(output, &png)?;
+    tiles::format::write_atomically(output, &png)
+        .with_context(|| format!("{}: cannot write", output.display()))?;
     println!(
         "{}: {w}x{h} texels, PSNR {:.2} dB against the filtered mip",
         output.display(),

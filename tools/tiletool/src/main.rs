@@ -181,7 +181,7 @@ struct ReadArgs {
     #[arg(long)]
     vertical_scale: Option<f64>,
     /// Grid size of raw .r16/.f32 files, e.g. 1025x1025.
-    #[arg(long, value_parser = parse_size)]
+    #[arg(long, value_parser = dem::parse_size::<usize>)]
     size: Option<(usize, usize)>,
     /// How RGB PNGs encode height: terrain-rgb or terrarium.
     #[arg(long)]
@@ -196,14 +196,6 @@ fn parse_pair(s: &str) -> Result<(u32, u32), String> {
     Ok((
         a.trim().parse().map_err(|_| "expected X,Y")?,
         b.trim().parse().map_err(|_| "expected X,Y")?,
-    ))
-}
-
-fn parse_size(s: &str) -> Result<(usize, usize), String> {
-    let (a, b) = s.split_once(['x', 'X']).ok_or("expected WxH")?;
-    Ok((
-        a.trim().parse().map_err(|_| "expected WxH")?,
-        b.trim().parse().map_err(|_| "expected WxH")?,
     ))
 }
 

@@ -1,4 +1,5 @@
-//! Helpers shared by the integration tests: where the real data lives, temp dirs, and a small
+//! Helpers shared by the integration tests: where the real data lives, temp dirs, reading with
+//! a spacing, SRTM tiles of one height, and a small
 //! TIFF writer for the layouts the `tiff` crate's encoder does not write (tiles, the floating
 //! point predictor, big-endian, unsupported variants).
 #![allow(dead_code)] // each test binary uses a different subset
@@ -21,6 +22,37 @@ pub fn write(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
     let path = dir.join(name);
     std::fs::write(&path, bytes).expect("write test file");
     path
+}
+
+/// Options that set only the spacing, in metres.
+pub fn spacing(metres: f64) -> dem::ReadOptions {
+    dem::ReadOptions {
+        spacing: Some(metres),
+        ..dem::ReadOptions::default()
+    }
+}
+
+/// The grid in one file; panics with the reader's error (which names the file).
+pub fn read(path: &Path, opts: &dem::ReadOptions) -> dem::HeightGrid {
+    read_mosaic(&[path.to_path_buf()], opts)
+}
+
+/// The grid of files read together (an SRTM mosaic); panics with the reader's error.
+pub fn read_mosaic(paths: &[PathBuf], opts: &dem::ReadOptions) -> dem::HeightGrid {
+    dem::read(paths, opts).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// An SRTM3 tile (1201 x 1201 big-endian samples): every sample `value`, voids (-32768)
+/// where `void(x, y)`.
+pub fn hgt3(value: i16, void: impl Fn(usize, usize) -> bool) -> Vec<u8> {
+    let mut out = Vec::with_capacity(1201 * 1201 * 2);
+    for y in 0..1201 {
+        for x in 0..1201 {
+            let v = if void(x, y) { -32768 } else { value };
+            out.extend(v.to_be_bytes());
+        }
+    }
+    out
 }
 
 /// Display of the error from reading `paths` with `opts`; panics if the read succeeds.
