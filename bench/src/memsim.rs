@@ -101,7 +101,7 @@ fn run() -> Result<()> {
         let o = memory::sim::replay(&trace, c, 2);
         println!("- slack {slack}: {:.1} MB uploaded", o.bytes() as f64 / 1e6);
     }
-    // vkterrain looks at least 8 frames ahead (renderer::predict::HORIZON_FRAMES); more at
+    // vkterrain looks at least 8 frames ahead (renderer::prefetch::predict::HORIZON_FRAMES); more at
     // interactive frame rates, where 2 s is longer.
     let ahead = flag("--perfect-frames")?.map_or(8, |f| f as usize);
     // As the renderer: index arrays built on the GPU unless told they are sent.

@@ -531,6 +531,17 @@ impl Manager {
     /// chunk and the finest level up to the predicted one that the budget allows. Progressive
     /// scheme only.
     pub fn prefetch(&mut self, plan: &mut FramePlan, candidates: &[Request]) {
+        self.prefetch_while(plan, candidates, || true);
+    }
+
+    /// [`Manager::prefetch`] that also stops before a candidate when `keep_going` says so (the
+    /// renderer's CPU budget for prefetching, `vkterrain --prefetch-ms`, is a deadline).
+    pub fn prefetch_while(
+        &mut self,
+        plan: &mut FramePlan,
+        candidates: &[Request],
+        mut keep_going: impl FnMut() -> bool,
+    ) {
         if self.config.scheme != Scheme::Progressive || candidates.is_empty() {
             return;
         }
@@ -545,7 +556,7 @@ impl Manager {
         self.speculating = true;
         for r in candidates {
             let free = self.chunks.len() - self.owned;
-            if left == 0 || free < min_free.max(1) {
+            if left == 0 || free < min_free.max(1) || !keep_going() {
                 break;
             }
             let Some(cost) = self.tiles.get(r.tile as usize) else {

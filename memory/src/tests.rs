@@ -599,6 +599,30 @@ fn prefetching_stops_at_the_free_share_and_the_budget() {
     assert_eq!(p.stats.prefetch_bytes, 0);
 }
 
+/// `prefetch_while` asks before each candidate and takes none once told to stop (the renderer's
+/// `--prefetch-ms` deadline): allowed two asks, two tiles; never allowed, none; always allowed,
+/// as `prefetch` (the control: the budget, not the deadline, stops it there).
+#[test]
+fn prefetching_stops_when_its_time_is_up() {
+    let t = tile(6, 60);
+    let tiles = vec![t.clone(); 8];
+    let level0 = t.block_bytes(0) + t.levels[0].indices;
+    let candidates: Vec<Request> = (1..8).map(|i| req(i, 0)).collect();
+    let sent = |asks: usize| {
+        let mut m = Manager::new(tiles.clone(), config(64 << 20, 1 << 30));
+        let mut p = m.plan_frame(0, None, &[req(0, 0)], true);
+        let mut left = asks;
+        m.prefetch_while(&mut p, &candidates, || {
+            left = left.saturating_sub(1);
+            left > 0 || asks == usize::MAX
+        });
+        p.stats.prefetch_bytes
+    };
+    assert_eq!(sent(3), 2 * level0);
+    assert_eq!(sent(0), 0);
+    assert_eq!(sent(usize::MAX), 7 * level0);
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(1000))]
 

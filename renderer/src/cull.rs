@@ -2,7 +2,7 @@
 
 use glam::{DVec3, Vec4};
 
-use crate::terrain::TileInfo;
+use crate::tile::TileInfo;
 
 /// Whether the tile's box touches the frustum (planes from [`crate::camera::View::frustum`]).
 pub fn visible(planes: &[Vec4; 5], camera: DVec3, tile: &TileInfo) -> bool {

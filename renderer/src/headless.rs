@@ -5,9 +5,12 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::camera::Camera;
-use crate::frame::{Fault, Finished, FrameError, FrameInput, MemoryOptions, Renderer, Settings};
+use crate::error::FrameError;
+use crate::fault::Fault;
+use crate::frame::{Finished, FrameInput, Renderer};
 use crate::log::FrameRecord;
 use crate::path::CameraPath;
+use crate::settings::{MemoryOptions, Settings};
 use crate::terrain::Terrain;
 use crate::vulkan::{Gpu, VkError};
 

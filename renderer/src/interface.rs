@@ -89,7 +89,7 @@ pub struct TileRecord {
     pub pad0: u32,
     pub pad1: u32,
     /// The level tables of the tile's vertices: inside, the N, E, S, W sides, the NW, NE, SW,
-    /// SE corners ([`crate::terrain::TileInfo::tables`]).
+    /// SE corners ([`crate::tile::TileInfo::tables`]).
     pub tables: [LevelCoefficients; 9],
 }
 

@@ -9,6 +9,8 @@
 
 pub mod camera;
 pub mod cull;
+pub mod error;
+pub mod fault;
 pub mod frame;
 pub mod headless;
 pub mod interface;
@@ -20,11 +22,13 @@ pub mod measure;
 pub mod morph;
 pub mod path;
 pub mod plan;
-pub mod predict;
 pub mod prefetch;
+pub mod settings;
 pub mod stitch;
 pub mod target;
 pub mod terrain;
+pub mod textures;
+pub mod tile;
 pub mod vulkan;
 pub mod window;
 

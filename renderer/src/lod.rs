@@ -43,7 +43,7 @@
 use glam::DVec3;
 
 use crate::camera::{View, NEAR};
-use crate::terrain::TileInfo;
+use crate::tile::TileInfo;
 
 /// How the largest `|J z|` over a tile is found.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

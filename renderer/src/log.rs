@@ -15,7 +15,6 @@
 //! shader `heights_read_back, heights_max_diff_m`,
 //! and last `tiles_level_0 .. tiles_level_{n-1}`.
 
-use std::io::Write;
 use std::path::Path;
 
 use frametimes::stats::percentile;
@@ -172,6 +171,11 @@ pub fn header(levels: u32) -> String {
 }
 
 /// A time in ms with four decimals, empty when unknown.
+/// Milliseconds since `t` (the log's unit of time).
+pub fn ms(t: std::time::Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1000.0
+}
+
 fn ms_cell(v: f64) -> String {
     if v.is_nan() {
         String::new()
@@ -384,6 +388,15 @@ pub struct Summary {
     pub validation_messages: u64,
 }
 
+/// The largest of a per-frame measure over the frames that measured it (None: none did).
+fn max_measured(records: &[FrameRecord], f: fn(&FrameRecord) -> f64) -> Option<f64> {
+    records
+        .iter()
+        .map(f)
+        .filter(|e| !e.is_nan())
+        .reduce(f64::max)
+}
+
 fn sorted(values: impl Iterator<Item = f64>) -> Vec<f64> {
     let mut v: Vec<f64> = values.filter(|x| !x.is_nan()).collect();
     v.sort_by(f64::total_cmp);
@@ -442,17 +455,9 @@ impl Summary {
             upload_mb_blocks: sum(|r| r.upload_bytes_blocks) as f64 / 1e6,
             upload_mb_indices: sum(|r| r.upload_bytes_indices) as f64 / 1e6,
             upload_mb_coarser: sum(|r| r.upload_bytes_coarser) as f64 / 1e6,
-            max_error_px: records
-                .iter()
-                .map(|r| r.max_error_px)
-                .filter(|e| !e.is_nan())
-                .reduce(f64::max),
+            max_error_px: max_measured(records, |r| r.max_error_px),
             frames_measured: records.iter().filter(|r| !r.max_error_px.is_nan()).count(),
-            pop_px: records
-                .iter()
-                .map(|r| r.pop_px)
-                .filter(|e| !e.is_nan())
-                .reduce(f64::max),
+            pop_px: max_measured(records, |r| r.pop_px),
             staged_mb: sum(|r| r.staged_bytes) as f64 / 1e6,
             upload_bytes_p99: percentile(&uploads, 99.0),
             upload_overshoot_mb: sum(|r| r.upload_overshoot_bytes) as f64 / 1e6,
@@ -466,11 +471,7 @@ impl Summary {
             index_builds: sum(|r| r.index_builds),
             index_build_mb: sum(|r| r.index_build_bytes) as f64 / 1e6,
             heights_read_back: sum(|r| r.heights_read_back),
-            heights_max_diff_m: records
-                .iter()
-                .map(|r| r.heights_max_diff_m)
-                .filter(|e| !e.is_nan())
-                .reduce(f64::max),
+            heights_max_diff_m: max_measured(records, |r| r.heights_max_diff_m),
             gpu_allocations_after_first_frame: records
                 .iter()
                 .skip(1)
@@ -505,18 +506,15 @@ impl Summary {
     }
 }
 
-/// Writes the log to a temporary file and renames it into place.
+/// Writes the log through a temporary file renamed into place, so no half-written log looks
+/// complete.
 pub fn write_csv(path: &Path, levels: u32, records: &[FrameRecord]) -> std::io::Result<()> {
-    let tmp = path.with_extension("csv.tmp");
-    {
-        let mut f = std::io::BufWriter::new(std::fs::File::create(&tmp)?);
-        writeln!(f, "{}", header(levels))?;
-        for r in records {
-            writeln!(f, "{}", r.csv_row())?;
-        }
-        f.flush()?;
+    let mut csv = String::new();
+    for row in std::iter::once(header(levels)).chain(records.iter().map(FrameRecord::csv_row)) {
+        csv.push_str(&row);
+        csv.push('\n');
     }
-    std::fs::rename(&tmp, path)
+    tiles::format::write_atomically(path, csv.as_bytes())
 }
 
 #[cfg(test)]

@@ -27,6 +27,7 @@ use tiles::verify::raster_barycentric;
 use tiles::Grid;
 
 use crate::camera::Camera;
+use crate::frame::{DrawnTile, ReadBack};
 use crate::morph;
 use crate::terrain::Terrain;
 
@@ -84,6 +85,21 @@ impl ErrorMeter {
             surfaces: HashMap::new(),
             previous: None,
         })
+    }
+
+    /// [`ErrorMeter::frame`] for the draws as the frame loop wrote them.
+    pub fn frame_drawn(
+        &mut self,
+        terrain: &Terrain,
+        camera: &Camera,
+        extent: (u32, u32),
+        drawn: &[DrawnTile],
+    ) -> Measured {
+        let draws: Vec<(usize, State)> = drawn
+            .iter()
+            .map(|&(tile, level, _, morph)| (tile, State { level, morph }))
+            .collect();
+        self.frame(terrain, camera, extent, &draws)
     }
 
     /// Measures a frame that drew `draws` (tile, state) seen by `camera` at `extent`; the
@@ -230,11 +246,7 @@ pub fn height_tolerance(h: f32, slope: f32) -> f64 {
 
 /// Compares every read-back height of a frame with [`morph::tile_vertices`] for the same draw;
 /// `bias` is added to every stored morph offset of the mirror (0; the check's control uses 1).
-pub fn check_heights(
-    terrain: &Terrain,
-    read_back: &crate::frame::ReadBack,
-    bias: i8,
-) -> HeightCheck {
+pub fn check_heights(terrain: &Terrain, read_back: &ReadBack, bias: i8) -> HeightCheck {
     let mut check = HeightCheck::default();
     for &(tile, level, start, morph) in &read_back.draws {
         let info = &terrain.tiles[tile];

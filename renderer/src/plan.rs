@@ -1,19 +1,20 @@
-//! The frame plan (DESIGN.md, "The frame", steps 2-5), in plain Rust: cull tiles against the
-//! frustum and sort them front to back, choose the level each one wants, let the memory
-//! manager grant levels and schedule uploads within the budget, and stitch neighbours at the
-//! levels *granted* (a tile whose wanted level is not resident yet is drawn, and stitched, at
-//! the level it has). The recorder in [`crate::frame`] turns the plan into commands.
+//! The frame plan (README, "How a frame is made", steps 2-5), in plain Rust: cull tiles against the
+//! frustum and sort them front to back, choose the level each one wants, let the memory manager
+//! grant levels and schedule uploads within the budget, and stitch neighbours at the levels
+//! *granted* (a tile whose wanted level is not resident yet is drawn, and stitched, at the level it
+//! has). The recorder in [`crate::frame`] turns the plan into commands.
 
 use std::collections::HashMap;
 use std::time::Instant;
 
 use glam::DVec3;
-use memory::textures::{TextureRequest, TextureSlots, TextureStats, TextureUpload};
 use memory::{Manager, Request, Stats};
 
 use crate::camera::{Camera, View};
-use crate::stitch::{stitch_side, Side, Stitch};
+use crate::log::ms;
+use crate::stitch::{stitch_side, DrawnSide, Stitch};
 use crate::terrain::Terrain;
+use crate::tile::Side;
 use crate::{cull, lod};
 
 /// How levels are chosen.
@@ -63,6 +64,8 @@ pub struct Plan {
     pub cpu_cull_ms: f64,
     pub cpu_lod_ms: f64,
     pub cpu_residency_ms: f64,
+    /// The manager's prefetch step (not in `cpu_residency_ms`).
+    pub cpu_prefetch_ms: f64,
     pub cpu_stitch_ms: f64,
 }
 
@@ -86,6 +89,9 @@ pub struct Residency<'a> {
     /// Tiles predicted to become visible, soonest first, to upload with what the frame leaves
     /// of its budget (empty: no prefetching).
     pub prefetch: &'a [Request],
+    /// The end of the frame's CPU time for prefetching (`--prefetch-ms`, counted from the
+    /// prediction's start): the manager takes no candidate after it. None: no deadline.
+    pub prefetch_until: Option<Instant>,
 }
 
 /// Plans one frame of `camera` at `extent` pixels.
@@ -102,6 +108,7 @@ pub fn plan(
         completed,
         allow_uploads,
         prefetch,
+        prefetch_until,
     } = residency;
     let view = camera.view(extent.0, extent.1);
 
@@ -116,9 +123,12 @@ pub fn plan(
 
     let t = Instant::now();
     let mut residency = manager.plan_frame(frame, completed, &requests, allow_uploads);
+    let t_prefetch = Instant::now();
     if allow_uploads {
-        manager.prefetch(&mut residency, prefetch);
+        let in_time = || prefetch_until.is_none_or(|end| Instant::now() < end);
+        manager.prefetch_while(&mut residency, prefetch, in_time);
     }
+    let cpu_prefetch_ms = ms(t_prefetch);
     let draws: Vec<Draw> = residency
         .grants
         .iter()
@@ -136,7 +146,8 @@ pub fn plan(
             })
         })
         .collect();
-    let cpu_residency_ms = ms(t);
+    // The prefetch step is counted with the prediction (`--prefetch-ms` bounds the two).
+    let cpu_residency_ms = ms(t) - cpu_prefetch_ms;
 
     let t = Instant::now();
     // Two morphed copies of a shared side vertex coincide only where the sides are shared.
@@ -155,6 +166,7 @@ pub fn plan(
         cpu_cull_ms,
         cpu_lod_ms,
         cpu_residency_ms,
+        cpu_prefetch_ms,
         cpu_stitch_ms,
     })
 }
@@ -221,20 +233,20 @@ pub fn stitch_granted(
     for (k, d) in draws.iter().enumerate() {
         let a = &terrain.tiles[d.tile];
         let mut s = Stitch::default();
-        for (side, (dx, dy)) in [(1usize, (1u32, 0u32)), (2, (0, 1))] {
-            let Some(j) = terrain.tile_index(a.tx + dx, a.ty + dy) else {
+        for side in Side::FORWARD {
+            let Some(j) = terrain.neighbour(a, side) else {
                 continue;
             };
             let Some(&(level_b, record_b)) = level_of.get(&j) else {
                 continue;
             };
             let b = &terrain.tiles[j];
-            let mine = Side {
+            let mine = DrawnSide {
                 tile: a,
                 level: d.level,
                 record: k as u32,
             };
-            let theirs = Side {
+            let theirs = DrawnSide {
                 tile: b,
                 level: level_b,
                 record: record_b,
@@ -251,168 +263,4 @@ pub fn stitch_granted(
         }
     }
     Ok(stitches)
-}
-
-/// A drawn tile's texture: the array layer (its slot) and the finest mip resident there,
-/// where the shader clamps its level of detail.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct TextureDraw {
-    pub layer: u32,
-    pub finest: u32,
-}
-
-/// The texture side of a frame.
-#[derive(Clone, Debug, Default)]
-pub struct TexturePlan {
-    /// Per draw, in the plan's order (None: drawn without its texture, shaded by height).
-    pub draws: Vec<Option<TextureDraw>>,
-    pub uploads: Vec<TextureUpload>,
-    pub stats: TextureStats,
-}
-
-/// The finest texture mip tile `tile` can show from `camera`: [`mip_for_distance`] at the
-/// tile box's nearest point, for mip-0 texels `256 * spacing / T` metres across.
-pub fn texture_mip_wanted(
-    terrain: &Terrain,
-    layout: &tiles::texture::Layout,
-    view: &View,
-    camera: DVec3,
-    tile: usize,
-) -> u32 {
-    let t = &terrain.tiles[tile];
-    let r = camera.clamp(t.min, t.max).distance(camera);
-    let (sx, sy) = terrain.spacing;
-    let texel = f64::from(tiles::mesh::TILE_CELLS) * sx.min(sy) / f64::from(layout.interior);
-    mip_for_distance(r, texel, view, layout.mips)
-}
-
-/// The mip to sample for surface `distance` metres or more from the camera, with mip-0 texels
-/// `texel` metres across and `mips` mips: the coarsest whose texels still project to at most
-/// a pixel anywhere in the view (a point at distance `r` is at least `r * cos(half
-/// diagonal)` deep, where a metre covers at most `focal / depth` pixels). Finer mips would
-/// only be minified; the next coarser one would be magnified somewhere.
-pub fn mip_for_distance(distance: f64, texel: f64, view: &View, mips: u32) -> u32 {
-    let focal = view.focal.0.max(view.focal.1);
-    let (hx, hy) = (
-        f64::from(view.width) * 0.5 / view.focal.0,
-        f64::from(view.height) * 0.5 / view.focal.1,
-    );
-    let depth = distance / (1.0 + hx * hx + hy * hy).sqrt();
-    let ratio = depth / (texel * focal);
-    if ratio <= 1.0 || !ratio.is_finite() {
-        return 0;
-    }
-    (ratio.log2().floor() as u32).min(mips.saturating_sub(1))
-}
-
-/// Textures for the plan's draws: each drawn tile asks for the finest mip its footprint
-/// needs, nearest first, and `slots` grants layers and schedules mips within `budget` bytes.
-/// With no budget (pre-recorded frames) nothing is placed or uploaded: tiles sample what is
-/// resident.
-pub fn plan_textures(
-    terrain: &Terrain,
-    slots: &mut TextureSlots,
-    plan: &Plan,
-    camera: DVec3,
-    residency: (u64, Option<u64>),
-    budget: Option<u64>,
-) -> TexturePlan {
-    let Some(layout) = terrain.texture else {
-        return TexturePlan {
-            draws: vec![None; plan.draws.len()],
-            ..TexturePlan::default()
-        };
-    };
-    let Some(budget) = budget else {
-        let draws = plan
-            .draws
-            .iter()
-            .map(|d| {
-                slots
-                    .resident(d.tile as u32)
-                    .map(|(layer, finest)| TextureDraw { layer, finest })
-            })
-            .collect();
-        return TexturePlan {
-            draws,
-            ..TexturePlan::default()
-        };
-    };
-    let requests: Vec<TextureRequest> = plan
-        .draws
-        .iter()
-        .map(|d| TextureRequest {
-            tile: d.tile as u32,
-            finest: texture_mip_wanted(terrain, &layout, &plan.view, camera, d.tile),
-        })
-        .collect();
-    let (frame, completed) = residency;
-    let (grants, uploads, stats) = slots.plan(frame, completed, &requests, budget);
-    let draws = grants
-        .iter()
-        .map(|g| {
-            g.slot.map(|layer| TextureDraw {
-                layer,
-                finest: g.finest,
-            })
-        })
-        .collect();
-    TexturePlan {
-        draws,
-        uploads,
-        stats,
-    }
-}
-
-fn ms(t: Instant) -> f64 {
-    t.elapsed().as_secs_f64() * 1000.0
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::camera::Camera;
-
-    #[test]
-    fn the_texture_mip_follows_the_pixel_footprint() {
-        let camera = Camera {
-            position: DVec3::ZERO,
-            yaw: 0.3,
-            pitch: -0.2,
-            fov_y: 60f64.to_radians(),
-        };
-        let view = camera.view(1024, 768);
-        let (texel, mips) = (40.0, 10);
-        // The direction of the image's corner: there a point at distance r is shallowest, so
-        // its texels look largest.
-        let (hx, hy) = (512.0 / view.focal.0, 384.0 / view.focal.1);
-        let corner = (-view.back + hx * view.right + hy * view.up).normalize();
-        let corner_pixel = view.project(corner * 100.0).expect("in front");
-        assert!((corner_pixel.0 - 1024.0).abs() < 1e-6 && corner_pixel.1.abs() < 1e-6);
-        // Pixels spanned on screen by a segment of `size` metres at `p`, across the view.
-        let pixels = |p: DVec3, size: f64| {
-            let a = view.project(p).expect("in front");
-            let b = view.project(p + view.right * size).expect("in front");
-            (b.0 - a.0).hypot(b.1 - a.1)
-        };
-        let mut last = 0;
-        for k in 0..400 {
-            let r = 10.0 * 1.05f64.powi(k);
-            let m = mip_for_distance(r, texel, &view, mips);
-            assert!(m >= last, "farther asks for a finer mip at {r} m");
-            last = m;
-            let size = |m: u32| texel * f64::from(1u32 << m);
-            let here = pixels(corner * r, size(m));
-            assert!(m == 0 || here <= 1.0 + 1e-9, "mip {m} at {r} m: {here} px");
-            if m + 1 < mips {
-                let coarser = pixels(corner * r, size(m + 1));
-                assert!(coarser > 1.0, "mip {} at {r} m: {coarser} px", m + 1);
-            }
-        }
-        assert_eq!(last, mips - 1, "far away reaches the coarsest mip");
-        // Inside the tile's box, or nonsense distances: the finest mip.
-        assert_eq!(mip_for_distance(0.0, texel, &view, mips), 0);
-        assert_eq!(mip_for_distance(f64::NAN, texel, &view, mips), 0);
-        assert_eq!(mip_for_distance(f64::INFINITY, texel, &view, mips), 0);
-    }
 }

@@ -21,9 +21,9 @@
 //! slivers in the plane of the edge that close the gap between the two morphed polylines
 //! (zero area in plan view, as before).
 
-use tiles::pack::{pack, unpack};
+use tiles::pack::unpack;
 
-use crate::terrain::TileInfo;
+use crate::tile::{rebase, Side, TileInfo};
 
 /// Restart index of the stitch index arrays.
 pub const RESTART: u32 = u32::MAX;
@@ -53,7 +53,7 @@ pub fn pulled(record: u32, index: u32) -> u32 {
 
 /// One side of a seam: a drawn tile, its level and its draw record.
 #[derive(Clone, Copy)]
-pub struct Side<'a> {
+pub struct DrawnSide<'a> {
     pub tile: &'a TileInfo,
     pub level: u32,
     pub record: u32,
@@ -72,42 +72,31 @@ impl Stitch {
     }
 }
 
-/// Along-side coordinate of a packed vertex on side `k` (N/S: x, E/W: y).
-fn along(p: u32, k: usize) -> u32 {
+/// Along-side coordinate of a packed vertex on `side` (N/S: x, E/W: y).
+fn along(p: u32, side: Side) -> u32 {
     let (x, y, _) = unpack(p);
-    if k.is_multiple_of(2) {
+    if side.runs_along_x() {
         x
     } else {
         y
     }
 }
 
-/// Moves a neighbour's border vertex into `a`'s frame: the neighbour across side `k`, with the
-/// height code re-based onto `a`'s base (same lattice, so the same height).
-pub(crate) fn rebase(p: u32, k: usize, from: &TileInfo, to: &TileInfo) -> Option<u32> {
-    let (x, y, code) = unpack(p);
-    let cells = tiles::mesh::TILE_CELLS as i64;
-    let (x, y) = match k {
-        0 => (i64::from(x), i64::from(y) - cells),
-        1 => (i64::from(x) + cells, i64::from(y)),
-        2 => (i64::from(x), i64::from(y) + cells),
-        _ => (i64::from(x) - cells, i64::from(y)),
-    };
-    let code =
-        i64::from(code) + i64::from(from.header.height_base) - i64::from(to.header.height_base);
-    let ok = (0..=cells).contains(&x) && (0..=cells).contains(&y) && (0..1 << 14).contains(&code);
-    ok.then(|| pack(x as u32, y as u32, code as u16))
-}
-
-/// Adds the triangles between tile `a` and its neighbour `b` across side `k` of `a`. With
+/// Adds the triangles between tile `a` and its neighbour `b` across `side` of `a`. With
 /// `slivers`, vertices both borders share are joined too (see the module header). Returns
 /// false if the borders do not line up (a broken file).
-pub fn stitch_side(out: &mut Stitch, a: Side, b: Side, k: usize, slivers: bool) -> bool {
-    let mine = &a.tile.borders[a.level as usize][k];
-    let far = (k + 2) % 4;
-    let theirs: Option<Vec<u32>> = b.tile.borders[b.level as usize][far]
+pub fn stitch_side(
+    out: &mut Stitch,
+    a: DrawnSide,
+    b: DrawnSide,
+    side: Side,
+    slivers: bool,
+) -> bool {
+    let mine = &a.tile.borders[a.level as usize][side.index()];
+    let far = side.opposite();
+    let theirs: Option<Vec<u32>> = b.tile.borders[b.level as usize][far.index()]
         .iter()
-        .map(|&p| rebase(p, k, b.tile, a.tile))
+        .map(|&p| rebase(p, side, b.tile, a.tile))
         .collect();
     let Some(theirs) = theirs else { return false };
     if *mine == theirs && !slivers {
@@ -123,13 +112,13 @@ pub fn stitch_side(out: &mut Stitch, a: Side, b: Side, k: usize, slivers: bool) 
     let base = out.vertices.len() as u32;
     out.vertices.extend_from_slice(mine);
     out.vertices.extend_from_slice(&theirs);
-    for (side, s) in [(a, k), (b, far)] {
-        let indices = &side.tile.border_indices[side.level as usize][s];
+    for (drawn, s) in [(a, side), (b, far)] {
+        let indices = &drawn.tile.border_indices[drawn.level as usize][s.index()];
         out.pulled
-            .extend(indices.iter().map(|&i| pulled(side.record, i)));
+            .extend(indices.iter().map(|&i| pulled(drawn.record, i)));
     }
     let all: Vec<u32> = mine.iter().chain(&theirs).copied().collect();
-    zip(mine, &theirs, k, |t| {
+    zip(mine, &theirs, side, |t| {
         // Two equal vertices make a triangle with no area even in 3D, unless morphing may
         // move the two tiles' copies apart: skip it then.
         if slivers || has_area(t.map(|i| all[i])) {
@@ -146,16 +135,16 @@ fn has_area(p: [u32; 3]) -> bool {
     p[0] != p[1] && p[1] != p[2] && p[0] != p[2]
 }
 
-/// Walks two polylines along side `k` that share their first and last vertex, `mine` and
+/// Walks two polylines along `side` that share their first and last vertex, `mine` and
 /// `theirs`, merging them by position along the side, and emits the triangles between them:
 /// each has the next edge of one polyline and the vertex the other has reached. Triangle
 /// corners index `mine` then `theirs` (offset by `mine.len()`), wound as tile A draws them.
-fn zip(mine: &[u32], theirs: &[u32], k: usize, mut emit: impl FnMut([usize; 3])) {
+fn zip(mine: &[u32], theirs: &[u32], side: Side, mut emit: impl FnMut([usize; 3])) {
     let q0 = mine.len();
     let (mut i, mut j) = (0usize, 0usize);
     while i + 1 < mine.len() || j + 1 < theirs.len() {
         let advance_theirs = j + 1 < theirs.len()
-            && (i + 1 >= mine.len() || along(theirs[j + 1], k) <= along(mine[i + 1], k));
+            && (i + 1 >= mine.len() || along(theirs[j + 1], side) <= along(mine[i + 1], side));
         if advance_theirs {
             emit([i, q0 + j, q0 + j + 1]);
             j += 1;
@@ -168,18 +157,27 @@ fn zip(mine: &[u32], theirs: &[u32], k: usize, mut emit: impl FnMut([usize; 3]))
 
 #[cfg(test)]
 mod tests {
+    use tiles::pack::pack;
+
     use super::*;
     use crate::test_rng::Rng;
 
-    /// A border along side `k` through the grid points `at` (0 and 256 included), with heights
+    /// A border along `side` through the grid points `at` (0 and 256 included), with heights
     /// that differ between the two tiles' copies only where `code` says.
-    fn border(k: usize, at: &[u32], code: impl Fn(u32) -> u16) -> Vec<u32> {
+    fn border(side: Side, at: &[u32], code: impl Fn(u32) -> u16) -> Vec<u32> {
         // N: y = 0, E: x = 256, S: y = 256, W: x = 0.
-        let fixed = if k == 1 || k == 2 { 256 } else { 0 };
+        let fixed = if matches!(side, Side::East | Side::South) {
+            256
+        } else {
+            0
+        };
         at.iter()
-            .map(|&a| match k % 2 {
-                0 => pack(a, fixed, code(a)),
-                _ => pack(fixed, a, code(a)),
+            .map(|&a| {
+                if side.runs_along_x() {
+                    pack(a, fixed, code(a))
+                } else {
+                    pack(fixed, a, code(a))
+                }
             })
             .collect()
     }
@@ -196,7 +194,7 @@ mod tests {
     /// segment of either polyline, each segment in exactly one, each triangle sharing an edge
     /// with the next (one strip, no gap), and the vertices the strip advances to in order
     /// along the side (the two polylines merged, so no triangle folds back over another).
-    fn check(mine: &[u32], theirs: &[u32], k: usize, zipped_along: usize) -> Result<(), String> {
+    fn check(mine: &[u32], theirs: &[u32], k: Side, zipped_along: Side) -> Result<(), String> {
         let all: Vec<u32> = mine.iter().chain(theirs).copied().collect();
         let mut triangles = Vec::new();
         zip(mine, theirs, zipped_along, |t| triangles.push(t));
@@ -246,13 +244,13 @@ mod tests {
     fn zipped_triangles_close_every_t_junction_on_every_side() {
         let mut rng = Rng(0x5717_c4ed_9e37_0001);
         for round in 0..400 {
-            let k = round % 4;
+            let k = Side::ALL[round % 4];
             let steps = [1, 2, 4, 8, 16, 32, 64, 128];
             let (sa, sb) = (steps[round % 8], steps[(round / 8) % 8]);
             let (pa, pb) = (points(&mut rng, sa), points(&mut rng, sb));
             let (mine, theirs) = (border(k, &pa, |_| 7), border(k, &pb, |_| 7));
             check(&mine, &theirs, k, k)
-                .unwrap_or_else(|e| panic!("side {k}, {pa:?} / {pb:?}: {e}"));
+                .unwrap_or_else(|e| panic!("side {k:?}, {pa:?} / {pb:?}: {e}"));
         }
     }
 
@@ -262,10 +260,10 @@ mod tests {
         // them) walk all of one polyline before the other, folding back.
         let mut rng = Rng(0xbad_a715);
         let caught = (0..50).filter(|round| {
-            let k = round % 4;
+            let k = Side::ALL[round % 4];
             let (pa, pb) = (points(&mut rng, 8), points(&mut rng, 16));
             let (mine, theirs) = (border(k, &pa, |_| 7), border(k, &pb, |_| 7));
-            check(&mine, &theirs, k, (k + 1) % 4).is_err()
+            check(&mine, &theirs, k, Side::ALL[(k.index() + 1) % 4]).is_err()
         });
         assert_eq!(caught.count(), 50);
     }
@@ -276,17 +274,17 @@ mod tests {
         // slivers none is kept; different heights at a shared grid point (independent sides
         // morphing apart) give triangles with area in 3D, the slivers.
         let pa = [0, 32, 64, 160, 256];
-        let mine = border(0, &pa, |_| 5);
+        let mine = border(Side::North, &pa, |_| 5);
         let mut kept = 0;
         let all: Vec<u32> = mine.iter().chain(&mine).copied().collect();
-        zip(&mine, &mine, 0, |t| {
+        zip(&mine, &mine, Side::North, |t| {
             kept += usize::from(has_area(t.map(|i| all[i])))
         });
         assert_eq!(kept, 0);
-        let moved = border(0, &pa, |a| if a == 64 { 6 } else { 5 });
+        let moved = border(Side::North, &pa, |a| if a == 64 { 6 } else { 5 });
         let all: Vec<u32> = mine.iter().chain(&moved).copied().collect();
         let mut slivers = 0;
-        zip(&mine, &moved, 0, |t| {
+        zip(&mine, &moved, Side::North, |t| {
             slivers += usize::from(has_area(t.map(|i| all[i])))
         });
         assert_eq!(slivers, 2, "the two triangles at the moved vertex");

@@ -5,38 +5,11 @@
 use std::path::Path;
 
 use glam::DVec3;
-use tiles::format::{LevelEntry, TileHeader, TileSet};
+use tiles::format::{LevelEntry, TileSet};
 use tiles::mesh::TILE_CELLS;
 
 use crate::levels::LevelTable;
-
-/// Cells per side of each tile's coarse height map (for ground-following paths).
-const HEIGHT_CELLS: usize = 8;
-
-pub struct TileInfo {
-    pub tx: u32,
-    pub ty: u32,
-    pub header: TileHeader,
-    pub levels: Vec<LevelEntry>,
-    /// World box over all levels: x east, y north, z up (metres).
-    pub min: DVec3,
-    pub max: DVec3,
-    /// Per level, per side (N, E, S, W): the packed border vertices in order along the side.
-    pub borders: Vec<[Vec<u32>; 4]>,
-    /// The same vertices as indices into the tile's vertex array (blocks 0.. in order).
-    pub border_indices: Vec<[Vec<u32>; 4]>,
-    heights: [f32; HEIGHT_CELLS * HEIGHT_CELLS],
-    /// Per texture mip, finest first: its BC1 blocks' place in the tile's texture blob
-    /// (validated at open; empty when the set has no textures).
-    texture_mips: Vec<std::ops::Range<usize>>,
-    /// The level tables geomorphing takes its vertices' levels from ([`crate::levels`]):
-    /// inside the tile (its own errors), on its N, E, S, W sides (the larger errors of it and
-    /// that neighbour), at its NW, NE, SW, SE corners (the largest of the tiles there).
-    pub tables: [LevelTable; 9],
-    /// The largest of the nine: the table the tile's drawn level comes from, so it covers every
-    /// vertex's level.
-    pub drawn_table: LevelTable,
-}
+use crate::tile::{rebase, Side, TileInfo, HEIGHT_CELLS};
 
 pub struct Terrain {
     pub set: TileSet,
@@ -67,80 +40,7 @@ impl Terrain {
         let mut tiles = Vec::with_capacity((h.tiles_x * h.tiles_y) as usize);
         for ty in 0..h.tiles_y {
             for tx in 0..h.tiles_x {
-                let tile = set.tile(tx, ty)?;
-                let th = tile.header;
-                let levels: Vec<LevelEntry> = tile.levels().to_vec();
-                let z_min = levels.iter().map(|l| l.z_min).fold(f32::INFINITY, f32::min);
-                let z_max = levels
-                    .iter()
-                    .map(|l| l.z_max)
-                    .fold(f32::NEG_INFINITY, f32::max);
-                let (c0, r0) = (f64::from(tx * TILE_CELLS), f64::from(ty * TILE_CELLS));
-                let min = DVec3::new(
-                    c0 * sx,
-                    -(r0 + f64::from(th.mesh_max_y)) * sy,
-                    f64::from(z_min),
-                );
-                let max = DVec3::new(
-                    (c0 + f64::from(th.mesh_max_x)) * sx,
-                    -r0 * sy,
-                    f64::from(z_max),
-                );
-                let mut packed: Vec<u32> = Vec::with_capacity(th.vertex_count as usize);
-                for i in 0..h.levels {
-                    if let Some(l) = tile.level(i) {
-                        packed.extend_from_slice(l.positions);
-                    }
-                }
-                let border_indices: Vec<[Vec<u32>; 4]> = (0..h.levels)
-                    .filter_map(|i| tile.level(i))
-                    .map(|l| l.border.map(|side| side.to_vec()))
-                    .collect();
-                let borders = border_indices
-                    .iter()
-                    .map(|sides| {
-                        sides
-                            .clone()
-                            .map(|side| side.iter().map(|&v| packed[v as usize]).collect())
-                    })
-                    .collect();
-                let texture_mips = match set.texture(tx, ty)? {
-                    Some(t) => t
-                        .mips
-                        .iter()
-                        .map(|(e, _)| e.offset as usize..(e.offset + e.len) as usize)
-                        .collect(),
-                    None => Vec::new(),
-                };
-                // Its levels' errors as the morph sees them: measured, plus half a morph unit
-                // (the stored offsets are rounded to whole units).
-                let errors: Vec<f32> = levels
-                    .iter()
-                    .map(|l| l.max_error.max(0.0) + 0.5 * l.morph_unit.max(0.0))
-                    .collect();
-                let own_table = LevelTable::new(&errors);
-                let q = tile.quantiser();
-                let mut heights = [f32::NEG_INFINITY; HEIGHT_CELLS * HEIGHT_CELLS];
-                for &p in &packed {
-                    let (x, y, code) = tiles::pack::unpack(p);
-                    let cell = (y as usize * HEIGHT_CELLS / 257) * HEIGHT_CELLS
-                        + x as usize * HEIGHT_CELLS / 257;
-                    heights[cell] = heights[cell].max(q.height(code));
-                }
-                tiles.push(TileInfo {
-                    tx,
-                    ty,
-                    header: th,
-                    levels,
-                    min,
-                    max,
-                    borders,
-                    border_indices,
-                    heights,
-                    texture_mips,
-                    tables: [own_table; 9],
-                    drawn_table: own_table,
-                });
+                tiles.push(tile_info(&set, tx, ty)?);
             }
         }
         check_tiles(&set, &tiles)?;
@@ -189,10 +89,10 @@ impl Terrain {
             .map(|t| {
                 [
                     own[self.tile_index(t.tx, t.ty).unwrap_or(0)],
-                    around(t, &[(0, -1)]),
-                    around(t, &[(1, 0)]),
-                    around(t, &[(0, 1)]),
-                    around(t, &[(-1, 0)]),
+                    around(t, &[Side::North.step()]),
+                    around(t, &[Side::East.step()]),
+                    around(t, &[Side::South.step()]),
+                    around(t, &[Side::West.step()]),
                     around(t, &[(-1, -1), (0, -1), (-1, 0)]),
                     around(t, &[(1, -1), (0, -1), (1, 0)]),
                     around(t, &[(-1, 1), (0, 1), (-1, 0)]),
@@ -214,22 +114,29 @@ impl Terrain {
         };
         self.tiles.iter().all(|a| {
             units(a) == units(&self.tiles[0])
-                && [(1usize, (1u32, 0u32)), (2, (0, 1))]
-                    .iter()
-                    .all(|&(k, (dx, dy))| {
-                        let Some(j) = self.tile_index(a.tx + dx, a.ty + dy) else {
-                            return true;
-                        };
-                        let b = &self.tiles[j];
-                        (0..self.levels as usize).all(|level| {
-                            let theirs: Option<Vec<u32>> = b.borders[level][(k + 2) % 4]
-                                .iter()
-                                .map(|&p| crate::stitch::rebase(p, k, b, a))
-                                .collect();
-                            theirs.as_ref() == Some(&a.borders[level][k])
-                        })
+                && Side::FORWARD.iter().all(|&side| {
+                    let Some(j) = self.neighbour(a, side) else {
+                        return true;
+                    };
+                    let b = &self.tiles[j];
+                    (0..self.levels as usize).all(|level| {
+                        let theirs: Option<Vec<u32>> = b.borders[level][side.opposite().index()]
+                            .iter()
+                            .map(|&p| rebase(p, side, b, a))
+                            .collect();
+                        theirs.as_ref() == Some(&a.borders[level][side.index()])
                     })
+                })
         })
+    }
+
+    /// The tile across `side` of `tile`, if the set has one.
+    pub fn neighbour(&self, tile: &TileInfo, side: Side) -> Option<usize> {
+        let (dx, dy) = side.step();
+        let (x, y) = (i64::from(tile.tx) + dx, i64::from(tile.ty) + dy);
+        let x = u32::try_from(x).ok()?;
+        let y = u32::try_from(y).ok()?;
+        self.tile_index(x, y)
     }
 
     /// What each tile costs in GPU memory, level by level (the memory manager's view).
@@ -347,6 +254,87 @@ impl Terrain {
             self.bounds().1.z
         }
     }
+}
+
+/// One tile's bounds, borders, height cells, texture mips and own level table, read from the
+/// file (its checksum and offsets checked by `TileSet::tile`).
+fn tile_info(set: &TileSet, tx: u32, ty: u32) -> Result<TileInfo, tiles::FormatError> {
+    let h = *set.header();
+    let (sx, sy) = (h.spacing_x, h.spacing_y);
+    let tile = set.tile(tx, ty)?;
+    let th = tile.header;
+    let levels: Vec<LevelEntry> = tile.levels().to_vec();
+    let z_min = levels.iter().map(|l| l.z_min).fold(f32::INFINITY, f32::min);
+    let z_max = levels
+        .iter()
+        .map(|l| l.z_max)
+        .fold(f32::NEG_INFINITY, f32::max);
+    let (c0, r0) = (f64::from(tx * TILE_CELLS), f64::from(ty * TILE_CELLS));
+    let min = DVec3::new(
+        c0 * sx,
+        -(r0 + f64::from(th.mesh_max_y)) * sy,
+        f64::from(z_min),
+    );
+    let max = DVec3::new(
+        (c0 + f64::from(th.mesh_max_x)) * sx,
+        -r0 * sy,
+        f64::from(z_max),
+    );
+    let mut packed: Vec<u32> = Vec::with_capacity(th.vertex_count as usize);
+    for i in 0..h.levels {
+        if let Some(l) = tile.level(i) {
+            packed.extend_from_slice(l.positions);
+        }
+    }
+    let border_indices: Vec<[Vec<u32>; 4]> = (0..h.levels)
+        .filter_map(|i| tile.level(i))
+        .map(|l| l.border.map(|side| side.to_vec()))
+        .collect();
+    let borders = border_indices
+        .iter()
+        .map(|sides| {
+            sides
+                .clone()
+                .map(|side| side.iter().map(|&v| packed[v as usize]).collect())
+        })
+        .collect();
+    let texture_mips = match set.texture(tx, ty)? {
+        Some(t) => t
+            .mips
+            .iter()
+            .map(|(e, _)| e.offset as usize..(e.offset + e.len) as usize)
+            .collect(),
+        None => Vec::new(),
+    };
+    // Its levels' errors as the morph sees them: measured, plus half a morph unit
+    // (the stored offsets are rounded to whole units).
+    let errors: Vec<f32> = levels
+        .iter()
+        .map(|l| l.max_error.max(0.0) + 0.5 * l.morph_unit.max(0.0))
+        .collect();
+    let own_table = LevelTable::new(&errors);
+    let q = tile.quantiser();
+    let mut heights = [f32::NEG_INFINITY; HEIGHT_CELLS * HEIGHT_CELLS];
+    for &p in &packed {
+        let (x, y, code) = tiles::pack::unpack(p);
+        let cell =
+            (y as usize * HEIGHT_CELLS / 257) * HEIGHT_CELLS + x as usize * HEIGHT_CELLS / 257;
+        heights[cell] = heights[cell].max(q.height(code));
+    }
+    Ok(TileInfo {
+        tx,
+        ty,
+        header: th,
+        levels,
+        min,
+        max,
+        borders,
+        border_indices,
+        heights,
+        texture_mips,
+        tables: [own_table; 9],
+        drawn_table: own_table,
+    })
 }
 
 /// Refuses the tile set if any tile has a problem `tiletool verify` (without a source) would

@@ -17,10 +17,11 @@ use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
 use crate::camera::Camera;
-use crate::frame::{Finished, FrameInput, MemoryOptions, Present, Renderer, Settings, Shading};
+use crate::frame::{Finished, FrameInput, Present, Renderer};
 use crate::headless::{write_png, FlightResult};
 use crate::log::FrameRecord;
 use crate::path::{CameraPath, Keyframe};
+use crate::settings::{MemoryOptions, Settings, Shading};
 use crate::terrain::Terrain;
 use crate::vulkan::swapchain::Swapchain;
 use crate::vulkan::{Gpu, GpuOptions, VkError};

@@ -712,7 +712,7 @@ fn flyover_start(set: &Path, dir: &Path, seconds: f64) -> std::path::PathBuf {
 /// pixels: the control geomorphing is measured against), and none when every tile stays at one
 /// forced level. Geomorphing keeps them under half a pixel at tau 1, 2 and 3 on grazing
 /// flights over Puget and SRTM N43E007 flown at 30 frames per second of path time (the first
-/// 8 s of each flyover, 240 frames: a pop is what one displayed frame shows; the whole 48 s
+/// 4 s of each flyover, 120 frames: a pop is what one displayed frame shows; the whole 48 s
 /// flyover in 120 frames is 0.4 s a frame, where the morph's own motion is larger, see
 /// bench/README.md), and on the Puget orbit in 120 frames. Every frame's error stays within
 /// tau.
@@ -733,8 +733,8 @@ fn geomorphing_keeps_pops_under_half_a_pixel_and_discrete_lod_pops() {
     let srtm_dir = tempfile::tempdir().expect("temp dir");
     let srtm = tileset(srtm_dir.path(), &hgt, dem::ReadOptions::default());
     let srtm_source = ["--measure-error", s(&hgt)];
-    let puget_path = flyover_start(&set, dir.path(), 8.0);
-    let srtm_path = flyover_start(&srtm, srtm_dir.path(), 8.0);
+    let puget_path = flyover_start(&set, dir.path(), 4.0);
+    let srtm_path = flyover_start(&srtm, srtm_dir.path(), 4.0);
     let run = |set: &Path, path: &str, frames: &str, source: &[&str], extra: &[&str]| {
         let mut args = vec![
             s(set),
@@ -754,15 +754,15 @@ fn geomorphing_keeps_pops_under_half_a_pixel_and_discrete_lod_pops() {
     };
     // Warm (tiles resident), so what is measured is the LOD's doing, not the upload budget's.
     let flights = [
-        (&set, "Puget", s(&puget_path), "240", &puget_source[..], "1"),
-        (&set, "Puget", s(&puget_path), "240", &puget_source[..], "2"),
-        (&set, "Puget", s(&puget_path), "240", &puget_source[..], "3"),
+        (&set, "Puget", s(&puget_path), "120", &puget_source[..], "1"),
+        (&set, "Puget", s(&puget_path), "120", &puget_source[..], "2"),
+        (&set, "Puget", s(&puget_path), "120", &puget_source[..], "3"),
         (&set, "Puget", "orbit", "120", &puget_source[..], "1"),
         (
             &srtm,
             "SRTM N43E007",
             s(&srtm_path),
-            "240",
+            "120",
             &srtm_source[..],
             "1",
         ),
@@ -770,7 +770,7 @@ fn geomorphing_keeps_pops_under_half_a_pixel_and_discrete_lod_pops() {
             &srtm,
             "SRTM N43E007",
             s(&srtm_path),
-            "240",
+            "120",
             &srtm_source[..],
             "3",
         ),
@@ -798,13 +798,13 @@ fn geomorphing_keeps_pops_under_half_a_pixel_and_discrete_lod_pops() {
     let discrete = run(
         &set,
         path,
-        "240",
+        "120",
         &puget_source,
         &["--tau", "2", "--warmup", "--no-geomorph"],
     );
     let pop = discrete["pop_px"].as_f64().expect("pop_px");
     assert!(pop > 0.5, "discrete LOD at tau 2 popped only {pop} px");
-    let fixed = run(&set, path, "240", &puget_source, &["--level", "4"]);
+    let fixed = run(&set, path, "120", &puget_source, &["--level", "4"]);
     assert_eq!(fixed["pop_px"].as_f64(), Some(0.0), "{fixed}");
 }
 
@@ -966,7 +966,7 @@ fn prefetching_under_a_tight_budget_stays_crack_free() {
 fn prefetching_draws_fewer_tiles_coarser_after_the_cold_start() {
     let dir = tempfile::tempdir().expect("temp dir");
     let set = common::puget(dir.path());
-    let run = |extra: &[&str]| -> serde_json::Value {
+    let run = |budget_ms: &str, extra: &[&str]| -> serde_json::Value {
         let mut args = vec![
             s(&set),
             "--headless",
@@ -982,13 +982,13 @@ fn prefetching_draws_fewer_tiles_coarser_after_the_cold_start() {
             "--upload-budget-mb",
             "0.05",
             "--prefetch-ms",
-            "1000",
+            budget_ms,
         ];
         args.extend(extra);
         common::summary(&args)
     };
-    let on = run(&[]);
-    let off = run(&["--no-prefetch"]);
+    let on = run("1000", &[]);
+    let off = run("1000", &["--no-prefetch"]);
     let warm = |v: &serde_json::Value| v["tiles_coarser_warm"].as_u64().expect("count");
     assert_eq!(on["index_arrays"], "built", "{on}");
     assert_eq!(on["warmup_frames"], off["warmup_frames"], "{on}\n{off}");
@@ -1000,6 +1000,11 @@ fn prefetching_draws_fewer_tiles_coarser_after_the_cold_start() {
         warm(&off)
     );
     assert!(on["prefetch_hits"].as_u64() > Some(0), "{on}");
+    // `--prefetch-ms` is a budget for the prediction and the manager's step together: with
+    // none, nothing is predicted in time and nothing is sent ahead (against `on`'s hits).
+    let none = run("0", &[]);
+    assert_eq!(none["prefetch_mb"].as_f64(), Some(0.0), "{none}");
+    assert_eq!(none["prefetch_hits"].as_u64(), Some(0), "{none}");
 }
 
 /// `--file-cache-mb`: the pages opening the set read are given back before the flight; once

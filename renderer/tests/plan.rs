@@ -10,6 +10,7 @@ use renderer::camera::Camera;
 use renderer::path::CameraPath;
 use renderer::plan::{plan, stitch_granted, visible_tiles, Draw, LevelRule, Residency};
 use renderer::terrain::Terrain;
+use renderer::tile::Side;
 
 const EXTENT: (u32, u32) = (640, 480);
 
@@ -123,6 +124,7 @@ fn tight_budget_draws_what_is_resident_and_stitches_granted_levels() {
                 completed: f.checked_sub(2),
                 allow_uploads: true,
                 prefetch: &[],
+                prefetch_until: None,
             },
         )
         .expect("plan");
@@ -189,14 +191,15 @@ fn stitch_edges(s: &renderer::stitch::Stitch) -> std::collections::HashSet<(u32,
 /// the Puget set at every pair of levels. Dropping one triangle breaks it (the control).
 #[test]
 fn stitches_close_every_seam_at_every_level_pair() {
-    use renderer::stitch::{stitch_side, Side, Stitch, LOCAL_BITS};
+    use renderer::stitch::{stitch_side, DrawnSide, Stitch, LOCAL_BITS};
     use tiles::pack::unpack;
     let (_dir, terrain) = puget();
     let mut checked = 0;
     let mut control_failed = 0;
     for a in &terrain.tiles {
-        for (k, (dx, dy)) in [(1usize, (1u32, 0u32)), (2, (0, 1))] {
-            let Some(j) = terrain.tile_index(a.tx + dx, a.ty + dy) else {
+        for side in Side::FORWARD {
+            let k = side.index();
+            let Some(j) = terrain.neighbour(a, side) else {
                 continue;
             };
             let b = &terrain.tiles[j];
@@ -205,18 +208,18 @@ fn stitches_close_every_seam_at_every_level_pair() {
             }) {
                 {
                     let mut s = Stitch::default();
-                    let mine = Side {
+                    let mine = DrawnSide {
                         tile: a,
                         level: la,
                         record: 0,
                     };
-                    let theirs = Side {
+                    let theirs = DrawnSide {
                         tile: b,
                         level: lb,
                         record: 1,
                     };
                     assert!(
-                        stitch_side(&mut s, mine, theirs, k, morph),
+                        stitch_side(&mut s, mine, theirs, side, morph),
                         "borders differ"
                     );
                     // Each vertex is pulled from its own tile: a's first, then b's, each the
@@ -228,7 +231,7 @@ fn stitches_close_every_seam_at_every_level_pair() {
                         let (tile, level, side, at) = if i < n {
                             (a, la, k, i)
                         } else {
-                            (b, lb, (k + 2) % 4, i - n)
+                            (b, lb, side.opposite().index(), i - n)
                         };
                         assert_eq!(record, u32::from(i >= n));
                         assert_eq!(tile.border_indices[level as usize][side][at], local);
@@ -237,12 +240,12 @@ fn stitches_close_every_seam_at_every_level_pair() {
                         // Morphing keeps the triangles at shared vertices: one per segment
                         // of either polyline.
                         let m = a.borders[la as usize][k].len()
-                            + b.borders[lb as usize][(k + 2) % 4].len();
+                            + b.borders[lb as usize][side.opposite().index()].len();
                         assert_eq!(s.triangles as usize, m - 2, "levels {la}/{lb}");
                     }
                     let on_edge = |p: u32| {
                         let (x, y, _) = unpack(p);
-                        if k == 1 {
+                        if side == Side::East {
                             x == 256
                         } else {
                             y == 256
@@ -336,8 +339,9 @@ fn shared_side_vertices_morph_to_one_height_from_both_tiles() {
                 let va = tile_vertices(&ta, finest, Some(&morph(i)));
                 let plain = tile_vertices(&ta, finest, None);
                 morphed += va.iter().zip(&plain).filter(|(m, p)| m.2 != p.2).count();
-                for (dx, dy) in [(1u32, 0u32), (0, 1)] {
-                    let Some(j) = terrain.tile_index(a.tx + dx, a.ty + dy) else {
+                for across in Side::FORWARD {
+                    let east = across == Side::East;
+                    let Some(j) = terrain.neighbour(a, across) else {
                         continue;
                     };
                     let b = &terrain.tiles[j];
@@ -346,8 +350,8 @@ fn shared_side_vertices_morph_to_one_height_from_both_tiles() {
                     // Heights along the shared side, by position along it.
                     let side = |v: &[(u32, u32, f32)], at: u32| {
                         v.iter()
-                            .filter(|p| if dx == 1 { p.0 == at } else { p.1 == at })
-                            .map(|p| (if dx == 1 { p.1 } else { p.0 }, p.2.to_bits()))
+                            .filter(|p| if east { p.0 == at } else { p.1 == at })
+                            .map(|p| (if east { p.1 } else { p.0 }, p.2.to_bits()))
                             .collect::<std::collections::HashMap<u32, u32>>()
                     };
                     let (mine, theirs) = (side(&va, 256), side(&vb, 0));

@@ -7,9 +7,10 @@
 
 use memory::{IndexArrays, Part};
 use renderer::camera::Camera;
-use renderer::frame::{FrameInput, MemoryOptions, Renderer, Settings};
+use renderer::frame::{FrameInput, Renderer};
 use renderer::log::FrameRecord;
 use renderer::path::CameraPath;
+use renderer::settings::{MemoryOptions, Settings};
 use renderer::terrain::Terrain;
 use renderer::vulkan::{Gpu, GpuOptions};
 

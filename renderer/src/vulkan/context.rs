@@ -87,6 +87,212 @@ unsafe extern "system" fn debug_callback(
     vk::FALSE
 }
 
+/// The instance, with the validation layer and the debug-utils messenger's extension when
+/// asked for (and the surface extensions a display needs); whether debug utils are there.
+fn create_instance(entry: &ash::Entry, options: &GpuOptions) -> VkResult<(ash::Instance, bool)> {
+    // SAFETY: plain enumeration calls on a loaded entry.
+    let layers = unsafe { entry.enumerate_instance_layer_properties() }?;
+    let has_layer = layers
+        .iter()
+        .any(|l| l.layer_name_as_c_str().is_ok_and(|n| n == VALIDATION_LAYER));
+    if options.validation && !has_layer {
+        return Err(VkError::Unsupported(
+            "--validation: the Khronos validation layer is not installed (Debian: vulkan-validationlayers)".into(),
+        ));
+    }
+    // SAFETY: as above.
+    let extensions = unsafe { entry.enumerate_instance_extension_properties(None) }?;
+    let has_debug_utils = extensions.iter().any(|e| {
+        e.extension_name_as_c_str()
+            .is_ok_and(|n| n == ash::ext::debug_utils::NAME)
+    });
+    if options.validation && !has_debug_utils {
+        // Without the messenger no message could be counted: a silent pass would lie.
+        return Err(VkError::Unsupported(
+            "--validation: VK_EXT_debug_utils is missing, so validation messages cannot be counted"
+                .into(),
+        ));
+    }
+    let app_name = c"vkterrain";
+    let app = vk::ApplicationInfo::default()
+        .application_name(app_name)
+        .engine_name(app_name)
+        .api_version(vk::API_VERSION_1_3);
+    let layer_names: Vec<*const i8> = if options.validation {
+        vec![VALIDATION_LAYER.as_ptr()]
+    } else {
+        vec![]
+    };
+    let mut ext_names: Vec<*const i8> = if has_debug_utils {
+        vec![ash::ext::debug_utils::NAME.as_ptr()]
+    } else {
+        vec![]
+    };
+    if let Some(display) = options.display {
+        let surface = ash_window::enumerate_required_extensions(display).map_err(|e| {
+            VkError::Unsupported(format!("this display cannot present with Vulkan: {e}"))
+        })?;
+        ext_names.extend_from_slice(surface);
+    }
+    let create = vk::InstanceCreateInfo::default()
+        .application_info(&app)
+        .enabled_layer_names(&layer_names)
+        .enabled_extension_names(&ext_names);
+    // SAFETY: every pointer in `create` outlives the call.
+    let instance = unsafe { entry.create_instance(&create, None) }?;
+    Ok((instance, has_debug_utils))
+}
+
+/// The messenger that counts validation warnings and errors into `counter` and prints them.
+fn create_messenger(
+    entry: &ash::Entry,
+    instance: &ash::Instance,
+    counter: *const AtomicU64,
+) -> VkResult<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)> {
+    let loader = ash::ext::debug_utils::Instance::new(entry, instance);
+    let info = vk::DebugUtilsMessengerCreateInfoEXT::default()
+        .message_severity(
+            vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
+                | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
+        )
+        .message_type(
+            vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
+                | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
+                | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
+        )
+        .pfn_user_callback(Some(debug_callback))
+        .user_data(counter as *mut c_void);
+    // SAFETY: the callback's user data lives until drop, after the messenger is destroyed.
+    let m = unsafe { loader.create_debug_utils_messenger(&info, None) }?;
+    Ok((loader, m))
+}
+
+/// With a display, the device must offer swapchains.
+fn require_swapchain(
+    instance: &ash::Instance,
+    chosen: (vk::PhysicalDevice, u32, bool),
+    options: &GpuOptions,
+) -> VkResult<(vk::PhysicalDevice, u32, bool)> {
+    if options.display.is_none() {
+        return Ok(chosen);
+    }
+    // SAFETY: enumeration on a device of this instance.
+    let exts = unsafe { instance.enumerate_device_extension_properties(chosen.0) }?;
+    if exts.iter().any(|e| {
+        e.extension_name_as_c_str()
+            .is_ok_and(|n| n == ash::khr::swapchain::NAME)
+    }) {
+        Ok(chosen)
+    } else {
+        Err(VkError::Unsupported(
+            "the device cannot present to windows (no VK_KHR_swapchain)".into(),
+        ))
+    }
+}
+
+/// The optional features the renderer uses, as the device offers them.
+fn query_features(
+    instance: &ash::Instance,
+    physical: vk::PhysicalDevice,
+    properties: &vk::PhysicalDeviceProperties,
+) -> Features {
+    // SAFETY: plain queries on this instance's device.
+    let supported = unsafe { instance.get_physical_device_features(physical) };
+    let bc1 = unsafe {
+        instance.get_physical_device_format_properties(physical, vk::Format::BC1_RGB_UNORM_BLOCK)
+    };
+    let bc_textures = supported.texture_compression_bc == vk::TRUE
+        && bc1.optimal_tiling_features.contains(
+            vk::FormatFeatureFlags::SAMPLED_IMAGE
+                | vk::FormatFeatureFlags::SAMPLED_IMAGE_FILTER_LINEAR
+                | vk::FormatFeatureFlags::TRANSFER_DST,
+        );
+    let min_lod = supported.shader_resource_min_lod == vk::TRUE;
+    let storage_16bit = {
+        let mut v11 = vk::PhysicalDeviceVulkan11Features::default();
+        let mut features = vk::PhysicalDeviceFeatures2::default().push_next(&mut v11);
+        // SAFETY: plain query on this instance's device; the chain outlives the call.
+        unsafe { instance.get_physical_device_features2(physical, &mut features) };
+        v11.storage_buffer16_bit_access == vk::TRUE
+    };
+    let anisotropy = supported.sampler_anisotropy == vk::TRUE && min_lod;
+    Features {
+        bc_textures,
+        min_lod,
+        vertex_stores: supported.vertex_pipeline_stores_and_atomics == vk::TRUE,
+        storage_16bit,
+        anisotropy,
+        max_anisotropy: if anisotropy {
+            properties.limits.max_sampler_anisotropy.max(1.0)
+        } else {
+            1.0
+        },
+    }
+}
+
+/// The logical device with one queue of `family` and the features the renderer uses.
+fn create_device(
+    instance: &ash::Instance,
+    (physical, family): (vk::PhysicalDevice, u32),
+    f: &Features,
+    wireframe: bool,
+    swapchain: bool,
+) -> VkResult<ash::Device> {
+    let priorities = [1.0f32];
+    let queues = [vk::DeviceQueueCreateInfo::default()
+        .queue_family_index(family)
+        .queue_priorities(&priorities)];
+    let mut v13 = vk::PhysicalDeviceVulkan13Features::default().dynamic_rendering(true);
+    let mut v11 =
+        vk::PhysicalDeviceVulkan11Features::default().storage_buffer16_bit_access(f.storage_16bit);
+    let features = vk::PhysicalDeviceFeatures::default()
+        .fill_mode_non_solid(wireframe)
+        .texture_compression_bc(f.bc_textures)
+        .sampler_anisotropy(f.anisotropy)
+        .shader_resource_min_lod(f.min_lod)
+        .vertex_pipeline_stores_and_atomics(f.vertex_stores);
+    let device_extensions: Vec<*const i8> = if swapchain {
+        vec![ash::khr::swapchain::NAME.as_ptr()]
+    } else {
+        vec![]
+    };
+    let device_info = vk::DeviceCreateInfo::default()
+        .queue_create_infos(&queues)
+        .enabled_extension_names(&device_extensions)
+        .enabled_features(&features)
+        .push_next(&mut v13)
+        .push_next(&mut v11);
+    // SAFETY: the features were checked in open_device; pointers outlive the call.
+    Ok(unsafe { instance.create_device(physical, &device_info, None) }?)
+}
+
+/// Whether every device-local memory type is also host-visible and coherent (lavapipe,
+/// integrated GPUs, resizable BAR).
+fn unified_memory(instance: &ash::Instance, physical: vk::PhysicalDevice) -> bool {
+    // SAFETY: plain property query on this instance's device.
+    let memory = unsafe { instance.get_physical_device_memory_properties(physical) };
+    let types = &memory.memory_types[..memory.memory_type_count as usize];
+    let host = vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT;
+    let local: Vec<_> = types
+        .iter()
+        .filter(|t| {
+            t.property_flags
+                .contains(vk::MemoryPropertyFlags::DEVICE_LOCAL)
+        })
+        .collect();
+    !local.is_empty() && local.iter().all(|t| t.property_flags.contains(host))
+}
+
+/// What the chosen device can do that the renderer enables or works around.
+struct Features {
+    bc_textures: bool,
+    min_lod: bool,
+    vertex_stores: bool,
+    storage_16bit: bool,
+    anisotropy: bool,
+    max_anisotropy: f32,
+}
+
 impl Gpu {
     pub fn new(options: &GpuOptions) -> VkResult<Gpu> {
         // SAFETY: loading the system Vulkan loader; failure is reported, not assumed.
@@ -95,99 +301,26 @@ impl Gpu {
                 "cannot load the Vulkan loader (install libvulkan1): {e}"
             ))
         })?;
-        // SAFETY: plain enumeration calls on a loaded entry.
-        let layers = unsafe { entry.enumerate_instance_layer_properties() }?;
-        let has_layer = layers
-            .iter()
-            .any(|l| l.layer_name_as_c_str().is_ok_and(|n| n == VALIDATION_LAYER));
-        if options.validation && !has_layer {
-            return Err(VkError::Unsupported(
-                "--validation: the Khronos validation layer is not installed (Debian: vulkan-validationlayers)".into(),
-            ));
-        }
-        // SAFETY: as above.
-        let extensions = unsafe { entry.enumerate_instance_extension_properties(None) }?;
-        let has_debug_utils = extensions.iter().any(|e| {
-            e.extension_name_as_c_str()
-                .is_ok_and(|n| n == ash::ext::debug_utils::NAME)
-        });
-        if options.validation && !has_debug_utils {
-            // Without the messenger no message could be counted: a silent pass would lie.
-            return Err(VkError::Unsupported(
-                "--validation: VK_EXT_debug_utils is missing, so validation messages cannot be counted".into(),
-            ));
-        }
-
-        let app_name = c"vkterrain";
-        let app = vk::ApplicationInfo::default()
-            .application_name(app_name)
-            .engine_name(app_name)
-            .api_version(vk::API_VERSION_1_3);
-        let layer_names: Vec<*const i8> = if options.validation {
-            vec![VALIDATION_LAYER.as_ptr()]
-        } else {
-            vec![]
-        };
-        let mut ext_names: Vec<*const i8> = if has_debug_utils {
-            vec![ash::ext::debug_utils::NAME.as_ptr()]
-        } else {
-            vec![]
-        };
-        if let Some(display) = options.display {
-            let surface = ash_window::enumerate_required_extensions(display).map_err(|e| {
-                VkError::Unsupported(format!("this display cannot present with Vulkan: {e}"))
-            })?;
-            ext_names.extend_from_slice(surface);
-        }
-        let create = vk::InstanceCreateInfo::default()
-            .application_info(&app)
-            .enabled_layer_names(&layer_names)
-            .enabled_extension_names(&ext_names);
-        // SAFETY: every pointer in `create` outlives the call.
-        let instance = unsafe { entry.create_instance(&create, None) }?;
-
+        let (instance, has_debug_utils) = create_instance(&entry, options)?;
         let validation_messages = Arc::new(AtomicU64::new(0));
         let callback_counter = Arc::into_raw(validation_messages.clone());
         let messenger = if has_debug_utils && options.validation {
-            let loader = ash::ext::debug_utils::Instance::new(&entry, &instance);
-            let info = vk::DebugUtilsMessengerCreateInfoEXT::default()
-                .message_severity(
-                    vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
-                        | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
-                )
-                .message_type(
-                    vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
-                        | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
-                        | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
-                )
-                .pfn_user_callback(Some(debug_callback))
-                .user_data(callback_counter as *mut c_void);
-            // SAFETY: the callback's user data lives until drop, after the messenger is destroyed.
-            let m = unsafe { loader.create_debug_utils_messenger(&info, None) }?;
-            Some((loader, m))
+            match create_messenger(&entry, &instance, callback_counter) {
+                Ok(m) => Some(m),
+                Err(e) => {
+                    // SAFETY: nothing else was created from the instance yet.
+                    unsafe {
+                        instance.destroy_instance(None);
+                        drop(Arc::from_raw(callback_counter));
+                    }
+                    return Err(e);
+                }
+            }
         } else {
             None
         };
-
-        let result = Self::open_device(&instance, options);
-        // With a display, the device must offer swapchains.
-        let result = result.and_then(|(pd, family, wire)| {
-            if options.display.is_none() {
-                return Ok((pd, family, wire));
-            }
-            // SAFETY: enumeration on a device of this instance.
-            let exts = unsafe { instance.enumerate_device_extension_properties(pd) }?;
-            if exts.iter().any(|e| {
-                e.extension_name_as_c_str()
-                    .is_ok_and(|n| n == ash::khr::swapchain::NAME)
-            }) {
-                Ok((pd, family, wire))
-            } else {
-                Err(VkError::Unsupported(
-                    "the device cannot present to windows (no VK_KHR_swapchain)".into(),
-                ))
-            }
-        });
+        let result = Self::open_device(&instance, options)
+            .and_then(|chosen| require_swapchain(&instance, chosen, options));
         let (physical, queue_family, wireframe_supported) = match result {
             Ok(v) => v,
             Err(e) => {
@@ -208,60 +341,14 @@ impl Gpu {
             .device_name_as_c_str()
             .map(|c| c.to_string_lossy().into_owned())
             .unwrap_or_default();
-
-        // SAFETY: plain queries on this instance's device.
-        let supported = unsafe { instance.get_physical_device_features(physical) };
-        let bc1 = unsafe {
-            instance
-                .get_physical_device_format_properties(physical, vk::Format::BC1_RGB_UNORM_BLOCK)
-        };
-        let bc_textures = supported.texture_compression_bc == vk::TRUE
-            && bc1.optimal_tiling_features.contains(
-                vk::FormatFeatureFlags::SAMPLED_IMAGE
-                    | vk::FormatFeatureFlags::SAMPLED_IMAGE_FILTER_LINEAR
-                    | vk::FormatFeatureFlags::TRANSFER_DST,
-            );
-        let min_lod = supported.shader_resource_min_lod == vk::TRUE;
-        let vertex_stores = supported.vertex_pipeline_stores_and_atomics == vk::TRUE;
-        let storage_16bit = {
-            let mut v11 = vk::PhysicalDeviceVulkan11Features::default();
-            let mut features = vk::PhysicalDeviceFeatures2::default().push_next(&mut v11);
-            // SAFETY: plain query on this instance's device; the chain outlives the call.
-            unsafe { instance.get_physical_device_features2(physical, &mut features) };
-            v11.storage_buffer16_bit_access == vk::TRUE
-        };
-        let anisotropy = supported.sampler_anisotropy == vk::TRUE && min_lod;
-        let max_anisotropy = if anisotropy {
-            properties.limits.max_sampler_anisotropy.max(1.0)
-        } else {
-            1.0
-        };
-        let priorities = [1.0f32];
-        let queues = [vk::DeviceQueueCreateInfo::default()
-            .queue_family_index(queue_family)
-            .queue_priorities(&priorities)];
-        let mut v13 = vk::PhysicalDeviceVulkan13Features::default().dynamic_rendering(true);
-        let mut v11 = vk::PhysicalDeviceVulkan11Features::default()
-            .storage_buffer16_bit_access(storage_16bit);
-        let features = vk::PhysicalDeviceFeatures::default()
-            .fill_mode_non_solid(wireframe_supported)
-            .texture_compression_bc(bc_textures)
-            .sampler_anisotropy(anisotropy)
-            .shader_resource_min_lod(min_lod)
-            .vertex_pipeline_stores_and_atomics(vertex_stores);
-        let device_extensions: Vec<*const i8> = if options.display.is_some() {
-            vec![ash::khr::swapchain::NAME.as_ptr()]
-        } else {
-            vec![]
-        };
-        let device_info = vk::DeviceCreateInfo::default()
-            .queue_create_infos(&queues)
-            .enabled_extension_names(&device_extensions)
-            .enabled_features(&features)
-            .push_next(&mut v13)
-            .push_next(&mut v11);
-        // SAFETY: the features were checked in open_device; pointers outlive the call.
-        let device = unsafe { instance.create_device(physical, &device_info, None) }?;
+        let features = query_features(&instance, physical, &properties);
+        let device = create_device(
+            &instance,
+            (physical, queue_family),
+            &features,
+            wireframe_supported,
+            options.display.is_some(),
+        )?;
         // SAFETY: family and index exist (one queue requested).
         let queue = unsafe { device.get_device_queue(queue_family, 0) };
         let debug_device =
@@ -274,21 +361,7 @@ impl Gpu {
             buffer_device_address: false,
             allocation_sizes: Default::default(),
         })?;
-        // SAFETY: plain property query on this instance's device.
-        let memory = unsafe { instance.get_physical_device_memory_properties(physical) };
-        let unified_memory = {
-            let types = &memory.memory_types[..memory.memory_type_count as usize];
-            let host =
-                vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT;
-            let local: Vec<_> = types
-                .iter()
-                .filter(|t| {
-                    t.property_flags
-                        .contains(vk::MemoryPropertyFlags::DEVICE_LOCAL)
-                })
-                .collect();
-            !local.is_empty() && local.iter().all(|t| t.property_flags.contains(host))
-        };
+        let unified_memory = unified_memory(&instance, physical);
         let gpu = Gpu {
             entry,
             instance,
@@ -304,11 +377,11 @@ impl Gpu {
             validation_messages,
             callback_counter,
             wireframe_supported,
-            bc_textures,
-            max_anisotropy,
-            min_lod,
-            storage_16bit,
-            vertex_stores,
+            bc_textures: features.bc_textures,
+            max_anisotropy: features.max_anisotropy,
+            min_lod: features.min_lod,
+            storage_16bit: features.storage_16bit,
+            vertex_stores: features.vertex_stores,
             unified_memory,
             allocations: AtomicU64::new(0),
         };

@@ -124,6 +124,7 @@ impl IndexBuilder {
         }
     }
 
+    /// The compute pipeline and its layout, then the sets.
     fn create(&mut self, gpu: &Gpu, pool: &Buffer, slots: usize) -> VkResult<()> {
         let ranges = [vk::PushConstantRange::default()
             .stage_flags(vk::ShaderStageFlags::COMPUTE)
@@ -154,7 +155,12 @@ impl IndexBuilder {
         unsafe { gpu.device.destroy_shader_module(module, None) };
         self.pipeline = pipelines.map_err(|(_, e)| VkError::from(e))?[0];
         gpu.name(self.pipeline, "index build pipeline");
+        self.create_sets(gpu, pool, slots)
+    }
 
+    /// The per-slot build lists and status buffers, and a descriptor set per slot over them,
+    /// the pool and the lookups.
+    fn create_sets(&mut self, gpu: &Gpu, pool: &Buffer, slots: usize) -> VkResult<()> {
         let sizes = [vk::DescriptorPoolSize::default()
             .ty(vk::DescriptorType::STORAGE_BUFFER)
             .descriptor_count(6 * slots as u32)];
@@ -225,14 +231,6 @@ impl IndexBuilder {
             unsafe { gpu.device.update_descriptor_sets(&writes, &[]) };
         }
         Ok(())
-    }
-
-    /// Bytes [`IndexBuilder::bytes`] will be for `slots` slots of `capacity` builds and
-    /// `lookups` lookups.
-    pub fn bytes_for(slots: usize, capacity: usize, lookups: u32) -> u64 {
-        LOOKUP_BYTES * u64::from(lookups.clamp(1, MAX_BUILDS_PER_DISPATCH))
-            + slots.max(1) as u64
-                * ((capacity.max(1) * std::mem::size_of::<Build>()) as u64 + STATUS_BYTES)
     }
 
     /// Builds a slot's list holds.
@@ -340,5 +338,16 @@ impl IndexBuilder {
             b.destroy(gpu);
         }
         self.scratch.destroy(gpu);
+    }
+}
+
+/// The builder's memory as `memory::budget` sizes it before one exists: per array built at once
+/// a lookup, per frame slot a build list and a status word ([`IndexBuilder::bytes`] once made).
+pub fn builder_cost() -> memory::budget::BuilderCost {
+    memory::budget::BuilderCost {
+        lookup_bytes: LOOKUP_BYTES,
+        build_bytes: std::mem::size_of::<Build>() as u64,
+        status_bytes: STATUS_BYTES,
+        max_lookups: MAX_BUILDS_PER_DISPATCH,
     }
 }

@@ -95,52 +95,24 @@ impl TerrainPipeline {
         } else {
             shader(gpu, spirv::TERRAIN_FRAG, "terrain.frag")?
         };
-        let fill = Self::build(
-            gpu,
-            layout,
-            vert,
-            frag,
-            color,
-            depth,
-            vk::PolygonMode::FILL,
-            "terrain (fill)",
-        );
-        let all_rows = Self::build(
-            gpu,
-            layout,
+        let build =
+            |vert, mode, name| Self::build(gpu, layout, vert, frag, color, depth, mode, name);
+        let fill = build(vert, vk::PolygonMode::FILL, "terrain (fill)");
+        let all_rows = build(
             vert_all_rows,
-            frag,
-            color,
-            depth,
             vk::PolygonMode::FILL,
             "terrain (fill, forward differences over all rows)",
         );
         let read_back = read_back.then(|| {
-            Self::build(
-                gpu,
-                layout,
+            build(
                 vert_read_back,
-                frag,
-                color,
-                depth,
                 vk::PolygonMode::FILL,
                 "terrain (fill, heights read back)",
             )
         });
-        let wireframe = if gpu.wireframe_supported {
-            Some(Self::build(
-                gpu,
-                layout,
-                vert,
-                frag,
-                color,
-                depth,
-                vk::PolygonMode::LINE,
-                "terrain (wireframe)",
-            ))
-        } else {
-            None
-        };
+        let wireframe = gpu
+            .wireframe_supported
+            .then(|| build(vert, vk::PolygonMode::LINE, "terrain (wireframe)"));
         // SAFETY: modules are only needed during pipeline creation.
         unsafe {
             gpu.device.destroy_shader_module(vert, None);

@@ -151,7 +151,7 @@ pub fn flight(
     flight_with_fault(set, out, path, frames, extra, None)
 }
 
-/// [`flight`] with a fault injected (`VKTERRAIN_FAULT`, see `renderer::frame::Fault`).
+/// [`flight`] with a fault injected (`VKTERRAIN_FAULT`, see `renderer::fault::Fault`).
 pub fn flight_with_fault(
     set: &Path,
     out: &Path,

@@ -1,18 +1,21 @@
 //! Prefetching (paper, section 6, last paragraph): the camera predicted from the poses flown
-//! ([`crate::predict`]), the tiles visible from the predicted poses with the levels they will
+//! ([`predict`]), the tiles visible from the predicted poses with the levels they will
 //! want, soonest first and nearest first, handed to the memory manager to upload with what the
-//! frame leaves of its byte budget ([`memory::Manager::prefetch`]), and the file side: their
+//! frame leaves of its byte budget ([`memory::Manager::prefetch_while`], within `--prefetch-ms` with the prediction), and the file side: their
 //! byte ranges advised `WILLNEED` so a cold page cache is read ahead, and, when the mapping
 //! outgrows a budget, tiles far behind the camera advised `DONTNEED`.
+
+pub mod predict;
 
 use std::time::Instant;
 
 use glam::DVec3;
 use memory::Request;
 
+use self::predict::Predictor;
 use crate::camera::Camera;
+use crate::log::ms;
 use crate::plan::{self, LevelRule};
-use crate::predict::Predictor;
 use crate::terrain::Terrain;
 
 /// How prefetching runs (`vkterrain --no-prefetch`, `--prefetch-ms`, `--prefetch-free`,
@@ -64,6 +67,9 @@ pub struct Prefetcher {
     /// Per tile: its bytes were advised or read by this run (and not released since).
     paged: Vec<bool>,
     paged_bytes: u64,
+    /// What a horizon cost in the last frame that looked at one (the slowest of its
+    /// horizons), ms: a horizon starts only when one as slow still ends within the budget.
+    horizon_ms: f64,
 }
 
 impl Prefetcher {
@@ -73,6 +79,7 @@ impl Prefetcher {
             predictor: Predictor::default(),
             paged: vec![false; tiles],
             paged_bytes: 0,
+            horizon_ms: 0.0,
         }
     }
 
@@ -97,10 +104,13 @@ impl Prefetcher {
         let started = Instant::now();
         let mut out = Predicted::default();
         let mut listed: Vec<Option<u32>> = vec![None; terrain.tiles.len()];
+        let mut slowest = 0.0f64;
         for h in self.predictor.horizons() {
-            if started.elapsed().as_secs_f64() * 1000.0 > self.options.cpu_ms {
+            // A horizon starts only if one as slow as the slowest yet still ends in budget.
+            if ms(started) + self.horizon_ms.max(slowest) > self.options.cpu_ms {
                 break;
             }
+            let t = Instant::now();
             let Some(predicted) = self.predictor.predict(h) else {
                 break;
             };
@@ -116,7 +126,15 @@ impl Prefetcher {
                 listed[i] = Some(r.wanted);
                 out.requests.push(r);
             }
+            slowest = slowest.max(ms(t));
         }
+        // A frame that looked at none forgets half of the estimate, so one slow frame does
+        // not stop prefetching for good.
+        self.horizon_ms = if out.horizons > 0 {
+            slowest
+        } else {
+            self.horizon_ms / 2.0
+        };
         if self.options.madvise {
             for r in &out.requests {
                 out.advised_bytes += self.page_in(terrain, r.tile as usize);
@@ -204,6 +222,6 @@ fn blob_len(terrain: &Terrain, tile: usize) -> u64 {
         .map_or(0, |r| r.end - r.start)
 }
 
-fn distance_to_box(p: DVec3, t: &crate::terrain::TileInfo) -> f64 {
+fn distance_to_box(p: DVec3, t: &crate::tile::TileInfo) -> f64 {
     p.clamp(t.min, t.max).distance(p)
 }

@@ -1,0 +1,372 @@
+//! Every GPU allocation the frame loop makes, at start: the tile pool (halved until device
+//! memory holds it), the texture slots, the index builder, the pipelines and one slot per frame
+//! in flight. How the budget splits between them is decided in `memory::budget`; this file only
+//! asks the device for what was decided and undoes what it made when a later step fails.
+
+use ash::vk;
+use memory::budget::{self, Split, Textures};
+use memory::textures::{TextureConfig, TextureSlots};
+use memory::{Config, Manager, Victim};
+
+use super::ring::{Slot, SlotSizes};
+use super::Renderer;
+use crate::fault::Fault;
+use crate::interface::{RECORDS_OFFSET, RECORD_BYTES};
+use crate::prefetch::Prefetcher;
+use crate::settings::MemoryOptions;
+use crate::stitch::MAX_RECORDS;
+use crate::target::{COLOR_FORMAT, DEPTH_FORMAT};
+use crate::terrain::Terrain;
+use crate::tile::Side;
+use crate::vulkan::indices::{self, IndexBuilder};
+use crate::vulkan::pipeline::{TerrainPipeline, TerrainSets};
+use crate::vulkan::pool::TilePool;
+use crate::vulkan::sync::Commands;
+use crate::vulkan::texture::{TextureArray, TextureDesc};
+use crate::vulkan::{Buffer, Gpu, VkError, VkResult};
+
+/// The smallest pool worth trying when device memory runs short.
+const MIN_POOL: u64 = 1 << 20;
+
+/// What [`Renderer::new`] has made so far beside the pool, destroyed together when a later
+/// step fails.
+#[derive(Default)]
+struct Parts {
+    textures: Option<TextureArray>,
+    commands: Option<Commands>,
+    pipeline: Option<TerrainPipeline>,
+    slots: Vec<Slot>,
+    builder: Option<IndexBuilder>,
+    sets: Option<TerrainSets>,
+}
+
+impl Parts {
+    fn destroy(self, gpu: &Gpu) {
+        gpu.wait_idle();
+        if let Some(s) = self.sets {
+            s.destroy(gpu);
+        }
+        if let Some(b) = self.builder {
+            b.destroy(gpu);
+        }
+        for s in self.slots {
+            s.destroy(gpu);
+        }
+        if let Some(p) = self.pipeline {
+            p.destroy(gpu);
+        }
+        if let Some(c) = self.commands {
+            c.destroy(gpu);
+        }
+        if let Some(t) = self.textures {
+            t.destroy(gpu);
+        }
+    }
+}
+
+impl Renderer {
+    /// Plans the pool for `terrain` and allocates everything the loop will use.
+    pub fn new(
+        gpu: &Gpu,
+        terrain: &Terrain,
+        extent: (u32, u32),
+        options: MemoryOptions,
+    ) -> VkResult<Renderer> {
+        let split = split_budget(gpu, terrain, &options);
+        let config = Config {
+            pool_bytes: split.pool_bytes,
+            upload_budget: options.upload_budget,
+            weight: options.weight,
+            class_ratio: 2.0,
+            scheme: options.scheme,
+            victim: Victim::Mixture,
+            downgrade_slack: options.downgrade_slack,
+            prefetch_free: options.prefetch.free_share,
+            index_arrays: split.index_arrays,
+        };
+        let fault = Fault::from_env();
+        let (manager, pool) = allocate_pool(gpu, terrain, config, options.force_staging, fault)?;
+        let mut parts = Parts::default();
+        let made = make_parts(
+            &mut parts,
+            gpu,
+            terrain,
+            (&pool, &manager),
+            &options,
+            &split,
+            extent,
+        );
+        let made = made.and_then(|()| {
+            match (
+                parts.pipeline.take(),
+                parts.commands.take(),
+                parts.textures.take(),
+            ) {
+                (Some(p), Some(c), Some(t)) => Ok((p, c, t)),
+                (p, c, t) => {
+                    (parts.pipeline, parts.commands, parts.textures) = (p, c, t);
+                    Err(VkError::Unsupported(
+                        "the frame loop's objects were not all made".into(),
+                    ))
+                }
+            }
+        });
+        let (pipeline, commands, textures) = match made {
+            Ok(made) => made,
+            Err(e) => {
+                parts.destroy(gpu);
+                pool.destroy(gpu);
+                return Err(e);
+            }
+        };
+        Ok(Renderer {
+            pipeline,
+            sets: parts.sets,
+            commands,
+            slots: parts.slots,
+            pool,
+            manager,
+            textures,
+            texture_slots: split.textures.config().cloned().map(TextureSlots::new),
+            options,
+            frame: 0,
+            slot_ready: None,
+            trace: None,
+            last_end: None,
+            meter: None,
+            fault,
+            collected: Vec::new(),
+            prefetcher: Prefetcher::new(options.prefetch, terrain.tiles.len()),
+            builder: parts.builder,
+        })
+    }
+
+    pub fn destroy(self, gpu: &Gpu) {
+        gpu.wait_idle();
+        if let Some(s) = self.sets {
+            s.destroy(gpu);
+        }
+        for s in self.slots {
+            s.destroy(gpu);
+        }
+        self.pool.destroy(gpu);
+        if let Some(b) = self.builder {
+            b.destroy(gpu);
+        }
+        self.textures.destroy(gpu);
+        self.pipeline.destroy(gpu);
+        self.commands.destroy(gpu);
+    }
+}
+
+/// Makes everything beside the pool into `parts`, in order; stops at the first failure.
+fn make_parts(
+    parts: &mut Parts,
+    gpu: &Gpu,
+    terrain: &Terrain,
+    (pool, manager): (&TilePool, &Manager),
+    options: &MemoryOptions,
+    split: &Split,
+    extent: (u32, u32),
+) -> VkResult<()> {
+    let textures = parts
+        .textures
+        .insert(texture_array(gpu, terrain, options, split)?);
+    let commands = parts.commands.insert(Commands::new(gpu, "frame commands")?);
+    let read_back = options.read_back_heights;
+    if read_back && !gpu.vertex_stores {
+        return Err(VkError::Unsupported(
+            "reading heights back needs vertexPipelineStoresAndAtomics, which this device lacks"
+                .into(),
+        ));
+    }
+    let pipeline = parts.pipeline.insert(TerrainPipeline::new(
+        gpu,
+        COLOR_FORMAT,
+        DEPTH_FORMAT,
+        read_back,
+    )?);
+    let sizes = slot_sizes(terrain, options, manager, split, extent);
+    for i in 0..split.frame_slots {
+        parts.slots.push(Slot::new(gpu, commands, i, sizes)?);
+    }
+    if let Some(b) = split.builder {
+        let (slots, builds) = (split.frame_slots, split.builds_per_frame);
+        let builder = IndexBuilder::new(gpu, &pool.buffer, slots, builds, b.lookups)?;
+        parts.builder = Some(builder);
+    }
+    let records: Vec<(&Buffer, &Buffer)> = parts
+        .slots
+        .iter()
+        .map(|s| (&s.records, &s.heights))
+        .collect();
+    let name = "frame descriptor sets";
+    let sets = TerrainSets::new(gpu, pipeline, &pool.buffer, &records, textures, name)?;
+    parts.sets = Some(sets);
+    Ok(())
+}
+
+/// The texture slots' array as the split sized it (a one-texel placeholder without textures).
+fn texture_array(
+    gpu: &Gpu,
+    terrain: &Terrain,
+    options: &MemoryOptions,
+    split: &Split,
+) -> VkResult<TextureArray> {
+    match (split.textures.config(), terrain.texture) {
+        (Some(c), Some(layout)) => TextureArray::new(
+            gpu,
+            TextureDesc {
+                format: vk::Format::BC1_RGB_UNORM_BLOCK,
+                size: layout.size,
+                mips: layout.mips,
+                layers: c.slots as u32,
+                anisotropy: options.anisotropy.clamp(1.0, gpu.max_anisotropy),
+            },
+            "texture slots",
+        ),
+        _ => TextureArray::placeholder(gpu),
+    }
+}
+
+/// How `options.gpu_budget_bytes` splits on this device for `terrain` (`memory::budget`),
+/// saying on stderr why a tile set's textures are left out.
+fn split_budget(gpu: &Gpu, terrain: &Terrain, options: &MemoryOptions) -> Split {
+    let limits = &gpu.properties.limits;
+    let device = budget::DeviceLimits {
+        max_storage_range: u64::from(limits.max_storage_buffer_range),
+        max_image_layers: limits.max_image_array_layers,
+        storage_16bit: gpu.storage_16bit,
+        bc1_textures: gpu.bc_textures,
+    };
+    let wishes = budget::Wishes {
+        gpu_budget: options.gpu_budget_bytes,
+        texture_share: options.texture_share,
+        textures: options.textures,
+        index_arrays: options.index_arrays,
+        frames_in_flight: options.frames_in_flight,
+    };
+    let set = budget::TileSet {
+        tiles: terrain.tiles.len(),
+        texture: terrain.texture.map(|layout| budget::MipChain {
+            mip_bytes: (0..layout.mips)
+                .map(|m| layout.mip_bytes(m) as u64)
+                .collect(),
+            mip_texels: (0..layout.mips).map(|m| layout.mip_size(m)).collect(),
+        }),
+    };
+    let split = Split::new(&device, &wishes, &set, &indices::builder_cost());
+    match split.textures {
+        Textures::NoBc1 => eprintln!(
+            "vkterrain: note: the device cannot sample BC1 textures; drawing without the tile set's textures"
+        ),
+        Textures::NoSlot { share, slot_bytes } => eprintln!(
+            "vkterrain: note: {:.1} MB of the GPU budget holds no {:.2} MB texture slot; drawing without textures",
+            share as f64 / 1e6,
+            slot_bytes as f64 / 1e6
+        ),
+        Textures::Slots(_) | Textures::Absent | Textures::Unwanted => {}
+    }
+    split
+}
+
+/// The sizes of each slot's buffers: stitches and records for every tile in view, heights for
+/// every drawn vertex (with read-back), and the staging bounds of `memory::budget`.
+fn slot_sizes(
+    terrain: &Terrain,
+    options: &MemoryOptions,
+    manager: &Manager,
+    split: &Split,
+    extent: (u32, u32),
+) -> SlotSizes {
+    let costs = tile_costs(manager);
+    let textures = split.textures.config();
+    SlotSizes {
+        stitch: stitch_bound(terrain),
+        records: RECORDS_OFFSET + RECORD_BYTES * terrain.tiles.len().clamp(1, MAX_RECORDS) as u64,
+        // Every tile at most once a frame, at its finest level at most.
+        heights: if options.read_back_heights {
+            4 * terrain
+                .tiles
+                .iter()
+                .filter_map(|t| t.levels.last())
+                .map(|l| u64::from(l.vertex_count()))
+                .sum::<u64>()
+                .max(4)
+        } else {
+            16
+        },
+        staging: budget::staging_bound(&costs, options.upload_budget)
+            + textures.map_or(0, |c: &TextureConfig| {
+                budget::texture_staging_bound(c, options.upload_budget)
+            }),
+        extent,
+    }
+}
+
+/// Plans and allocates the tile pool; when device memory runs out, halves the budget and tries
+/// again (down to [`MIN_POOL`]), saying so once on stderr: a smaller pool only means coarser
+/// tiles.
+fn allocate_pool(
+    gpu: &Gpu,
+    terrain: &Terrain,
+    mut config: Config,
+    force_staging: bool,
+    fault: Option<Fault>,
+) -> VkResult<(Manager, TilePool)> {
+    let mut first = None;
+    loop {
+        let manager = Manager::new(terrain.costs(), config);
+        let bytes = manager.pool_bytes();
+        let wanted = *first.get_or_insert(bytes);
+        let result = match fault {
+            Some(Fault::OomAbove(limit)) if bytes > limit => Err(VkError::OutOfMemory),
+            _ => TilePool::new(gpu, bytes, force_staging),
+        };
+        match result {
+            Ok(pool) => {
+                if bytes < wanted {
+                    eprintln!(
+                        "vkterrain: note: out of GPU memory for a {:.1} MB tile pool; flying with {:.1} MB (tiles may be drawn coarser)",
+                        wanted as f64 / 1e6,
+                        bytes as f64 / 1e6
+                    );
+                }
+                return Ok((manager, pool));
+            }
+            Err(VkError::OutOfMemory | VkError::Allocation(_)) if bytes / 2 >= MIN_POOL => {
+                config.pool_bytes = bytes / 2;
+            }
+            Err(e) => return Err(e),
+        }
+    }
+}
+
+/// Every tile's costs as the manager holds them.
+pub(super) fn tile_costs(manager: &Manager) -> Vec<memory::TileCost> {
+    (0..manager.tile_count())
+        .map(|t| manager.tile_cost(t as u32).clone())
+        .collect()
+}
+
+/// Bytes of stitch geometry a frame can need at most: every pair of neighbouring tiles, each
+/// side at its longest border (a 4-index fan per triangle, fewer triangles than vertices).
+fn stitch_bound(terrain: &Terrain) -> u64 {
+    let longest = |t: usize, side: Side| {
+        terrain.tiles[t]
+            .borders
+            .iter()
+            .map(|b| b[side.index()].len() as u64)
+            .max()
+            .unwrap_or(0)
+    };
+    let mut bytes = 0;
+    for (i, a) in terrain.tiles.iter().enumerate() {
+        for side in Side::FORWARD {
+            if let Some(j) = terrain.neighbour(a, side) {
+                bytes += 16 * (longest(i, side) + longest(j, side.opposite()));
+            }
+        }
+    }
+    bytes.max(4)
+}

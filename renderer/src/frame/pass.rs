@@ -1,0 +1,349 @@
+//! The terrain pass, recorded the same way for a live frame and a replayed one: the push
+//! constants, one indexed fan draw per tile from the pool and the stitches, between the
+//! pass's timestamps; and a live frame's whole command buffer around it.
+
+use ash::vk;
+
+use super::records::{self, DrawnTile};
+use super::uploads::Uploads;
+use super::{FrameInput, Renderer};
+use crate::camera::{Camera, View};
+use crate::error::FrameError;
+use crate::fault::Fault;
+use crate::interface::{
+    FrameConstants, MorphFrame, FLAG_GEOMORPH, FLAG_LEVEL_COLOURS, FLAG_RELIEF, FLAG_TEXTURE,
+    FLAG_TILES,
+};
+use crate::morph;
+use crate::plan::{LevelRule, Plan};
+use crate::settings::{MorphShader, Settings, Shading};
+use crate::stitch::pulled;
+use crate::target::Target;
+use crate::terrain::Terrain;
+use crate::textures::TexturePlan;
+use crate::vulkan::pipeline::TerrainPipeline;
+use crate::vulkan::pool;
+use crate::vulkan::sync;
+use crate::vulkan::texture;
+use crate::vulkan::timestamps::Timestamps;
+use crate::vulkan::Gpu;
+
+/// What a live frame wrote for its pass.
+pub(super) struct PassInputs {
+    pub constants: FrameConstants,
+    pub drawn: Vec<DrawnTile>,
+    pub stitch_ranges: Vec<(u32, u32)>,
+}
+
+impl Renderer {
+    /// Writes slot `s`'s stitches and tile records for the frame; returns them with the push
+    /// constants.
+    pub(super) fn write_pass_inputs(
+        &mut self,
+        terrain: &Terrain,
+        settings: &Settings,
+        camera: &Camera,
+        (plan, textures): (&Plan, &TexturePlan),
+        s: usize,
+    ) -> Result<PassInputs, FrameError> {
+        let slot = &mut self.slots[s];
+        let stitch_ranges = records::write_stitches(&mut slot.stitch, &plan.stitches)?;
+        let textured = self.texture_slots.is_some();
+        let (constants, morph) = pass_constants(terrain, camera, &plan.view, settings, textured);
+        // The meter and the read-back need each draw's morph inputs; nothing else does.
+        let describe = self.meter.is_some() || self.options.read_back_heights;
+        let drawn = records::write_records(
+            &mut slot.records,
+            terrain,
+            camera,
+            (plan, textures),
+            morph.as_ref().map(|m| (m, &constants)),
+            self.fault,
+            describe,
+        )?;
+        Ok(PassInputs {
+            constants,
+            drawn,
+            stitch_ranges,
+        })
+    }
+
+    /// Records slot `s`'s command buffer: the frame's copies and index builds, the pass, the
+    /// screenshot's read-back and the window's blit, between the frame's timestamps.
+    pub(super) fn record_live(
+        &self,
+        gpu: &Gpu,
+        s: usize,
+        input: &FrameInput<'_>,
+        scene: Scene<'_>,
+        uploads: &Uploads,
+    ) -> Result<DrawCounts, FrameError> {
+        let slot = &self.slots[s];
+        let cmd = slot.cmd;
+        sync::begin(gpu, cmd, true)?;
+        slot.timestamps.begin(gpu, cmd);
+        let staging = &slot.staging;
+        pool::record_transfers(
+            gpu,
+            cmd,
+            &self.pool,
+            staging,
+            &uploads.moves,
+            &uploads.staged,
+        );
+        let copies = &uploads.texture_copies;
+        texture::record_uploads(gpu, cmd, &self.textures, staging.raw(), copies);
+        if let Some(b) = &self.builder {
+            b.record(gpu, cmd, s, uploads.builds);
+        }
+        if self.fault == Some(Fault::Validation) && self.frame == 0 {
+            // SAFETY: deliberately invalid (offset 1 for 16-bit indices), for the tests of
+            // the validation path; the pass rebinds a valid index buffer before any draw.
+            unsafe {
+                let pool = self.pool.buffer.raw;
+                gpu.device
+                    .cmd_bind_index_buffer(cmd, pool, 1, vk::IndexType::UINT16);
+            }
+        }
+        let at = Bindings {
+            target: &slot.target,
+            timestamps: &slot.timestamps,
+            set: self
+                .sets
+                .as_ref()
+                .map_or(vk::DescriptorSet::null(), |t| t.sets[s]),
+            stitch: slot.stitch.raw,
+        };
+        let counts = self.record_pass(gpu, cmd, at, scene);
+        if input.screenshot {
+            slot.target.record_readback(gpu, cmd);
+        }
+        if let Some(p) = &input.present {
+            slot.target
+                .record_blit(gpu, cmd, p.image, p.extent, input.screenshot);
+        }
+        slot.timestamps.end(gpu, cmd);
+        sync::end(gpu, cmd)?;
+        Ok(counts)
+    }
+
+    /// Records the terrain pass between the pass's timestamps (and, with read-back, the barrier
+    /// that makes the vertex shader's heights visible to the host).
+    pub(super) fn record_pass(
+        &self,
+        gpu: &Gpu,
+        cmd: vk::CommandBuffer,
+        at: Bindings<'_>,
+        scene: Scene<'_>,
+    ) -> DrawCounts {
+        let read_back = scene.read_back;
+        let timestamps = at.timestamps;
+        timestamps.pass_begin(gpu, cmd);
+        let counts = Pass {
+            gpu,
+            cmd,
+            pipeline: &self.pipeline,
+            pool: self.pool.buffer.raw,
+            at,
+            scene,
+        }
+        .record();
+        if read_back {
+            sync::vertex_to_host_barrier(gpu, cmd);
+        }
+        timestamps.pass_end(gpu, cmd);
+        counts
+    }
+}
+
+/// What the terrain pass drew.
+#[derive(Clone, Copy, Default)]
+pub(super) struct DrawCounts {
+    pub triangles: u64,
+    pub vertices: u64,
+    pub stitch_triangles: u64,
+}
+
+/// What a pass draws: the same for a live frame and a replayed one.
+pub(super) struct Scene<'a> {
+    pub terrain: &'a Terrain,
+    pub settings: &'a Settings,
+    pub plan: &'a Plan,
+    pub constants: &'a FrameConstants,
+    /// Per stitch, its indices in the stitch buffer (first, count).
+    pub stitch_ranges: &'a [(u32, u32)],
+    /// Draw with the pipeline that writes every vertex's height.
+    pub read_back: bool,
+}
+
+/// Where a pass draws from and to: a frame slot's objects, or a static frame's.
+pub(super) struct Bindings<'a> {
+    pub target: &'a Target,
+    pub timestamps: &'a Timestamps,
+    /// The pool and the frame's records.
+    pub set: vk::DescriptorSet,
+    pub stitch: vk::Buffer,
+}
+
+/// The terrain pass of one frame: clear, one indexed fan draw per tile from the pool, then
+/// the stitches from the stitch buffer; every vertex pulled by the shader with its tile's
+/// record.
+struct Pass<'a> {
+    gpu: &'a Gpu,
+    cmd: vk::CommandBuffer,
+    pipeline: &'a TerrainPipeline,
+    pool: vk::Buffer,
+    at: Bindings<'a>,
+    scene: Scene<'a>,
+}
+
+impl Pass<'_> {
+    fn record(&self) -> DrawCounts {
+        let (gpu, cmd) = (self.gpu, self.cmd);
+        self.at
+            .target
+            .begin_rendering(gpu, cmd, self.scene.settings.sky);
+        let pipeline = match (
+            self.scene.settings.wireframe,
+            self.scene.settings.morph_shader,
+        ) {
+            (true, _) => self.pipeline.wireframe.unwrap_or(self.pipeline.fill),
+            (false, _) if self.scene.read_back => {
+                self.pipeline.read_back.unwrap_or(self.pipeline.fill)
+            }
+            (false, MorphShader::ForwardDifferences) => self.pipeline.all_rows,
+            (false, MorphShader::TwoLevels) => self.pipeline.fill,
+        };
+        let constants = *self.scene.constants;
+        let mut counts = DrawCounts::default();
+        // SAFETY: recording inside dynamic rendering; the pool, the records and the stitch
+        // buffer outlive the frame, and every range drawn was written before (the manager's
+        // grants; records and stitches by this frame).
+        unsafe {
+            gpu.device
+                .cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, pipeline);
+            gpu.device.cmd_bind_descriptor_sets(
+                cmd,
+                vk::PipelineBindPoint::GRAPHICS,
+                self.pipeline.layout,
+                0,
+                &[self.at.set],
+                &[],
+            );
+            gpu.device.cmd_push_constants(
+                cmd,
+                self.pipeline.layout,
+                vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT,
+                0,
+                bytemuck::bytes_of(&constants),
+            );
+            let mut bound: Option<u32> = None;
+            for (record, d) in self.scene.plan.draws.iter().enumerate() {
+                if bound != Some(d.index_width) {
+                    gpu.device
+                        .cmd_bind_index_buffer(cmd, self.pool, 0, index_type(d.index_width));
+                    bound = Some(d.index_width);
+                }
+                // The tile's local indices plus vertexOffset: the pulled index of its record.
+                gpu.device.cmd_draw_indexed(
+                    cmd,
+                    d.index_count,
+                    1,
+                    (d.index_offset / u64::from(d.index_width)) as u32,
+                    pulled(record as u32, 0) as i32,
+                    0,
+                );
+                let entry = &self.scene.terrain.tiles[d.tile].levels[d.level as usize];
+                counts.triangles += u64::from(entry.triangle_count);
+                counts.vertices += u64::from(entry.vertex_count());
+            }
+            if !self.scene.settings.no_stitch && !self.scene.plan.stitches.is_empty() {
+                gpu.device
+                    .cmd_bind_index_buffer(cmd, self.at.stitch, 0, vk::IndexType::UINT32);
+                for ((_, s), &(first, count)) in self
+                    .scene
+                    .plan
+                    .stitches
+                    .iter()
+                    .zip(self.scene.stitch_ranges)
+                {
+                    gpu.device.cmd_draw_indexed(cmd, count, 1, first, 0, 0);
+                    counts.stitch_triangles += u64::from(s.triangles);
+                }
+            }
+            gpu.device.cmd_end_rendering(cmd);
+        }
+        counts
+    }
+}
+
+/// The frame's push constants, and its morph constants when it morphs.
+pub(super) fn pass_constants(
+    terrain: &Terrain,
+    camera: &Camera,
+    view: &View,
+    settings: &Settings,
+    textured: bool,
+) -> (FrameConstants, Option<MorphFrame>) {
+    let constants = frame_constants(terrain, camera, view, settings, textured);
+    let morph = matches!(settings.rule(), LevelRule::Morph(..))
+        .then(|| morph::frame_constants(view, settings.tau));
+    (constants, morph)
+}
+
+/// The frame's push constants: the camera, the spacing, the flags for `settings`.
+fn frame_constants(
+    terrain: &Terrain,
+    camera: &Camera,
+    view: &View,
+    settings: &Settings,
+    textured: bool,
+) -> FrameConstants {
+    let (sx, sy) = terrain.spacing;
+    let (_, cam_rel) = terrain.camera_tile(camera.position);
+    let mut flags = 0;
+    if matches!(settings.rule(), LevelRule::Morph(..)) {
+        flags |= FLAG_GEOMORPH;
+    }
+    match settings.shading {
+        Shading::Photo if textured => flags |= FLAG_TEXTURE,
+        Shading::Photo | Shading::Tint => {}
+        Shading::Relief => flags |= FLAG_RELIEF,
+        Shading::Level => flags |= FLAG_LEVEL_COLOURS,
+        Shading::Tiles => flags |= FLAG_TILES,
+    }
+    let texture_map = match terrain.texture {
+        Some(l) => {
+            let size = f64::from(l.size);
+            [
+                (f64::from(l.gutter) / size) as f32,
+                (f64::from(l.interior) / (f64::from(tiles::mesh::TILE_CELLS) * size)) as f32,
+                l.size as f32,
+                settings.tile_grid_offset,
+            ]
+        }
+        None => [0.0, 0.0, 0.0, settings.tile_grid_offset],
+    };
+    FrameConstants {
+        view_proj: view.view_proj.to_cols_array(),
+        camera: [
+            cam_rel.x as f32,
+            cam_rel.y as f32,
+            cam_rel.z as f32,
+            sx as f32,
+        ],
+        spacing_y: sy as f32,
+        height_step: terrain.height_step,
+        flags,
+        pad: 0,
+        texture_map,
+    }
+}
+
+fn index_type(width: u32) -> vk::IndexType {
+    if width == 2 {
+        vk::IndexType::UINT16
+    } else {
+        vk::IndexType::UINT32
+    }
+}

@@ -1,0 +1,210 @@
+//! A frame's uploads written where the GPU will read them: blocks and sent index arrays straight
+//! into the pool where that is safe (host-visible memory no frame in flight reads), else into
+//! the slot's staging memory; index arrays built on the GPU as the builder's list; texture mips
+//! through the staging memory.
+
+use ash::vk;
+use memory::budget::TEXTURE_ALIGN;
+
+use super::Renderer;
+use crate::error::FrameError;
+use crate::plan::Plan;
+use crate::terrain::Terrain;
+use crate::textures::TexturePlan;
+use crate::vulkan::indices;
+use crate::vulkan::texture;
+
+/// What a frame's commands must copy and build before its pass.
+pub(super) struct Uploads {
+    /// Copies inside the pool (tiles moved to larger chunks).
+    pub moves: Vec<vk::BufferCopy>,
+    /// Copies from the slot's staging memory into the pool.
+    pub staged: Vec<vk::BufferCopy>,
+    /// Index arrays the builder makes this frame.
+    pub builds: u32,
+    /// Bytes of geometry that went through the staging memory.
+    pub staged_geometry: u64,
+    /// Copies from the staging memory into the texture array.
+    pub texture_copies: Vec<vk::BufferImageCopy>,
+}
+
+impl Renderer {
+    /// Writes the plan's geometry uploads, then its texture mips, into slot `s`'s memory.
+    pub(super) fn write_uploads(
+        &mut self,
+        terrain: &Terrain,
+        plan: &Plan,
+        textures: &TexturePlan,
+        s: usize,
+    ) -> Result<Uploads, FrameError> {
+        self.slots[s].staging.reset();
+        let moves = plan
+            .moves
+            .iter()
+            .map(|m| {
+                vk::BufferCopy::default()
+                    .src_offset(m.src)
+                    .dst_offset(m.dst)
+                    .size(m.bytes)
+            })
+            .collect();
+        if let Some(fault) = self.fault {
+            fault.cut_file_before(self.frame, terrain);
+        }
+        if !plan.uploads.is_empty() {
+            check_file(terrain)?;
+        }
+        let builds = self.write_builds(terrain, plan, s)?;
+        let staged = self.write_geometry(terrain, plan, s)?;
+        let staged_geometry = self.slots[s].staging.sent();
+        let texture_copies = self.write_texture_uploads(terrain, textures, s)?;
+        Ok(Uploads {
+            moves,
+            staged,
+            builds,
+            staged_geometry,
+            texture_copies,
+        })
+    }
+
+    /// Writes the blocks and the index arrays sent from the file; returns the staged copies.
+    fn write_geometry(
+        &mut self,
+        terrain: &Terrain,
+        plan: &Plan,
+        s: usize,
+    ) -> Result<Vec<vk::BufferCopy>, FrameError> {
+        let mut staged = Vec::new();
+        for u in plan.uploads.iter().filter(|u| !u.built) {
+            self.prefetcher.touched(terrain, u.tile as usize);
+            let bytes = terrain
+                .part(u.tile as usize, u.part)
+                .ok_or(FrameError::MissingPart {
+                    tile: u.tile,
+                    part: u.part,
+                })?;
+            if bytes.is_empty() {
+                continue;
+            }
+            if !u.in_flight && self.pool.write(u.dst, bytes) {
+                continue;
+            }
+            let staging = &mut self.slots[s].staging;
+            let at = staging.push(bytes).ok_or(FrameError::StagingFull {
+                used: staging.used(),
+                tile: u.tile,
+                what: "",
+            })?;
+            staged.push(
+                vk::BufferCopy::default()
+                    .src_offset(at)
+                    .dst_offset(u.dst)
+                    .size(bytes.len() as u64),
+            );
+        }
+        Ok(staged)
+    }
+
+    /// Writes the plan's index array builds ([`memory::gpu_builds`]: a build overlapped by a
+    /// later one is left out) into slot `s`'s list; returns how many.
+    fn write_builds(
+        &mut self,
+        terrain: &Terrain,
+        plan: &Plan,
+        s: usize,
+    ) -> Result<u32, FrameError> {
+        let Some(builder) = self.builder.as_mut() else {
+            return Ok(0);
+        };
+        let kept = memory::gpu_builds(&plan.uploads);
+        let mut builds = Vec::with_capacity(kept.len());
+        for u in kept {
+            let memory::Part::Indices(level) = u.part else {
+                return Err(FrameError::BuiltNotIndices {
+                    tile: u.tile,
+                    part: u.part,
+                });
+            };
+            let tile = &terrain.tiles[u.tile as usize];
+            let l = &tile.levels[level as usize];
+            let word = |bytes: u64, width: u64| {
+                u32::try_from(bytes / width).map_err(|_| FrameError::PastIndexing { bytes })
+            };
+            builds.push(indices::Build {
+                vertex_word: word(u.chunk, 4)?,
+                vertex_count: l.vertex_count(),
+                index_at: word(u.dst, u64::from(l.index_width))?,
+                index_count: l.index_count,
+                index_width: l.index_width,
+                mesh_max_x: tile.header.mesh_max_x,
+                mesh_max_y: tile.header.mesh_max_y,
+                tile: u.tile,
+            });
+        }
+        if !builder.write(s, &builds) {
+            return Err(FrameError::TooManyBuilds {
+                builds: builds.len(),
+                capacity: builder.capacity(),
+            });
+        }
+        Ok(builds.len() as u32)
+    }
+
+    /// Writes the frame's texture mips into the slot's staging memory; returns the copies.
+    fn write_texture_uploads(
+        &mut self,
+        terrain: &Terrain,
+        textures: &TexturePlan,
+        s: usize,
+    ) -> Result<Vec<vk::BufferImageCopy>, FrameError> {
+        let mut copies = Vec::with_capacity(textures.uploads.len());
+        for u in &textures.uploads {
+            let bytes = terrain.texture_mip(u.tile as usize, u.mip).ok_or(
+                FrameError::MissingTextureMip {
+                    tile: u.tile,
+                    mip: u.mip,
+                },
+            )?;
+            let staging = &mut self.slots[s].staging;
+            let at = staging
+                .push_aligned(bytes, TEXTURE_ALIGN)
+                .ok_or(FrameError::StagingFull {
+                    used: staging.used(),
+                    tile: u.tile,
+                    what: "'s texture",
+                })?;
+            let texels = self.textures.desc.size >> u.mip;
+            copies.push(texture::copy_region(at, u.slot, u.mip, texels.max(1)));
+        }
+        Ok(copies)
+    }
+}
+
+/// Reading a mapped file that shrank would fault (SIGBUS): its length is checked before a
+/// frame's reads. (A file cut between this check and the copies can still fault; tile sets are
+/// meant to be replaced by rename, as tiletool writes them.)
+fn check_file(terrain: &Terrain) -> Result<(), FrameError> {
+    let path = terrain.set.path();
+    let was = terrain.set.file_len();
+    match std::fs::metadata(path).map(|m| m.len()) {
+        Ok(len) if len >= was => Ok(()),
+        now => Err(FrameError::FileChanged {
+            path: path.to_path_buf(),
+            now: now.map_or_else(|e| e.to_string(), |l| l.to_string()),
+            was,
+        }),
+    }
+}
+
+/// The error for a build whose array did not come out as the file says.
+pub(super) fn build_failure(f: indices::BuildFailure) -> String {
+    let got = if f.got == u32::MAX {
+        "lacks a vertex its fans need".to_string()
+    } else {
+        format!("has {} indices", f.got)
+    };
+    format!(
+        "tile #{}: the index array built from its vertices {got} where the tile set says {} ({} such builds in the frame): the file's vertices do not make the mesh it claims",
+        f.tile, f.expected, f.failed
+    )
+}

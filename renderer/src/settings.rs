@@ -1,0 +1,144 @@
+//! How a flight draws and what memory it may use: the settings the command line, the window's
+//! keys and the tests choose, read by the frame loop ([`crate::frame`]) and the plan
+//! ([`crate::plan`]).
+
+use memory::{IndexArrays, Scheme};
+
+use crate::plan::LevelRule;
+use crate::prefetch::PrefetchOptions;
+
+/// How to draw.
+#[derive(Clone, Debug)]
+pub struct Settings {
+    /// Pixel tolerance.
+    pub tau: f64,
+    /// Draw every visible tile at this level.
+    pub forced_level: Option<u32>,
+    /// Draw every visible tile at its finest level (the baseline).
+    pub brute_force: bool,
+    pub shading: Shading,
+    /// Samples the `Tiles` shading's grid is moved by (0: the tiles; tests use other lines).
+    pub tile_grid_offset: f32,
+    pub wireframe: bool,
+    pub sky: [f32; 3],
+    /// Diagnostic: leave the seams open, to see (and test) what stitching closes.
+    pub no_stitch: bool,
+    /// How the level for tau is chosen (the guaranteed bound, or the old sampling).
+    pub bound: crate::lod::Bound,
+    /// Continuous levels, heights blended between levels (off: `--no-geomorph`).
+    pub geomorph: bool,
+    pub morph_shader: MorphShader,
+}
+
+/// How the terrain is coloured.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Shading {
+    /// The tile set's texture tiles: a photo, or the shaded relief tiletool bakes without
+    /// one (tiles without a texture slot fall back to `Tint`).
+    Photo,
+    /// Grey, lit by each triangle's own normal: the mesh as the level of detail made it.
+    Relief,
+    /// A hypsometric tint lit by each triangle's normal (the shading without textures).
+    #[default]
+    Tint,
+    /// Level colours (coarse blue to fine red) over the tint.
+    Level,
+    /// One flat colour per tile, neighbours always different (a diagnostic: where the tile
+    /// borders fall on screen). The grid may be moved by `Settings::tile_grid_offset`.
+    Tiles,
+}
+
+impl Shading {
+    pub const ALL: [Shading; 5] = [
+        Shading::Photo,
+        Shading::Relief,
+        Shading::Tint,
+        Shading::Level,
+        Shading::Tiles,
+    ];
+
+    /// The next mode in [`Shading::ALL`] (the window's key).
+    pub fn next(self) -> Shading {
+        let i = Shading::ALL.iter().position(|&s| s == self).unwrap_or(0);
+        Shading::ALL[(i + 1) % Shading::ALL.len()]
+    }
+}
+
+/// Which vertex shader blends the levels.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum MorphShader {
+    /// The two levels around each vertex's level, two bytes read (the default).
+    #[default]
+    TwoLevels,
+    /// The paper's clamped forward differences as dot products over every stored level (the
+    /// reference, `--morph-shader forward-differences`).
+    ForwardDifferences,
+}
+
+impl Settings {
+    pub fn rule(&self) -> LevelRule {
+        if self.brute_force {
+            LevelRule::Finest
+        } else if let Some(l) = self.forced_level {
+            LevelRule::Forced(l)
+        } else if self.geomorph {
+            LevelRule::Morph(self.tau, self.bound)
+        } else {
+            LevelRule::Tau(self.tau, self.bound)
+        }
+    }
+}
+
+/// GPU memory and transfer settings.
+#[derive(Clone, Copy, Debug)]
+pub struct MemoryOptions {
+    /// Device memory for tile data (the pool is at most this).
+    pub gpu_budget_bytes: u64,
+    /// Tile data sent per frame at most (see `memory::Manager::plan_frame` for the exceptions).
+    pub upload_budget: u64,
+    /// The eviction mixture's weight.
+    pub weight: f64,
+    pub frames_in_flight: usize,
+    /// Send every upload through the staging ring, even where the pool is host-visible.
+    pub force_staging: bool,
+    /// Levels finer than wanted a tile may stay drawn rather than re-sending an index array.
+    pub downgrade_slack: u32,
+    /// How levels travel (progressive; the others are for comparison and the draw-only limit).
+    pub scheme: Scheme,
+    pub prefetch: PrefetchOptions,
+    /// Allocate texture slots when the tile set has textures (false: geometry only).
+    pub textures: bool,
+    /// The share of `gpu_budget_bytes` the texture slots may take.
+    pub texture_share: f64,
+    /// Anisotropic filtering of the textures, up to the device's limit (1: off).
+    pub anisotropy: f32,
+    /// Build index arrays on the GPU from the resident blocks (the default; sent from the
+    /// file instead when the device cannot store 16-bit values from a shader).
+    pub index_arrays: IndexArrays,
+    /// Read every drawn vertex's height back from the vertex shader (a buffer per frame slot),
+    /// for the check against the CPU mirror (`vkterrain --read-back-heights`).
+    pub read_back_heights: bool,
+}
+
+impl Default for MemoryOptions {
+    fn default() -> Self {
+        MemoryOptions {
+            gpu_budget_bytes: 1 << 30,
+            upload_budget: memory::DEFAULT_UPLOAD_BUDGET,
+            weight: memory::DEFAULT_WEIGHT,
+            frames_in_flight: 2,
+            force_staging: false,
+            downgrade_slack: memory::DEFAULT_DOWNGRADE_SLACK,
+            scheme: Scheme::Progressive,
+            prefetch: PrefetchOptions::default(),
+            textures: true,
+            texture_share: DEFAULT_TEXTURE_SHARE,
+            anisotropy: 16.0,
+            index_arrays: IndexArrays::Built,
+            read_back_heights: false,
+        }
+    }
+}
+
+/// The share of the GPU budget texture slots take by default.
+pub const DEFAULT_TEXTURE_SHARE: f64 = 0.25;
