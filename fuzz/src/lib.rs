@@ -130,7 +130,7 @@ fn run_vkt(p: &Path) {
         }
     }
     // The renderer's own open (boxes, borders, coarse height maps), GPU-free.
-    let _ = renderer::terrain::Terrain::open(p);
+    let _ = scene::terrain::Terrain::open(p);
 }
 
 fn run_dem(p: &Path) {
@@ -164,7 +164,7 @@ fn run_raw(p: &Path) {
 
 fn run_path(p: &Path) {
     if let Ok(text) = std::fs::read_to_string(p) {
-        if let Ok(path) = renderer::path::CameraPath::parse(&text) {
+        if let Ok(path) = scene::path::CameraPath::parse(&text) {
             let d = path.duration();
             for k in 0..8 {
                 let _ = path.at(path.keys[0].time + d * f64::from(k) / 7.0);

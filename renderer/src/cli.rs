@@ -198,7 +198,8 @@ pub struct Cli {
     /// the file.
     #[arg(long)]
     pub no_prefetch: bool,
-    /// CPU time per frame for predicting the camera and culling and choosing levels for it.
+    /// CPU time per frame for prefetching: predicting the camera, culling and choosing levels
+    /// for the predicted poses, and the memory manager's prefetch step (its deadline).
     #[arg(long, default_value_t = 2.0, value_name = "MS")]
     pub prefetch_ms: f64,
     /// Prefetch only while at least this share (0..1) of the GPU pool's chunks is free, and

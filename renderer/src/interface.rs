@@ -60,6 +60,18 @@ pub struct LevelCoefficients {
     pub b_hi: [f32; 4],
 }
 
+impl LevelCoefficients {
+    /// A level table's coefficients as the shader reads them.
+    pub fn of(table: &crate::levels::LevelTable) -> LevelCoefficients {
+        LevelCoefficients {
+            a_lo: std::array::from_fn(|k| table.a[k]),
+            a_hi: std::array::from_fn(|k| table.a[k + 4]),
+            b_lo: std::array::from_fn(|k| table.b[k]),
+            b_hi: std::array::from_fn(|k| table.b[k + 4]),
+        }
+    }
+}
+
 /// One drawn tile as the vertex shader reads it (`TileRecord`, std430).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]

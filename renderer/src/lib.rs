@@ -7,28 +7,25 @@
 //! tests drive without a GPU; [`vulkan`] is the thin layer that owns every Vulkan object, and
 //! [`frame`] turns one frame's plan into commands.
 
-pub mod camera;
+pub use scene::{camera, levels, path, terrain, tile};
+
 pub mod cull;
 pub mod error;
 pub mod fault;
 pub mod frame;
 pub mod headless;
 pub mod interface;
-pub mod levels;
 pub mod limit;
 pub mod lod;
 pub mod log;
 pub mod measure;
 pub mod morph;
-pub mod path;
 pub mod plan;
 pub mod prefetch;
 pub mod settings;
 pub mod stitch;
 pub mod target;
-pub mod terrain;
 pub mod textures;
-pub mod tile;
 pub mod vulkan;
 pub mod window;
 

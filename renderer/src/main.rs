@@ -119,11 +119,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
     if windowed && !cli.measure_error.is_empty() {
         bail!("--measure-error runs headless (add --headless)");
     }
-    let flown = if windowed {
-        fly_window(&cli, &terrain, &path, settings, memory)?
-    } else {
-        fly_headless(&cli, &terrain, &path, settings, memory)?
-    };
+    let flown = fly_path(&cli, &terrain, &path, (settings, memory), windowed)?;
     // A window fails through `window::run`; a headless flight may stop early with its log kept.
     let code = finish(&cli, &terrain, &flown, &memory, released_at_open)?;
     match &flown.result.error {
@@ -180,42 +176,36 @@ fn gpu_options(cli: &Cli) -> GpuOptions {
     }
 }
 
-/// Flies in a window (until closed, or for `--frames`).
-fn fly_window(
+/// Flies the path: in a window (until closed, or for `--frames`), or offscreen for `--frames`
+/// frames.
+fn fly_path(
     cli: &Cli,
     terrain: &Terrain,
     path: &CameraPath,
-    settings: Settings,
-    memory: MemoryOptions,
+    (settings, memory): (Settings, MemoryOptions),
+    windowed: bool,
 ) -> Result<Flown> {
-    let options = WindowOptions {
-        gpu: gpu_options(cli),
-        size: cli.size,
-        settings,
-        memory,
-        trace: cli.trace.is_some(),
-        frames: cli.frames,
-        resize_at: cli.resize_at.clone(),
-        screenshot_dir: cli.out.clone().unwrap_or_else(|| PathBuf::from(".")),
-        record: cli.record.clone(),
-        start: path.at(path.keys[0].time),
-    };
-    let (result, device, validation) = window::run(terrain, options).map_err(anyhow::Error::msg)?;
-    Ok(Flown {
-        result,
-        device,
-        validation,
-    })
-}
-
-/// Flies the path offscreen for `--frames` frames.
-fn fly_headless(
-    cli: &Cli,
-    terrain: &Terrain,
-    path: &CameraPath,
-    settings: Settings,
-    memory: MemoryOptions,
-) -> Result<Flown> {
+    if windowed {
+        let options = WindowOptions {
+            gpu: gpu_options(cli),
+            size: cli.size,
+            settings,
+            memory,
+            trace: cli.trace.is_some(),
+            frames: cli.frames,
+            resize_at: cli.resize_at.clone(),
+            screenshot_dir: cli.out.clone().unwrap_or_else(|| PathBuf::from(".")),
+            record: cli.record.clone(),
+            start: path.at(path.keys[0].time),
+        };
+        let (result, device, validation) =
+            window::run(terrain, options).map_err(anyhow::Error::msg)?;
+        return Ok(Flown {
+            result,
+            device,
+            validation,
+        });
+    }
     if let Some(record) = &cli.record {
         std::fs::write(record, path.to_csv())
             .with_context(|| format!("{}: cannot write", record.display()))?;

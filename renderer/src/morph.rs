@@ -255,7 +255,9 @@ impl TileMorph {
             frame: frame_constants(&view, tau),
             tile_offset: Terrain::tile_offset(cam_tile, &terrain.tiles[tile]),
             cap: terrain.levels.saturating_sub(1) as f32,
-            tables: terrain.tiles[tile].tables.map(|t| t.coefficients()),
+            tables: terrain.tiles[tile]
+                .tables
+                .map(|t| LevelCoefficients::of(&t)),
         }
     }
 
@@ -419,7 +421,7 @@ mod tests {
                 "{s} vs {want} at {p:?}"
             );
             // And the vertex's level is Λ of tau over it.
-            let l = vertex_level(&m, &table.coefficients(), clip);
+            let l = vertex_level(&m, &LevelCoefficients::of(&table), clip);
             let expected = table.level_f64(TAU_MARGIN / want);
             assert!((f64::from(l) - expected).abs() < 2e-3, "{l} vs {expected}");
         }

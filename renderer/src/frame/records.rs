@@ -7,7 +7,7 @@ use bytemuck::Zeroable;
 use crate::camera::Camera;
 use crate::error::FrameError;
 use crate::fault::Fault;
-use crate::interface::{FrameConstants, MorphFrame, TileRecord, RECORDS_OFFSET};
+use crate::interface::{FrameConstants, LevelCoefficients, MorphFrame, TileRecord, RECORDS_OFFSET};
 use crate::log::FrameRecord;
 use crate::morph::{TileMorph, MAX_LEVELS};
 use crate::plan::Plan;
@@ -99,7 +99,7 @@ pub(super) fn write_records(
             }
             (r.starts_lo, r.starts_hi) = split(starts);
             if morph.is_some() {
-                r.tables = info.tables.map(|t| t.coefficients());
+                r.tables = info.tables.map(|t| LevelCoefficients::of(&t));
             }
             let tile_morph = morph.filter(|_| describe).map(|(frame, c)| TileMorph {
                 view_proj: glam::Mat4::from_cols_array(&c.view_proj),

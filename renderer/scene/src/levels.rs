@@ -1,5 +1,5 @@
 //! Level tables: the errors per level a geomorphing vertex takes its level from
-//! ([`crate::morph`], "The error of a blend, and `Λ`"), and the coefficients of `Λ`, the inverse
+//! (the renderer's `morph` module, "The error of a blend, and `Λ`"), and the coefficients of `Λ`, the inverse
 //! of their linear blend, as the vertex shader evaluates it.
 //!
 //! A tile's own table is its levels' measured errors plus half a morph unit. A vertex on a side
@@ -11,14 +11,12 @@
 //! once (a jump in a vertex's level is a pop).
 //!
 //! ```
-//! use renderer::levels::LevelTable;
+//! use scene::levels::LevelTable;
 //! let t = LevelTable::new(&[16.0, 8.0, 4.0, 2.0, 1.0]);
 //! assert_eq!(t.level(20.0), 0.0);
 //! assert!((t.level(6.0) - 1.5).abs() < 1e-5);
 //! assert_eq!(t.level(0.5), 4.0);
 //! ```
-
-use crate::interface::LevelCoefficients;
 
 /// Levels a tile has at most (the tile format's maximum).
 pub const MAX_LEVELS: usize = 9;
@@ -96,16 +94,6 @@ impl LevelTable {
             .zip(&self.b)
             .map(|(&a, &b)| (f64::from(a) - r * f64::from(b)).clamp(0.0, 1.0))
             .sum()
-    }
-
-    /// The coefficients as the shader reads them.
-    pub fn coefficients(&self) -> LevelCoefficients {
-        LevelCoefficients {
-            a_lo: std::array::from_fn(|k| self.a[k]),
-            a_hi: std::array::from_fn(|k| self.a[k + 4]),
-            b_lo: std::array::from_fn(|k| self.b[k]),
-            b_hi: std::array::from_fn(|k| self.b[k + 4]),
-        }
     }
 }
 
