@@ -108,20 +108,10 @@ pub const SPLIT: u32 = 4;
 /// corner is off screen, as for tiles under and beside the camera.
 pub fn subdivided_bound(view: &View, lo: DVec3, hi: DVec3, n: u32) -> f64 {
     let planes = view.frustum();
-    sub_boxes(lo, hi, n)
+    pieces(lo, hi, n, n)
         .filter(|&(a, b)| !crate::cull::box_outside(&planes, a, b))
         .map(|(a, b)| bound(view, a, b))
         .fold(0.0, f64::max)
-}
-
-/// The `n x n` sub-boxes of `lo..hi`, split in x and y (each spans the whole height).
-fn sub_boxes(lo: DVec3, hi: DVec3, n: u32) -> impl Iterator<Item = (DVec3, DVec3)> {
-    let n = n.max(1);
-    let step = (hi - lo) / f64::from(n);
-    (0..n * n).map(move |i| {
-        let a = lo + DVec3::new(step.x * f64::from(i % n), step.y * f64::from(i / n), 0.0);
-        (a, DVec3::new(a.x + step.x, a.y + step.y, hi.z))
-    })
 }
 
 /// `|J z|` over a tile's on-screen part under `rule` (the guaranteed rule splits its box).
@@ -183,21 +173,90 @@ pub fn level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: Bound)
 }
 
 /// The level a tile is drawn at while geomorphing ([`crate::morph`], "The level a tile is
-/// drawn at"): the ceiling of the vertex rule's level `Λ(τ / S)` for `S` the bound over the
-/// tile's on-screen sub-boxes and the largest of the tile's level tables
-/// (`TileInfo::drawn_table`), so it covers the level of every vertex on screen.
+/// drawn at"): the coarsest that covers the level `Λ(τ / S)` of every vertex on screen. Each
+/// vertex takes one of the tile's nine level tables ([`crate::morph::table_of`]): the interior
+/// its own, a side the larger of the two tiles', a corner the largest around it. So the drawn
+/// level is the largest, over the nine parts of the tile, of `ceil(Λ_part(τ / S_part))`, with
+/// `S_part` the proved bound over the on-screen pieces of that part's box: the whole tile's
+/// box for the interior, a side's line (its `x, y` segment times the tile's height range, in
+/// [`SPLIT`] pieces) for a side, and a corner's vertical segment for a corner. A part whose
+/// table is the interior's adds nothing and is skipped. A rough neighbour then makes a tile
+/// finer only as far as the shared side itself needs, not the whole tile wherever it is seen.
+/// When the whole box already allows level 0 under the largest table, level 0 it is.
 pub fn morph_level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: Bound) -> u32 {
     let finest = tile.levels.len().saturating_sub(1) as u32;
-    let within = |r: f64| (tile.drawn_table.level_f64(r).ceil() as u32).min(finest);
+    let within =
+        |table: &crate::levels::LevelTable, r: f64| (table.level_f64(r).ceil() as u32).min(finest);
     // The vertices aim at a margin below tau (crate::morph::TAU_MARGIN); so does the tile.
     let tau = tau * crate::morph::TAU_MARGIN;
-    if rule == Bound::Guaranteed {
-        let (lo, hi) = tile_box(tile);
-        if within(error_for(bound(view, lo - camera, hi - camera), tau)) == 0 {
-            return 0;
+    if rule == Bound::Sampled {
+        return within(
+            &tile.drawn_table,
+            tolerable_error(view, camera, tile, tau, rule),
+        );
+    }
+    let (lo, hi) = tile_box(tile);
+    let (lo, hi) = (lo - camera, hi - camera);
+    if within(&tile.drawn_table, error_for(bound(view, lo, hi), tau)) == 0 {
+        return 0;
+    }
+    let planes = view.frustum();
+    let on_screen_bound = |lo: DVec3, hi: DVec3, nx: u32, ny: u32| {
+        pieces(lo, hi, nx, ny)
+            .filter(|&(a, b)| !crate::cull::box_outside(&planes, a, b))
+            .map(|(a, b)| bound(view, a, b))
+            .fold(0.0, f64::max)
+    };
+    let interior = &tile.tables[0];
+    let mut level = within(
+        interior,
+        error_for(on_screen_bound(lo, hi, SPLIT, SPLIT), tau),
+    );
+    for (part, (a, b)) in rim(lo, hi).into_iter().enumerate() {
+        let table = &tile.tables[part + 1];
+        if level == finest || table == interior {
+            continue;
+        }
+        let along = |a: f64, b: f64| if a == b { 1 } else { SPLIT };
+        let s = on_screen_bound(a, b, along(a.x, b.x), along(a.y, b.y));
+        // 0: no piece of the part touches the frustum, so none of its vertices is on screen.
+        if s > 0.0 {
+            level = level.max(within(table, error_for(s, tau)));
         }
     }
-    within(tolerable_error(view, camera, tile, tau, rule))
+    level
+}
+
+/// The boxes of a tile's rim in the order of its level tables after the interior: the N, E, S
+/// and W sides (north is +y), then the NW, NE, SW and SE corners, each over the whole height.
+fn rim(lo: DVec3, hi: DVec3) -> [(DVec3, DVec3); 8] {
+    let at = |x: f64, y: f64, z: f64| DVec3::new(x, y, z);
+    let side = |x0: f64, y0: f64, x1: f64, y1: f64| (at(x0, y0, lo.z), at(x1, y1, hi.z));
+    let corner = |x: f64, y: f64| side(x, y, x, y);
+    [
+        side(lo.x, hi.y, hi.x, hi.y),
+        side(hi.x, lo.y, hi.x, hi.y),
+        side(lo.x, lo.y, hi.x, lo.y),
+        side(lo.x, lo.y, lo.x, hi.y),
+        corner(lo.x, hi.y),
+        corner(hi.x, hi.y),
+        corner(lo.x, lo.y),
+        corner(hi.x, lo.y),
+    ]
+}
+
+/// The `nx x ny` pieces of `lo..hi`, split in x and y (each spans the whole height).
+fn pieces(lo: DVec3, hi: DVec3, nx: u32, ny: u32) -> impl Iterator<Item = (DVec3, DVec3)> {
+    let (nx, ny) = (nx.max(1), ny.max(1));
+    let step = DVec3::new(
+        (hi.x - lo.x) / f64::from(nx),
+        (hi.y - lo.y) / f64::from(ny),
+        0.0,
+    );
+    (0..nx * ny).map(move |i| {
+        let a = lo + DVec3::new(step.x * f64::from(i % nx), step.y * f64::from(i / nx), 0.0);
+        (a, DVec3::new(a.x + step.x, a.y + step.y, hi.z))
+    })
 }
 
 /// The coarsest level whose measured error is within `r` metres (the finest if none is).

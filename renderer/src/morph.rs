@@ -73,14 +73,18 @@
 //!
 //! # The level a tile is drawn at
 //!
-//! A tile is drawn at `G = ceil(Λ(τ / S_box))`, `S_box` the proved bound of [`crate::lod`]
-//! over the sub-boxes of the tile that touch the frustum ([`crate::lod::morph_level`]). The
-//! bound covers `S(v)` at every on-screen vertex, so every on-screen vertex's level is at most
-//! `G`: off-screen parts do not raise it. `Λ` here is the largest of the tile's nine tables
-//! (`TileInfo::drawn_table`), which covers every one of its vertices' tables: a tile next to a
-//! rougher one is drawn a little finer than its own errors need, so that no on-screen vertex
-//! ever wants more than the drawn mesh has (such a vertex would start off the coarser surface
-//! when the finer level arrives). Vertices whose level reaches their
+//! A tile is drawn at the level `G` that covers every on-screen vertex's level
+//! ([`crate::lod::morph_level`]): the largest, over the tile's nine parts (its interior, four
+//! sides and four corners, each with its own level table), of `ceil(Λ_part(τ / S_part))`,
+//! `S_part` the proved bound of [`crate::lod`] over the pieces of that part's box that touch
+//! the frustum. Every on-screen vertex lies in the box of its part, so its `S(v)` is within
+//! that bound and its level at most `G`: off-screen parts do not raise it, and a rougher
+//! neighbour raises it only as far as the shared side needs (a side vertex takes the larger
+//! table of the two tiles, so that both give it one level). Were some on-screen vertex to want
+//! more than the drawn mesh has, it would start off the coarser surface when the finer level
+//! arrived. The test `the_drawn_level_covers_every_vertex_on_screen` checks the cover vertex by
+//! vertex, and that the largest table over the whole box, the rule before, drew finer (the
+//! control). Vertices whose level reaches their
 //! own block `j` sit at their own height, bit for bit (every weight below `j` is exactly 0),
 //! so a vertex off screen whose level exceeds `G` is simply on level `G`'s surface.
 //!

@@ -375,3 +375,99 @@ fn shared_side_vertices_morph_to_one_height_from_both_tiles() {
         eprintln!("{name} sides: {differing} of {compared} shared side vertices differ");
     }
 }
+
+/// The drawn level of a morphing tile covers the level of every vertex of it on screen
+/// (`renderer::morph`, "The level a tile is drawn at"): over Puget and SRTM N48W125 (smooth
+/// filled voids beside rough coast, so neighbouring tiles' tables differ), from the orbit, the
+/// flyover and low random cameras, at tau 1 and 3, every on-screen vertex of every visible
+/// tile, at every level, has `l(v)` at most the tile's drawn level. Two controls: the interior's
+/// table alone over the whole box does not cover them (the rim's tables matter), and the rule
+/// before (the largest of the nine tables over the whole box) drew some tiles finer and none
+/// coarser.
+#[test]
+fn the_drawn_level_covers_every_vertex_on_screen() {
+    use renderer::lod::{self, Bound};
+    use renderer::morph::{TileMorph, TAU_MARGIN};
+    let dir = tempfile::tempdir().expect("tempdir");
+    let puget = Terrain::open(&common::puget(dir.path())).expect("open");
+    let srtm_dir = tempfile::tempdir().expect("tempdir");
+    let n48 = common::tileset(
+        srtm_dir.path(),
+        &common::data("srtm/N48W125.hgt"),
+        Default::default(),
+    );
+    let n48 = Terrain::open(&n48).expect("open");
+    let mut rng = splitmix::Rng(0x6d6f_7270_685f_6c76);
+    let (mut checked, mut interior_misses, mut coarser, mut tiles) = (0usize, 0usize, 0usize, 0);
+    for terrain in [&puget, &n48] {
+        let finest = terrain.levels - 1;
+        let (lo, hi) = terrain.bounds();
+        // Every third camera of the paths (the test's cost is in its vertices).
+        let mut views: Vec<Camera> = cameras(terrain).into_iter().step_by(3).collect();
+        views.extend((0..4).map(|_| Camera {
+            position: DVec3::new(
+                lo.x + (hi.x - lo.x) * rng.unit(),
+                lo.y + (hi.y - lo.y) * rng.unit(),
+                hi.z + 100.0 + 2000.0 * rng.unit(),
+            ),
+            yaw: rng.unit() * std::f64::consts::TAU,
+            pitch: -0.05 - 0.4 * rng.unit(),
+            fov_y: 1.0,
+        }));
+        for camera in views {
+            let view = camera.view(EXTENT.0, EXTENT.1);
+            for tau in [1.0, 3.0] {
+                for i in visible_tiles(terrain, &view, camera.position) {
+                    let tile = &terrain.tiles[i];
+                    let drawn =
+                        lod::morph_level(&view, camera.position, tile, tau, Bound::Guaranteed);
+                    let whole = |table: &renderer::levels::LevelTable| {
+                        let r = lod::tolerable_error(
+                            &view,
+                            camera.position,
+                            tile,
+                            tau * TAU_MARGIN,
+                            Bound::Guaranteed,
+                        );
+                        (table.level_f64(r).ceil() as u32).min(finest)
+                    };
+                    let (interior, before) = (whole(&tile.tables[0]), whole(&tile.drawn_table));
+                    assert!(
+                        drawn <= before,
+                        "tile {i}: drawn {drawn}, the rule before {before}"
+                    );
+                    coarser += usize::from(drawn < before);
+                    tiles += 1;
+                    let morph = TileMorph::from_camera(terrain, &camera, EXTENT, tau, i);
+                    let data = terrain.set.tile(tile.tx, tile.ty).expect("tile");
+                    let mut interior_missed = false;
+                    for (x, y, own) in data.vertices() {
+                        let (relative, l) = morph.vertex(x, y, own);
+                        let clip = morph.view_proj * relative.extend(1.0);
+                        let w = clip.w;
+                        if w < 1e-3 || clip.x.abs() > w || clip.y.abs() > w {
+                            continue;
+                        }
+                        checked += 1;
+                        assert!(
+                            l <= drawn as f32 + 1e-3,
+                            "tile {i} drawn at {drawn}: vertex ({x}, {y}) on screen wants {l}"
+                        );
+                        interior_missed |= l > interior as f32 + 1e-3;
+                    }
+                    interior_misses += usize::from(interior_missed);
+                }
+            }
+        }
+    }
+    eprintln!(
+        "{checked} on-screen vertices covered; {coarser} of {tiles} tile draws coarser than \
+         the rule before; the interior's table alone misses in {interior_misses}"
+    );
+    assert!(checked > 1_000_000, "only {checked} vertices checked");
+    assert!(
+        interior_misses > 0,
+        "the control: the interior's table always covered"
+    );
+    assert!(coarser > 0, "no tile drawn coarser than before");
+}

@@ -5,7 +5,8 @@
 //! A tile's own table is its levels' measured errors plus half a morph unit. A vertex on a side
 //! takes the larger errors of the two tiles there, a corner those of the tiles around it
 //! ([`crate::tile::TileInfo::tables`]): every tile holding a vertex gives it one table, and a
-//! tile is drawn at the level its roughest table asks for. Errors are made to fall by at least
+//! tile is drawn at the finest level any of its tables asks for where that table's part of the
+//! tile is on screen. Errors are made to fall by at least
 //! [`MIN_RATIO`] a level: where the spacing rule left a level's error above the next coarser
 //! one's, the coarser is taken as worse than it is rather than `Λ` jumping across two levels at
 //! once (a jump in a vertex's level is a pop).

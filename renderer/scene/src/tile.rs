@@ -32,8 +32,9 @@ pub struct TileInfo {
     /// inside the tile (its own errors), on its N, E, S, W sides (the larger errors of it and
     /// that neighbour), at its NW, NE, SW, SE corners (the largest of the tiles there).
     pub tables: [LevelTable; 9],
-    /// The largest of the nine: the table the tile's drawn level comes from, so it covers every
-    /// vertex's level.
+    /// The largest of the nine: covers every vertex's table, for the quick test that the whole
+    /// tile may be drawn at level 0 (the drawn level itself takes each part's table over that
+    /// part, `renderer::lod::morph_level`).
     pub drawn_table: LevelTable,
 }
 
