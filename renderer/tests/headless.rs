@@ -9,6 +9,11 @@ mod common;
 
 use common::{data, flight, is_sky, puget, s, tileset, tileset_of, vkterrain};
 
+/// A flight as warm as one flown twice (`--warmup`) at half the cost: every wanted level is sent
+/// the frame it is wanted, so no upload budget defers one and what is measured is the LOD's
+/// doing.
+const WARM: &str = "--upload-budget-mb=100000";
+
 /// Sky pixels with terrain on both sides (horizontally or vertically) in `lod`, where the
 /// brute-force image has terrain all around: holes in the surface.
 fn cracks(lod: &image::RgbaImage, brute: &image::RgbaImage) -> Vec<(u32, u32)> {
@@ -82,7 +87,7 @@ fn flyover_cracks(set: &Path, dir: &Path, open: &[&str]) -> usize {
 fn compare_with_brute_force(set: &Path, path: &str, frames: u32, tau: f64) {
     // On the cold first frame the upload budget can defer some levels (geomorphing's levels
     // come from the set-wide error table, a little finer than discrete LOD's): fly warm.
-    for extra in [&["--warmup"][..], &["--no-geomorph"][..]] {
+    for extra in [&[WARM][..], &["--no-geomorph"][..]] {
         let s = compare_under_budget(set, path, frames, tau, extra);
         // With the default budget nothing the test flies is deferred: tau holds on every frame.
         assert_eq!(s["tiles_coarser"], 0, "{path} {extra:?}: {s}");
@@ -96,11 +101,7 @@ fn compare_with_brute_force(set: &Path, path: &str, frames: u32, tau: f64) {
 fn independent_sides_crack_while_morphing_without_slivers() {
     let dir = tempfile::tempdir().expect("temp dir");
     let set = common::puget_independent(dir.path());
-    let total = flyover_cracks(
-        &set,
-        dir.path(),
-        &["--no-slivers", "--warmup", "--tau", "3"],
-    );
+    let total = flyover_cracks(&set, dir.path(), &["--no-slivers", WARM, "--tau", "3"]);
     assert!(
         total > 0,
         "no crack without slivers: the seams were never tested"
@@ -433,9 +434,9 @@ fn measured_error_stays_within_tau() {
     // Warm: on a cold first frame the upload budget may defer levels (counted in
     // tiles_coarser), which voids tau for that frame whatever the LOD does.
     for (path, tau, morph) in [
-        ("flyover", "1", "--warmup"),
-        ("orbit", "1", "--warmup"),
-        ("flyover", "2", "--warmup"),
+        ("flyover", "1", WARM),
+        ("orbit", "1", WARM),
+        ("flyover", "2", WARM),
         ("flyover", "1", "--no-geomorph"),
         ("flyover", "2", "--no-geomorph"),
     ] {
@@ -459,7 +460,7 @@ fn measured_error_stays_within_tau() {
     let hgt = data("srtm/N43E007.hgt");
     let srtm_dir = tempfile::tempdir().expect("temp dir");
     let srtm = tileset(srtm_dir.path(), &hgt, dem::ReadOptions::default());
-    for morph in ["--warmup", "--no-geomorph"] {
+    for morph in [WARM, "--no-geomorph"] {
         let errors = measured(&srtm, &[&hgt], &[], "flyover", &["--tau", "1", morph]);
         assert!(
             errors.iter().all(|&e| e <= 1.0),
@@ -799,7 +800,7 @@ fn geomorphing_keeps_pops_under_half_a_pixel_and_discrete_lod_pops() {
     let discrete = run(
         &set,
         path,
-        "120",
+        "60",
         &puget_source,
         &[
             "--tau",
@@ -811,7 +812,7 @@ fn geomorphing_keeps_pops_under_half_a_pixel_and_discrete_lod_pops() {
     );
     let pop = discrete["pop_px"].as_f64().expect("pop_px");
     assert!(pop > 0.5, "discrete LOD at tau 2 popped only {pop} px");
-    let fixed = run(&set, path, "120", &puget_source, &["--level", "4"]);
+    let fixed = run(&set, path, "24", &puget_source, &["--level", "4"]);
     assert_eq!(fixed["pop_px"].as_f64(), Some(0.0), "{fixed}");
 }
 
@@ -824,7 +825,7 @@ fn raising_tau_with_morphing_draws_fewer_triangles() {
     let set = puget(dir.path());
     let triangles = |extra: &[&str]| {
         let mut args = vec![s(&set), "--headless", "--path", "flyover", "--frames", "12"];
-        args.extend(["--size", "640x480", "--warmup"]);
+        args.extend(["--size", "640x480", WARM]);
         args.extend(extra);
         let o = vkterrain(&args);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -857,12 +858,12 @@ fn the_gpus_morphed_heights_equal_the_cpu_mirror() {
         vkterrain(&args)
     };
     for (set, path, tau, morph) in [
-        (&set, "flyover", "1", "--warmup"),
-        (&set, "flyover", "3", "--warmup"),
+        (&set, "flyover", "1", WARM),
+        (&set, "flyover", "3", WARM),
         (&set, "orbit", "1", "--upload-budget-mb=4"),
         (&set, "flyover", "1", "--no-geomorph"),
-        (&srtm, "flyover", "1", "--warmup"),
-        (&srtm, "orbit", "2", "--warmup"),
+        (&srtm, "flyover", "1", WARM),
+        (&srtm, "orbit", "2", WARM),
     ] {
         let o = read_back(set, path, &["--tau", tau, morph]);
         let err = String::from_utf8_lossy(&o.stderr);
@@ -890,7 +891,7 @@ fn the_gpus_morphed_heights_equal_the_cpu_mirror() {
             "--size",
             "480x360",
             "--read-back-heights",
-            "--warmup",
+            WARM,
         ],
         ("VKTERRAIN_FAULT", "mirror-bias"),
     );
@@ -973,7 +974,7 @@ fn prefetching_under_a_tight_budget_stays_crack_free() {
 fn prefetching_draws_fewer_tiles_coarser_after_the_cold_start() {
     let dir = tempfile::tempdir().expect("temp dir");
     let set = common::puget(dir.path());
-    let run = |budget_ms: &str, extra: &[&str]| -> serde_json::Value {
+    let run = |budget_ms: &str, frames: &str, extra: &[&str]| -> serde_json::Value {
         let mut args = vec![
             s(&set),
             "--headless",
@@ -981,7 +982,7 @@ fn prefetching_draws_fewer_tiles_coarser_after_the_cold_start() {
             "--path",
             "flyover",
             "--frames",
-            "120",
+            frames,
             "--size",
             "1024x768",
             "--tau",
@@ -994,8 +995,8 @@ fn prefetching_draws_fewer_tiles_coarser_after_the_cold_start() {
         args.extend(extra);
         common::summary(&args)
     };
-    let on = run("1000", &[]);
-    let off = run("1000", &["--no-prefetch"]);
+    let on = run("1000", "120", &[]);
+    let off = run("1000", "120", &["--no-prefetch"]);
     let warm = |v: &serde_json::Value| v["tiles_coarser_warm"].as_u64().expect("count");
     assert_eq!(on["index_arrays"], "built", "{on}");
     assert_eq!(on["warmup_frames"], off["warmup_frames"], "{on}\n{off}");
@@ -1009,7 +1010,8 @@ fn prefetching_draws_fewer_tiles_coarser_after_the_cold_start() {
     assert!(on["prefetch_hits"].as_u64() > Some(0), "{on}");
     // `--prefetch-ms` is a budget for the prediction and the manager's step together: with
     // none, nothing is predicted in time and nothing is sent ahead (against `on`'s hits).
-    let none = run("0", &[]);
+    // (The whole flight: in its first quarter prefetching has no hits yet, budget or not.)
+    let none = run("0", "120", &[]);
     assert_eq!(none["prefetch_mb"].as_f64(), Some(0.0), "{none}");
     assert_eq!(none["prefetch_hits"].as_u64(), Some(0), "{none}");
 }
