@@ -911,6 +911,18 @@ impl TileSet {
         self.bytes_at(e.texture_offset, e.texture_len)
     }
 
+    /// Tile `(tx, ty)`'s header and level table, checked for the counts and offsets that make
+    /// its sections lie inside it, without reading the sections: no checksum, no vertex or index
+    /// values. One page of the file per tile, for a reader that learns every tile's box and
+    /// errors at open and validates a tile fully ([`tile`](Self::tile)) only when it needs the
+    /// tile's data. The level data it hands out may be nonsense (in range, but unchecked).
+    pub fn tile_outline(&self, tx: u32, ty: u32) -> Result<Tile<'_>, FormatError> {
+        let invalid = |what: String| self.tile_error(tx, ty, what);
+        let e = self.checked_entry(tx, ty)?;
+        let blob = &self.map[e.offset as usize..(e.offset + e.len) as usize];
+        Tile::outline(blob, tx, ty, self.header.levels, self.header.height_step).map_err(invalid)
+    }
+
     /// Tile `(tx, ty)`, checksum and structure validated.
     pub fn tile(&self, tx: u32, ty: u32) -> Result<Tile<'_>, FormatError> {
         let invalid = |what: String| self.tile_error(tx, ty, what);
@@ -1024,7 +1036,14 @@ fn section<'a, T: Pod>(
 }
 
 impl<'a> Tile<'a> {
-    fn parse(blob: &'a [u8], tx: u32, ty: u32, levels: u32, step: f32) -> Result<Tile<'a>, String> {
+    /// The header and level table, and every section's place inside the blob.
+    fn outline(
+        blob: &'a [u8],
+        tx: u32,
+        ty: u32,
+        levels: u32,
+        step: f32,
+    ) -> Result<Tile<'a>, String> {
         let header: TileHeader = *section::<TileHeader>(blob, 0, 1, "tile header")?
             .first()
             .ok_or("empty tile")?;
@@ -1093,6 +1112,24 @@ impl<'a> Tile<'a> {
             if let Some(problem) = level_numbers(e) {
                 return Err(err(problem));
             }
+            tile.level_unchecked(i as u32).map_err(err)?;
+        }
+        if start != header.vertex_count {
+            return Err(format!(
+                "blocks hold {start} vertices, header says {}",
+                header.vertex_count
+            ));
+        }
+        Ok(tile)
+    }
+
+    /// [`outline`](Self::outline), then every vertex, index and border entry in range.
+    fn parse(blob: &'a [u8], tx: u32, ty: u32, levels: u32, step: f32) -> Result<Tile<'a>, String> {
+        let tile = Tile::outline(blob, tx, ty, levels, step)?;
+        let header = tile.header;
+        for (i, e) in tile.levels.iter().enumerate() {
+            let err = |what: String| format!("level {i}: {what}");
+            let start = e.block_start + e.block_len;
             let level = tile.level_unchecked(i as u32).map_err(err)?;
             // Decoded positions inside the tile's mesh extent (readers index by them).
             let (mx, my) = (header.mesh_max_x, header.mesh_max_y);
@@ -1122,12 +1159,6 @@ impl<'a> Tile<'a> {
             {
                 return Err(err(format!("border vertex {v} outside blocks 0..={i}")));
             }
-        }
-        if start != header.vertex_count {
-            return Err(format!(
-                "blocks hold {start} vertices, header says {}",
-                header.vertex_count
-            ));
         }
         Ok(tile)
     }
