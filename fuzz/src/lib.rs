@@ -129,8 +129,15 @@ fn run_vkt(p: &Path) {
             }
         }
     }
-    // The renderer's own open (boxes, borders, coarse height maps), GPU-free.
-    let _ = scene::terrain::Terrain::open(p);
+    // The renderer's own open (outlines, boxes, level tables) and each tile's check when first
+    // needed (borders, texture mips), and the coarse height maps, GPU-free.
+    if let Ok(terrain) = scene::terrain::Terrain::open(p) {
+        let tiles: Vec<usize> = (0..terrain.tiles.len().min(64 * 64)).collect();
+        terrain.check_all(&tiles);
+        let _ = terrain.take_failures();
+        let (lo, hi) = terrain.bounds();
+        let _ = terrain.max_height_near(0.5 * (lo.x + hi.x), 0.5 * (lo.y + hi.y), 1e4);
+    }
 }
 
 fn run_dem(p: &Path) {

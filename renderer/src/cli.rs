@@ -209,13 +209,14 @@ pub struct Cli {
     /// Do not advise the kernel to read predicted tiles ahead of use (madvise WILLNEED).
     #[arg(long)]
     pub no_madvise: bool,
-    /// When the tile set file is larger than this, give back the pages that opening it read,
-    /// and let the kernel drop tiles far behind the camera from this process's memory (madvise
-    /// DONTNEED) once the flight has paged in more than this.
-    #[arg(long, value_name = "MB")]
-    pub file_cache_mb: Option<u64>,
-    /// Benchmark: drop the tile set from the page cache after opening it (which reads it
-    /// whole, to validate it), so the flight reads tiles from disk as a first run would.
+    /// When the tile set file is larger than this, give back the pages that opening it read
+    /// (its tiles' outlines), and let the kernel drop tiles far behind the camera from this
+    /// process's memory (madvise DONTNEED) once the flight has paged in more than this: the
+    /// resident set follows the view, not the file
+    #[arg(long, value_name = "MB", default_value_t = 1024)]
+    pub file_cache_mb: u64,
+    /// Benchmark: drop the tile set from the page cache after opening it, so the flight reads
+    /// tiles from disk as a first run would.
     #[arg(long)]
     pub cold_file_cache: bool,
 }
@@ -413,7 +414,7 @@ impl Cli {
             free_share: self.prefetch_free,
             cpu_ms: self.prefetch_ms,
             madvise: !self.no_prefetch && !self.no_madvise,
-            file_cache_bytes: self.file_cache_mb.map(|mb| mb.saturating_mul(1 << 20)),
+            file_cache_bytes: Some(self.file_cache_mb.saturating_mul(1 << 20)),
         })
     }
 }

@@ -97,6 +97,8 @@ pub struct FlightResult {
     pub built_indices: bool,
     /// How long drawing the first view before the flight took (ms; None: not primed).
     pub prime_ms: Option<f64>,
+    /// Checking the first view's tiles before the first frame (ms).
+    pub first_view_check_ms: f64,
     /// Why the flight stopped early (the device was lost, a tile set changed under it, ...):
     /// `records` holds the frames that completed before.
     pub error: Option<FlightError>,
@@ -118,7 +120,16 @@ pub fn fly(
     }
     let mut records = Vec::with_capacity(flight.frames.min(1 << 16) as usize);
     let mut prime_ms = None;
-    let error = run(gpu, flight, &mut renderer, &mut records, &mut prime_ms).err();
+    // The first view's tiles are checked before the first frame (the rest as they are needed,
+    // or ahead of need on a thread beside the frames).
+    let (_, first) = camera_at(flight, 0);
+    let begun = Instant::now();
+    crate::plan::check_view(flight.terrain, &first, flight.size);
+    let first_view_check_ms = begun.elapsed().as_secs_f64() * 1000.0;
+    let error = flight
+        .terrain
+        .with_checks_ahead(|| run(gpu, flight, &mut renderer, &mut records, &mut prime_ms))
+        .err();
     if error.is_some() {
         // Frames submitted before the failure still count if the device can finish them.
         if let Ok(finished) = renderer.finish_all(gpu) {
@@ -139,6 +150,7 @@ pub fn fly(
         staging,
         built_indices,
         prime_ms,
+        first_view_check_ms,
         error,
     })
 }

@@ -12,7 +12,8 @@
 //! file_advised_bytes, file_released_bytes`, then the textures'
 //! `upload_bytes_textures, texture_slots_free, tiles_texture_coarser`, then the index arrays
 //! built on the GPU `index_builds, index_build_bytes`, the heights read back from the vertex
-//! shader `heights_read_back, heights_max_diff_m`,
+//! shader `heights_read_back, heights_max_diff_m`, the tiles' checks when first needed
+//! `cpu_check_ms, tiles_checked, tiles_failed`,
 //! and last `tiles_level_0 .. tiles_level_{n-1}`.
 
 use std::path::Path;
@@ -108,10 +109,15 @@ pub struct FrameRecord {
     pub texture_slots_free: u64,
     /// Drawn tiles whose texture is coarser than their footprint wants, or missing (no slot).
     pub tiles_texture_coarser: u64,
+    /// Checking tiles that came into view unchecked, before their first upload, and how
+    /// many; tiles that have failed their checks so far (never drawn).
+    pub cpu_check_ms: f64,
+    pub tiles_checked: u64,
+    pub tiles_failed: u64,
     pub tiles_per_level: Vec<u64>,
 }
 
-pub const BASE_COLUMNS: [&str; 50] = [
+pub const BASE_COLUMNS: [&str; 53] = [
     "frame",
     "time_s",
     "frame_ms",
@@ -162,6 +168,9 @@ pub const BASE_COLUMNS: [&str; 50] = [
     "index_build_bytes",
     "heights_read_back",
     "heights_max_diff_m",
+    "cpu_check_ms",
+    "tiles_checked",
+    "tiles_failed",
 ];
 
 pub fn header(levels: u32) -> String {
@@ -243,6 +252,9 @@ impl FrameRecord {
             } else {
                 format!("{:.3e}", self.heights_max_diff_m)
             },
+            ms_cell(self.cpu_check_ms),
+            n(self.tiles_checked),
+            n(self.tiles_failed),
         ];
         let levels = self.tiles_per_level.iter().map(|&v| n(v));
         cells
@@ -252,8 +264,10 @@ impl FrameRecord {
             .join(",")
     }
 
+    /// All the frame's CPU work: its decisions, its uploads and the checks of tiles that came
+    /// into view unchecked.
     pub fn cpu_ms(&self) -> f64 {
-        self.overhead_ms() + self.cpu_upload_ms
+        self.overhead_ms() + self.cpu_upload_ms + self.cpu_check_ms
     }
 
     /// The per-frame decision and recording work: cull + LOD + residency + stitch + record
@@ -294,6 +308,12 @@ pub struct RunInfo {
     pub file_released_at_open_bytes: u64,
     /// Drawing the first view once before the timed flight (ms; None: not primed).
     pub prime_ms: Option<f64>,
+    /// Opening the tile set (header, directory, tile outlines), and checking the tiles of the
+    /// first view before the first frame (ms).
+    pub open_ms: f64,
+    pub first_view_check_ms: f64,
+    /// Tiles that failed their checks (never drawn; exit code 4).
+    pub tiles_failed: u64,
 }
 
 #[derive(Serialize, Debug)]
@@ -315,6 +335,14 @@ pub struct Summary {
     pub first_frames_ratio: f64,
     /// Drawing the first view once, untimed, before the flight (ms; None: not primed).
     pub prime_ms: Option<f64>,
+    /// Opening the tile set and checking the first view's tiles (ms), and the checks of tiles
+    /// that came into view unchecked during the flight (in the frames' CPU time).
+    pub open_ms: f64,
+    pub first_view_check_ms: f64,
+    pub tiles_checked_in_frames: u64,
+    pub check_ms_in_frames: f64,
+    /// Tiles that failed their checks and were not drawn.
+    pub tiles_failed: u64,
     pub gpu_ms_median: Option<f64>,
     pub gpu_draw_ms_median: Option<f64>,
     pub cpu_ms_median: f64,
@@ -443,6 +471,11 @@ impl Summary {
                 .reduce(f64::max)
                 .unwrap_or(f64::NAN),
             prime_ms: run.prime_ms,
+            open_ms: run.open_ms,
+            first_view_check_ms: run.first_view_check_ms,
+            tiles_checked_in_frames: sum(|r| r.tiles_checked),
+            check_ms_in_frames: records.iter().map(|r| r.cpu_check_ms).sum(),
+            tiles_failed: run.tiles_failed,
             gpu_ms_median: (!gpu.is_empty()).then(|| percentile(&gpu, 50.0)),
             gpu_draw_ms_median: (!draw.is_empty()).then(|| percentile(&draw, 50.0)),
             cpu_ms_median: percentile(&cpu, 50.0),

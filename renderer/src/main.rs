@@ -25,8 +25,10 @@ use tiles::format::write_atomically;
 use crate::cli::Cli;
 
 /// Exit codes (README, "Exit codes"): 0 success, 1 bad input or a failure (one line on
-/// stderr), 2 usage (clap), 3 the run completed but the validation layer spoke.
+/// stderr), 2 usage (clap), 3 the run completed but the validation layer spoke, 4 the run
+/// completed without the tiles that failed their checks (one line each).
 const EXIT_VALIDATION: u8 = 3;
+const EXIT_BAD_TILES: u8 = 4;
 
 /// Reads the source DEM for --measure-error and cuts it into the tile set's tiles.
 fn error_meter(cli: &Cli, terrain: &Terrain, sources: &[PathBuf]) -> Result<ErrorMeter> {
@@ -87,7 +89,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
     if let Some(n) = cli.static_grid {
         return static_limit(&cli, n);
     }
+    let opening = std::time::Instant::now();
     let mut terrain = Terrain::open(&cli.tileset)?;
+    let open_ms = opening.elapsed().as_secs_f64() * 1000.0;
     terrain.shared_sides |= cli.no_slivers;
     let path = match cli.path.as_str() {
         "orbit" => CameraPath::orbit(&terrain),
@@ -121,7 +125,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
     }
     let flown = fly_path(&cli, &terrain, &path, (settings, memory), windowed)?;
     // A window fails through `window::run`; a headless flight may stop early with its log kept.
-    let code = finish(&cli, &terrain, &flown, &memory, released_at_open)?;
+    let code = finish(&cli, &terrain, &flown, &memory, (released_at_open, open_ms))?;
     match &flown.result.error {
         // The log of the frames before the failure is written; the failure is the one line.
         Some(e) => bail!(
@@ -139,9 +143,10 @@ struct Flown {
     validation: u64,
 }
 
-/// Opening read every tile's positions (borders, height bounds): with a file cache budget
-/// smaller than the set, the process gives those pages back before flying, and holds what the
-/// flight pages in (advice only: a kernel that ignores it costs the budget, not the run).
+/// Opening read every tile's outline (a page each):
+/// with a file cache budget smaller than the set, the process gives those pages back before
+/// flying, and holds what the flight pages in (advice only: a kernel that ignores it costs the
+/// budget, not the run).
 /// `--cold-file-cache` drops the set from the page cache. Returns the bytes given back.
 fn prepare_file_cache(cli: &Cli, terrain: &Terrain, memory: &MemoryOptions) -> Result<u64> {
     let mut released_at_open = 0;
@@ -247,7 +252,7 @@ fn finish(
     terrain: &Terrain,
     flown: &Flown,
     memory: &MemoryOptions,
-    released_at_open: u64,
+    (released_at_open, open_ms): (u64, f64),
 ) -> Result<ExitCode> {
     let Flown {
         result,
@@ -275,6 +280,9 @@ fn finish(
         file_mapped_bytes: terrain.set.mapped_bytes().ok(),
         file_released_at_open_bytes: released_at_open,
         prime_ms: result.prime_ms,
+        open_ms,
+        first_view_check_ms: result.first_view_check_ms,
+        tiles_failed: terrain.failed_count() as u64,
         index_arrays: if result.built_indices {
             "built"
         } else {
@@ -299,6 +307,10 @@ fn finish(
     if validation > 0 {
         eprintln!("vkterrain: {validation} validation messages");
         return Ok(ExitCode::from(EXIT_VALIDATION));
+    }
+    // Each failed tile had its line when it failed; the summary counts them.
+    if terrain.failed_count() > 0 {
+        return Ok(ExitCode::from(EXIT_BAD_TILES));
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -67,6 +67,12 @@ pub struct Plan {
     /// The manager's prefetch step (not in `cpu_residency_ms`).
     pub cpu_prefetch_ms: f64,
     pub cpu_stitch_ms: f64,
+    /// Checking tiles that came into view unchecked (the prefetcher's tiles are checked ahead,
+    /// off the frame), and how many.
+    pub cpu_check_ms: f64,
+    pub tiles_checked: u64,
+    /// Tiles that have failed their checks so far (never drawn).
+    pub tiles_failed: u64,
 }
 
 /// A tile set whose neighbouring tiles do not share their border.
@@ -113,8 +119,31 @@ pub fn plan(
     let view = camera.view(extent.0, extent.1);
 
     let t = Instant::now();
-    let visible = visible_tiles(terrain, &view, camera.position);
+    let mut visible = visible_tiles(terrain, &view, camera.position);
     let cpu_cull_ms = ms(t);
+    let tiles_visible = visible.len() as u64;
+
+    // A tile is checked before its first upload; one that fails is never drawn.
+    let t = Instant::now();
+    let unchecked: Vec<usize> = visible
+        .iter()
+        .copied()
+        .filter(|&i| terrain.tiles[i].usable().is_none())
+        .collect();
+    terrain.check_all(&unchecked);
+    visible.retain(|&i| terrain.tiles[i].usable() == Some(true));
+    let prefetch: Vec<Request> = prefetch
+        .iter()
+        .copied()
+        .filter(|r| match terrain.tiles[r.tile as usize].usable() {
+            Some(usable) => usable,
+            None => {
+                terrain.check_soon(r.tile as usize);
+                false
+            }
+        })
+        .collect();
+    let cpu_check_ms = ms(t);
 
     let t = Instant::now();
     let morphing = matches!(rule, LevelRule::Morph(..));
@@ -126,7 +155,7 @@ pub fn plan(
     let t_prefetch = Instant::now();
     if allow_uploads {
         let in_time = || prefetch_until.is_none_or(|end| Instant::now() < end);
-        manager.prefetch_while(&mut residency, prefetch, in_time);
+        manager.prefetch_while(&mut residency, &prefetch, in_time);
     }
     let cpu_prefetch_ms = ms(t_prefetch);
     let draws: Vec<Draw> = residency
@@ -162,13 +191,23 @@ pub fn plan(
         moves: residency.moves,
         requests,
         stats: residency.stats,
-        tiles_visible: visible.len() as u64,
+        tiles_visible,
         cpu_cull_ms,
         cpu_lod_ms,
         cpu_residency_ms,
         cpu_prefetch_ms,
         cpu_stitch_ms,
+        cpu_check_ms,
+        tiles_checked: unchecked.len() as u64,
+        tiles_failed: terrain.failed_count() as u64,
     })
+}
+
+/// Checks the tiles `camera` sees at `extent` pixels, on every core ([`Terrain::check`]): the
+/// part of opening a tile set that its first view needs, before the first frame.
+pub fn check_view(terrain: &Terrain, camera: &Camera, extent: (u32, u32)) {
+    let view = camera.view(extent.0, extent.1);
+    terrain.check_all(&visible_tiles(terrain, &view, camera.position));
 }
 
 /// Tiles whose box touches the frustum, nearest first (by the box point closest to the camera).

@@ -92,9 +92,13 @@ pub fn stitch_side(
     side: Side,
     slivers: bool,
 ) -> bool {
-    let mine = &a.tile.borders[a.level as usize][side.index()];
+    // Drawn tiles have passed their checks, so their borders are read.
+    let (Some(paged_a), Some(paged_b)) = (a.tile.paged(), b.tile.paged()) else {
+        return false;
+    };
+    let mine = &paged_a.borders[a.level as usize][side.index()];
     let far = side.opposite();
-    let theirs: Option<Vec<u32>> = b.tile.borders[b.level as usize][far.index()]
+    let theirs: Option<Vec<u32>> = paged_b.borders[b.level as usize][far.index()]
         .iter()
         .map(|&p| rebase(p, side, b.tile, a.tile))
         .collect();
@@ -112,8 +116,8 @@ pub fn stitch_side(
     let base = out.vertices.len() as u32;
     out.vertices.extend_from_slice(mine);
     out.vertices.extend_from_slice(&theirs);
-    for (drawn, s) in [(a, side), (b, far)] {
-        let indices = &drawn.tile.border_indices[drawn.level as usize][s.index()];
+    for (drawn, paged, s) in [(a, paged_a, side), (b, paged_b, far)] {
+        let indices = &paged.border_indices[drawn.level as usize][s.index()];
         out.pulled
             .extend(indices.iter().map(|&i| pulled(drawn.record, i)));
     }

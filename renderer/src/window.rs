@@ -113,7 +113,7 @@ pub fn run(
         staging: false,
         built_indices: false,
     };
-    let result = event_loop.run_app(&mut app);
+    let result = terrain.with_checks_ahead(|| event_loop.run_app(&mut app));
     app.shutdown();
     if let Some(e) = app.error.take() {
         return Err(e);
@@ -152,6 +152,7 @@ pub fn run(
         staging: app.staging,
         built_indices: app.built_indices,
         prime_ms: None,
+        first_view_check_ms: 0.0,
         error: None,
     };
     Ok((result, app.gpu.device_name.clone(), validation))
@@ -230,6 +231,7 @@ impl App<'_> {
         if self.options.trace {
             renderer.enable_trace();
         }
+        crate::plan::check_view(self.terrain, &self.camera, (extent.width, extent.height));
         self.renderer = Some(renderer);
         Ok(())
     }

@@ -18,6 +18,9 @@ fn puget() -> (tempfile::TempDir, Terrain) {
     let dir = tempfile::tempdir().expect("tempdir");
     let set = common::puget(dir.path());
     let terrain = Terrain::open(&set).unwrap_or_else(|e| panic!("{}: {e}", set.display()));
+    let all: Vec<usize> = (0..terrain.tiles.len()).collect();
+    terrain.check_all(&all);
+    assert_eq!(terrain.failed_count(), 0, "{:?}", terrain.take_failures());
     (dir, terrain)
 }
 
@@ -224,7 +227,7 @@ fn stitches_close_every_seam_at_every_level_pair() {
                     );
                     // Each vertex is pulled from its own tile: a's first, then b's, each the
                     // border vertex it stands for.
-                    let n = a.borders[la as usize][k].len();
+                    let n = a.paged().expect("checked").borders[la as usize][k].len();
                     assert_eq!(s.pulled.len(), s.vertices.len());
                     for (i, &p) in s.pulled.iter().enumerate() {
                         let (record, local) = (p >> LOCAL_BITS, p & ((1 << LOCAL_BITS) - 1));
@@ -234,13 +237,18 @@ fn stitches_close_every_seam_at_every_level_pair() {
                             (b, lb, side.opposite().index(), i - n)
                         };
                         assert_eq!(record, u32::from(i >= n));
-                        assert_eq!(tile.border_indices[level as usize][side][at], local);
+                        assert_eq!(
+                            tile.paged().expect("checked").border_indices[level as usize][side][at],
+                            local
+                        );
                     }
                     if morph {
                         // Morphing keeps the triangles at shared vertices: one per segment
                         // of either polyline.
-                        let m = a.borders[la as usize][k].len()
-                            + b.borders[lb as usize][side.opposite().index()].len();
+                        let m = a.paged().expect("checked").borders[la as usize][k].len()
+                            + b.paged().expect("checked").borders[lb as usize]
+                                [side.opposite().index()]
+                            .len();
                         assert_eq!(s.triangles as usize, m - 2, "levels {la}/{lb}");
                     }
                     let on_edge = |p: u32| {
@@ -252,7 +260,7 @@ fn stitches_close_every_seam_at_every_level_pair() {
                         }
                     };
                     assert!(s.vertices.iter().all(|&p| on_edge(p)));
-                    let mine = &a.borders[la as usize][k];
+                    let mine = &a.paged().expect("checked").borders[la as usize][k];
                     let theirs: Vec<u32> = s.vertices[mine.len().min(s.vertices.len())..].to_vec();
                     let open = |edges: &std::collections::HashSet<(u32, u32)>| {
                         let segs = |line: &[u32]| -> Vec<(u32, u32)> {
@@ -470,4 +478,95 @@ fn the_drawn_level_covers_every_vertex_on_screen() {
         "the control: the interior's table always covered"
     );
     assert!(coarser > 0, "no tile drawn coarser than before");
+}
+
+/// Opening reads the header, the directory and each tile's outline, not the tiles' data: a
+/// tile whose data is damaged (its checksum no longer matches) opens with the rest, and its
+/// check, the first time it is asked for, names the file, the tile and the checksum; its
+/// neighbours pass. A failure is taken once. The control: the undamaged file's tiles all pass.
+#[test]
+fn a_damaged_tile_opens_and_fails_its_check_when_first_needed() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let set = common::puget(dir.path());
+    let mut bytes = std::fs::read(&set).expect("read");
+    let ts = tiles::TileSet::open(&set).expect("open");
+    let e = ts.dir_entry(2, 1).expect("entry");
+    drop(ts);
+    // A byte near the end of the blob: the finest level's data, far from the outline.
+    let at = (e.offset + e.len - 64) as usize;
+    bytes[at] ^= 0x5a;
+    let damaged = dir.path().join("damaged.vkt");
+    std::fs::write(&damaged, &bytes).expect("write");
+    let terrain = Terrain::open(&damaged).expect("a damaged tile's data does not stop the open");
+    assert!(
+        terrain.tiles.iter().all(|t| t.usable().is_none()),
+        "nothing checked at open"
+    );
+    let broken = terrain.tile_index(2, 1).expect("tile 2,1");
+    let problem = terrain
+        .check(broken)
+        .err()
+        .expect("the damaged tile fails")
+        .to_string();
+    assert!(
+        problem.contains("damaged.vkt")
+            && problem.contains("tile 2,1")
+            && problem.contains("checksum"),
+        "{problem}"
+    );
+    assert!(
+        terrain.part(broken, memory::Part::Positions(0)).is_none(),
+        "no data from it"
+    );
+    for side in Side::ALL {
+        if let Some(j) = terrain.neighbour(&terrain.tiles[broken], side) {
+            assert!(terrain.check(j).is_ok(), "{side:?} neighbour");
+        }
+    }
+    assert_eq!(terrain.failed_count(), 1);
+    let taken = terrain.take_failures();
+    assert_eq!(taken.len(), 1);
+    assert_eq!(taken[0].0, broken);
+    assert!(
+        terrain.take_failures().is_empty(),
+        "a failure is taken once"
+    );
+    // The control.
+    let (_dir, whole) = puget();
+    assert!(whole.check(broken).is_ok());
+}
+
+/// A tile set that claims shared sides although its tiles were built with independent sides
+/// (the flag forged, checksums resealed): the tiles whose sides differ from a neighbour's fail
+/// their checks when needed, named with the neighbour; they are never drawn, rather than drawn
+/// with seams that would crack. The control is every other test's set: built with shared sides,
+/// every tile passes (`puget()` asserts it).
+#[test]
+fn a_forged_shared_sides_claim_fails_the_tiles_whose_sides_differ() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let alone = common::puget_independent(dir.path());
+    let mut bytes = std::fs::read(&alone).expect("read");
+    let at = std::mem::offset_of!(tiles::format::FileHeader, flags);
+    bytes[at..at + 4].copy_from_slice(&tiles::format::FLAG_SHARED_SIDES.to_le_bytes());
+    tiles::format::reseal(&mut bytes).expect("reseal");
+    let forged = dir.path().join("forged.vkt");
+    std::fs::write(&forged, &bytes).expect("write");
+    let terrain = Terrain::open(&forged).expect("open");
+    assert!(terrain.shared_sides, "the claim is taken at open");
+    let all: Vec<usize> = (0..terrain.tiles.len()).collect();
+    terrain.check_all(&all);
+    let failures = terrain.take_failures();
+    assert!(!failures.is_empty(), "the forged claim went unnoticed");
+    for (i, problem) in &failures {
+        let t = &terrain.tiles[*i];
+        assert!(
+            problem.contains(&format!("tile {},{}", t.tx, t.ty))
+                && problem.contains("side differs"),
+            "{problem}"
+        );
+    }
+    // The same file without the claim: every tile passes.
+    let genuine = Terrain::open(&alone).expect("open");
+    genuine.check_all(&all);
+    assert_eq!(genuine.failed_count(), 0, "{:?}", genuine.take_failures());
 }

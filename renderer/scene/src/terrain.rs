@@ -1,15 +1,23 @@
-//! A mapped tile set as the renderer sees it: every tile validated once at open, its world
-//! bounding box, measured errors and border vertices kept in memory for culling, LOD and
-//! stitching; the vertex and index data stay in the mapped file until uploaded.
+//! A mapped tile set as the renderer sees it. Opening reads the header, the directory (both
+//! checksummed) and each tile's header and level table: every tile's world box, level tables
+//! and memory costs are known at once, for culling, LOD and the memory manager, while the tiles'
+//! data stay on disk. A tile is checked the first time it is needed ([`Terrain::check`]): its
+//! checksum, structure and `tiletool verify`'s semantic checks, before any of its bytes reach
+//! the GPU. A tile that fails is never drawn; the flight goes on without it and
+//! [`Terrain::take_failures`] names it.
 
+use std::collections::VecDeque;
 use std::path::Path;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Condvar, Mutex, OnceLock};
+use std::time::Duration;
 
 use glam::DVec3;
 use tiles::format::{LevelEntry, TileSet};
 use tiles::mesh::TILE_CELLS;
 
 use crate::levels::LevelTable;
-use crate::tile::{rebase, Side, TileInfo, HEIGHT_CELLS};
+use crate::tile::{rebase, Paged, Side, TileInfo, HEIGHT_CELLS};
 
 pub struct Terrain {
     pub set: TileSet,
@@ -22,17 +30,28 @@ pub struct Terrain {
     /// Neighbouring tiles have the same side vertices at every level, with the same morph
     /// offsets ([`tiles::format::FLAG_SHARED_SIDES`], checked against the borders here):
     /// geomorphing gives a shared side vertex the same height from both tiles, so stitches
-    /// need no slivers between two copies of it.
+    /// need no slivers between two copies of it. A caller may set it to stitch without
+    /// slivers anyway (`--no-slivers`, to show the cracks); the checks follow the file's claim.
     pub shared_sides: bool,
+    /// What the file's header claims: the side checks hold tiles to it.
+    sides_claimed: bool,
     /// The texture tiles' layout (None: the set has none) and what they show
     /// (`tiles::texture::SOURCE_*`).
     pub texture: Option<tiles::texture::Layout>,
     pub texture_source: u32,
+    /// Tiles that failed their check, in the order they failed, not yet taken.
+    failures: Mutex<Vec<usize>>,
+    failed: AtomicUsize,
+    /// Tiles to check ahead of need, soonest first ([`Terrain::check_soon`]), and the signal
+    /// that wakes the thread checking them.
+    ahead: Mutex<VecDeque<usize>>,
+    ahead_ready: Condvar,
 }
 
 impl Terrain {
-    /// Opens and validates every tile (checksums, offsets, indices), so a corrupted file is
-    /// refused before any GPU work.
+    /// Opens the tile set: the header and directory with their checksum, and every tile's
+    /// header and level table (one page of the file per tile). Tiles' data are checked later,
+    /// one tile at a time ([`Terrain::check`]).
     pub fn open(path: &Path) -> Result<Terrain, tiles::FormatError> {
         let set = TileSet::open(path)?;
         let h = *set.header();
@@ -43,7 +62,6 @@ impl Terrain {
                 tiles.push(tile_info(&set, tx, ty)?);
             }
         }
-        check_tiles(&set, &tiles)?;
         let texture = set.texture_layout();
         let mut terrain = Terrain {
             set,
@@ -53,16 +71,184 @@ impl Terrain {
             levels: h.levels,
             spacing: (sx, sy),
             height_step: h.height_step,
-            shared_sides: false,
+            // A file that claims shared sides but whose borders differ (tampered with) loses
+            // the tiles whose sides differ, when they are checked.
+            shared_sides: h.flags & tiles::format::FLAG_SHARED_SIDES != 0,
+            sides_claimed: h.flags & tiles::format::FLAG_SHARED_SIDES != 0,
             texture,
             texture_source: h.texture_source,
+            failures: Mutex::new(Vec::new()),
+            failed: AtomicUsize::new(0),
+            ahead: Mutex::new(VecDeque::new()),
+            ahead_ready: Condvar::new(),
         };
-        // A file that claims shared sides but whose borders differ (tampered with) is drawn as
-        // one without: the seams stay closed by slivers.
-        terrain.shared_sides =
-            h.flags & tiles::format::FLAG_SHARED_SIDES != 0 && terrain.sides_agree();
         terrain.share_tables();
         Ok(terrain)
+    }
+
+    /// Checks tile `i` the first time it is asked (later calls return the first answer; a
+    /// call while another thread checks it waits for that check): its checksum, structure,
+    /// the semantic checks `tiletool verify` makes without a source (fans, coverage, nesting,
+    /// blocks, borders, morph offsets) and its texture; and where the set shares sides, that
+    /// each side holds the same vertices as the neighbour's (when the neighbour passes its own
+    /// checks: a broken neighbour is never drawn, so no seam joins them). Checksums catch
+    /// accidents; the rest catches a file whose checksums were recomputed over nonsense.
+    /// About 50 ms a tile. Returns the problem, as one line naming the file and the tile.
+    pub fn check(&self, i: usize) -> Result<&Paged, &str> {
+        let tile = self.tiles.get(i).ok_or("no such tile")?;
+        let usable = tile.usable.get_or_init(|| {
+            let verdict = self.usable(tile);
+            if verdict.is_err() {
+                self.failed.fetch_add(1, Ordering::Relaxed);
+                self.failures
+                    .lock()
+                    .unwrap_or_else(|poisoned| poisoned.into_inner())
+                    .push(i);
+            }
+            verdict
+        });
+        match (usable, self.own(tile)) {
+            (Ok(()), Ok(paged)) => Ok(paged),
+            (Err(e), _) | (_, Err(e)) => Err(e),
+        }
+    }
+
+    /// Checks `tiles` on every core (see [`Terrain::check`]).
+    pub fn check_all(&self, tiles: &[usize]) {
+        use rayon::prelude::*;
+        tiles.par_iter().for_each(|&i| {
+            let _ = self.check(i);
+        });
+    }
+
+    /// The tiles that failed their check since the last call, with their problems.
+    pub fn take_failures(&self) -> Vec<(usize, String)> {
+        let taken = std::mem::take(
+            &mut *self
+                .failures
+                .lock()
+                .unwrap_or_else(|poisoned| poisoned.into_inner()),
+        );
+        taken
+            .into_iter()
+            .map(|i| {
+                let problem = self.check(i).err().unwrap_or("failed its check");
+                (i, problem.to_string())
+            })
+            .collect()
+    }
+
+    /// How many tiles have failed their check so far.
+    pub fn failed_count(&self) -> usize {
+        self.failed.load(Ordering::Relaxed)
+    }
+
+    /// Asks for tile `i` to be checked ahead of need, by the thread running
+    /// [`Terrain::check_ahead`] (the prefetcher's predicted tiles). Cheap, and a no-op for a
+    /// tile checked already.
+    pub fn check_soon(&self, i: usize) {
+        if self.tiles.get(i).is_none_or(|t| t.usable().is_some()) {
+            return;
+        }
+        let mut ahead = self.ahead.lock().unwrap_or_else(|p| p.into_inner());
+        if !ahead.contains(&i) {
+            // A bounded queue: the newest predictions matter, the oldest may be stale.
+            if ahead.len() >= 256 {
+                ahead.pop_front();
+            }
+            ahead.push_back(i);
+            self.ahead_ready.notify_one();
+        }
+    }
+
+    /// Checks the tiles [`Terrain::check_soon`] asks for, oldest first, until `stop` is set
+    /// (then returns within a few milliseconds, after the check in progress). Run on a thread
+    /// of its own beside the frames, so that tiles come into view already checked.
+    pub fn check_ahead(&self, stop: &AtomicBool) {
+        while !stop.load(Ordering::Acquire) {
+            let next = {
+                let mut ahead = self.ahead.lock().unwrap_or_else(|p| p.into_inner());
+                if ahead.is_empty() {
+                    ahead = self
+                        .ahead_ready
+                        .wait_timeout(ahead, Duration::from_millis(5))
+                        .unwrap_or_else(|p| p.into_inner())
+                        .0;
+                }
+                ahead.pop_front()
+            };
+            if let Some(i) = next {
+                let _ = self.check(i);
+            }
+        }
+    }
+
+    /// Runs `f` with a thread checking tiles ahead of need beside it ([`Terrain::check_ahead`]).
+    pub fn with_checks_ahead<R>(&self, f: impl FnOnce() -> R) -> R {
+        /// Stops the thread when `f` returns or unwinds (the scope waits for it either way).
+        struct Stop<'a>(&'a AtomicBool, &'a Condvar);
+        impl Drop for Stop<'_> {
+            fn drop(&mut self) {
+                self.0.store(true, Ordering::Release);
+                self.1.notify_all();
+            }
+        }
+        let stop = AtomicBool::new(false);
+        std::thread::scope(|s| {
+            s.spawn(|| self.check_ahead(&stop));
+            let _stop = Stop(&stop, &self.ahead_ready);
+            f()
+        })
+    }
+
+    /// The tile's own check (see [`Terrain::check`]), made once.
+    fn own<'a>(&self, tile: &'a TileInfo) -> &'a Result<Paged, String> {
+        tile.own.get_or_init(|| {
+            paged(&self.set, tile).map_err(|what| {
+                // verify's problems start with the file's name, a FormatError too.
+                let prefix = format!("{}: ", self.set.path().display());
+                format!("{prefix}{}", what.strip_prefix(&prefix).unwrap_or(&what))
+            })
+        })
+    }
+
+    /// Whether `tile` may be drawn: its own check, then its sides against its neighbours'.
+    fn usable(&self, tile: &TileInfo) -> Result<(), String> {
+        let mine = self.own(tile).as_ref().map_err(Clone::clone)?;
+        if !self.sides_claimed {
+            return Ok(());
+        }
+        let units = |t: &TileInfo| -> Vec<u32> {
+            t.levels.iter().map(|l| l.morph_unit.to_bits()).collect()
+        };
+        for side in Side::ALL {
+            let Some(j) = self.neighbour(tile, side) else {
+                continue;
+            };
+            let b = &self.tiles[j];
+            let Ok(theirs) = self.own(b) else {
+                continue;
+            };
+            let differs = units(tile) != units(b)
+                || (0..self.levels as usize).any(|level| {
+                    let rebased: Option<Vec<u32>> = theirs.borders[level][side.opposite().index()]
+                        .iter()
+                        .map(|&p| rebase(p, side, b, tile))
+                        .collect();
+                    rebased.as_ref() != Some(&mine.borders[level][side.index()])
+                });
+            if differs {
+                return Err(format!(
+                    "{}: tile {},{}: its {side:?} side differs from tile {},{}'s, in a set built with shared sides (corrupted file)",
+                    self.set.path().display(),
+                    tile.tx,
+                    tile.ty,
+                    b.tx,
+                    b.ty
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// Gives every tile its side and corner level tables: the larger errors of the tiles that
@@ -106,30 +292,6 @@ impl Terrain {
         }
     }
 
-    /// Whether every two neighbouring tiles hold the same border vertices at every level, and
-    /// every tile the same morph units.
-    fn sides_agree(&self) -> bool {
-        let units = |t: &TileInfo| -> Vec<u32> {
-            t.levels.iter().map(|l| l.morph_unit.to_bits()).collect()
-        };
-        self.tiles.iter().all(|a| {
-            units(a) == units(&self.tiles[0])
-                && Side::FORWARD.iter().all(|&side| {
-                    let Some(j) = self.neighbour(a, side) else {
-                        return true;
-                    };
-                    let b = &self.tiles[j];
-                    (0..self.levels as usize).all(|level| {
-                        let theirs: Option<Vec<u32>> = b.borders[level][side.opposite().index()]
-                            .iter()
-                            .map(|&p| rebase(p, side, b, a))
-                            .collect();
-                        theirs.as_ref() == Some(&a.borders[level][side.index()])
-                    })
-                })
-        })
-    }
-
     /// The tile across `side` of `tile`, if the set has one.
     pub fn neighbour(&self, tile: &TileInfo, side: Side) -> Option<usize> {
         let (dx, dy) = side.step();
@@ -159,9 +321,13 @@ impl Terrain {
             .collect()
     }
 
-    /// The stored bytes of one part of a tile (validated when the tile set was opened).
+    /// The stored bytes of one part of a tile, once the tile has passed its check (None
+    /// before, or when it failed).
     pub fn part(&self, tile: usize, part: memory::Part) -> Option<&[u8]> {
         let info = self.tiles.get(tile)?;
+        if info.usable() != Some(true) {
+            return None;
+        }
         let blob = self.set.blob(info.tx, info.ty)?;
         let (offset, len) = match part {
             memory::Part::Positions(j) => {
@@ -184,10 +350,13 @@ impl Terrain {
         blob.get(start..start.checked_add(usize::try_from(len).ok()?)?)
     }
 
-    /// The BC1 blocks of texture mip `mip` of `tile` (validated when the tile set was opened).
+    /// The BC1 blocks of texture mip `mip` of `tile`, once the tile has passed its check.
     pub fn texture_mip(&self, tile: usize, mip: u32) -> Option<&[u8]> {
         let info = self.tiles.get(tile)?;
-        let range = info.texture_mips.get(mip as usize)?.clone();
+        if info.usable() != Some(true) {
+            return None;
+        }
+        let range = info.paged()?.texture_mips.get(mip as usize)?.clone();
         self.set.texture_blob(info.tx, info.ty)?.get(range)
     }
 
@@ -226,24 +395,53 @@ impl Terrain {
             })
     }
 
-    /// The highest ground within `radius` metres of (x, y), from each tile's coarse height map.
+    /// The highest ground within `radius` metres of (x, y), from the coarse height maps of the
+    /// tiles there (each read from its tile's positions the first time it is needed).
     pub fn max_height_near(&self, x: f64, y: f64, radius: f64) -> f64 {
         let mut best = f64::NEG_INFINITY;
         let (sx, sy) = self.spacing;
-        for t in &self.tiles {
-            for cy in 0..HEIGHT_CELLS {
-                for cx in 0..HEIGHT_CELLS {
-                    let h = t.heights[cy * HEIGHT_CELLS + cx];
-                    if h == f32::NEG_INFINITY {
-                        continue;
-                    }
-                    let cell = 257.0 / HEIGHT_CELLS as f64;
-                    let x0 = t.min.x + cx as f64 * cell * sx;
-                    let y1 = t.max.y - cy as f64 * cell * sy;
-                    let (x1, y0) = (x0 + cell * sx, y1 - cell * sy);
-                    if x1 >= x - radius && x0 <= x + radius && y1 >= y - radius && y0 <= y + radius
-                    {
-                        best = best.max(f64::from(h));
+        let tile_w = f64::from(TILE_CELLS) * sx;
+        let tile_h = f64::from(TILE_CELLS) * sy;
+        // Tiles whose box may meet the square (x, y) ± radius: columns east, rows south.
+        let clamp_to = |v: f64, n: u32| v.floor().clamp(0.0, f64::from(n.max(1) - 1)) as u32;
+        let (c0, c1) = (
+            clamp_to((x - radius) / tile_w, self.tiles_x),
+            clamp_to((x + radius) / tile_w, self.tiles_x),
+        );
+        let (r0, r1) = (
+            clamp_to(-(y + radius) / tile_h, self.tiles_y),
+            clamp_to(-(y - radius) / tile_h, self.tiles_y),
+        );
+        for ty in r0..=r1 {
+            for tx in c0..=c1 {
+                let Some(t) = self.tile_index(tx, ty).map(|i| &self.tiles[i]) else {
+                    continue;
+                };
+                if t.max.x < x - radius
+                    || t.min.x > x + radius
+                    || t.max.y < y - radius
+                    || t.min.y > y + radius
+                {
+                    continue;
+                }
+                let heights = t.heights.get_or_init(|| coarse_heights(&self.set, t));
+                for cy in 0..HEIGHT_CELLS {
+                    for cx in 0..HEIGHT_CELLS {
+                        let h = heights[cy * HEIGHT_CELLS + cx];
+                        if h == f32::NEG_INFINITY {
+                            continue;
+                        }
+                        let cell = 257.0 / HEIGHT_CELLS as f64;
+                        let x0 = t.min.x + cx as f64 * cell * sx;
+                        let y1 = t.max.y - cy as f64 * cell * sy;
+                        let (x1, y0) = (x0 + cell * sx, y1 - cell * sy);
+                        if x1 >= x - radius
+                            && x0 <= x + radius
+                            && y1 >= y - radius
+                            && y0 <= y + radius
+                        {
+                            best = best.max(f64::from(h));
+                        }
                     }
                 }
             }
@@ -256,12 +454,12 @@ impl Terrain {
     }
 }
 
-/// One tile's bounds, borders, height cells, texture mips and own level table, read from the
-/// file (its checksum and offsets checked by `TileSet::tile`).
+/// One tile's header, level table, box and own level table, from its outline (no checksum:
+/// the tile's check comes when it is first needed).
 fn tile_info(set: &TileSet, tx: u32, ty: u32) -> Result<TileInfo, tiles::FormatError> {
     let h = *set.header();
     let (sx, sy) = (h.spacing_x, h.spacing_y);
-    let tile = set.tile(tx, ty)?;
+    let tile = set.tile_outline(tx, ty)?;
     let th = tile.header;
     let levels: Vec<LevelEntry> = tile.levels().to_vec();
     let z_min = levels.iter().map(|l| l.z_min).fold(f32::INFINITY, f32::min);
@@ -280,12 +478,50 @@ fn tile_info(set: &TileSet, tx: u32, ty: u32) -> Result<TileInfo, tiles::FormatE
         -r0 * sy,
         f64::from(z_max),
     );
-    let mut packed: Vec<u32> = Vec::with_capacity(th.vertex_count as usize);
-    for i in 0..h.levels {
-        if let Some(l) = tile.level(i) {
-            packed.extend_from_slice(l.positions);
-        }
+    // Its levels' errors as the morph sees them: measured, plus half a morph unit
+    // (the stored offsets are rounded to whole units).
+    let errors: Vec<f32> = levels
+        .iter()
+        .map(|l| l.max_error.max(0.0) + 0.5 * l.morph_unit.max(0.0))
+        .collect();
+    let own_table = LevelTable::new(&errors);
+    Ok(TileInfo {
+        tx,
+        ty,
+        header: th,
+        levels,
+        min,
+        max,
+        tables: [own_table; 9],
+        drawn_table: own_table,
+        own: OnceLock::new(),
+        usable: OnceLock::new(),
+        heights: OnceLock::new(),
+    })
+}
+
+/// A tile's own check, and what it reads: the tile parsed with its checksum, the problems
+/// `tiletool verify` (without a source) would report, the texture, and the level table the
+/// outline read at open still the one stored.
+fn paged(set: &TileSet, info: &TileInfo) -> Result<Paged, String> {
+    let h = *set.header();
+    let (tx, ty) = (info.tx, info.ty);
+    let tile = set.tile(tx, ty).map_err(|e| e.to_string())?;
+    if let Some(problem) = tiles::verify::tile_problems(set, &tile).into_iter().next() {
+        return Err(problem);
     }
+    let texture_mips = match set.texture(tx, ty).map_err(|e| e.to_string())? {
+        Some(t) => t
+            .mips
+            .iter()
+            .map(|(e, _)| e.offset as usize..(e.offset + e.len) as usize)
+            .collect(),
+        None => Vec::new(),
+    };
+    let packed: Vec<u32> = (0..h.levels)
+        .filter_map(|i| tile.level(i))
+        .flat_map(|l| l.positions.iter().copied())
+        .collect();
     let border_indices: Vec<[Vec<u32>; 4]> = (0..h.levels)
         .filter_map(|i| tile.level(i))
         .map(|l| l.border.map(|side| side.to_vec()))
@@ -298,67 +534,28 @@ fn tile_info(set: &TileSet, tx: u32, ty: u32) -> Result<TileInfo, tiles::FormatE
                 .map(|side| side.iter().map(|&v| packed[v as usize]).collect())
         })
         .collect();
-    let texture_mips = match set.texture(tx, ty)? {
-        Some(t) => t
-            .mips
-            .iter()
-            .map(|(e, _)| e.offset as usize..(e.offset + e.len) as usize)
-            .collect(),
-        None => Vec::new(),
-    };
-    // Its levels' errors as the morph sees them: measured, plus half a morph unit
-    // (the stored offsets are rounded to whole units).
-    let errors: Vec<f32> = levels
-        .iter()
-        .map(|l| l.max_error.max(0.0) + 0.5 * l.morph_unit.max(0.0))
-        .collect();
-    let own_table = LevelTable::new(&errors);
-    let q = tile.quantiser();
-    let mut heights = [f32::NEG_INFINITY; HEIGHT_CELLS * HEIGHT_CELLS];
-    for &p in &packed {
-        let (x, y, code) = tiles::pack::unpack(p);
-        let cell =
-            (y as usize * HEIGHT_CELLS / 257) * HEIGHT_CELLS + x as usize * HEIGHT_CELLS / 257;
-        heights[cell] = heights[cell].max(q.height(code));
-    }
-    Ok(TileInfo {
-        tx,
-        ty,
-        header: th,
-        levels,
-        min,
-        max,
+    Ok(Paged {
         borders,
         border_indices,
-        heights,
         texture_mips,
-        tables: [own_table; 9],
-        drawn_table: own_table,
     })
 }
 
-/// Refuses the tile set if any tile has a problem `tiletool verify` (without a source) would
-/// report: fans, coverage, nesting, blocks, borders, morph offsets. Checksums catch accidents;
-/// this catches a file whose checksums were recomputed over nonsense, before any of its bytes
-/// reach the GPU. About 50 ms a tile, on every core.
-fn check_tiles(set: &TileSet, tiles: &[TileInfo]) -> Result<(), tiles::FormatError> {
-    use rayon::prelude::*;
-    let problem = tiles.par_iter().find_map_first(|t| {
-        let tile = match set.tile(t.tx, t.ty) {
-            Ok(tile) => tile,
-            Err(e) => return Some(e.to_string()),
-        };
-        tiles::verify::tile_problems(set, &tile).into_iter().next()
-    });
-    match problem {
-        None => Ok(()),
-        Some(what) => {
-            // verify's problems start with the file's name; the error adds it back.
-            let prefix = format!("{}: ", set.path().display());
-            Err(tiles::FormatError::Invalid {
-                path: set.path().to_path_buf(),
-                what: what.strip_prefix(&prefix).unwrap_or(&what).to_string(),
-            })
+/// A tile's coarse height map: the highest vertex in each cell, from its positions as stored
+/// (unchecked: the map only places cameras).
+fn coarse_heights(set: &TileSet, info: &TileInfo) -> [f32; HEIGHT_CELLS * HEIGHT_CELLS] {
+    let mut heights = [f32::NEG_INFINITY; HEIGHT_CELLS * HEIGHT_CELLS];
+    let Ok(tile) = set.tile_outline(info.tx, info.ty) else {
+        return heights;
+    };
+    let q = tile.quantiser();
+    for level in (0..set.header().levels).filter_map(|i| tile.level(i)) {
+        for &p in level.positions {
+            let (x, y, code) = tiles::pack::unpack(p);
+            let (x, y) = ((x as usize).min(256), (y as usize).min(256));
+            let cell = (y * HEIGHT_CELLS / 257) * HEIGHT_CELLS + x * HEIGHT_CELLS / 257;
+            heights[cell] = heights[cell].max(q.height(code));
         }
     }
+    heights
 }

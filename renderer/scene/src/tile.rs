@@ -3,6 +3,8 @@
 //! neighbour's frame. Terrain (the whole set), stitching and the level tables all speak of sides
 //! in these terms.
 
+use std::sync::OnceLock;
+
 use glam::DVec3;
 use tiles::format::{LevelEntry, TileHeader};
 use tiles::pack::{pack, unpack};
@@ -12,6 +14,10 @@ use crate::levels::LevelTable;
 /// Cells per side of each tile's coarse height map (for ground-following paths).
 pub(crate) const HEIGHT_CELLS: usize = 8;
 
+/// What the renderer knows of a tile from the moment the set is opened: its header and level
+/// table (read without touching the tile's data, [`tiles::TileSet::tile_outline`]), its box and
+/// its level tables. What needs the tile's data, its borders and texture mips, comes with its
+/// check ([`Paged`]), the first time the tile is needed ([`crate::terrain::Terrain::check`]).
 pub struct TileInfo {
     pub tx: u32,
     pub ty: u32,
@@ -20,14 +26,6 @@ pub struct TileInfo {
     /// World box over all levels: x east, y north, z up (metres).
     pub min: DVec3,
     pub max: DVec3,
-    /// Per level, per [`Side`] (N, E, S, W): the packed border vertices in order along the side.
-    pub borders: Vec<[Vec<u32>; 4]>,
-    /// The same vertices as indices into the tile's vertex array (blocks 0.. in order).
-    pub border_indices: Vec<[Vec<u32>; 4]>,
-    pub(crate) heights: [f32; HEIGHT_CELLS * HEIGHT_CELLS],
-    /// Per texture mip, finest first: its BC1 blocks' place in the tile's texture blob
-    /// (validated at open; empty when the set has no textures).
-    pub(crate) texture_mips: Vec<std::ops::Range<usize>>,
     /// The level tables geomorphing takes its vertices' levels from ([`crate::levels`]):
     /// inside the tile (its own errors), on its N, E, S, W sides (the larger errors of it and
     /// that neighbour), at its NW, NE, SW, SE corners (the largest of the tiles there).
@@ -36,6 +34,38 @@ pub struct TileInfo {
     /// tile may be drawn at level 0 (the drawn level itself takes each part's table over that
     /// part, `renderer::lod::morph_level`).
     pub drawn_table: LevelTable,
+    /// The tile's own check: its checksum, its structure, `tiletool verify`'s semantic checks
+    /// and its texture; on success, what was read from its data.
+    pub(crate) own: OnceLock<Result<Paged, String>>,
+    /// The check that decides whether the tile is drawn: its own, and where the set shares
+    /// sides, its sides against those of its neighbours that pass their own.
+    pub(crate) usable: OnceLock<Result<(), String>>,
+    /// The coarse height map, read from the tile's positions the first time it is asked for.
+    pub(crate) heights: OnceLock<[f32; HEIGHT_CELLS * HEIGHT_CELLS]>,
+}
+
+/// What a tile's check reads from its data, for stitching and texturing.
+pub struct Paged {
+    /// Per level, per [`Side`] (N, E, S, W): the packed border vertices in order along the side.
+    pub borders: Vec<[Vec<u32>; 4]>,
+    /// The same vertices as indices into the tile's vertex array (blocks 0.. in order).
+    pub border_indices: Vec<[Vec<u32>; 4]>,
+    /// Per texture mip, finest first: its BC1 blocks' place in the tile's texture blob (empty
+    /// when the set has no textures).
+    pub(crate) texture_mips: Vec<std::ops::Range<usize>>,
+}
+
+impl TileInfo {
+    /// What the tile's check read, once the tile passed its own check (None: not checked yet,
+    /// or failed).
+    pub fn paged(&self) -> Option<&Paged> {
+        self.own.get().and_then(|r| r.as_ref().ok())
+    }
+
+    /// Whether the tile may be drawn: None until it is checked.
+    pub fn usable(&self) -> Option<bool> {
+        self.usable.get().map(Result::is_ok)
+    }
 }
 
 /// A side of a tile, in the order the tile set stores borders.

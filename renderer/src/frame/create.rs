@@ -350,15 +350,18 @@ pub(super) fn tile_costs(manager: &Manager) -> Vec<memory::TileCost> {
 }
 
 /// Bytes of stitch geometry a frame can need at most: every pair of neighbouring tiles, each
-/// side at its longest border (a 4-index fan per triangle, fewer triangles than vertices).
+/// side at its longest border (a 4-index fan per triangle, fewer triangles than vertices), as
+/// the level tables read at open say.
 fn stitch_bound(terrain: &Terrain) -> u64 {
     let longest = |t: usize, side: Side| {
         terrain.tiles[t]
-            .borders
+            .levels
             .iter()
-            .map(|b| b[side.index()].len() as u64)
+            .map(|l| u64::from(l.border_len[side.index()]))
             .max()
             .unwrap_or(0)
+            // A side holds at most a vertex per sample (a tile not checked yet may say more).
+            .min(u64::from(tiles::mesh::TILE_CELLS) + 1)
     };
     let mut bytes = 0;
     for (i, a) in terrain.tiles.iter().enumerate() {

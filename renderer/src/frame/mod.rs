@@ -332,6 +332,10 @@ impl Renderer {
                 prefetch_until,
             },
         )?;
+        // One line per tile that failed its check (here, or on the thread checking ahead).
+        for (_, problem) in terrain.take_failures() {
+            eprintln!("vkterrain: {problem}; the tile is not drawn");
+        }
         // The prediction and the manager's step: what `--prefetch-ms` bounds.
         let cpu_prefetch_ms = cpu_predict_ms + plan.cpu_prefetch_ms;
         self.write_trace(&plan, &predicted.requests);
