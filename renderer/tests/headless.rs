@@ -1203,3 +1203,33 @@ fn predictions_never_read_the_path_ahead() {
     );
     assert_ne!(pa, pb, "predictions after the paths part must differ");
 }
+
+/// A flight over a GENERATED 2049² mirror tiling of SRTM N55W003 (64 tiles, `common::mirror`):
+/// validation-clean, no tile fails, the first view is checked before the first frame, and
+/// every frame draws some of the set's tiles, never all (the frames follow the view).
+#[test]
+fn a_mirror_set_flies_clean_drawing_only_what_is_in_view() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = common::mirror(dir.path(), 2049);
+    let log = dir.path().join("m.csv");
+    let v = common::summary(&[
+        s(&set),
+        "--headless",
+        "--validation",
+        "--path",
+        "flyover",
+        "--frames",
+        "24",
+        "--size",
+        "256x192",
+        "--log",
+        s(&log),
+    ]);
+    assert_eq!(v["tiles_failed"].as_u64(), Some(0), "{v}");
+    assert!(
+        v["first_view_check_ms"].as_f64().expect("check ms") > 0.0,
+        "{v}"
+    );
+    let drawn = common::log_column(&log, "tiles_drawn");
+    assert!(drawn.iter().all(|&d| d > 0.0 && d < 64.0), "{drawn:?}");
+}

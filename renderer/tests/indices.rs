@@ -202,7 +202,7 @@ fn check_every_level(bench: &mut Bench, terrain: &Terrain) -> (usize, usize, usi
 #[test]
 fn every_level_of_the_puget_sample_builds_as_the_file_says() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let terrain = Terrain::open(&common::puget(dir.path())).expect("tile set");
+    let terrain = common::open_checked(&common::puget(dir.path()));
     let Some(mut bench) = Bench::new() else {
         return;
     };
@@ -249,7 +249,7 @@ fn tiles_past_the_data_edge_build_as_the_file_says_and_controls_fail() {
         ..Default::default()
     };
     let set = common::tileset(dir.path(), &common::data("srtm/N48W125.hgt"), opts);
-    let terrain = Terrain::open(&set).expect("tile set");
+    let terrain = common::open_checked(&set);
     let Some(mut bench) = Bench::new() else {
         return;
     };

@@ -570,3 +570,40 @@ fn a_forged_shared_sides_claim_fails_the_tiles_whose_sides_differ() {
     genuine.check_all(&all);
     assert_eq!(genuine.failed_count(), 0, "{:?}", genuine.take_failures());
 }
+
+/// A GENERATED set four times the Puget sample's side: a 2049² mirror tiling of SRTM N55W003
+/// (64 tiles, `common::mirror`, the grid bench/mirror.py makes for the 4K and 16K benchmark
+/// sets). Opening checks no tile; checking the first view checks exactly the tiles in view, and
+/// those are fewer than the set's (the control: were every tile checked, or none, the sets
+/// would differ); then every tile passes its full check, sides against neighbours included.
+#[test]
+fn a_mirror_set_is_checked_where_it_is_seen_and_passes_everywhere() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let set = common::mirror(dir.path(), 2049);
+    let terrain = Terrain::open(&set).unwrap_or_else(|e| panic!("{}: {e}", set.display()));
+    assert_eq!(terrain.tiles.len(), 64);
+    assert!(terrain.shared_sides);
+    let checked = |terrain: &Terrain| -> Vec<usize> {
+        (0..terrain.tiles.len())
+            .filter(|&i| terrain.tiles[i].usable().is_some())
+            .collect()
+    };
+    assert!(checked(&terrain).is_empty(), "nothing checked at open");
+    let path = CameraPath::flyover(&terrain);
+    let camera = path.at(path.keys[0].time);
+    renderer::plan::check_view(&terrain, &camera, EXTENT);
+    let view = camera.view(EXTENT.0, EXTENT.1);
+    let mut visible = visible_tiles(&terrain, &view, camera.position);
+    visible.sort_unstable();
+    assert!(
+        !visible.is_empty() && visible.len() < terrain.tiles.len(),
+        "the view sees {} of {} tiles",
+        visible.len(),
+        terrain.tiles.len()
+    );
+    assert_eq!(checked(&terrain), visible, "checked: the tiles in view");
+    let all: Vec<usize> = (0..terrain.tiles.len()).collect();
+    terrain.check_all(&all);
+    assert_eq!(terrain.failed_count(), 0, "{:?}", terrain.take_failures());
+    assert!(terrain.tiles.iter().all(|t| t.usable() == Some(true)));
+}

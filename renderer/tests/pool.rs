@@ -93,7 +93,7 @@ fn check_pool(gpu: &Gpu, renderer: &Renderer, terrain: &Terrain) -> (usize, u64,
 fn fly(force_staging: bool, index_arrays: IndexArrays) {
     let dir = tempfile::tempdir().expect("temp dir");
     let set = common::puget(dir.path());
-    let terrain = Terrain::open(&set).expect("tile set");
+    let terrain = common::open_checked(&set);
     let gpu = Gpu::new(&GpuOptions {
         validation: true,
         ..Default::default()

@@ -47,6 +47,65 @@ pub fn grid_view(grid: &dem::HeightGrid) -> Grid<'_> {
     }
 }
 
+/// GENERATED test data, not a real place: a `size` x `size` mirror tiling of the real SRTM3
+/// tile N55W003, the same grid `bench/mirror.py` writes for the scale benchmarks (reflected at
+/// every edge, voids and heights below 0 as 0, 90 m spacing), built with the default
+/// parameters into `dir/mirror-SIZE.vkt`.
+pub fn mirror(dir: &Path, size: usize) -> PathBuf {
+    let path = data("srtm/N55W003.hgt");
+    let raw = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let side = ((raw.len() / 2) as f64).sqrt().round() as usize;
+    assert_eq!(
+        side * side * 2,
+        raw.len(),
+        "{}: not a square .hgt",
+        path.display()
+    );
+    let source = |x: usize, y: usize| -> f32 {
+        let at = 2 * (y * side + x);
+        f32::from(i16::from_be_bytes([raw[at], raw[at + 1]]).max(0))
+    };
+    let mirrored = |i: usize| {
+        let j = i % (2 * (side - 1));
+        if j < side {
+            j
+        } else {
+            2 * (side - 1) - j
+        }
+    };
+    let heights: Vec<f32> = (0..size * size)
+        .map(|i| source(mirrored(i % size), mirrored(i / size)))
+        .collect();
+    let grid = Grid {
+        width: size,
+        height: size,
+        heights: &heights,
+        spacing_x: 90.0,
+        spacing_y: 90.0,
+    };
+    let out = dir.join(format!("mirror-{size}.vkt"));
+    build_tileset(
+        &grid,
+        &BuildParams::default(),
+        &TileSetMeta::default(),
+        &out,
+        &|| {},
+    )
+    .expect("build");
+    out
+}
+
+/// Opens a tile set and checks every tile, as a flight checks them when first needed
+/// (`part` gives a tile's data only after its check); fails the test if any tile fails.
+pub fn open_checked(set: &Path) -> renderer::terrain::Terrain {
+    let terrain =
+        renderer::terrain::Terrain::open(set).unwrap_or_else(|e| panic!("{}: {e}", set.display()));
+    let all: Vec<usize> = (0..terrain.tiles.len()).collect();
+    terrain.check_all(&all);
+    assert_eq!(terrain.failed_count(), 0, "{:?}", terrain.take_failures());
+    terrain
+}
+
 /// How the tests read the bundled Puget Sound sample.
 pub fn puget_options() -> dem::ReadOptions {
     dem::ReadOptions {
