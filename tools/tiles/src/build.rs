@@ -7,8 +7,8 @@ use std::sync::mpsc::sync_channel;
 use rayon::prelude::*;
 
 use crate::format::{
-    level_error, tile_count, FileHeader, LevelEntry, TileHeader, TileSetWriter, FLAG_SHARED_SIDES,
-    MAX_LEVELS, TILE_MAGIC,
+    level_error, side_error_code, tile_count, FileHeader, LevelEntry, TileHeader, TileSetWriter,
+    FLAG_SHARED_SIDES, MAX_LEVELS, TILE_MAGIC,
 };
 use crate::grid::{tile_samples, Grid};
 use crate::mesh::{lattice, plane, triangle_spans, Mesher, Quad, TILE_CELLS, TILE_SIZE};
@@ -274,25 +274,56 @@ fn emit_fans(
     (indices, triangles)
 }
 
-/// The level's measured max error and, where refinement was forbidden, how many triangles
-/// exceed `e` and by how much at most. A triangle over `e` that could have been refined is a
-/// mesher bug, returned as the offending cell.
-fn measure_level(mesher: &mut Mesher, leaves: &[Quad], e: f64) -> Result<(f64, u32, f64), Quad> {
-    let (mut max_error, mut limited, mut excess) = (0.0f64, 0u32, 0.0f64);
+/// What [`measure_level`] finds of a level.
+struct Measured {
+    max_error: f64,
+    /// The largest error over the triangles touching each side (N, E, S, W).
+    side_errors: [f64; 4],
+    limited_triangles: u32,
+    limited_excess: f64,
+}
+
+/// The level's measured max error, overall and over the triangles that touch each side of the
+/// mesh extent (`mesh_max`: its last column and row), and, where refinement was forbidden, how
+/// many triangles exceed `e` and by how much at most. A triangle touches a side where one of
+/// its corners is on it: the extent is convex. A triangle over `e` that could have been refined
+/// is a mesher bug, returned as the offending cell.
+fn measure_level(
+    mesher: &mut Mesher,
+    leaves: &[Quad],
+    e: f64,
+    mesh_max: (u32, u32),
+) -> Result<Measured, Quad> {
+    let mut m = Measured {
+        max_error: 0.0,
+        side_errors: [0.0; 4],
+        limited_triangles: 0,
+        limited_excess: 0.0,
+    };
     for &q in leaves {
         for &t in mesher.fan_triangles(q).as_slice() {
             let err = mesher.triangle_error(q, t);
-            max_error = max_error.max(err);
+            m.max_error = m.max_error.max(err);
+            for &(x, y) in &q.triangle(t) {
+                for (k, on_side) in [y == 0, x == mesh_max.0, y == mesh_max.1, x == 0]
+                    .into_iter()
+                    .enumerate()
+                {
+                    if on_side {
+                        m.side_errors[k] = m.side_errors[k].max(err);
+                    }
+                }
+            }
             if err > e {
                 if !mesher.refinement_forbidden(q, t, e) {
                     return Err(q);
                 }
-                limited += 1;
-                excess = excess.max(err - e);
+                m.limited_triangles += 1;
+                m.limited_excess = m.limited_excess.max(err - e);
             }
         }
     }
-    Ok((max_error, limited, excess))
+    Ok(m)
 }
 
 /// The level's surface at every lattice point of the mesh extent.
@@ -380,12 +411,11 @@ pub fn build_tile(
         let leaves = p_order(mesher.leaves());
         let block_start = vertices.lattice_of.len();
         let (indices, triangles) = emit_fans(&mesher, &leaves, &mut vertices, &mut cache);
-        let (max_error, limited_triangles, limited_excess) = measure_level(&mut mesher, &leaves, e)
-            .map_err(|q| {
-                BuildError::Internal(format!(
-                    "tile {tx},{ty} level {level}: a triangle of cell {q:?} exceeds {e} m"
-                ))
-            })?;
+        let measured = measure_level(&mut mesher, &leaves, e, mesh_max).map_err(|q| {
+            BuildError::Internal(format!(
+                "tile {tx},{ty} level {level}: a triangle of cell {q:?} exceeds {e} m"
+            ))
+        })?;
         let heights = mesher.quantised_heights();
         let new = &vertices.lattice_of[block_start..];
         let block: Vec<u32> = new
@@ -422,12 +452,16 @@ pub fn build_tile(
             surfaces.push(surface);
         }
         let vertex_count = vertices.lattice_of.len() as u32;
+        let max_error = round_up_f32(measured.max_error);
         let entry = LevelEntry {
             error_bound: e as f32,
-            // Rounded up so the stored figure is never below the measured one.
-            max_error: round_up_f32(max_error),
-            limited_excess: round_up_f32(limited_excess),
-            limited_triangles,
+            // Rounded up so the stored figures are never below the measured ones.
+            max_error,
+            side_errors: measured
+                .side_errors
+                .map(|side| side_error_code(max_error, side)),
+            limited_excess: round_up_f32(measured.limited_excess),
+            limited_triangles: measured.limited_triangles,
             z_min,
             z_max,
             block_start: block_start as u32,

@@ -18,6 +18,10 @@
 //! ```
 //!
 //! Version 1 files (no texture fields) are still read, as tile sets without textures.
+//! `LevelEntry::side_errors` (each level's error near each side) took the entry's last,
+//! formerly reserved and zero, four bytes within version 2: a zero code reads as the whole
+//! level's error, so files from before it read as they did, and readers from before it ignore
+//! the codes.
 //!
 //! Writing goes to a hidden temporary file in the destination folder which is renamed over the
 //! destination only after everything, header last, is written and synced: an interrupted build
@@ -161,7 +165,10 @@ pub struct LevelEntry {
     pub border_offset: u32,
     /// Vertices on the N, E, S, W tile sides at this level.
     pub border_len: [u32; 4],
-    pub reserved: u32,
+    /// The level's error near each side (N, E, S, W), as a share of `max_error`: see
+    /// [`LevelEntry::side_error`]. 0 where no builder recorded it (a reserved, zero field in
+    /// files from before it), which reads as `max_error`.
+    pub side_errors: [u8; 4],
 }
 
 impl LevelEntry {
@@ -169,6 +176,34 @@ impl LevelEntry {
     pub fn vertex_count(&self) -> u32 {
         self.block_start + self.block_len
     }
+
+    /// The max error of this level over its triangles that touch side `side` (0..4: N, E, S,
+    /// W; a triangle touches a side where one of its corners lies on it), after quantisation,
+    /// never below the measured figure: `max_error · c / 255` for the stored code `c` in
+    /// 1..=255, and `max_error` itself where the code is 0 (not recorded). A vertex on a side
+    /// lies in no triangle of any level that misses the side, so this bounds every level's
+    /// error wherever its triangles around that vertex reach: the renderer's side level tables
+    /// are built from it.
+    pub fn side_error(&self, side: usize) -> f32 {
+        side_error_of(self.max_error, self.side_errors[side])
+    }
+}
+
+/// What code `c` of [`LevelEntry::side_errors`] stands for, for a level whose max error is
+/// `max_error`.
+pub fn side_error_of(max_error: f32, c: u8) -> f32 {
+    match c {
+        0 | 255 => max_error,
+        c => max_error * (f32::from(c) / 255.0),
+    }
+}
+
+/// The least code in 1..=255 that [`side_error_of`] reads as at least `measured` metres (the
+/// side's measured max error, at most `max_error`); 0, read as `max_error`, if none does.
+pub fn side_error_code(max_error: f32, measured: f64) -> u8 {
+    (1..=255u8)
+        .find(|&c| f64::from(side_error_of(max_error, c)) >= measured)
+        .unwrap_or(0)
 }
 
 /// What went wrong reading or writing a `.vkt` file; shows as one line naming the file.

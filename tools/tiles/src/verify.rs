@@ -352,12 +352,12 @@ fn check_tile(set: &TileSet, tile: &Tile, source: Option<&Grid>, report: &mut Ve
         }
         if let Some(s) = &samples {
             let min_spacing = fh.spacing_x.min(fh.spacing_y);
-            let (worst, limited, excess, unexplained) = measure_level(
+            let (worst, limited, excess, unexplained, near_sides) = measure_level(
                 &fans,
                 &vertices,
                 &s.heights,
-                th.data_max_x,
-                th.data_max_y,
+                (th.data_max_x, th.data_max_y),
+                (th.mesh_max_x, th.mesh_max_y),
                 bound,
                 min_spacing,
             );
@@ -376,6 +376,20 @@ fn check_tile(set: &TileSet, tile: &Tile, source: Option<&Grid>, report: &mut Ve
                 problem(Some(level), format!(
                     "error exceeds e = {bound} m by {unexplained:.4} m where the spacing rule did not stop refinement"
                 ));
+            }
+            // A side's error may be stored a code step (1/255 of the level's) above what it is,
+            // never below it; code 0 stands for the level's whole error.
+            let step = f64::from(e.max_error) / 255.0;
+            for (k, &near) in near_sides.iter().enumerate() {
+                let stored = f64::from(e.side_error(k));
+                if e.side_errors[k] != 0
+                    && (stored < near - tolerance(near) || stored > near + step + tolerance(near))
+                {
+                    problem(
+                        Some(level),
+                        format!("recomputed error near side {k} {near:.4} m, stored {stored:.4} m"),
+                    );
+                }
             }
             if limited as u32 != e.limited_triangles
                 || (excess - f64::from(e.limited_excess)).abs() > tolerance(excess)
@@ -535,12 +549,13 @@ fn measure_level(
     fans: &[&[u32]],
     vertices: &[(u32, u32, f32)],
     source: &[f32],
-    max_x: u32,
-    max_y: u32,
+    (max_x, max_y): (u32, u32),
+    mesh_max: (u32, u32),
     bound: f64,
     min_spacing: f64,
-) -> (f64, u64, f64, f64) {
+) -> (f64, u64, f64, f64, [f64; 4]) {
     let (mut worst, mut limited, mut excess, mut unexplained) = (0.0f64, 0u64, 0.0f64, 0.0f64);
+    let mut near_sides = [0.0f64; 4];
     for fan in fans {
         let v = |i: u32| vertices[i as usize];
         let c = v(fan[0]);
@@ -551,6 +566,12 @@ fn measure_level(
             let (a, b) = (w[0], w[1]);
             let err = triangle_error([c, a, b], source, max_x, max_y);
             worst = worst.max(err);
+            for (x, y, _) in [c, a, b] {
+                let on = [y == 0, x == mesh_max.0, y == mesh_max.1, x == 0];
+                for (k, _) in on.iter().enumerate().filter(|(_, &on)| on) {
+                    near_sides[k] = near_sides[k].max(err);
+                }
+            }
             // A micrometre of slack: the builder's and this f64 arithmetic round differently.
             if err > bound + 1e-6 {
                 // A ring edge as long as the cell side can still get its midpoint (spacing
@@ -570,7 +591,7 @@ fn measure_level(
             }
         }
     }
-    (worst, limited, excess, unexplained)
+    (worst, limited, excess, unexplained, near_sides)
 }
 
 /// Max |source - plane| over the real samples inside (or on) a triangle, in f64.
