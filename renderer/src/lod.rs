@@ -107,9 +107,20 @@ pub const SPLIT: u32 = 4;
 /// is in some sub-box that is not wholly outside), and it is tighter when the box's nearest
 /// corner is off screen, as for tiles under and beside the camera.
 pub fn subdivided_bound(view: &View, lo: DVec3, hi: DVec3, n: u32) -> f64 {
-    let planes = view.frustum();
-    pieces(lo, hi, n, n)
-        .filter(|&(a, b)| !crate::cull::box_outside(&planes, a, b))
+    pieces_bound(view, &view.frustum(), lo, hi, (n, n))
+}
+
+/// [`bound`] over the `nx x ny` pieces of `lo..hi` that are not wholly outside `planes`, the
+/// view's frustum: 0 when none touches it.
+fn pieces_bound(
+    view: &View,
+    planes: &[glam::Vec4; 5],
+    lo: DVec3,
+    hi: DVec3,
+    (nx, ny): (u32, u32),
+) -> f64 {
+    pieces(lo, hi, nx, ny)
+        .filter(|&(a, b)| !crate::cull::box_outside(planes, a, b))
         .map(|(a, b)| bound(view, a, b))
         .fold(0.0, f64::max)
 }
@@ -201,16 +212,10 @@ pub fn morph_level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: 
         return 0;
     }
     let planes = view.frustum();
-    let on_screen_bound = |lo: DVec3, hi: DVec3, nx: u32, ny: u32| {
-        pieces(lo, hi, nx, ny)
-            .filter(|&(a, b)| !crate::cull::box_outside(&planes, a, b))
-            .map(|(a, b)| bound(view, a, b))
-            .fold(0.0, f64::max)
-    };
     let interior = &tile.tables[0];
     let mut level = within(
         interior,
-        error_for(on_screen_bound(lo, hi, SPLIT, SPLIT), tau),
+        error_for(pieces_bound(view, &planes, lo, hi, (SPLIT, SPLIT)), tau),
     );
     for (part, (a, b)) in rim(lo, hi).into_iter().enumerate() {
         let table = &tile.tables[part + 1];
@@ -218,7 +223,7 @@ pub fn morph_level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: 
             continue;
         }
         let along = |a: f64, b: f64| if a == b { 1 } else { SPLIT };
-        let s = on_screen_bound(a, b, along(a.x, b.x), along(a.y, b.y));
+        let s = pieces_bound(view, &planes, a, b, (along(a.x, b.x), along(a.y, b.y)));
         // 0: no piece of the part touches the frustum, so none of its vertices is on screen.
         if s > 0.0 {
             level = level.max(within(table, error_for(s, tau)));
