@@ -67,8 +67,8 @@ fn odd_sized_crop_builds_and_verifies_against_its_source() {
     assert_eq!(names.len(), 1, "{names:?}");
 }
 
-/// Each level records its error near each side (over its triangles that touch the side), the
-/// renderer's side level tables are built from it, and `verify` recomputes it: never below
+/// Each level records its error near each side (over its triangles that touch the side, a
+/// bound for side level tables), and `verify` recomputes it: never below
 /// what it is, at most a code step above. Where coast meets sea (SRTM1 N48W125, no voids in
 /// this crop), many sides' errors are well below their tile's, which is what the codes are
 /// for; on ground rugged all over they are close to it. The controls: a code
@@ -145,7 +145,7 @@ fn errors_near_each_side_are_recorded_and_verified() {
         let set = TileSet::open(&path).expect("open");
         verify(&set, Some(&grid))
     };
-    // Understated by two code steps: the renderer would refine too little near that side.
+    // Understated by two code steps: a side table built from it would refine too little.
     let lowered = with_code(code - 2);
     assert!(
         lowered.problems.iter().any(|p| p.contains("near side")),
