@@ -304,12 +304,9 @@ fn measure_level(
         for &t in mesher.fan_triangles(q).as_slice() {
             let err = mesher.triangle_error(q, t);
             m.max_error = m.max_error.max(err);
-            for &(x, y) in &q.triangle(t) {
-                for (k, on_side) in [y == 0, x == mesh_max.0, y == mesh_max.1, x == 0]
-                    .into_iter()
-                    .enumerate()
-                {
-                    if on_side {
+            for &p in &q.triangle(t) {
+                for (k, on) in on_sides(p, mesh_max).into_iter().enumerate() {
+                    if on {
                         m.side_errors[k] = m.side_errors[k].max(err);
                     }
                 }
@@ -430,13 +427,8 @@ pub fn build_tile(
             let v = (block_start + i) as u32;
             z_min = z_min.min(heights[l as usize]);
             z_max = z_max.max(heights[l as usize]);
-            for (k, on_side) in [
-                (0, y == 0),
-                (1, x == mesh_max.0),
-                (2, y == mesh_max.1),
-                (3, x == 0),
-            ] {
-                if on_side {
+            for (k, on) in on_sides((x, y), mesh_max).into_iter().enumerate() {
+                if on {
                     sides[k].push((if k % 2 == 0 { x } else { y }, v));
                 }
             }
@@ -532,6 +524,12 @@ pub fn build_tile(
         sides: positions,
         deviation,
     })
+}
+
+/// Whether lattice point `(x, y)` lies on the N, E, S and W sides of a mesh extent whose last
+/// column and row are `max_x`, `max_y`.
+fn on_sides((x, y): (u32, u32), (max_x, max_y): (u32, u32)) -> [bool; 4] {
+    [y == 0, x == max_x, y == max_y, x == 0]
 }
 
 /// The lattice point at `at` along side `k` (north, east, south, west) of a mesh.
