@@ -184,15 +184,23 @@ pub fn level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: Bound)
 }
 
 /// The level a tile is drawn at while geomorphing ([`crate::morph`], "The level a tile is
-/// drawn at"): the coarsest that covers the level `Λ(τ / S)` of every vertex on screen. Each
-/// vertex takes one of the tile's nine level tables ([`crate::morph::table_of`]): the interior
-/// its own, a side the larger of the two tiles', a corner the largest around it. So the drawn
-/// level is the largest, over the nine parts of the tile, of `ceil(Λ_part(τ / S_part))`, with
-/// `S_part` the proved bound over the on-screen pieces of that part's box: the whole tile's
-/// box for the interior, a side's line (its `x, y` segment times the tile's height range, in
-/// [`SPLIT`] pieces) for a side, and a corner's vertical segment for a corner. A part whose
-/// table is the interior's adds nothing and is skipped. A rough neighbour then makes a tile
-/// finer only as far as the shared side itself needs, not the whole tile wherever it is seen.
+/// drawn at"): the coarsest that covers the level `Λ(τ / S)` of every vertex on screen whose
+/// level moves it. Each vertex takes one of the tile's nine level tables
+/// ([`crate::morph::table_of`]): the interior its own, a side the larger of the two tiles'. So
+/// the drawn level is the largest, over the interior and the four sides, of
+/// `ceil(Λ_part(τ / S_part))`, with `S_part` the proved bound over the on-screen pieces of that
+/// part's box: the whole tile's box for the interior, a side's line (its `x, y` segment times
+/// the tile's height range, in [`SPLIT`] pieces) for a side. A side whose table is the
+/// interior's adds nothing and is skipped. A rough neighbour then makes a tile finer only as
+/// far as the shared side itself needs, not the whole tile wherever it is seen.
+///
+/// The four corners take no part: a tile's corners are vertices of its coarsest level (block
+/// 0), which every level holds at the vertex's own height, so no level moves them and none
+/// makes them appear (the shader's weights for them multiply no offset). Their level tables
+/// (the largest of the four tiles around) raised a tile wherever a rougher tile touched it
+/// only diagonally, for nothing. The surface near a corner is the interior's and the sides'
+/// (every point there is in their boxes).
+///
 /// When the whole box already allows level 0 under the largest table, level 0 it is.
 pub fn morph_level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: Bound) -> u32 {
     let finest = tile.levels.len().saturating_sub(1) as u32;
@@ -217,7 +225,7 @@ pub fn morph_level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: 
         interior,
         error_for(pieces_bound(view, &planes, lo, hi, (SPLIT, SPLIT)), tau),
     );
-    for (part, (a, b)) in rim(lo, hi).into_iter().enumerate() {
+    for (part, (a, b)) in sides(lo, hi).into_iter().enumerate() {
         let table = &tile.tables[part + 1];
         if level == finest || table == interior {
             continue;
@@ -232,21 +240,16 @@ pub fn morph_level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: 
     level
 }
 
-/// The boxes of a tile's rim in the order of its level tables after the interior: the N, E, S
-/// and W sides (north is +y), then the NW, NE, SW and SE corners, each over the whole height.
-fn rim(lo: DVec3, hi: DVec3) -> [(DVec3, DVec3); 8] {
+/// The boxes of a tile's sides in the order of its level tables after the interior: the N, E,
+/// S and W sides (north is +y), each over the whole height.
+fn sides(lo: DVec3, hi: DVec3) -> [(DVec3, DVec3); 4] {
     let at = |x: f64, y: f64, z: f64| DVec3::new(x, y, z);
     let side = |x0: f64, y0: f64, x1: f64, y1: f64| (at(x0, y0, lo.z), at(x1, y1, hi.z));
-    let corner = |x: f64, y: f64| side(x, y, x, y);
     [
         side(lo.x, hi.y, hi.x, hi.y),
         side(hi.x, lo.y, hi.x, hi.y),
         side(lo.x, lo.y, hi.x, lo.y),
         side(lo.x, lo.y, lo.x, hi.y),
-        corner(lo.x, hi.y),
-        corner(hi.x, hi.y),
-        corner(lo.x, lo.y),
-        corner(hi.x, lo.y),
     ]
 }
 

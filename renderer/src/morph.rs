@@ -73,23 +73,33 @@
 //!
 //! # The level a tile is drawn at
 //!
-//! A tile is drawn at the level `G` that covers every on-screen vertex's level
-//! ([`crate::lod::morph_level`]): the largest, over the tile's nine parts (its interior, four
-//! sides and four corners, each with its own level table), of `ceil(Λ_part(τ / S_part))`,
-//! `S_part` the proved bound of [`crate::lod`] over the pieces of that part's box that touch
-//! the frustum. Every on-screen vertex lies in the box of its part, so its `S(v)` is within
-//! that bound and its level at most `G`: off-screen parts do not raise it, and a rougher
-//! neighbour raises it only as far as the shared side needs (a side vertex takes the larger
-//! table of the two tiles, so that both give it one level). Were some on-screen vertex to want
-//! more than the drawn mesh has, it would start off the coarser surface when the finer level
-//! arrived. The test `the_drawn_level_covers_every_vertex_on_screen` checks the cover vertex by
-//! vertex, and that the largest table over the whole box, the rule before, drew finer (the
-//! control). The side tables from each tile's errors near the side alone (which the file
-//! records, [`tiles::format::LevelEntry::side_error`]) were tried and measured: 13% fewer
-//! triangles on the N48W125 orbit at tau 1, but side vertices then take finer levels than the
-//! interior vertices beside them, and the error between a triangle's vertices reached 2.06 px
-//! at tau 2 there (bench/README.md), past [`TAU_MARGIN`]; so sides keep the whole tiles'
-//! tables until that excess is bounded. Vertices whose level reaches their
+//! A tile is drawn at the level `G` that covers the level of every on-screen vertex that a
+//! level can move ([`crate::lod::morph_level`]): the largest, over the tile's interior and its
+//! four sides (each with its own level table), of `ceil(Λ_part(τ / S_part))`, `S_part` the
+//! proved bound of [`crate::lod`] over the pieces of that part's box that touch the frustum.
+//! Every on-screen vertex of the interior or a side lies in the box of its part, so its `S(v)`
+//! is within that bound and its level at most `G`: off-screen parts do not raise it, and a
+//! rougher neighbour raises it only as far as the shared side needs (a side vertex takes the
+//! larger table of the two tiles, so that both give it one level). Were some on-screen vertex
+//! to want more than the drawn mesh has, it would start off the coarser surface when the finer
+//! level arrived. The tile's four corners are left out: they are vertices of block 0, at their
+//! own height on every level, so their level moves nothing and no level adds them; their
+//! tables (the largest of the four tiles around a corner) only made a tile finer where a
+//! rougher tile touched it diagonally (the N48W125 orbit at tau 1: 43.1k triangles with them,
+//! 38.5k without, discrete 28.8k). The test `the_drawn_level_covers_every_vertex_on_screen`
+//! checks the cover vertex by vertex, that the corners are block-0 vertices, and that the
+//! largest table over the whole box, the rule before, drew finer (the control).
+//!
+//! The side tables from each tile's errors near the side alone (which the file records,
+//! [`tiles::format::LevelEntry::side_error`]) were tried and measured twice: they cut the
+//! N48W125 orbit at tau 1 to 1.14x discrete's triangles, but the error reached 2.06 px at tau
+//! 2 there (bench/README.md). Found the second time: the worst sample lies on the side of a
+//! smooth tile drawn at level 1, between a corner and a side vertex 128 rows (4 km) away. A
+//! segment whose one end is a block-0 vertex blends, all along, at the other end's level, so
+//! the error near the corner is the far vertex's `τ / S(v)` seen at the corner's larger
+//! `|J z|`. Smaller side tables lower `G`, lengthen such segments and expose it. Sides keep the
+//! whole tiles' tables until the vertex rule bounds `|J z|` over a vertex's star, not at the
+//! vertex alone. Vertices whose level reaches their
 //! own block `j` sit at their own height, bit for bit (every weight below `j` is exactly 0),
 //! so a vertex off screen whose level exceeds `G` is simply on level `G`'s surface.
 //!

@@ -384,14 +384,16 @@ fn shared_side_vertices_morph_to_one_height_from_both_tiles() {
     }
 }
 
-/// The drawn level of a morphing tile covers the level of every vertex of it on screen
-/// (`renderer::morph`, "The level a tile is drawn at"): over Puget and SRTM N48W125 (smooth
-/// filled voids beside rough coast, so neighbouring tiles' tables differ), from the orbit, the
-/// flyover and low random cameras, at tau 1 and 3, every on-screen vertex of every visible
-/// tile, at every level, has `l(v)` at most the tile's drawn level. Two controls: the interior's
-/// table alone over the whole box does not cover them (the rim's tables matter), and the rule
-/// before (the largest of the nine tables over the whole box) drew some tiles finer and none
-/// coarser.
+/// The drawn level of a morphing tile covers the level of every vertex of it on screen that a
+/// level moves (`renderer::morph`, "The level a tile is drawn at"): over Puget and SRTM
+/// N48W125 (smooth filled voids beside rough coast, so neighbouring tiles' tables differ),
+/// from the orbit, the flyover and low random cameras, at tau 1 and 3, every on-screen vertex
+/// of every visible tile, at every level, has `l(v)` at most the tile's drawn level, except
+/// the tile's corners, which are checked to be block-0 vertices (own height on every level).
+/// Controls: the interior's table alone over the whole box does not cover them (the sides'
+/// tables matter); the rule before (the largest of the nine tables over the whole box) drew
+/// some tiles finer and none coarser; and some corner on screen does want more than its
+/// tile's drawn level (leaving the corners out changed something).
 #[test]
 fn the_drawn_level_covers_every_vertex_on_screen() {
     use renderer::lod::{self, Bound};
@@ -407,6 +409,7 @@ fn the_drawn_level_covers_every_vertex_on_screen() {
     let n48 = Terrain::open(&n48).expect("open");
     let mut rng = splitmix::Rng(0x6d6f_7270_685f_6c76);
     let (mut checked, mut interior_misses, mut coarser, mut tiles) = (0usize, 0usize, 0usize, 0);
+    let mut corners_above = 0usize;
     for terrain in [&puget, &n48] {
         let finest = terrain.levels - 1;
         let (lo, hi) = terrain.bounds();
@@ -448,12 +451,19 @@ fn the_drawn_level_covers_every_vertex_on_screen() {
                     tiles += 1;
                     let morph = TileMorph::from_camera(terrain, &camera, EXTENT, tau, i);
                     let data = terrain.set.tile(tile.tx, tile.ty).expect("tile");
+                    let block0 = data.level(0).expect("level 0").positions.len();
                     let mut interior_missed = false;
-                    for (x, y, own) in data.vertices() {
+                    for (k, (x, y, own)) in data.vertices().into_iter().enumerate() {
+                        let corner = (x == 0 || x == 256) && (y == 0 || y == 256);
                         let (relative, l) = morph.vertex(x, y, own);
                         let clip = morph.view_proj * relative.extend(1.0);
                         let w = clip.w;
                         if w < 1e-3 || clip.x.abs() > w || clip.y.abs() > w {
+                            continue;
+                        }
+                        if corner {
+                            assert!(k < block0, "tile {i}: corner ({x}, {y}) in block > 0");
+                            corners_above += usize::from(l > drawn as f32 + 1e-3);
                             continue;
                         }
                         checked += 1;
@@ -470,7 +480,12 @@ fn the_drawn_level_covers_every_vertex_on_screen() {
     }
     eprintln!(
         "{checked} on-screen vertices covered; {coarser} of {tiles} tile draws coarser than \
-         the rule before; the interior's table alone misses in {interior_misses}"
+         the rule before; the interior's table alone misses in {interior_misses}; \
+         {corners_above} corners on screen above their tile's drawn level"
+    );
+    assert!(
+        corners_above > 0,
+        "the control: no corner wants more than its tile's level"
     );
     assert!(checked > 1_000_000, "only {checked} vertices checked");
     assert!(
