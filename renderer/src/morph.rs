@@ -87,21 +87,22 @@
 //! tables (the largest of the four tiles around a corner) only made a tile finer where a
 //! rougher tile touched it diagonally (the N48W125 orbit at tau 1: 43.1k triangles with them,
 //! 38.5k without, discrete 28.8k). The test `the_drawn_level_covers_every_vertex_on_screen`
-//! checks the cover vertex by vertex, that the corners are block-0 vertices, and that the
-//! largest table over the whole box, the rule before, drew finer (the control).
+//! checks the cover vertex by vertex, that the corners are block-0 vertices and that some
+//! corner on screen does want more than its tile's level, and that the largest table over the
+//! whole box, the rule before, drew finer (the controls). Vertices whose level reaches their
+//! own block `j` sit at their own height, bit for bit (every weight below `j` is exactly 0),
+//! so a vertex off screen whose level exceeds `G` is simply on level `G`'s surface.
 //!
 //! The side tables from each tile's errors near the side alone (which the file records,
 //! [`tiles::format::LevelEntry::side_error`]) were tried and measured twice: they cut the
 //! N48W125 orbit at tau 1 to 1.14x discrete's triangles, but the error reached 2.06 px at tau
 //! 2 there (bench/README.md). Found the second time: the worst sample lies on the side of a
-//! smooth tile drawn at level 1, between a corner and a side vertex 128 rows (4 km) away. A
+//! tile drawn at level 1, between a corner and a side vertex 128 rows (4 km) away. A
 //! segment whose one end is a block-0 vertex blends, all along, at the other end's level, so
 //! the error near the corner is the far vertex's `τ / S(v)` seen at the corner's larger
 //! `|J z|`. Smaller side tables lower `G`, lengthen such segments and expose it. Sides keep the
 //! whole tiles' tables until the vertex rule bounds `|J z|` over a vertex's star, not at the
-//! vertex alone. Vertices whose level reaches their
-//! own block `j` sit at their own height, bit for bit (every weight below `j` is exactly 0),
-//! so a vertex off screen whose level exceeds `G` is simply on level `G`'s surface.
+//! vertex alone.
 //!
 //! # Continuity
 //!
