@@ -653,9 +653,9 @@ fn interrupted_builds_leave_no_temporary_files() {
     let own = dir.path().join(format!(".big.vkt.tmp.{}", child.id()));
     let start = std::time::Instant::now();
     // The temporary appears once the grid is read and the tiles agree on their shared sides
-    // (every tile meshed several times, tools/tiles/src/build.rs): about 30 s
-    // on an idle 2-core machine, over 60 s when other tests share it. The wait ends as soon as
-    // it appears, so a generous limit costs nothing.
+    // (every tile meshed several times, tools/tiles/src/build.rs): about 30 s on an idle
+    // 2-core machine, over 60 s when other tests share it. The wait ends as soon as it
+    // appears, so a generous limit costs nothing.
     while !own.exists() {
         assert!(
             start.elapsed().as_secs() < 300,
