@@ -103,13 +103,28 @@ pub struct TileRecord {
     /// The level tables of the tile's vertices: inside, the N, E, S, W sides, the NW, NE, SW,
     /// SE corners ([`crate::tile::TileInfo::tables`]).
     pub tables: [LevelCoefficients; 9],
+    /// To [`RECORD_ALIGNMENT`] and beyond.
+    pub pad2: [[u32; 4]; 12],
 }
 
 /// Bytes of one record.
 pub const RECORD_BYTES: u64 = std::mem::size_of::<TileRecord>() as u64;
 
+/// What a record's place in the records buffer is a multiple of: the largest
+/// `minUniformBufferOffsetAlignment` Vulkan allows, so that the `Tile` binding's dynamic
+/// offset may point at any record on any device.
+pub const RECORD_ALIGNMENT: u64 = 256;
+
 /// Where the records start in the records buffer, after the frame's [`MorphFrame`].
-pub const RECORDS_OFFSET: u64 = std::mem::size_of::<MorphFrame>() as u64;
+pub const RECORDS_OFFSET: u64 = RECORD_ALIGNMENT;
+
+const _: () = assert!(RECORD_BYTES % RECORD_ALIGNMENT == 0);
+const _: () = assert!(std::mem::size_of::<MorphFrame>() as u64 <= RECORDS_OFFSET);
+
+/// The dynamic offset of the `Tile` binding for record `i`: its bytes from [`RECORDS_OFFSET`].
+pub fn tile_binding_offset(i: usize) -> u32 {
+    (RECORD_BYTES * i as u64) as u32
+}
 
 /// `(field, offset)` of a `#[repr(C)]` struct, for the layout test.
 macro_rules! fields {
@@ -127,7 +142,7 @@ pub fn host_layout() -> Vec<(&'static str, &'static str, u32)> {
     let coefficients = fields!(LevelCoefficients: a_lo, a_hi, b_lo, b_hi);
     let record = fields!(TileRecord: tile_offset, height_base, positions, starts_lo, starts_hi,
         blocks, units, level, cap, heights, texture_layer, texture_finest, texture_shift, pad0,
-        pad1, tables);
+        pad1, tables, pad2);
     let named = |name: &'static str, fields: Vec<(&'static str, u32)>| {
         fields.into_iter().map(move |(f, o)| (name, f, o))
     };
@@ -139,7 +154,6 @@ pub fn host_layout() -> Vec<(&'static str, &'static str, u32)> {
     layout.push(("TileRecord", "stride", RECORD_BYTES as u32));
     let stride = std::mem::size_of::<LevelCoefficients>() as u32;
     layout.push(("LevelCoefficients", "stride", stride));
-    layout.push(("Records", "morph", 0));
     layout.push(("Records", "tiles", RECORDS_OFFSET as u32));
     layout.sort();
     layout

@@ -51,7 +51,7 @@ struct TileRecord {
     uvec4 starts_lo;         // first vertex of blocks 1..4 (0xffffffff past the last block)
     uvec4 starts_hi;         // first vertex of blocks 5..8
     uvec4 blocks[9];         // per block: first vertex, vertices, pool byte of its morph rows, 0
-    float units[8];          // metres per morph offset unit of levels 0..7
+    vec4 units[2];           // metres per morph offset unit of levels 0..3, 4..7 (vec4s: std140 = std430)
     uint level;              // the level drawn
     float cap;               // the level the vertices morph to at most
     uint heights;            // read-back: where the tile's first vertex's height goes
@@ -64,13 +64,25 @@ struct TileRecord {
     // larger errors of the tile and that neighbour) and the NW, NE, SW, SE corners (of the
     // tiles there), so that every tile holding a vertex gives it the same table.
     LevelCoefficients tables[9];
+    // To 1024 bytes: a record's offset in the buffer is then a multiple of any device's
+    // minUniformBufferOffsetAlignment (at most 256), as the Tile binding's dynamic offset must be.
+    uvec4 pad2[12];
 };
 
 layout(std430, set = 0, binding = 0) readonly buffer Pool { uint words[]; } pool;
+// The frame's records buffer: its MorphFrame at byte 0 (the Morph binding below), the tile
+// records from byte 256 (aligned for the Tile binding, as above).
 layout(std430, set = 0, binding = 1) readonly buffer Records {
-    MorphFrame morph;
-    TileRecord tiles[];
+    layout(offset = 256) TileRecord tiles[];
 } records;
+// The records buffer's first bytes as a uniform buffer: the frame's morph constants.
+layout(std140, set = 0, binding = 5) uniform Morph { MorphFrame morph; } frame_morph;
+// The tile a draw draws, read with uniform offsets: the same records through a dynamic
+// uniform buffer whose offset each tile's draw moves to its own record. A shader's reads of a
+// whole draw's record are then one load for all its vertices (on lavapipe, a broadcast
+// instead of a per-vertex loop over the storage buffer). Stitches join two tiles and read the
+// records above by each vertex's record number.
+layout(std140, set = 0, binding = 4) uniform Tile { TileRecord tile; } draw;
 #ifdef READ_BACK
 // Each drawn vertex's height (m), at its record's `heights` plus its index in the tile.
 layout(std430, set = 0, binding = 3) writeonly buffer Heights { float values[]; } heights;

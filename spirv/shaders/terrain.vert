@@ -8,6 +8,14 @@
 // encoded indices, so every vertex of a stitch is computed from its own tile's record, bit
 // for bit as that tile's draw computes it.
 //
+// What a vertex costs is mostly what it reads. On lavapipe a read from a storage buffer at an
+// address that differs between vertices is a loop over the SIMD lanes, one scalar load each
+// (about 40 of them a vertex when the record came from there); a read from a uniform buffer
+// at an address the same for every vertex is one load for the whole batch. So a tile's draw
+// reads its record through the Tile binding (moved to the record by the draw's dynamic
+// offset) and the frame's morph constants through the Morph binding: what remains per vertex
+// is the pool: its packed position, and two morph bytes when it morphs.
+//
 // Positions are computed relative to the camera from integers wherever possible, so a grid
 // point shared by two tiles lands on the same f32 position in every draw: its sample
 // column/row relative to the camera's tile is the same integer, and its height the same
@@ -30,6 +38,13 @@
 
 #define TERRAIN_VERTEX
 #include "interface.glsl"
+
+// A tile's draw reads its record through the Tile binding, at offsets the same for every
+// vertex of the draw; a stitch's vertices belong to two tiles and read theirs by record
+// number. The pipelines for stitches set STITCH. Both read the same bytes, so a vertex a
+// stitch shares with a tile lands where the tile's draw puts it, bit for bit.
+layout(constant_id = 0) const bool STITCH = false;
+#define REC(r, field) (STITCH ? records.tiles[r].field : draw.tile.field)
 
 layout(location = 0) out vec3 relative;   // position relative to the camera (m)
 layout(location = 1) out float height;    // absolute height (m)
@@ -60,36 +75,42 @@ uint table_of(uint x, uint y) {
 // `r`: the finest level behind the near plane (r = 0).
 float vertex_level(vec4 clip, uint r, uint t) {
     float d = clip.w;
-    vec2 g = records.morph.jacobian.xy * d + records.morph.jacobian.zw * clip.xy;
-    float e = d < records.morph.near ? 0.0
-        : records.morph.tau * d * d * inversesqrt(max(dot(g, g), 1e-30));
-    vec4 lo = clamp(records.tiles[r].tables[t].a_lo - e * records.tiles[r].tables[t].b_lo, 0.0, 1.0);
-    vec4 hi = clamp(records.tiles[r].tables[t].a_hi - e * records.tiles[r].tables[t].b_hi, 0.0, 1.0);
+    MorphFrame m = frame_morph.morph;
+    vec2 g = m.jacobian.xy * d + m.jacobian.zw * clip.xy;
+    float e = d < m.near ? 0.0 : m.tau * d * d * inversesqrt(max(dot(g, g), 1e-30));
+    LevelCoefficients c = REC(r, tables[t]);
+    vec4 lo = clamp(c.a_lo - e * c.b_lo, 0.0, 1.0);
+    vec4 hi = clamp(c.a_hi - e * c.b_hi, 0.0, 1.0);
     return dot(lo + hi, vec4(1.0));
+}
+
+// Metres per morph offset unit of level k.
+float unit_of(uint r, uint k) {
+    return REC(r, units[k >> 2u])[k & 3u];
 }
 
 void main() {
     uint id = uint(gl_VertexIndex);
     uint r = id >> 17;
     uint local = id & 0x1ffffu;
-    uint v = pool.words[records.tiles[r].positions + local];
+    uint v = pool.words[REC(r, positions) + local];
     uint x = v & 511u;
     uint y = (v >> 9) & 511u;
     uint code = v >> 18;
-    ivec2 sample_pos = records.tiles[r].tile_offset + ivec2(int(x), int(y));
-    float own = float(records.tiles[r].height_base + int(code)) * frame.height_step;
+    ivec2 sample_pos = REC(r, tile_offset) + ivec2(int(x), int(y));
+    float own = float(REC(r, height_base) + int(code)) * frame.height_step;
     relative = vec3(float(sample_pos.x) * frame.camera.w, -float(sample_pos.y) * frame.spacing_y, own) - frame.camera.xyz;
 
-    float l = float(records.tiles[r].level);
+    float l = float(REC(r, level));
     height = own;
     if ((frame.flags & FLAG_GEOMORPH) != 0u) {
         vec4 clip = frame.view_proj * vec4(relative, 1.0);
-        l = min(vertex_level(clip, r, table_of(x, y)), records.tiles[r].cap);
+        l = min(vertex_level(clip, r, table_of(x, y)), REC(r, cap));
         // The vertex's block j: how many block starts it has passed.
-        uvec4 passed = uvec4(greaterThanEqual(uvec4(local), records.tiles[r].starts_lo))
-                     + uvec4(greaterThanEqual(uvec4(local), records.tiles[r].starts_hi));
+        uvec4 passed = uvec4(greaterThanEqual(uvec4(local), REC(r, starts_lo)))
+                     + uvec4(greaterThanEqual(uvec4(local), REC(r, starts_hi)));
         uint j = passed.x + passed.y + passed.z + passed.w;
-        uvec4 block = records.tiles[r].blocks[j];
+        uvec4 block = REC(r, blocks[j]);
         uint rows = block.z + (local - block.x);   // row k of the block is at rows + k * block.y
         uint last = max(j, 1u) - 1u;
 #ifdef MORPH_ALL_ROWS
@@ -98,8 +119,8 @@ void main() {
             // Rows past the block's last read its last row, masked to 0.
             o_lo[k] = pool_byte(rows + min(k, last) * block.y) * float(k < j);
             o_hi[k] = pool_byte(rows + min(k + 4u, last) * block.y) * float(k + 4u < j);
-            u_lo[k] = records.tiles[r].units[k];
-            u_hi[k] = records.tiles[r].units[k + 4u];
+            u_lo[k] = unit_of(r, k);
+            u_hi[k] = unit_of(r, k + 4u);
         }
         vec4 h_lo = clamp(vec4(l) - vec4(0.0, 1.0, 2.0, 3.0), 0.0, 1.0);
         vec4 h_hi = clamp(vec4(l) - vec4(4.0, 5.0, 6.0, 7.0), 0.0, 1.0);
@@ -110,23 +131,23 @@ void main() {
         // k = floor(l) below the block (l >= j gives k = j - 1 and t = 1 on a zero offset).
         uint k = min(uint(l), last);
         float t = clamp(l - float(k), 0.0, 1.0);
-        float lower = pool_byte(rows + k * block.y) * records.tiles[r].units[k] * float(j > 0u);
+        float lower = pool_byte(rows + k * block.y) * unit_of(r, k) * float(j > 0u);
         uint above = min(k + 1u, last);
-        float upper = pool_byte(rows + above * block.y) * records.tiles[r].units[above] * float(k + 1u < j);
+        float upper = pool_byte(rows + above * block.y) * unit_of(r, above) * float(k + 1u < j);
         float shift = lower * (1.0 - t) + upper * t;
 #endif
         height = own + shift;
         relative.z = height - frame.camera.z;
     }
 #ifdef READ_BACK
-    heights.values[records.tiles[r].heights + local] = height;
+    heights.values[REC(r, heights) + local] = height;
 #endif
     level = l;
     flags = frame.flags;
     sample_xy = vec2(sample_pos);
-    uint layer = records.tiles[r].texture_layer;
-    texture_tile = vec4(vec2(records.tiles[r].tile_offset) + records.tiles[r].texture_shift,
+    uint layer = REC(r, texture_layer);
+    texture_tile = vec4(vec2(REC(r, tile_offset)) + REC(r, texture_shift),
                         layer == 0xffffffffu ? -1.0 : float(layer),
-                        records.tiles[r].texture_finest);
+                        REC(r, texture_finest));
     gl_Position = frame.view_proj * vec4(relative, 1.0);
 }

@@ -11,8 +11,8 @@ use crate::camera::{Camera, View};
 use crate::error::FrameError;
 use crate::fault::Fault;
 use crate::interface::{
-    FrameConstants, MorphFrame, FLAG_GEOMORPH, FLAG_LEVEL_COLOURS, FLAG_RELIEF, FLAG_TEXTURE,
-    FLAG_TILES,
+    tile_binding_offset, FrameConstants, MorphFrame, FLAG_GEOMORPH, FLAG_LEVEL_COLOURS,
+    FLAG_RELIEF, FLAG_TEXTURE, FLAG_TILES,
 };
 use crate::morph;
 use crate::plan::{LevelRule, Plan};
@@ -216,20 +216,27 @@ impl Pass<'_> {
         };
         let constants = *self.scene.constants;
         let mut counts = DrawCounts::default();
+        // The set, its Tile binding at record `record`.
+        let bind = |record: usize| {
+            // SAFETY: recording; the set's buffers outlive the frame, and the offset is a
+            // record's, inside the records buffer (its size counts every draw's record).
+            unsafe {
+                gpu.device.cmd_bind_descriptor_sets(
+                    cmd,
+                    vk::PipelineBindPoint::GRAPHICS,
+                    self.pipeline.layout,
+                    0,
+                    &[self.at.set],
+                    &[tile_binding_offset(record)],
+                );
+            }
+        };
         // SAFETY: recording inside dynamic rendering; the pool, the records and the stitch
         // buffer outlive the frame, and every range drawn was written before (the manager's
         // grants; records and stitches by this frame).
         unsafe {
             gpu.device
-                .cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, pipeline);
-            gpu.device.cmd_bind_descriptor_sets(
-                cmd,
-                vk::PipelineBindPoint::GRAPHICS,
-                self.pipeline.layout,
-                0,
-                &[self.at.set],
-                &[],
-            );
+                .cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, pipeline.tiles);
             gpu.device.cmd_push_constants(
                 cmd,
                 self.pipeline.layout,
@@ -244,6 +251,7 @@ impl Pass<'_> {
                         .cmd_bind_index_buffer(cmd, self.pool, 0, index_type(d.index_width));
                     bound = Some(d.index_width);
                 }
+                bind(record);
                 // The tile's local indices plus vertexOffset: the pulled index of its record.
                 gpu.device.cmd_draw_indexed(
                     cmd,
@@ -258,6 +266,12 @@ impl Pass<'_> {
                 counts.vertices += u64::from(entry.vertex_count());
             }
             if !self.scene.settings.no_stitch && !self.scene.plan.stitches.is_empty() {
+                gpu.device.cmd_bind_pipeline(
+                    cmd,
+                    vk::PipelineBindPoint::GRAPHICS,
+                    pipeline.stitches,
+                );
+                bind(0);
                 gpu.device
                     .cmd_bind_index_buffer(cmd, self.at.stitch, 0, vk::IndexType::UINT32);
                 for ((_, s), &(first, count)) in self

@@ -103,7 +103,7 @@ impl Renderer {
         let ranges = records::write_stitches(stitch, &plan.stitches)?;
         let stitch = stitch.raw;
         let record_bytes = RECORDS_OFFSET + RECORD_BYTES * plan.draws.len().max(1) as u64;
-        let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
+        let usage = vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::UNIFORM_BUFFER;
         let desc = BufferDesc::upload(record_bytes, usage);
         let records = frame
             .records

@@ -72,7 +72,10 @@ impl Slot {
             )?,
             records: Buffer::new(
                 gpu,
-                BufferDesc::upload(sizes.records, vk::BufferUsageFlags::STORAGE_BUFFER),
+                BufferDesc::upload(
+                    sizes.records,
+                    vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::UNIFORM_BUFFER,
+                ),
                 &format!("frame slot {i} tile records"),
             )?,
             heights: Buffer::new(

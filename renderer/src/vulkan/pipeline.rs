@@ -11,21 +11,32 @@ use ash::vk;
 
 use super::{Gpu, VkResult};
 
-use crate::interface::PUSH_CONSTANT_BYTES;
+use crate::interface::{MorphFrame, PUSH_CONSTANT_BYTES, RECORDS_OFFSET, RECORD_BYTES};
 
 pub struct TerrainPipeline {
     /// Binding 0: the tile pool; binding 1: the frame's tile records (both storage buffers);
-    /// binding 2: the texture array and its sampler; binding 3: the heights read back.
+    /// binding 2: the texture array and its sampler; binding 3: the heights read back;
+    /// binding 4: the drawn tile's record (a dynamic uniform buffer over binding 1, moved to
+    /// each draw's record); binding 5: the frame's morph constants (the records buffer's first
+    /// bytes, a uniform buffer).
     pub set_layout: vk::DescriptorSetLayout,
     pub layout: vk::PipelineLayout,
-    pub fill: vk::Pipeline,
+    pub fill: Pair,
     /// The same with the forward-differences morph (`--morph-shader forward-differences`).
-    pub all_rows: vk::Pipeline,
+    pub all_rows: Pair,
     /// The default writing each vertex's height (`--read-back-heights`; needs
     /// `vertexPipelineStoresAndAtomics`).
-    pub read_back: Option<vk::Pipeline>,
+    pub read_back: Option<Pair>,
     /// Present when the device supports `fillModeNonSolid`.
-    pub wireframe: Option<vk::Pipeline>,
+    pub wireframe: Option<Pair>,
+}
+
+/// One vertex shader's two pipelines: for tiles, which read their record through the Tile
+/// binding, and for stitches, whose vertices read theirs by record number (`STITCH`).
+#[derive(Clone, Copy, Debug)]
+pub struct Pair {
+    pub tiles: vk::Pipeline,
+    pub stitches: vk::Pipeline,
 }
 
 fn shader(gpu: &Gpu, words: &[u32], name: &str) -> VkResult<vk::ShaderModule> {
@@ -48,22 +59,22 @@ impl TerrainPipeline {
         let ranges = [vk::PushConstantRange::default()
             .stage_flags(vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT)
             .size(PUSH_CONSTANT_BYTES)];
-        let buffer = |b| {
+        let binding = |b, ty, stage| {
             vk::DescriptorSetLayoutBinding::default()
                 .binding(b)
-                .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                .descriptor_type(ty)
                 .descriptor_count(1)
-                .stage_flags(vk::ShaderStageFlags::VERTEX)
+                .stage_flags(stage)
         };
+        let (vertex, fragment) = (vk::ShaderStageFlags::VERTEX, vk::ShaderStageFlags::FRAGMENT);
+        let storage = vk::DescriptorType::STORAGE_BUFFER;
         let bindings = [
-            buffer(0),
-            buffer(1),
-            vk::DescriptorSetLayoutBinding::default()
-                .binding(2)
-                .descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER)
-                .descriptor_count(1)
-                .stage_flags(vk::ShaderStageFlags::FRAGMENT),
-            buffer(3),
+            binding(0, storage, vertex),
+            binding(1, storage, vertex),
+            binding(2, vk::DescriptorType::COMBINED_IMAGE_SAMPLER, fragment),
+            binding(3, storage, vertex),
+            binding(4, vk::DescriptorType::UNIFORM_BUFFER_DYNAMIC, vertex),
+            binding(5, vk::DescriptorType::UNIFORM_BUFFER, vertex),
         ];
         let set_info = vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings);
         // SAFETY: valid create info.
@@ -95,16 +106,40 @@ impl TerrainPipeline {
         } else {
             shader(gpu, spirv::TERRAIN_FRAG, "terrain.frag")?
         };
-        let build =
-            |vert, mode, name| Self::build(gpu, layout, vert, frag, color, depth, mode, name);
-        let fill = build(vert, vk::PolygonMode::FILL, "terrain (fill)");
-        let all_rows = build(
+        let pair = |vert, mode, name: &str| -> VkResult<Pair> {
+            let build = |stitch: bool, name: String| {
+                let value = u32::from(stitch).to_ne_bytes();
+                let entries = [vk::SpecializationMapEntry::default()
+                    .constant_id(0)
+                    .offset(0)
+                    .size(4)];
+                let spec = vk::SpecializationInfo::default()
+                    .map_entries(&entries)
+                    .data(&value);
+                Self::build(
+                    gpu,
+                    layout,
+                    (vert, Some(&spec)),
+                    frag,
+                    color,
+                    depth,
+                    mode,
+                    &name,
+                )
+            };
+            Ok(Pair {
+                tiles: build(false, name.to_string())?,
+                stitches: build(true, format!("{name}, stitches"))?,
+            })
+        };
+        let fill = pair(vert, vk::PolygonMode::FILL, "terrain (fill)");
+        let all_rows = pair(
             vert_all_rows,
             vk::PolygonMode::FILL,
             "terrain (fill, forward differences over all rows)",
         );
         let read_back = read_back.then(|| {
-            build(
+            pair(
                 vert_read_back,
                 vk::PolygonMode::FILL,
                 "terrain (fill, heights read back)",
@@ -112,7 +147,7 @@ impl TerrainPipeline {
         });
         let wireframe = gpu
             .wireframe_supported
-            .then(|| build(vert, vk::PolygonMode::LINE, "terrain (wireframe)"));
+            .then(|| pair(vert, vk::PolygonMode::LINE, "terrain (wireframe)"));
         // SAFETY: modules are only needed during pipeline creation.
         unsafe {
             gpu.device.destroy_shader_module(vert, None);
@@ -138,7 +173,7 @@ impl TerrainPipeline {
     pub(crate) fn build(
         gpu: &Gpu,
         layout: vk::PipelineLayout,
-        vert: vk::ShaderModule,
+        (vert, specialization): (vk::ShaderModule, Option<&vk::SpecializationInfo>),
         frag: vk::ShaderModule,
         color: vk::Format,
         depth: vk::Format,
@@ -146,11 +181,15 @@ impl TerrainPipeline {
         name: &str,
     ) -> VkResult<vk::Pipeline> {
         let entry: &CStr = c"main";
+        let mut vertex_stage = vk::PipelineShaderStageCreateInfo::default()
+            .stage(vk::ShaderStageFlags::VERTEX)
+            .module(vert)
+            .name(entry);
+        if let Some(s) = specialization {
+            vertex_stage = vertex_stage.specialization_info(s);
+        }
         let stages = [
-            vk::PipelineShaderStageCreateInfo::default()
-                .stage(vk::ShaderStageFlags::VERTEX)
-                .module(vert)
-                .name(entry),
+            vertex_stage,
             vk::PipelineShaderStageCreateInfo::default()
                 .stage(vk::ShaderStageFlags::FRAGMENT)
                 .module(frag)
@@ -214,13 +253,15 @@ impl TerrainPipeline {
     pub fn destroy(self, gpu: &Gpu) {
         // SAFETY: no command buffer in flight uses them.
         unsafe {
-            gpu.device.destroy_pipeline(self.fill, None);
-            gpu.device.destroy_pipeline(self.all_rows, None);
-            if let Some(p) = self.read_back {
-                gpu.device.destroy_pipeline(p, None);
-            }
-            if let Some(w) = self.wireframe {
-                gpu.device.destroy_pipeline(w, None);
+            let pairs = [
+                Some(self.fill),
+                Some(self.all_rows),
+                self.read_back,
+                self.wireframe,
+            ];
+            for p in pairs.into_iter().flatten() {
+                gpu.device.destroy_pipeline(p.tiles, None);
+                gpu.device.destroy_pipeline(p.stitches, None);
             }
             gpu.device.destroy_pipeline_layout(self.layout, None);
             gpu.device
@@ -255,7 +296,7 @@ impl LimitPipeline {
             let p = TerrainPipeline::build(
                 gpu,
                 layout,
-                vert,
+                (vert, None),
                 frag,
                 color,
                 depth,
@@ -313,6 +354,12 @@ impl TerrainSets {
             vk::DescriptorPoolSize::default()
                 .ty(vk::DescriptorType::COMBINED_IMAGE_SAMPLER)
                 .descriptor_count(count),
+            vk::DescriptorPoolSize::default()
+                .ty(vk::DescriptorType::UNIFORM_BUFFER_DYNAMIC)
+                .descriptor_count(count),
+            vk::DescriptorPoolSize::default()
+                .ty(vk::DescriptorType::UNIFORM_BUFFER)
+                .descriptor_count(count),
         ];
         let info = vk::DescriptorPoolCreateInfo::default()
             .max_sets(count)
@@ -343,6 +390,13 @@ impl TerrainSets {
             let record_info = [vk::DescriptorBufferInfo::default()
                 .buffer(r.raw)
                 .range(vk::WHOLE_SIZE)];
+            let tile_info = [vk::DescriptorBufferInfo::default()
+                .buffer(r.raw)
+                .offset(RECORDS_OFFSET)
+                .range(RECORD_BYTES)];
+            let morph_info = [vk::DescriptorBufferInfo::default()
+                .buffer(r.raw)
+                .range(std::mem::size_of::<MorphFrame>() as u64)];
             let heights_info = [vk::DescriptorBufferInfo::default()
                 .buffer(heights.raw)
                 .range(vk::WHOLE_SIZE)];
@@ -371,6 +425,16 @@ impl TerrainSets {
                     .dst_binding(3)
                     .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
                     .buffer_info(&heights_info),
+                vk::WriteDescriptorSet::default()
+                    .dst_set(set)
+                    .dst_binding(4)
+                    .descriptor_type(vk::DescriptorType::UNIFORM_BUFFER_DYNAMIC)
+                    .buffer_info(&tile_info),
+                vk::WriteDescriptorSet::default()
+                    .dst_set(set)
+                    .dst_binding(5)
+                    .descriptor_type(vk::DescriptorType::UNIFORM_BUFFER)
+                    .buffer_info(&morph_info),
             ];
             // SAFETY: the set is not in use; the buffers, view and sampler are live.
             unsafe { gpu.device.update_descriptor_sets(&writes, &[]) };
