@@ -1,8 +1,8 @@
 //! From a height grid to tile blobs: cutting, per-tile level construction, fan emission in
-//! P-order, vertex blocks, morph offsets, and the parallel, streaming tile-set build.
+//! P-order, vertex blocks, morph offsets, and the parallel, streaming tile-set build, whose
+//! tiles are written in row-major order so that a build is reproducible byte for byte.
 
 use std::path::Path;
-use std::sync::mpsc::sync_channel;
 
 use rayon::prelude::*;
 
@@ -14,7 +14,7 @@ use crate::grid::{tile_samples, Grid};
 use crate::mesh::{lattice, plane, triangle_spans, Mesher, Quad, TILE_CELLS, TILE_SIZE};
 use crate::pack::{morph_offset, morph_unit, pack};
 use crate::quantise::{lattice_step, Quantiser};
-use crate::texture::{self, MipEntry, Prepared, Source, Texturing};
+use crate::texture::{self, Prepared, Source, Texturing};
 use crate::BuildError;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -835,67 +835,60 @@ pub fn build_tileset_textured(
             .unwrap_or_default(),
         ..Default::default()
     };
-    let jobs: Vec<(u32, u32)> = (0..tiles_y)
-        .flat_map(|ty| (0..tiles_x).map(move |tx| (tx, ty)))
-        .collect();
+    // Tiles are made on every core and written in row-major order, whatever order they
+    // finish in, so that the same input and options give the same bytes.
+    let count = (tiles_x * tiles_y) as usize;
     let in_flight = 2 * rayon::current_num_threads();
-    type Textured = (BuiltTile, Option<(Vec<u8>, Vec<MipEntry>, f64)>);
-    let (send, receive) = sync_channel::<Result<Textured, BuildError>>(in_flight);
-    std::thread::scope(|scope| -> Result<(), BuildError> {
-        scope.spawn(move || {
-            // A failed send means the writer stopped (an error): stop building too.
-            let alone = Agreement::default();
-            let _ = jobs.par_iter().try_for_each_with(send, |send, &(tx, ty)| {
-                let built = match &agreements {
-                    Some(a) => {
-                        let (agreement, sides) = &a[(ty * tiles_x + tx) as usize];
-                        build_tile(grid, tx, ty, params, step, agreement).and_then(|b| {
-                            if b.sides == *sides {
-                                Ok(b)
-                            } else {
-                                Err(BuildError::Internal(format!(
-                                    "tile {tx},{ty}: its sides changed after agreement"
-                                )))
-                            }
-                        })
+    let alone = Agreement::default();
+    let make = |t: usize| {
+        let (tx, ty) = (t as u32 % tiles_x, t as u32 / tiles_x);
+        let built = match &agreements {
+            Some(a) => {
+                let (agreement, sides) = &a[t];
+                build_tile(grid, tx, ty, params, step, agreement).and_then(|b| {
+                    if b.sides == *sides {
+                        Ok(b)
+                    } else {
+                        Err(BuildError::Internal(format!(
+                            "tile {tx},{ty}: its sides changed after agreement"
+                        )))
                     }
-                    None => build_tile(grid, tx, ty, params, step, &alone),
-                };
-                let textured = built.map(|b| {
-                    let texture = prepared.as_ref().map(|(source, layout)| {
-                        let start = std::time::Instant::now();
-                        let (blob, mips) = texture::build_blob(grid, source, layout, (tx, ty));
-                        (blob, mips, start.elapsed().as_secs_f64())
-                    });
-                    (b, texture)
-                });
-                send.send(textured).map_err(|_| ())
+                })
+            }
+            None => build_tile(grid, tx, ty, params, step, &alone),
+        };
+        built.map(|b| {
+            let texture = prepared.as_ref().map(|(source, layout)| {
+                let start = std::time::Instant::now();
+                let (blob, mips) = texture::build_blob(grid, source, layout, (tx, ty));
+                (blob, mips, start.elapsed().as_secs_f64())
             });
-        });
-        for built in receive {
-            let (built, texture) = built?;
-            writer.add_tile(built.tx, built.ty, &built.blob)?;
-            if let Some((blob, mips, seconds)) = texture {
-                writer.add_texture(built.tx, built.ty, &blob)?;
-                summary.texture_seconds += seconds;
-                for (sum, m) in summary.texture_mips.iter_mut().zip(&mips) {
-                    sum.bytes += u64::from(m.len);
-                    sum.squared_error += m.squared_error;
-                    sum.texels += m.texels;
-                }
+            (b, texture)
+        })
+    };
+    crate::ordered::in_order(count, in_flight, make, |_, built| {
+        let (built, texture) = built?;
+        writer.add_tile(built.tx, built.ty, &built.blob)?;
+        if let Some((blob, mips, seconds)) = texture {
+            writer.add_texture(built.tx, built.ty, &blob)?;
+            summary.texture_seconds += seconds;
+            for (sum, m) in summary.texture_mips.iter_mut().zip(&mips) {
+                sum.bytes += u64::from(m.len);
+                sum.squared_error += m.squared_error;
+                sum.texels += m.texels;
             }
-            summary.tiles += 1;
-            for (sum, l) in summary.levels.iter_mut().zip(&built.levels) {
-                sum.vertices += l.vertices;
-                sum.triangles += l.triangles;
-                sum.bytes += l.bytes;
-                sum.max_error = sum.max_error.max(l.max_error);
-                sum.limited_triangles += l.limited_triangles;
-                sum.limited_excess = sum.limited_excess.max(l.limited_excess);
-            }
-            progress();
         }
-        Ok(())
+        summary.tiles += 1;
+        for (sum, l) in summary.levels.iter_mut().zip(&built.levels) {
+            sum.vertices += l.vertices;
+            sum.triangles += l.triangles;
+            sum.bytes += l.bytes;
+            sum.max_error = sum.max_error.max(l.max_error);
+            sum.limited_triangles += l.limited_triangles;
+            sum.limited_excess = sum.limited_excess.max(l.limited_excess);
+        }
+        progress();
+        Ok::<(), BuildError>(())
     })?;
     writer.finish()?;
     summary.file_bytes = std::fs::metadata(out).map(|m| m.len()).unwrap_or(0);

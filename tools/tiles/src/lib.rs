@@ -18,6 +18,7 @@ pub mod build;
 pub mod format;
 pub mod grid;
 pub mod mesh;
+pub mod ordered;
 pub mod pack;
 pub mod quantise;
 pub mod rings;
