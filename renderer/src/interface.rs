@@ -72,7 +72,9 @@ impl LevelCoefficients {
     }
 }
 
-/// One drawn tile as the vertex shader reads it (`TileRecord`, std430).
+/// One drawn tile as the vertex shader reads it (`TileRecord`): std430 in the records buffer,
+/// and the same bytes as std140 through the `Tile` binding (every member 16-byte aligned or
+/// packed so that the two layouts agree; the layout test sees both copies).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct TileRecord {
