@@ -120,7 +120,7 @@ pub const RECORD_ALIGNMENT: u64 = 256;
 /// Where the records start in the records buffer, after the frame's [`MorphFrame`].
 pub const RECORDS_OFFSET: u64 = RECORD_ALIGNMENT;
 
-const _: () = assert!(RECORD_BYTES % RECORD_ALIGNMENT == 0);
+const _: () = assert!(RECORD_BYTES.is_multiple_of(RECORD_ALIGNMENT));
 const _: () = assert!(std::mem::size_of::<MorphFrame>() as u64 <= RECORDS_OFFSET);
 
 /// The dynamic offset of the `Tile` binding for record `i`: its bytes from [`RECORDS_OFFSET`].
