@@ -371,6 +371,28 @@ pub fn build_tile(
     step: f32,
     agreement: &Agreement,
 ) -> Result<BuiltTile, BuildError> {
+    mesh_tile(grid, (tx, ty), params, step, agreement, Output::Tile)
+}
+
+/// What [`mesh_tile`] makes: the whole tile, or only what the shared-sides agreement reads of
+/// it (its sides and deviations; no fan order, index arrays, morph offsets or blob).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Output {
+    Tile,
+    Sides,
+}
+
+/// [`build_tile`], or with `Output::Sides` the same meshes with only `sides` and `deviation`
+/// of the result filled in: they depend on each level's set of vertices, not on their order.
+fn mesh_tile(
+    grid: &Grid,
+    (tx, ty): (u32, u32),
+    params: &BuildParams,
+    step: f32,
+    agreement: &Agreement,
+    output: Output,
+) -> Result<BuiltTile, BuildError> {
+    let full = output == Output::Tile;
     let samples = tile_samples(grid, tx, ty);
     let lo = samples
         .heights
@@ -405,9 +427,23 @@ pub fn build_tile(
             // A forced split can leave finer cells over `e`.
             mesher.refine(e);
         }
+        // In P-order either way: the surfaces below are written leaf by leaf, and points on
+        // shared edges take the last leaf's rounding.
         let leaves = p_order(mesher.leaves());
         let block_start = vertices.lattice_of.len();
-        let (indices, triangles) = emit_fans(&mesher, &leaves, &mut vertices, &mut cache);
+        let (indices, triangles) = if full {
+            emit_fans(&mesher, &leaves, &mut vertices, &mut cache)
+        } else {
+            let mut fan = Vec::with_capacity(10);
+            for &q in &leaves {
+                fan.clear();
+                mesher.fan(q, &mut fan);
+                for &(x, y) in &fan {
+                    vertices.index(lattice(x, y));
+                }
+            }
+            (Vec::new(), 0)
+        };
         let measured = measure_level(&mut mesher, &leaves, e, mesh_max).map_err(|q| {
             BuildError::Internal(format!(
                 "tile {tx},{ty} level {level}: a triangle of cell {q:?} exceeds {e} m"
@@ -417,6 +453,7 @@ pub fn build_tile(
         let new = &vertices.lattice_of[block_start..];
         let block: Vec<u32> = new
             .iter()
+            .filter(|_| full)
             .map(|&l| {
                 let (x, y) = xy(l);
                 pack(x, y, quantiser.quantise(samples.heights[l as usize]))
@@ -479,6 +516,16 @@ pub fn build_tile(
 
     let heights = mesher.quantised_heights();
     let deviation = deviations(&levels, &surfaces, &vertices.lattice_of, heights);
+    if !full {
+        return Ok(BuiltTile {
+            tx,
+            ty,
+            blob: Vec::new(),
+            levels: Vec::new(),
+            sides: positions,
+            deviation,
+        });
+    }
     let units: Vec<f64> = match &agreement.units {
         Some(units) => {
             if let Some(k) = (0..n).find(|&k| deviation[k] > units[k] * 127.0) {
@@ -969,7 +1016,7 @@ fn agree_sides(
                     forced: forced.clone(),
                     units: None,
                 };
-                build_tile(grid, tx, ty, params, step, &agreement)
+                mesh_tile(grid, (tx, ty), params, step, &agreement, Output::Sides)
                     .map(|b| (*t, b.sides, b.deviation))
             })
             .collect::<Result<_, _>>()?;
@@ -1050,21 +1097,71 @@ struct Agreed {
 mod tests {
     use super::*;
 
-    /// Meshing again only the tiles whose forced sides changed settles on the same sides
-    /// and agreements as meshing every tile next to a change, with fewer meshes (real SRTM3
-    /// heights, 4 x 4 tiles).
+    /// What the agreement reads of a tile (`Output::Sides`: no fan order, arrays or blob) is
+    /// what the whole build makes of it, with and without forced sides.
     #[test]
-    fn agreement_remeshes_only_what_changed_and_settles_the_same() {
+    fn a_mesh_for_the_agreement_has_the_whole_builds_sides_and_deviations() {
+        let heights = srtm3_crop(2 * 256 + 1);
+        let grid = Grid {
+            width: 2 * 256 + 1,
+            height: 2 * 256 + 1,
+            heights: &heights,
+            spacing_x: 53.2,
+            spacing_y: 92.6,
+        };
+        let params = BuildParams::default();
+        let step = height_step(&grid).expect("step");
+        let alone = Agreement::default();
+        let first = mesh_tile(&grid, (1, 1), &params, step, &alone, Output::Tile);
+        let first = first.expect("built");
+        // Force the west side to hold every vertex the tile has on its east side.
+        let forced: Sides = first
+            .sides
+            .iter()
+            .map(|s| [vec![], vec![], vec![], s[1].clone()])
+            .collect();
+        let mut seen = Vec::new();
+        for agreement in [
+            alone,
+            Agreement {
+                forced,
+                units: None,
+            },
+        ] {
+            let whole = mesh_tile(&grid, (1, 1), &params, step, &agreement, Output::Tile);
+            let sides = mesh_tile(&grid, (1, 1), &params, step, &agreement, Output::Sides);
+            let (whole, sides) = (whole.expect("built"), sides.expect("meshed"));
+            assert!(sides.blob.is_empty() && !whole.blob.is_empty());
+            assert_eq!(sides.sides, whole.sides);
+            assert_eq!(sides.deviation, whole.deviation);
+            seen.push(whole.sides);
+        }
+        assert_ne!(
+            seen[0], seen[1],
+            "forcing the west side changed nothing: no test"
+        );
+    }
+
+    /// `side * side` heights of the SRTM3 tile N55W003 (no voids), from (100, 100).
+    fn srtm3_crop(side: usize) -> Vec<f32> {
         let n = 1201;
         let bytes = std::fs::read(testdata::data("srtm/N55W003.hgt")).expect("readable hgt");
-        let side = 4 * 256 + 1;
-        let heights: Vec<f32> = (0..side * side)
+        (0..side * side)
             .map(|i| {
                 let (x, y) = (i % side, i / side);
                 let at = 2 * ((y + 100) * n + x + 100);
                 f32::from(i16::from_be_bytes([bytes[at], bytes[at + 1]]))
             })
-            .collect();
+            .collect()
+    }
+
+    /// Meshing again only the tiles whose forced sides changed settles on the same sides
+    /// and agreements as meshing every tile next to a change, with fewer meshes (real SRTM3
+    /// heights, 4 x 4 tiles).
+    #[test]
+    fn agreement_remeshes_only_what_changed_and_settles_the_same() {
+        let side = 4 * 256 + 1;
+        let heights = srtm3_crop(side);
         let grid = Grid {
             width: side,
             height: side,
