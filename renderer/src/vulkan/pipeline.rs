@@ -31,6 +31,41 @@ pub struct TerrainPipeline {
     pub wireframe: Option<Pair>,
 }
 
+/// The terrain set's bindings (as [`TerrainPipeline::set_layout`] describes them): number,
+/// kind and stages, the one list the layout, the pool's sizes and the writes take them from.
+const BINDINGS: [(u32, vk::DescriptorType, vk::ShaderStageFlags); 6] = [
+    (
+        0,
+        vk::DescriptorType::STORAGE_BUFFER,
+        vk::ShaderStageFlags::VERTEX,
+    ),
+    (
+        1,
+        vk::DescriptorType::STORAGE_BUFFER,
+        vk::ShaderStageFlags::VERTEX,
+    ),
+    (
+        2,
+        vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
+        vk::ShaderStageFlags::FRAGMENT,
+    ),
+    (
+        3,
+        vk::DescriptorType::STORAGE_BUFFER,
+        vk::ShaderStageFlags::VERTEX,
+    ),
+    (
+        4,
+        vk::DescriptorType::UNIFORM_BUFFER_DYNAMIC,
+        vk::ShaderStageFlags::VERTEX,
+    ),
+    (
+        5,
+        vk::DescriptorType::UNIFORM_BUFFER,
+        vk::ShaderStageFlags::VERTEX,
+    ),
+];
+
 /// One vertex shader's two pipelines: for tiles, which read their record through the Tile
 /// binding, and for stitches, whose vertices read theirs by record number (`STITCH`).
 #[derive(Clone, Copy, Debug)]
@@ -59,23 +94,13 @@ impl TerrainPipeline {
         let ranges = [vk::PushConstantRange::default()
             .stage_flags(vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT)
             .size(PUSH_CONSTANT_BYTES)];
-        let binding = |b, ty, stage| {
+        let bindings = BINDINGS.map(|(b, ty, stage)| {
             vk::DescriptorSetLayoutBinding::default()
                 .binding(b)
                 .descriptor_type(ty)
                 .descriptor_count(1)
                 .stage_flags(stage)
-        };
-        let (vertex, fragment) = (vk::ShaderStageFlags::VERTEX, vk::ShaderStageFlags::FRAGMENT);
-        let storage = vk::DescriptorType::STORAGE_BUFFER;
-        let bindings = [
-            binding(0, storage, vertex),
-            binding(1, storage, vertex),
-            binding(2, vk::DescriptorType::COMBINED_IMAGE_SAMPLER, fragment),
-            binding(3, storage, vertex),
-            binding(4, vk::DescriptorType::UNIFORM_BUFFER_DYNAMIC, vertex),
-            binding(5, vk::DescriptorType::UNIFORM_BUFFER, vertex),
-        ];
+        });
         let set_info = vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings);
         // SAFETY: valid create info.
         let set_layout = unsafe { gpu.device.create_descriptor_set_layout(&set_info, None) }?;
@@ -347,20 +372,18 @@ impl TerrainSets {
         name: &str,
     ) -> VkResult<TerrainSets> {
         let count = records.len().max(1) as u32;
-        let sizes = [
-            vk::DescriptorPoolSize::default()
-                .ty(vk::DescriptorType::STORAGE_BUFFER)
-                .descriptor_count(3 * count),
-            vk::DescriptorPoolSize::default()
-                .ty(vk::DescriptorType::COMBINED_IMAGE_SAMPLER)
-                .descriptor_count(count),
-            vk::DescriptorPoolSize::default()
-                .ty(vk::DescriptorType::UNIFORM_BUFFER_DYNAMIC)
-                .descriptor_count(count),
-            vk::DescriptorPoolSize::default()
-                .ty(vk::DescriptorType::UNIFORM_BUFFER)
-                .descriptor_count(count),
-        ];
+        // Per descriptor kind, its bindings' count in every set.
+        let mut sizes: Vec<vk::DescriptorPoolSize> = Vec::new();
+        for (_, ty, _) in BINDINGS {
+            match sizes.iter_mut().find(|s| s.ty == ty) {
+                Some(s) => s.descriptor_count += count,
+                None => sizes.push(
+                    vk::DescriptorPoolSize::default()
+                        .ty(ty)
+                        .descriptor_count(count),
+                ),
+            }
+        }
         let info = vk::DescriptorPoolCreateInfo::default()
             .max_sets(count)
             .pool_sizes(&sizes);
@@ -404,37 +427,19 @@ impl TerrainSets {
                 .sampler(textures.sampler)
                 .image_view(textures.view)
                 .image_layout(vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL)];
+            let write = |b: u32| {
+                vk::WriteDescriptorSet::default()
+                    .dst_set(set)
+                    .dst_binding(b)
+                    .descriptor_type(BINDINGS[b as usize].1)
+            };
             let writes = [
-                vk::WriteDescriptorSet::default()
-                    .dst_set(set)
-                    .dst_binding(0)
-                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-                    .buffer_info(&pool_info),
-                vk::WriteDescriptorSet::default()
-                    .dst_set(set)
-                    .dst_binding(1)
-                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-                    .buffer_info(&record_info),
-                vk::WriteDescriptorSet::default()
-                    .dst_set(set)
-                    .dst_binding(2)
-                    .descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER)
-                    .image_info(&texture_info),
-                vk::WriteDescriptorSet::default()
-                    .dst_set(set)
-                    .dst_binding(3)
-                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-                    .buffer_info(&heights_info),
-                vk::WriteDescriptorSet::default()
-                    .dst_set(set)
-                    .dst_binding(4)
-                    .descriptor_type(vk::DescriptorType::UNIFORM_BUFFER_DYNAMIC)
-                    .buffer_info(&tile_info),
-                vk::WriteDescriptorSet::default()
-                    .dst_set(set)
-                    .dst_binding(5)
-                    .descriptor_type(vk::DescriptorType::UNIFORM_BUFFER)
-                    .buffer_info(&morph_info),
+                write(0).buffer_info(&pool_info),
+                write(1).buffer_info(&record_info),
+                write(2).image_info(&texture_info),
+                write(3).buffer_info(&heights_info),
+                write(4).buffer_info(&tile_info),
+                write(5).buffer_info(&morph_info),
             ];
             // SAFETY: the set is not in use; the buffers, view and sampler are live.
             unsafe { gpu.device.update_descriptor_sets(&writes, &[]) };

@@ -451,14 +451,16 @@ fn mesh_tile(
         })?;
         let heights = mesher.quantised_heights();
         let new = &vertices.lattice_of[block_start..];
-        let block: Vec<u32> = new
-            .iter()
-            .filter(|_| full)
-            .map(|&l| {
-                let (x, y) = xy(l);
-                pack(x, y, quantiser.quantise(samples.heights[l as usize]))
-            })
-            .collect();
+        let block: Vec<u32> = if full {
+            new.iter()
+                .map(|&l| {
+                    let (x, y) = xy(l);
+                    pack(x, y, quantiser.quantise(samples.heights[l as usize]))
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
         for (i, &l) in new.iter().enumerate() {
             let (x, y) = xy(l);
             let v = (block_start + i) as u32;
