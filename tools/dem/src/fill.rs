@@ -7,10 +7,11 @@
 //! value is a convex combination of valid samples, so fills stay inside the data's range.
 
 /// One level of the pyramid; NaN marks a void.
-struct Level {
-    width: usize,
-    height: usize,
-    samples: Vec<f32>,
+#[derive(Clone, Debug)]
+pub(crate) struct Level {
+    pub(crate) width: usize,
+    pub(crate) height: usize,
+    pub(crate) samples: Vec<f32>,
 }
 
 /// Fills every NaN in the `width` x `height` grid `samples` and returns how many there were.
@@ -53,7 +54,7 @@ pub fn fill_voids(samples: &mut [f32], width: usize, height: usize) -> Option<u6
 
 /// Half-size level: each sample is the mean of the valid samples of its (up to) 2x2 block,
 /// NaN if the block has none.
-fn pull(fine: &[f32], width: usize, height: usize) -> Level {
+pub(crate) fn pull(fine: &[f32], width: usize, height: usize) -> Level {
     let cw = width.div_ceil(2);
     let ch = height.div_ceil(2);
     let mut samples = Vec::with_capacity(cw * ch);
@@ -97,26 +98,42 @@ fn pull(fine: &[f32], width: usize, height: usize) -> Level {
 /// of the second. Fine sample `i` has its centre at `i + 0.5`; coarse sample `j` covers fine
 /// `2j..2j+2`, centre `2j + 1`; so in coarse index space the fine centre is at `(i - 0.5) / 2`.
 fn taps(fine_len: usize, coarse_len: usize) -> Vec<(usize, usize, f32)> {
-    (0..fine_len)
-        .map(|i| {
-            let c = ((i as f32 - 0.5) * 0.5).clamp(0.0, (coarse_len - 1) as f32);
-            let j0 = c.floor() as usize;
-            let j1 = (j0 + 1).min(coarse_len - 1);
-            (j0, j1, c - j0 as f32)
-        })
-        .collect()
+    (0..fine_len).map(|i| tap(i, coarse_len)).collect()
+}
+
+/// [`taps`] of fine row or column `i` alone.
+pub(crate) fn tap(i: usize, coarse_len: usize) -> (usize, usize, f32) {
+    let c = ((i as f32 - 0.5) * 0.5).clamp(0.0, (coarse_len - 1) as f32);
+    let j0 = c.floor() as usize;
+    let j1 = (j0 + 1).min(coarse_len - 1);
+    (j0, j1, c - j0 as f32)
 }
 
 /// Fills the voids of `fine` by bilinear interpolation of the void-free `coarse` level.
 fn push(fine: &mut [f32], width: usize, height: usize, coarse: &Level) {
+    push_rows(fine, width, (0, height), coarse, 0);
+}
+
+/// [`push`] for rows `first..first + n` of a level `height` rows high (`rows` = `(first,
+/// height)`), held in `fine`, from rows `coarse_first..` of the coarser level held in
+/// `coarse` (whose `height` is the whole level's): the same taps and arithmetic, so the same
+/// bits as pushing the whole level.
+pub(crate) fn push_rows(
+    fine: &mut [f32],
+    width: usize,
+    (first, height): (usize, usize),
+    coarse: &Level,
+    coarse_first: usize,
+) {
     let xs = taps(width, coarse.width);
-    let ys = taps(height, coarse.height);
     let cw = coarse.width;
-    for (y, row) in fine.chunks_exact_mut(width).enumerate() {
+    for (k, row) in fine.chunks_exact_mut(width).enumerate() {
         if !row.iter().any(|v| v.is_nan()) {
             continue;
         }
-        let (y0, y1, ty) = ys[y];
+        debug_assert!(first + k < height);
+        let (y0, y1, ty) = tap(first + k, coarse.height);
+        let (y0, y1) = (y0 - coarse_first, y1 - coarse_first);
         let r0 = &coarse.samples[y0 * cw..(y0 + 1) * cw];
         let r1 = &coarse.samples[y1 * cw..(y1 + 1) * cw];
         for (v, &(x0, x1, tx)) in row.iter_mut().zip(&xs) {

@@ -13,6 +13,7 @@
 //! # Ok::<(), dem::DemError>(())
 //! ```
 
+mod banded;
 mod error;
 mod fill;
 mod geo;
@@ -23,6 +24,7 @@ mod placement;
 mod raster;
 mod raw;
 mod srtm;
+mod stream;
 
 use std::path::{Path, PathBuf};
 
@@ -32,6 +34,7 @@ pub use geotiff::read_placement as read_tiff_placement;
 pub use options::{parse_size, Crop, Encoding, ReadOptions};
 pub use placement::{Crs, Mapping, Placement};
 pub use raster::MAX_SAMPLES;
+pub use stream::{open, Stream, BAND_FORMATS};
 
 use error::label;
 use raster::{Georef, Raster};
@@ -160,6 +163,21 @@ impl Kind {
 /// Reads one elevation file, or several adjacent SRTM `.hgt` tiles as one mosaic, applies
 /// `opts.crop`, fills voids inside the window and works out the spacing.
 pub fn read(paths: &[PathBuf], opts: &ReadOptions) -> Result<HeightGrid, DemError> {
+    let (kind, file) = kind_of(paths, opts)?;
+    let first = &paths[0];
+    let raster = match kind {
+        Kind::Hgt => srtm::read(paths, opts)?,
+        Kind::Tiff => geotiff::read(first, opts)?,
+        Kind::Png => picture::read(first, image::ImageFormat::Png, opts)?,
+        Kind::Jpeg => picture::read(first, image::ImageFormat::Jpeg, opts)?,
+        Kind::Raw(raw_kind) => raw::read(first, raw_kind, opts)?,
+    };
+    finish(raster, &file, opts)
+}
+
+/// The kind of the input and its label for messages, once the options and the mosaic's kinds
+/// are checked.
+fn kind_of(paths: &[PathBuf], opts: &ReadOptions) -> Result<(Kind, String), DemError> {
     opts.validate()?;
     let Some(first) = paths.first() else {
         return Err(DemError::NoInput);
@@ -199,15 +217,7 @@ pub fn read(paths: &[PathBuf], opts: &ReadOptions) -> Result<HeightGrid, DemErro
             problem: format!("--encoding {e} is for RGB PNG tiles, not {}", kind.name()),
         });
     }
-
-    let raster = match kind {
-        Kind::Hgt => srtm::read(paths, opts)?,
-        Kind::Tiff => geotiff::read(first, opts)?,
-        Kind::Png => picture::read(first, image::ImageFormat::Png, opts)?,
-        Kind::Jpeg => picture::read(first, image::ImageFormat::Jpeg, opts)?,
-        Kind::Raw(raw_kind) => raw::read(first, raw_kind, opts)?,
-    };
-    finish(raster, &file, opts)
+    Ok((kind, file))
 }
 
 /// Sample spacings a DEM may have, metres: from a millimetre to a thousand kilometres.
@@ -218,27 +228,43 @@ pub const MAX_SPACING: f64 = 1e6;
 /// or an undeclared nodata value (such as -3.4e38).
 pub const MAX_HEIGHT: f64 = 250_000.0;
 
-/// Crop, spacing, fill: the steps every format shares.
-fn finish(raster: Raster, file: &str, opts: &ReadOptions) -> Result<HeightGrid, DemError> {
-    let (x0, y0, width, height) = match opts.crop {
-        None => (0, 0, raster.width, raster.height),
+/// The window `opts.crop` keeps of a `full_width` x `full_height` grid: first column, first
+/// row, width, height.
+fn window(
+    file: &str,
+    opts: &ReadOptions,
+    full_width: usize,
+    full_height: usize,
+) -> Result<(usize, usize, usize, usize), DemError> {
+    Ok(match opts.crop {
+        None => (0, 0, full_width, full_height),
         Some(c) => {
             let fits = |start: usize, len: usize, max: usize| {
                 start.checked_add(len).is_some_and(|end| end <= max)
             };
-            if !(fits(c.x, c.width, raster.width) && fits(c.y, c.height, raster.height)) {
+            if !(fits(c.x, c.width, full_width) && fits(c.y, c.height, full_height)) {
                 return Err(DemError::CropOutside {
                     file: file.to_string(),
                     crop: c,
-                    width: raster.width,
-                    height: raster.height,
+                    width: full_width,
+                    height: full_height,
                 });
             }
             (c.x, c.y, c.width, c.height)
         }
-    };
+    })
+}
 
-    let (spacing_x, spacing_y) = match (opts.spacing, raster.georef) {
+/// Metres between columns and rows of the window whose rows start at `y0` and number
+/// `height`, from `--spacing` or the georeferencing, refused when implausible.
+fn spacing(
+    file: &str,
+    opts: &ReadOptions,
+    georef: Georef,
+    y0: usize,
+    height: usize,
+) -> Result<(f64, f64), DemError> {
+    let (spacing_x, spacing_y) = match (opts.spacing, georef) {
         (Some(s), _) => (s, s),
         (None, Georef::None) => {
             return Err(DemError::Option {
@@ -296,7 +322,13 @@ fn finish(raster: Raster, file: &str, opts: &ReadOptions) -> Result<HeightGrid, 
             ),
         });
     }
+    Ok((spacing_x, spacing_y))
+}
 
+/// Crop, spacing, fill: the steps every format shares.
+fn finish(raster: Raster, file: &str, opts: &ReadOptions) -> Result<HeightGrid, DemError> {
+    let (x0, y0, width, height) = window(file, opts, raster.width, raster.height)?;
+    let (spacing_x, spacing_y) = spacing(file, opts, raster.georef, y0, height)?;
     let mut heights = match opts.crop {
         None => raster.samples,
         Some(_) => raster.crop(x0, y0, width, height),

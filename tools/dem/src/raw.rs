@@ -3,7 +3,7 @@
 //! size or spacing, so `--size` and `--spacing` are required, and the length must match the
 //! size exactly: a wrong `--size` would otherwise silently shear the terrain.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use crate::error::label;
 use crate::raster::{check_dimensions, Georef, Raster};
@@ -26,6 +26,32 @@ impl RawKind {
 }
 
 pub fn read(path: &Path, kind: RawKind, opts: &ReadOptions) -> Result<Raster, DemError> {
+    let raw = layout(path, kind, opts)?;
+    let samples = raw.rows(0, raw.height)?;
+    Ok(Raster {
+        width: raw.width,
+        height: raw.height,
+        samples,
+        georef: Georef::None,
+        placement: None,
+        description: raw.description.clone(),
+    })
+}
+
+/// A raw file whose length matched its `--size`, read a band of rows at a time.
+#[derive(Clone, Debug)]
+pub struct RawRows {
+    pub width: usize,
+    pub height: usize,
+    pub description: String,
+    path: PathBuf,
+    file: String,
+    kind: RawKind,
+    scale: f64,
+}
+
+/// Checks a raw file's size against `--size`, reading nothing.
+pub fn layout(path: &Path, kind: RawKind, opts: &ReadOptions) -> Result<RawRows, DemError> {
     let file = label(path);
     let ext = match kind {
         RawKind::U16 => ".r16",
@@ -60,52 +86,67 @@ pub fn read(path: &Path, kind: RawKind, opts: &ReadOptions) -> Result<Raster, De
     }
     // The length matched, so this only enforces the sample limit.
     check_dimensions(&file, width as u64, height as u64, kind.bytes(), actual)?;
-
-    let bytes = std::fs::read(path).map_err(|source| DemError::Io {
-        file: file.clone(),
-        source,
-    })?;
-    if bytes.len() as u64 != expected {
-        return Err(DemError::Malformed {
-            file,
-            problem: format!("size changed while reading (now {} bytes)", bytes.len()),
-        });
-    }
-    let scale = opts.vertical_scale();
-    let samples = match kind {
-        RawKind::U16 => bytes
-            .chunks_exact(2)
-            .map(|b| (f64::from(u16::from_le_bytes([b[0], b[1]])) * scale) as f32)
-            .collect(),
-        RawKind::F32 => {
-            let mut samples = Vec::with_capacity(width * height);
-            for (i, b) in bytes.chunks_exact(4).enumerate() {
-                let v = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
-                // Raw files have no nodata convention: NaN is damage, not a void.
-                let scaled = (f64::from(v) * scale) as f32;
-                if !scaled.is_finite() {
-                    return Err(DemError::BadSample {
-                        file,
-                        x: i % width,
-                        y: i / width,
-                        problem: format!("height {v} is not a finite number"),
-                    });
-                }
-                samples.push(scaled);
-            }
-            samples
-        }
-    };
     let kind_name = match kind {
         RawKind::U16 => "raw u16 (.r16)",
         RawKind::F32 => "raw f32 (.f32)",
     };
-    Ok(Raster {
+    Ok(RawRows {
         width,
         height,
-        samples,
-        georef: Georef::None,
-        placement: None,
         description: format!("{kind_name} {width}x{height}"),
+        path: path.to_path_buf(),
+        file,
+        kind,
+        scale: opts.vertical_scale(),
     })
+}
+
+impl RawRows {
+    /// Rows `y0..y1`, metres.
+    pub fn rows(&self, y0: usize, y1: usize) -> Result<Vec<f32>, DemError> {
+        use std::os::unix::fs::FileExt;
+        let file = &self.file;
+        let io = |source| DemError::Io {
+            file: file.clone(),
+            source,
+        };
+        let f = std::fs::File::open(&self.path).map_err(io)?;
+        let b = self.kind.bytes() as usize;
+        let expected = (self.width * self.height * b) as u64;
+        let len = f.metadata().map_err(io)?.len();
+        if len != expected {
+            return Err(DemError::Malformed {
+                file: file.clone(),
+                problem: format!("size changed while reading (now {len} bytes)"),
+            });
+        }
+        let mut bytes = vec![0u8; (y1 - y0) * self.width * b];
+        f.read_exact_at(&mut bytes, (y0 * self.width * b) as u64)
+            .map_err(io)?;
+        let scale = self.scale;
+        Ok(match self.kind {
+            RawKind::U16 => bytes
+                .chunks_exact(2)
+                .map(|b| (f64::from(u16::from_le_bytes([b[0], b[1]])) * scale) as f32)
+                .collect(),
+            RawKind::F32 => {
+                let mut samples = Vec::with_capacity(bytes.len() / 4);
+                for (i, b) in bytes.chunks_exact(4).enumerate() {
+                    let v = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+                    // Raw files have no nodata convention: NaN is damage, not a void.
+                    let scaled = (f64::from(v) * scale) as f32;
+                    if !scaled.is_finite() {
+                        return Err(DemError::BadSample {
+                            file: file.clone(),
+                            x: i % self.width,
+                            y: y0 + i / self.width,
+                            problem: format!("height {v} is not a finite number"),
+                        });
+                    }
+                    samples.push(scaled);
+                }
+                samples
+            }
+        })
+    }
 }

@@ -73,6 +73,36 @@ fn side_from_len(file: &str, len: u64) -> Result<usize, DemError> {
 
 /// Reads one tile, or mosaics several.
 pub fn read(paths: &[PathBuf], opts: &ReadOptions) -> Result<Raster, DemError> {
+    let mosaic = layout(paths, opts)?;
+    let samples = mosaic.rows(0, mosaic.height)?;
+    Ok(Raster {
+        width: mosaic.width,
+        height: mosaic.height,
+        samples,
+        georef: mosaic.georef,
+        placement: mosaic.placement,
+        description: mosaic.description,
+    })
+}
+
+/// One tile or a mosaic of several, laid out from the files' names and sizes, read a band of
+/// rows at a time ([`Mosaic::rows`]).
+#[derive(Clone, Debug)]
+pub struct Mosaic {
+    pub width: usize,
+    pub height: usize,
+    pub georef: Georef,
+    pub placement: Option<Placement>,
+    pub description: String,
+    /// Samples per tile side.
+    side: usize,
+    /// North to south, then west to east: first row, first column, path, label.
+    cells: Vec<(usize, usize, PathBuf, String)>,
+    scale: f64,
+}
+
+/// Lays out one tile, or a mosaic of several, without reading their samples.
+pub fn layout(paths: &[PathBuf], opts: &ReadOptions) -> Result<Mosaic, DemError> {
     // Sizes and names first, so a bad mosaic is refused before any tile is read.
     let mut tiles = Vec::with_capacity(paths.len());
     for path in paths {
@@ -88,11 +118,9 @@ pub fn read(paths: &[PathBuf], opts: &ReadOptions) -> Result<Raster, DemError> {
     }
 
     let [(path, file, side, cell)] = &tiles[..] else {
-        return read_mosaic(&tiles, opts);
+        return layout_mosaic(&tiles, opts);
     };
     let side = *side;
-    let mut samples = vec![f32::NAN; side * side];
-    read_tile(path, file, side, &mut samples, opts.vertical_scale())?;
     let arc = if side == 1201 { 3 } else { 1 };
     let (georef, description) = match cell {
         Some(cell) => (
@@ -109,14 +137,61 @@ pub fn read(paths: &[PathBuf], opts: &ReadOptions) -> Result<Raster, DemError> {
             })
         }
     };
-    Ok(Raster {
+    Ok(Mosaic {
         width: side,
         height: side,
-        samples,
         georef,
         placement: cell.map(|c| placement(c.lat + 1, c.lon, side)),
         description,
+        side,
+        cells: vec![(0, 0, (*path).clone(), file.clone())],
+        scale: opts.vertical_scale(),
     })
+}
+
+impl Mosaic {
+    /// Rows `y0..y1` of the mosaic, voids as NaN, heights times the vertical scale. Where
+    /// tiles share a row or column, a valid sample wins over a void, and of two valid ones the
+    /// later tile's (north to south, west to east).
+    pub fn rows(&self, y0: usize, y1: usize) -> Result<Vec<f32>, DemError> {
+        use std::os::unix::fs::FileExt;
+        let (width, side) = (self.width, self.side);
+        let mut out = vec![f32::NAN; (y1 - y0) * width];
+        let mut bytes = Vec::new();
+        for (row0, col0, path, file) in &self.cells {
+            let (a, b) = (y0.max(*row0), y1.min(row0 + side));
+            if a >= b {
+                continue;
+            }
+            let io = |source| DemError::Io {
+                file: file.clone(),
+                source,
+            };
+            let f = std::fs::File::open(path).map_err(io)?;
+            // The file may have changed since its length was checked.
+            let len = f.metadata().map_err(io)?.len();
+            if len != (side * side * 2) as u64 {
+                return Err(DemError::Malformed {
+                    file: file.clone(),
+                    problem: format!("size changed while reading (now {len} bytes)"),
+                });
+            }
+            bytes.resize((b - a) * side * 2, 0);
+            f.read_exact_at(&mut bytes, ((a - row0) * side * 2) as u64)
+                .map_err(io)?;
+            for (r, src) in bytes.chunks_exact(side * 2).enumerate() {
+                let dst = &mut out[(a - y0 + r) * width + col0..][..side];
+                for (d, s) in dst.iter_mut().zip(src.chunks_exact(2)) {
+                    let v = i16::from_be_bytes([s[0], s[1]]);
+                    // On shared edges keep a valid sample over a void (the neighbour may have it).
+                    if v != VOID {
+                        *d = (f64::from(v) * self.scale) as f32;
+                    }
+                }
+            }
+        }
+        Ok(out)
+    }
 }
 
 /// Sample (0, 0) of a tile or mosaic is the north-west corner of its top-left cell: SRTM
@@ -144,7 +219,7 @@ fn georef(lat_north: i32, side: usize) -> Georef {
 
 type Tile<'a> = (&'a PathBuf, String, usize, Option<Cell>);
 
-fn read_mosaic(tiles: &[Tile<'_>], opts: &ReadOptions) -> Result<Raster, DemError> {
+fn layout_mosaic(tiles: &[Tile<'_>], opts: &ReadOptions) -> Result<Mosaic, DemError> {
     let mosaic_error = |file: &str, problem: String| DemError::Mosaic {
         file: file.to_string(),
         problem,
@@ -225,24 +300,7 @@ fn read_mosaic(tiles: &[Tile<'_>], opts: &ReadOptions) -> Result<Raster, DemErro
     let step = side - 1;
     let width = cols * step + 1;
     let height = rows * step + 1;
-    let mut samples = vec![f32::NAN; width * height];
-    let mut tile_samples = vec![f32::NAN; side * side];
     cells.sort_by_key(|(c, _)| (std::cmp::Reverse(c.lat), c.lon));
-    for (cell, (path, file, _, _)) in &cells {
-        read_tile(path, file, side, &mut tile_samples, opts.vertical_scale())?;
-        let row0 = (lat_max - cell.lat) as usize * step;
-        let col0 = (cell.lon - lon_min) as usize * step;
-        for (r, src) in tile_samples.chunks_exact(side).enumerate() {
-            let dst = &mut samples[(row0 + r) * width + col0..][..side];
-            for (d, &s) in dst.iter_mut().zip(src) {
-                // On shared edges keep a valid sample over a void (the neighbour may have it).
-                if !s.is_nan() {
-                    *d = s;
-                }
-            }
-        }
-    }
-
     let sw = Cell {
         lat: lat_min,
         lon: lon_min,
@@ -252,10 +310,9 @@ fn read_mosaic(tiles: &[Tile<'_>], opts: &ReadOptions) -> Result<Raster, DemErro
         lon: lon_max,
     };
     let arc = if side == 1201 { 3 } else { 1 };
-    Ok(Raster {
+    Ok(Mosaic {
         width,
         height,
-        samples,
         georef: georef(lat_max + 1, side),
         placement: Some(placement(lat_max + 1, lon_min, side)),
         description: format!(
@@ -264,38 +321,17 @@ fn read_mosaic(tiles: &[Tile<'_>], opts: &ReadOptions) -> Result<Raster, DemErro
             ne.name(),
             cells.len()
         ),
+        side,
+        cells: cells
+            .iter()
+            .map(|(cell, (path, file, _, _))| {
+                let row0 = (lat_max - cell.lat) as usize * step;
+                let col0 = (cell.lon - lon_min) as usize * step;
+                (row0, col0, (*path).clone(), file.clone())
+            })
+            .collect(),
+        scale: opts.vertical_scale(),
     })
-}
-
-/// Reads a tile whose length was already checked into `out` (`side` x `side`), voids as NaN,
-/// heights times `scale`.
-fn read_tile(
-    path: &Path,
-    file: &str,
-    side: usize,
-    out: &mut [f32],
-    scale: f64,
-) -> Result<(), DemError> {
-    let bytes = std::fs::read(path).map_err(|source| DemError::Io {
-        file: file.to_string(),
-        source,
-    })?;
-    // The file may have changed since its length was checked.
-    if bytes.len() != side * side * 2 {
-        return Err(DemError::Malformed {
-            file: file.to_string(),
-            problem: format!("size changed while reading (now {} bytes)", bytes.len()),
-        });
-    }
-    for (d, b) in out.iter_mut().zip(bytes.chunks_exact(2)) {
-        let v = i16::from_be_bytes([b[0], b[1]]);
-        *d = if v == VOID {
-            f32::NAN
-        } else {
-            (f64::from(v) * scale) as f32
-        };
-    }
-    Ok(())
 }
 
 #[cfg(test)]

@@ -1,0 +1,122 @@
+//! A DEM read band by band ([`dem::open`]) is the DEM read whole ([`dem::read`]), bit for bit,
+//! on real data with voids: one SRTM1 tile, a mosaic of two SRTM3 tiles, crops, and a raw file
+//! written from SRTM heights.
+
+mod common;
+
+use std::path::PathBuf;
+
+use common::data;
+use dem::{Crop, ReadOptions};
+
+/// Every band of `rows` rows (and a few odd ones) of the stream equals the same rows of the
+/// whole read; the metadata agree too.
+fn same_in_bands(paths: &[PathBuf], opts: &ReadOptions, rows: usize) -> dem::HeightGrid {
+    let whole = dem::read(paths, opts).expect("read whole");
+    let stream = dem::open(paths, opts).expect("open");
+    assert!(stream.is_banded(), "{}", whole.description);
+    assert_eq!((stream.width, stream.height), (whole.width, whole.height));
+    assert_eq!(
+        (stream.spacing_x, stream.spacing_y),
+        (whole.spacing_x, whole.spacing_y)
+    );
+    assert_eq!(stream.voids_filled, whole.voids_filled);
+    assert_eq!(stream.description, whole.description);
+    assert_eq!(stream.placement, whole.placement);
+    assert_eq!(stream.min_max, whole.min_max());
+    let w = whole.width;
+    let mut bands: Vec<(usize, usize)> = (0..whole.height)
+        .step_by(rows)
+        .map(|y| (y, (y + rows).min(whole.height)))
+        .collect();
+    bands.extend([(0, 1), (whole.height - 1, whole.height), (17, 300), (0, 0)]);
+    for (y0, y1) in bands {
+        let got = stream.rows(y0, y1).expect("rows");
+        let want = &whole.heights[y0 * w..y1 * w];
+        assert!(
+            got.len() == want.len()
+                && got
+                    .iter()
+                    .zip(want)
+                    .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "{}: rows {y0}..{y1} differ",
+            whole.description
+        );
+    }
+    whole
+}
+
+#[test]
+fn srtm_tiles_and_mosaics_read_in_bands_are_read_whole() {
+    let opts = ReadOptions::default();
+    let one = same_in_bands(&[data("srtm/N48W125.hgt")], &opts, 257);
+    // Not vacuous: the tile has voids, so the bands were filled.
+    assert!(one.voids_filled > 100_000, "{}", one.voids_filled);
+    let pair = [data("srtm/N41E001.hgt"), data("srtm/N42E001.hgt")];
+    let mosaic = same_in_bands(&pair, &opts, 256);
+    assert!(mosaic.voids_filled > 0);
+    let crop = ReadOptions {
+        crop: Some(Crop {
+            x: 333,
+            y: 1000,
+            width: 700,
+            height: 900,
+        }),
+        ..ReadOptions::default()
+    };
+    same_in_bands(&pair, &crop, 100);
+    let void_crop = ReadOptions {
+        crop: Some(Crop {
+            x: 1500,
+            y: 2000,
+            width: 1600,
+            height: 1200,
+        }),
+        ..ReadOptions::default()
+    };
+    let g = same_in_bands(&[data("srtm/N48W125.hgt")], &void_crop, 64);
+    assert!(g.voids_filled > 0);
+}
+
+#[test]
+fn raw_files_read_in_bands_are_read_whole() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let src = dem::read(&[data("srtm/N43E007.hgt")], &ReadOptions::default()).expect("read");
+    let path = dir.path().join("alps.r16");
+    let bytes: Vec<u8> = src
+        .heights
+        .iter()
+        .flat_map(|h| (h.max(0.0) as u16).to_le_bytes())
+        .collect();
+    std::fs::write(&path, bytes).expect("write");
+    let opts = ReadOptions {
+        size: Some((src.width, src.height)),
+        spacing: Some(90.0),
+        vertical_scale: Some(0.5),
+        crop: Some(Crop {
+            x: 1,
+            y: 2,
+            width: 1000,
+            height: 1100,
+        }),
+        ..ReadOptions::default()
+    };
+    same_in_bands(&[path], &opts, 300);
+}
+
+/// Formats without band reads are decoded whole and served from memory, with the same rows.
+#[test]
+fn other_formats_are_held_whole() {
+    let path = testdata::sample();
+    let opts = ReadOptions {
+        spacing: Some(40.0),
+        ..ReadOptions::default()
+    };
+    let whole = dem::read(std::slice::from_ref(&path), &opts).expect("read");
+    let stream = dem::open(&[path], &opts).expect("open");
+    assert!(!stream.is_banded());
+    assert_eq!(
+        &stream.rows(0, whole.height).expect("rows")[..],
+        &whole.heights[..]
+    );
+}
