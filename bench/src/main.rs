@@ -195,6 +195,7 @@ fn build(grid: &dem::HeightGrid, params: &BuildParams, out: &Path) -> Result<Til
     let view = Grid {
         width: grid.width,
         height: grid.height,
+        first_row: 0,
         heights: &grid.heights,
         spacing_x: grid.spacing_x,
         spacing_y: grid.spacing_y,

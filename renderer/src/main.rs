@@ -42,6 +42,7 @@ fn error_meter(cli: &Cli, terrain: &Terrain, sources: &[PathBuf]) -> Result<Erro
     let view = tiles::Grid {
         width: grid.width,
         height: grid.height,
+        first_row: 0,
         heights: &grid.heights,
         spacing_x: grid.spacing_x,
         spacing_y: grid.spacing_y,

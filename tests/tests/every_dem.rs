@@ -14,6 +14,7 @@ fn build_and_verify(files: &[&str], opts: ReadOptions, params: BuildParams) {
     let view = Grid {
         width: grid.width,
         height: grid.height,
+        first_row: 0,
         heights: &grid.heights,
         spacing_x: grid.spacing_x,
         spacing_y: grid.spacing_y,

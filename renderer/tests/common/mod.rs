@@ -41,6 +41,7 @@ pub fn grid_view(grid: &dem::HeightGrid) -> Grid<'_> {
     Grid {
         width: grid.width,
         height: grid.height,
+        first_row: 0,
         heights: &grid.heights,
         spacing_x: grid.spacing_x,
         spacing_y: grid.spacing_y,
@@ -79,6 +80,7 @@ pub fn mirror(dir: &Path, size: usize) -> PathBuf {
     let grid = Grid {
         width: size,
         height: size,
+        first_row: 0,
         heights: &heights,
         spacing_x: 90.0,
         spacing_y: 90.0,

@@ -2,6 +2,7 @@
 //! P-order, vertex blocks, morph offsets, and the parallel, streaming tile-set build, whose
 //! tiles are written in row-major order so that a build is reproducible byte for byte.
 
+use std::borrow::Cow;
 use std::path::Path;
 
 use rayon::prelude::*;
@@ -63,9 +64,16 @@ impl BuildParams {
 /// The height lattice step for a grid: fits the roughest tile's range in 14 bits.
 pub fn height_step(grid: &Grid) -> Result<f32, String> {
     let (tiles_x, tiles_y) = tile_count(grid.width, grid.height)?;
+    let (max_range, max_abs) = tile_ranges(grid, tiles_x, 0..tiles_y);
+    Ok(lattice_step(max_range, max_abs))
+}
+
+/// The largest height range of one tile and the largest absolute height, over the tiles of
+/// tile rows `rows` (which `grid` holds).
+fn tile_ranges(grid: &Grid, tiles_x: u32, rows: std::ops::Range<u32>) -> (f32, f32) {
     let cells = TILE_CELLS as usize;
     let (mut max_range, mut max_abs) = (0.0f32, 0.0f32);
-    for ty in 0..tiles_y as usize {
+    for ty in rows.map(|t| t as usize) {
         for tx in 0..tiles_x as usize {
             let (x0, y0) = (tx * cells, ty * cells);
             let (x1, y1) = (
@@ -74,7 +82,7 @@ pub fn height_step(grid: &Grid) -> Result<f32, String> {
             );
             let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
             for y in y0..=y1 {
-                for &h in &grid.heights[y * grid.width + x0..=y * grid.width + x1] {
+                for &h in &grid.row(y)[x0..=x1] {
                     lo = lo.min(h);
                     hi = hi.max(h);
                 }
@@ -83,7 +91,105 @@ pub fn height_step(grid: &Grid) -> Result<f32, String> {
             max_abs = max_abs.max(lo.abs()).max(hi.abs());
         }
     }
-    Ok(lattice_step(max_range, max_abs))
+    (max_range, max_abs)
+}
+
+/// Where a build reads its heights: a grid held whole ([`Grid`]), or a grid read a band of
+/// tile rows at a time, so that its size is not bounded by memory (`tiletool` reads SRTM and
+/// raw inputs so). Builds from either are the same bytes.
+pub trait Heights: Sync {
+    /// The whole grid's width, height and spacing (its `heights` empty).
+    fn shape(&self) -> Grid<'_>;
+    /// Rows `y0..y1` of the grid, metres.
+    fn rows(&self, y0: usize, y1: usize) -> Result<Cow<'_, [f32]>, BuildError>;
+    /// Tile rows a band holds: `u32::MAX` reads the grid as one band.
+    fn band_tile_rows(&self) -> u32 {
+        u32::MAX
+    }
+}
+
+impl Heights for Grid<'_> {
+    fn shape(&self) -> Grid<'_> {
+        Grid {
+            heights: &[],
+            first_row: 0,
+            ..*self
+        }
+    }
+
+    fn rows(&self, y0: usize, y1: usize) -> Result<Cow<'_, [f32]>, BuildError> {
+        let held = self.rows();
+        if !(held.start <= y0 && y0 <= y1 && y1 <= held.end) {
+            return Err(BuildError::Internal(format!(
+                "rows {y0}..{y1} asked of a grid holding {held:?}"
+            )));
+        }
+        let w = self.width;
+        Ok(Cow::Borrowed(
+            &self.heights[(y0 - held.start) * w..(y1 - held.start) * w],
+        ))
+    }
+}
+
+/// A grid cut into bands of whole tile rows, each read when a step of the build needs it.
+struct Bands<'a> {
+    source: &'a dyn Heights,
+    shape: Grid<'a>,
+    tiles: (u32, u32),
+    per_band: u32,
+}
+
+/// One band's rows, and the grid they make.
+struct Band<'a> {
+    rows: Cow<'a, [f32]>,
+    first_row: usize,
+    tile_rows: std::ops::Range<u32>,
+}
+
+impl<'a> Bands<'a> {
+    fn new(source: &'a dyn Heights, tiles: (u32, u32)) -> Bands<'a> {
+        Bands {
+            source,
+            shape: source.shape(),
+            tiles,
+            per_band: source.band_tile_rows().clamp(1, tiles.1.max(1)),
+        }
+    }
+
+    fn count(&self) -> u32 {
+        self.tiles.1.div_ceil(self.per_band)
+    }
+
+    fn tile_rows(&self, b: u32) -> std::ops::Range<u32> {
+        b * self.per_band..((b + 1) * self.per_band).min(self.tiles.1)
+    }
+
+    /// Band `b`: the samples of its tile rows and `margin` more rows either side (within the
+    /// grid).
+    fn load(&self, b: u32, margin: usize) -> Result<Band<'a>, BuildError> {
+        let rows = self.tile_rows(b);
+        let cells = TILE_CELLS as usize;
+        let y0 = (rows.start as usize * cells).saturating_sub(margin);
+        let y1 = (rows.end as usize * cells + 1 + margin).min(self.shape.height);
+        Ok(Band {
+            rows: self.source.rows(y0, y1)?,
+            first_row: y0,
+            tile_rows: rows,
+        })
+    }
+}
+
+impl Band<'_> {
+    fn grid<'g>(&'g self, shape: &Grid) -> Grid<'g> {
+        Grid {
+            width: shape.width,
+            height: shape.height,
+            first_row: self.first_row,
+            heights: &self.rows,
+            spacing_x: shape.spacing_x,
+            spacing_y: shape.spacing_y,
+        }
+    }
 }
 
 /// Per-level figures of a built tile, for summaries.
@@ -791,6 +897,61 @@ pub fn build_tileset_textured(
     out: &Path,
     progress: &(dyn Fn() + Sync),
 ) -> Result<BuildSummary, BuildError> {
+    if grid.first_row != 0 || grid.heights.len() != grid.width * grid.height {
+        return Err(BuildError::Params(
+            "height grid length does not match its size".into(),
+        ));
+    }
+    build_tileset_from(grid, params, texturing, meta, out, progress)
+}
+
+/// What a first pass over the heights finds: the range, and the height lattice's step.
+struct Scanned {
+    lo: f32,
+    hi: f32,
+    step: f32,
+}
+
+/// One pass over the grid, band by band: refuses a non-finite height and finds the range of
+/// heights and the lattice step ([`height_step`]'s, over the bands' tiles).
+fn scan(bands: &Bands) -> Result<Scanned, BuildError> {
+    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+    let (mut max_range, mut max_abs) = (0.0f32, 0.0f32);
+    for b in 0..bands.count() {
+        let band = bands.load(b, 0)?;
+        if let Some(bad) = band.rows.iter().find(|h| !h.is_finite()) {
+            return Err(BuildError::Params(format!(
+                "height grid holds a non-finite value ({bad})"
+            )));
+        }
+        for &h in band.rows.iter() {
+            lo = lo.min(h);
+            hi = hi.max(h);
+        }
+        let grid = band.grid(&bands.shape);
+        let (range, abs) = tile_ranges(&grid, bands.tiles.0, band.tile_rows.clone());
+        max_range = max_range.max(range);
+        max_abs = max_abs.max(abs);
+    }
+    Ok(Scanned {
+        lo,
+        hi,
+        step: lattice_step(max_range, max_abs),
+    })
+}
+
+/// [`build_tileset_textured`] from any [`Heights`]: a grid held whole is one band; a grid
+/// read in bands is read once to scan it, once per agreement pass for the bands with tiles to
+/// mesh again, and once to build, a band at a time, so that memory holds one band (and its
+/// texture margin), not the grid. The bytes are the same either way.
+pub fn build_tileset_from(
+    heights: &dyn Heights,
+    params: &BuildParams,
+    texturing: Option<&Texturing>,
+    meta: &TileSetMeta,
+    out: &Path,
+    progress: &(dyn Fn() + Sync),
+) -> Result<BuildSummary, BuildError> {
     params.validate()?;
     if let Some(Texturing {
         source: Source::Relief(r),
@@ -799,24 +960,10 @@ pub fn build_tileset_textured(
     {
         r.validate().map_err(BuildError::Params)?;
     }
-    let (tiles_x, tiles_y) = tile_count(grid.width, grid.height).map_err(BuildError::Params)?;
-    if grid.heights.len() != grid.width * grid.height {
-        return Err(BuildError::Params(
-            "height grid length does not match its size".into(),
-        ));
-    }
-    if let Some(bad) = grid.heights.iter().find(|h| !h.is_finite()) {
-        return Err(BuildError::Params(format!(
-            "height grid holds a non-finite value ({bad})"
-        )));
-    }
-    let (lo, hi) = grid
-        .heights
-        .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &h| {
-            (lo.min(h), hi.max(h))
-        });
-    let step = height_step(grid).map_err(BuildError::Params)?;
+    let shape = heights.shape();
+    let (tiles_x, tiles_y) = tile_count(shape.width, shape.height).map_err(BuildError::Params)?;
+    let bands = Bands::new(heights, (tiles_x, tiles_y));
+    let Scanned { lo, hi, step } = scan(&bands)?;
     let mut description = [0u8; 128];
     let text = meta.description.as_bytes();
     let mut cut = text.len().min(description.len());
@@ -825,14 +972,14 @@ pub fn build_tileset_textured(
     }
     description[..cut].copy_from_slice(&text[..cut]);
     let header = FileHeader {
-        grid_width: grid.width as u32,
-        grid_height: grid.height as u32,
+        grid_width: shape.width as u32,
+        grid_height: shape.height as u32,
         tiles_x,
         tiles_y,
         tile_size: TILE_SIZE as u32,
         levels: params.levels,
-        spacing_x: grid.spacing_x,
-        spacing_y: grid.spacing_y,
+        spacing_x: shape.spacing_x,
+        spacing_y: shape.spacing_y,
         base_error: params.base_error,
         height_min: lo,
         height_max: hi,
@@ -842,7 +989,7 @@ pub fn build_tileset_textured(
         ..bytemuck::Zeroable::zeroed()
     };
     let (agreements, agreement_passes, agreement_meshes) = if params.shared_sides {
-        let agreed = agree_sides(grid, params, step, (tiles_x, tiles_y), Remesh::Changed)?;
+        let agreed = agree_sides(&bands, params, step, Remesh::Changed)?;
         (Some(agreed.tiles), agreed.passes, agreed.meshes)
     } else {
         (None, 0, 0)
@@ -866,7 +1013,8 @@ pub fn build_tileset_textured(
         },
         None => header,
     };
-    let prepared = texturing.map(|t| (Prepared::new(grid, &t.source), t.layout));
+    let prepared = texturing.map(|t| (Prepared::new((lo, hi), &t.source), t.layout));
+    let margin = texturing.map_or(0, |t| t.layout.rows_beyond_tile());
     let mut writer = TileSetWriter::create(out, header)?;
     let mut summary = BuildSummary {
         levels: vec![LevelStats::default(); params.levels as usize],
@@ -886,59 +1034,65 @@ pub fn build_tileset_textured(
     };
     // Tiles are made on every core and written in row-major order, whatever order they
     // finish in, so that the same input and options give the same bytes.
-    let count = (tiles_x * tiles_y) as usize;
     let in_flight = 2 * rayon::current_num_threads();
     let alone = Agreement::default();
-    let make = |t: usize| {
-        let (tx, ty) = (t as u32 % tiles_x, t as u32 / tiles_x);
-        let built = match &agreements {
-            Some(a) => {
-                let (agreement, sides) = &a[t];
-                build_tile(grid, tx, ty, params, step, agreement).and_then(|b| {
-                    if b.sides == *sides {
-                        Ok(b)
-                    } else {
-                        Err(BuildError::Internal(format!(
-                            "tile {tx},{ty}: its sides changed after agreement"
-                        )))
-                    }
-                })
-            }
-            None => build_tile(grid, tx, ty, params, step, &alone),
+    for b in 0..bands.count() {
+        let band = bands.load(b, margin)?;
+        let grid = band.grid(&bands.shape);
+        let first = (band.tile_rows.start * tiles_x) as usize;
+        let count = (band.tile_rows.len() as u32 * tiles_x) as usize;
+        let make = |i: usize| {
+            let t = first + i;
+            let (tx, ty) = (t as u32 % tiles_x, t as u32 / tiles_x);
+            let built = match &agreements {
+                Some(a) => {
+                    let (agreement, sides) = &a[t];
+                    build_tile(&grid, tx, ty, params, step, agreement).and_then(|b| {
+                        if b.sides == *sides {
+                            Ok(b)
+                        } else {
+                            Err(BuildError::Internal(format!(
+                                "tile {tx},{ty}: its sides changed after agreement"
+                            )))
+                        }
+                    })
+                }
+                None => build_tile(&grid, tx, ty, params, step, &alone),
+            };
+            built.map(|b| {
+                let texture = prepared.as_ref().map(|(source, layout)| {
+                    let start = std::time::Instant::now();
+                    let (blob, mips) = texture::build_blob(&grid, source, layout, (tx, ty));
+                    (blob, mips, start.elapsed().as_secs_f64())
+                });
+                (b, texture)
+            })
         };
-        built.map(|b| {
-            let texture = prepared.as_ref().map(|(source, layout)| {
-                let start = std::time::Instant::now();
-                let (blob, mips) = texture::build_blob(grid, source, layout, (tx, ty));
-                (blob, mips, start.elapsed().as_secs_f64())
-            });
-            (b, texture)
-        })
-    };
-    crate::ordered::in_order(count, in_flight, make, |_, built| {
-        let (built, texture) = built?;
-        writer.add_tile(built.tx, built.ty, &built.blob)?;
-        if let Some((blob, mips, seconds)) = texture {
-            writer.add_texture(built.tx, built.ty, &blob)?;
-            summary.texture_seconds += seconds;
-            for (sum, m) in summary.texture_mips.iter_mut().zip(&mips) {
-                sum.bytes += u64::from(m.len);
-                sum.squared_error += m.squared_error;
-                sum.texels += m.texels;
+        crate::ordered::in_order(count, in_flight, make, |_, built| {
+            let (built, texture) = built?;
+            writer.add_tile(built.tx, built.ty, &built.blob)?;
+            if let Some((blob, mips, seconds)) = texture {
+                writer.add_texture(built.tx, built.ty, &blob)?;
+                summary.texture_seconds += seconds;
+                for (sum, m) in summary.texture_mips.iter_mut().zip(&mips) {
+                    sum.bytes += u64::from(m.len);
+                    sum.squared_error += m.squared_error;
+                    sum.texels += m.texels;
+                }
             }
-        }
-        summary.tiles += 1;
-        for (sum, l) in summary.levels.iter_mut().zip(&built.levels) {
-            sum.vertices += l.vertices;
-            sum.triangles += l.triangles;
-            sum.bytes += l.bytes;
-            sum.max_error = sum.max_error.max(l.max_error);
-            sum.limited_triangles += l.limited_triangles;
-            sum.limited_excess = sum.limited_excess.max(l.limited_excess);
-        }
-        progress();
-        Ok::<(), BuildError>(())
-    })?;
+            summary.tiles += 1;
+            for (sum, l) in summary.levels.iter_mut().zip(&built.levels) {
+                sum.vertices += l.vertices;
+                sum.triangles += l.triangles;
+                sum.bytes += l.bytes;
+                sum.max_error = sum.max_error.max(l.max_error);
+                sum.limited_triangles += l.limited_triangles;
+                sum.limited_excess = sum.limited_excess.max(l.limited_excess);
+            }
+            progress();
+            Ok::<(), BuildError>(())
+        })?;
+    }
     writer.finish()?;
     summary.file_bytes = std::fs::metadata(out).map(|m| m.len()).unwrap_or(0);
     Ok(summary)
@@ -957,12 +1111,12 @@ pub fn build_tileset_textured(
 /// result). The morph units are then the largest any tile needs per level, so a side
 /// vertex's offsets (same surface, same height) are the same bytes in both tiles.
 fn agree_sides(
-    grid: &Grid,
+    bands: &Bands,
     params: &BuildParams,
     step: f32,
-    (tiles_x, tiles_y): (u32, u32),
     remesh: Remesh,
 ) -> Result<Agreed, BuildError> {
+    let (tiles_x, tiles_y) = bands.tiles;
     /// Far more than any data needs (a change spreads one tile per pass).
     const MAX_PASSES: u32 = 1000;
     let count = (tiles_x * tiles_y) as usize;
@@ -1010,18 +1164,34 @@ fn agree_sides(
                 "tile sides still changing after {MAX_PASSES} passes"
             )));
         }
-        let built: Vec<(usize, Sides, Vec<f64>)> = dirty
-            .par_iter()
-            .map(|(t, forced)| {
-                let (tx, ty) = (*t as u32 % tiles_x, *t as u32 / tiles_x);
-                let agreement = Agreement {
-                    forced: forced.clone(),
-                    units: None,
-                };
-                mesh_tile(grid, (tx, ty), params, step, &agreement, Output::Sides)
-                    .map(|b| (*t, b.sides, b.deviation))
-            })
-            .collect::<Result<_, _>>()?;
+        // Band by band, in row-major order as `dirty` is: each band read only when one of
+        // its tiles is to be meshed again.
+        let mut built: Vec<(usize, Sides, Vec<f64>)> = Vec::with_capacity(dirty.len());
+        for b in 0..bands.count() {
+            let rows = bands.tile_rows(b);
+            let here: Vec<&(usize, Sides)> = dirty
+                .iter()
+                .filter(|(t, _)| rows.contains(&(*t as u32 / tiles_x)))
+                .collect();
+            if here.is_empty() {
+                continue;
+            }
+            let band = bands.load(b, 0)?;
+            let grid = band.grid(&bands.shape);
+            let meshed: Vec<(usize, Sides, Vec<f64>)> = here
+                .par_iter()
+                .map(|(t, forced)| {
+                    let (tx, ty) = (*t as u32 % tiles_x, *t as u32 / tiles_x);
+                    let agreement = Agreement {
+                        forced: forced.clone(),
+                        units: None,
+                    };
+                    mesh_tile(&grid, (tx, ty), params, step, &agreement, Output::Sides)
+                        .map(|b| (*t, b.sides, b.deviation))
+                })
+                .collect::<Result<_, _>>()?;
+            built.extend(meshed);
+        }
         let mut next = vec![false; count];
         for ((t, new, d), (_, used)) in built.into_iter().zip(dirty) {
             deviation[t] = d;
@@ -1107,6 +1277,7 @@ mod tests {
         let grid = Grid {
             width: 2 * 256 + 1,
             height: 2 * 256 + 1,
+            first_row: 0,
             heights: &heights,
             spacing_x: 53.2,
             spacing_y: 92.6,
@@ -1167,13 +1338,15 @@ mod tests {
         let grid = Grid {
             width: side,
             height: side,
+            first_row: 0,
             heights: &heights,
             spacing_x: 53.2,
             spacing_y: 92.6,
         };
         let params = BuildParams::default();
         let step = height_step(&grid).expect("step");
-        let agree = |remesh| agree_sides(&grid, &params, step, (4, 4), remesh).expect("agreed");
+        let bands = Bands::new(&grid, (4, 4));
+        let agree = |remesh| agree_sides(&bands, &params, step, remesh).expect("agreed");
         let (fewer, every) = (agree(Remesh::Changed), agree(Remesh::NextToChange));
         assert!(fewer.passes > 1, "the sides did not need agreeing: no test");
         assert!(

@@ -38,6 +38,9 @@ pub enum BuildError {
     Params(String),
     #[error(transparent)]
     Format(#[from] FormatError),
+    /// Reading the heights of a band failed (the message names the file).
+    #[error("{0}")]
+    Input(String),
     /// A broken invariant of the mesher: a bug, reported rather than written.
     #[error("internal error: {0}")]
     Internal(String),

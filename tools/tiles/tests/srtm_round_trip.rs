@@ -33,6 +33,7 @@ fn odd_sized_crop_builds_and_verifies_against_its_source() {
     let grid = Grid {
         width: w,
         height: h,
+        first_row: 0,
         heights: &heights,
         spacing_x: 53.2,
         spacing_y: 92.6,
@@ -83,6 +84,7 @@ fn errors_near_each_side_are_recorded_and_verified() {
     let grid = Grid {
         width: w,
         height: h,
+        first_row: 0,
         heights: &heights,
         spacing_x: 20.6,
         spacing_y: 30.9,

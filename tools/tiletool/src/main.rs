@@ -58,6 +58,11 @@ enum Command {
         /// Replace the output even if it exists and is not a tile set.
         #[arg(long)]
         force: bool,
+        /// Tile rows (256 grid rows each) held at a time when reading SRTM and raw inputs,
+        /// which are read a band at a time; other inputs are held whole
+        /// [default: about 64 M samples a band]
+        #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
+        band_rows: Option<u32>,
         #[command(flatten)]
         texture: TextureArgs,
     },
@@ -129,7 +134,7 @@ impl TextureArgs {
     /// on the heights.
     fn texturing(
         &self,
-        grid: &dem::HeightGrid,
+        grid: Option<&dem::HeightGrid>,
     ) -> Result<Option<(tiles::texture::Texturing, Option<photo::Laid>)>> {
         use tiles::texture::{interior_for, Layout, Source, Texturing};
         if self.no_texture {
@@ -142,6 +147,9 @@ impl TextureArgs {
         }
         let (source, density, laid) = match &self.texture {
             Some(path) => {
+                let grid = grid.ok_or_else(|| {
+                    anyhow::anyhow!("{}: a photo is laid on a grid read whole", path.display())
+                })?;
                 let picture = photo::read(path)?;
                 let (photo, laid) = photo::lay(picture, path, grid, &view(grid))?;
                 let density = photo.pixels_per_cell();
@@ -260,6 +268,7 @@ fn main() -> ExitCode {
             independent_sides,
             quiet,
             force,
+            band_rows,
             texture,
         } => check_output(&output, &input.inputs, force).and_then(|()| {
             remove_on_signal(&output)?;
@@ -272,6 +281,7 @@ fn main() -> ExitCode {
                     shared_sides: !independent_sides,
                 },
                 &texture,
+                band_rows,
                 quiet,
             )
         }),
@@ -303,9 +313,94 @@ fn view(grid: &dem::HeightGrid) -> tiles::Grid<'_> {
     tiles::Grid {
         width: grid.width,
         height: grid.height,
+        first_row: 0,
         heights: &grid.heights,
         spacing_x: grid.spacing_x,
         spacing_y: grid.spacing_y,
+    }
+}
+
+/// A build's heights: held whole, or read a band at a time.
+enum Dem {
+    Whole(dem::HeightGrid),
+    Bands(StreamHeights),
+}
+
+/// What a build's summary says of its heights.
+struct About {
+    width: usize,
+    height: usize,
+    spacing_x: f64,
+    spacing_y: f64,
+    min_max: (f32, f32),
+    voids_filled: u64,
+    description: String,
+}
+
+impl Dem {
+    fn about(&self) -> About {
+        match self {
+            Dem::Whole(g) => About {
+                width: g.width,
+                height: g.height,
+                spacing_x: g.spacing_x,
+                spacing_y: g.spacing_y,
+                min_max: g.min_max(),
+                voids_filled: g.voids_filled,
+                description: g.description.clone(),
+            },
+            Dem::Bands(StreamHeights { stream: s, .. }) => About {
+                width: s.width,
+                height: s.height,
+                spacing_x: s.spacing_x,
+                spacing_y: s.spacing_y,
+                min_max: s.min_max,
+                voids_filled: s.voids_filled,
+                description: s.description.clone(),
+            },
+        }
+    }
+}
+
+/// Samples a band holds by default: 256 MB of heights.
+const BAND_SAMPLES: usize = 1 << 26;
+
+/// Tile rows per band for a grid `width` samples wide: about [`BAND_SAMPLES`], at least one.
+fn default_band_rows(width: usize) -> u32 {
+    (BAND_SAMPLES / (257 * width.max(1))).clamp(1, u32::MAX as usize) as u32
+}
+
+/// A DEM stream as the tile builder reads it.
+struct StreamHeights {
+    stream: dem::Stream,
+    per_band: u32,
+}
+
+impl tiles::build::Heights for StreamHeights {
+    fn shape(&self) -> tiles::Grid<'_> {
+        let s = &self.stream;
+        tiles::Grid {
+            width: s.width,
+            height: s.height,
+            first_row: 0,
+            heights: &[],
+            spacing_x: s.spacing_x,
+            spacing_y: s.spacing_y,
+        }
+    }
+
+    fn rows(&self, y0: usize, y1: usize) -> Result<std::borrow::Cow<'_, [f32]>, tiles::BuildError> {
+        self.stream
+            .rows(y0, y1)
+            .map_err(|e| tiles::BuildError::Input(e.to_string()))
+    }
+
+    fn band_tile_rows(&self) -> u32 {
+        if self.stream.is_banded() {
+            self.per_band
+        } else {
+            u32::MAX
+        }
     }
 }
 
@@ -357,6 +452,7 @@ fn build(
     output: &Path,
     params: tiles::BuildParams,
     texture: &TextureArgs,
+    band_rows: Option<u32>,
     quiet: bool,
 ) -> Result<ExitCode> {
     params.validate()?;
@@ -364,11 +460,25 @@ fn build(
         bail!("{}: is a folder, not an output file", output.display());
     }
     let start = Instant::now();
-    let grid = read_dem(&input.inputs, &input.read)?;
-    let (texturing, laid) = texture.texturing(&grid)?.unzip();
+    // A photo is laid on the grid by its georeferencing, which needs the grid whole; otherwise
+    // SRTM and raw inputs are read a band at a time (dem::open), the others held whole.
+    let dem = if texture.texture.is_some() {
+        Dem::Whole(read_dem(&input.inputs, &input.read)?)
+    } else {
+        let stream = dem::open(&input.inputs, &input.read.options())?;
+        let per_band = band_rows.unwrap_or_else(|| default_band_rows(stream.width));
+        Dem::Bands(StreamHeights { stream, per_band })
+    };
+    let (texturing, laid) = texture
+        .texturing(match &dem {
+            Dem::Whole(grid) => Some(grid),
+            Dem::Bands(_) => None,
+        })?
+        .unzip();
     let laid = laid.flatten();
     let decoded = start.elapsed();
-    let (tiles_x, tiles_y) = tiles::format::tile_count(grid.width, grid.height)
+    let about = dem.about();
+    let (tiles_x, tiles_y) = tiles::format::tile_count(about.width, about.height)
         .map_err(|e| anyhow::anyhow!("{}: {e}", input.inputs[0].display()))?;
     let bar = ProgressBar::with_draw_target(
         Some(u64::from(tiles_x * tiles_y)),
@@ -387,23 +497,33 @@ fn build(
         }
     };
     let meta = tiles::TileSetMeta {
-        description: grid.description.clone(),
-        voids_filled: grid.voids_filled,
+        description: about.description.clone(),
+        voids_filled: about.voids_filled,
     };
-    let view = view(&grid);
-    let summary = tiles::build_tileset_textured(
-        &view,
-        &params,
-        texturing.as_ref(),
-        &meta,
-        output,
-        &progress,
-    )?;
+    let summary = match &dem {
+        Dem::Whole(grid) => tiles::build_tileset_textured(
+            &view(grid),
+            &params,
+            texturing.as_ref(),
+            &meta,
+            output,
+            &progress,
+        )?,
+        Dem::Bands(heights) => tiles::build::build_tileset_from(
+            heights,
+            &params,
+            texturing.as_ref(),
+            &meta,
+            output,
+            &progress,
+        )?,
+    };
     bar.finish_and_clear();
     let total = start.elapsed();
     if !quiet {
+        let grid = &about;
         let samples = (grid.width * grid.height) as f64;
-        let (lo, hi) = grid.min_max();
+        let (lo, hi) = grid.min_max;
         println!(
             "{}  ->  {}",
             input

@@ -120,6 +120,14 @@ impl Layout {
     /// of the aligned mips below has all its taps: 0 at the last aligned mip, and each finer
     /// mip `2 * margin + 3` (a reduction by two reads 4 texels either side of a centre that
     /// sits half a texel off the grid).
+    /// Grid rows (or columns) beyond a tile's own 257 that its texture reads: the gutter and
+    /// the finer mips' margins, one more for rounding out the bilinear taps, one for the
+    /// relief's normals. A banded build holds them with the tile's band.
+    pub fn rows_beyond_tile(&self) -> usize {
+        let cells_per_texel = f64::from(TILE_CELLS) / f64::from(self.interior);
+        (f64::from(self.gutter + self.margin(0)) * cells_per_texel).ceil() as usize + 2
+    }
+
     fn margin(&self, m: u32) -> u32 {
         let last = self.aligned_mips() - 1;
         (m..last).fold(0, |e, _| 2 * e + 3)
@@ -324,10 +332,11 @@ pub enum Prepared<'a> {
 }
 
 impl<'a> Prepared<'a> {
-    pub fn new(grid: &Grid, source: &'a Source) -> Prepared<'a> {
+    /// `source` for a grid whose heights span `range` (lowest, highest).
+    pub fn new(range: (f32, f32), source: &'a Source) -> Prepared<'a> {
         match source {
             Source::Photo(p) => Prepared::Photo(p),
-            Source::Relief(r) => Prepared::Relief(Lighting::new(grid, *r)),
+            Source::Relief(r) => Prepared::Relief(Lighting::with_range(range, *r)),
         }
     }
 }
@@ -642,6 +651,7 @@ mod tests {
         Grid {
             width: 3 * 256 + 1,
             height: 2 * 256 + 1,
+            first_row: 0,
             heights,
             spacing_x: 10.0,
             spacing_y: 10.0,

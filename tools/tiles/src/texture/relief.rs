@@ -102,12 +102,17 @@ pub struct Lighting {
 
 impl Lighting {
     pub fn new(grid: &Grid, relief: Relief) -> Lighting {
-        let (lo, hi) = grid
+        let range = grid
             .heights
             .iter()
             .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &h| {
                 (lo.min(h), hi.max(h))
             });
+        Lighting::with_range(range, relief)
+    }
+
+    /// The lighting of a grid whose heights span `(lo, hi)` (the tint's ramp runs between).
+    pub fn with_range((lo, hi): (f32, f32), relief: Relief) -> Lighting {
         Lighting {
             relief,
             sun: relief.sun(),
@@ -119,7 +124,7 @@ impl Lighting {
 
 fn light(grid: &Grid, l: &Lighting, (x0, y0): (usize, usize), (x1, y1): (usize, usize)) -> Lit {
     let (sun, lo, range) = (l.sun, l.lo, l.range);
-    let h = |x: usize, y: usize| f64::from(grid.heights[y * grid.width + x]);
+    let h = |x: usize, y: usize| f64::from(grid.at(x, y));
     let width = x1 + 1 - x0;
     let mut colours = Vec::with_capacity(width * (y1 + 1 - y0));
     for y in y0..=y1 {
@@ -211,6 +216,7 @@ mod tests {
         Grid {
             width: 32,
             height: 32,
+            first_row: 0,
             heights,
             spacing_x: 10.0,
             spacing_y: 10.0,
