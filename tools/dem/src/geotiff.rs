@@ -7,7 +7,7 @@
 
 use std::fs::File;
 use std::io::BufReader;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use tiff::decoder::{ChunkType, Decoder, DecodingResult, Limits};
 use tiff::tags::Tag;
@@ -54,6 +54,39 @@ fn compression_name(code: u16) -> Result<&'static str, String> {
 }
 
 pub fn read(path: &Path, opts: &ReadOptions) -> Result<Raster, DemError> {
+    let tiff = layout(path, opts)?;
+    let samples = tiff.rows(0, tiff.height)?;
+    Ok(Raster {
+        width: tiff.width,
+        height: tiff.height,
+        samples,
+        georef: tiff.georef,
+        placement: tiff.placement,
+        description: tiff.description,
+    })
+}
+
+/// A GeoTIFF whose tags, chunk layout and byte counts were checked, read a band of rows at a
+/// time by decoding the chunks (strips or tiles) that the band touches.
+#[derive(Clone, Debug)]
+pub struct GeoTiff {
+    pub width: usize,
+    pub height: usize,
+    pub georef: Georef,
+    pub placement: Option<Placement>,
+    pub description: String,
+    path: PathBuf,
+    file: String,
+    chunks: ChunkGrid,
+    bytes_per_sample: u64,
+    /// The decoder's limits: its decoding and intermediate buffers, bytes.
+    limits: (usize, usize),
+    nodata: Option<f64>,
+    scale: f64,
+}
+
+/// Reads and checks a GeoTIFF's tags, decoding no samples.
+pub fn layout(path: &Path, opts: &ReadOptions) -> Result<GeoTiff, DemError> {
     let file = label(path);
     let io = |source| DemError::Io {
         file: file.clone(),
@@ -124,7 +157,7 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<Raster, DemError> {
     } else {
         file_len.saturating_mul(MAX_COMPRESSION_RATIO)
     };
-    let samples = check_dimensions(
+    check_dimensions(
         &file,
         width.into(),
         height.into(),
@@ -214,60 +247,96 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<Raster, DemError> {
             problem,
         },
     })?;
-    let mut decoder = decoder.with_limits(limits);
-
-    let mut converter = Converter {
-        file: &file,
-        nodata,
-        scale: opts.vertical_scale() * vertical,
-        width: width as usize,
-        out: vec![f32::NAN; samples],
-    };
-    let mut buffer = DecodingResult::U8(Vec::new());
-    for index in 0..chunks.count {
-        let (x0, y0, w, h) = chunks.rect(index, width, height);
-        // Read each chunk at its full stored width: the tiff crate's row-by-row path for
-        // narrower edge tiles can fail on valid LZW data ("no lzw end code found").
-        let stride = chunks.width as usize;
-        decoder
-            .read_chunk_to_buffer(&mut buffer, index, stride * bytes_per_sample as usize)
-            .map_err(malformed)?;
-        let window = Window {
-            x0,
-            y0,
-            width: w,
-            height: h,
-            stride,
-        };
-        match &buffer {
-            DecodingResult::U8(v) => converter.ints(v, &window, f64::from),
-            DecodingResult::U16(v) => converter.ints(v, &window, f64::from),
-            DecodingResult::U32(v) => converter.ints(v, &window, f64::from),
-            DecodingResult::U64(v) => converter.ints(v, &window, |x| x as f64),
-            DecodingResult::I8(v) => converter.ints(v, &window, f64::from),
-            DecodingResult::I16(v) => converter.ints(v, &window, f64::from),
-            DecodingResult::I32(v) => converter.ints(v, &window, f64::from),
-            DecodingResult::I64(v) => converter.ints(v, &window, |x| x as f64),
-            DecodingResult::F16(v) => converter.floats(v, &window, |x| f64::from(f32::from(x))),
-            DecodingResult::F32(v) => converter.floats(v, &window, f64::from),
-            DecodingResult::F64(v) => converter.floats(v, &window, |x| x),
-        }?;
-    }
-    let out = converter.out;
     let nodata_text = match nodata {
         Some(n) => format!(", nodata {n}"),
         None => String::new(),
     };
-    Ok(Raster {
+    Ok(GeoTiff {
         width: width as usize,
         height: height as usize,
-        samples: out,
         georef,
         placement,
         description: format!(
             "GeoTIFF {sample_type} {compression}, {layout}, {georef_text}{nodata_text}"
         ),
+        path: path.to_path_buf(),
+        file,
+        chunks,
+        bytes_per_sample,
+        limits: (limits.decoding_buffer_size, limits.intermediate_buffer_size),
+        nodata,
+        scale: opts.vertical_scale() * vertical,
     })
+}
+
+impl GeoTiff {
+    /// Rows `y0..y1`, metres, voids as NaN: the chunks that hold them decoded one at a time.
+    pub fn rows(&self, y0: usize, y1: usize) -> Result<Vec<f32>, DemError> {
+        let file = &self.file;
+        let malformed = |e: tiff::TiffError| DemError::Malformed {
+            file: file.clone(),
+            problem: format!("not a readable TIFF: {}", one_line(e)),
+        };
+        let handle = File::open(&self.path).map_err(|source| DemError::Io {
+            file: file.clone(),
+            source,
+        })?;
+        let mut limits = Limits::default();
+        (limits.decoding_buffer_size, limits.intermediate_buffer_size) = self.limits;
+        let mut decoder = Decoder::new(BufReader::new(handle))
+            .map_err(malformed)?
+            .with_limits(limits);
+        // The file may have changed since its tags were read.
+        if decoder.dimensions().map_err(malformed)? != (self.width as u32, self.height as u32) {
+            return Err(DemError::Malformed {
+                file: file.clone(),
+                problem: "size changed while reading".into(),
+            });
+        }
+        let mut converter = Converter {
+            file,
+            nodata: self.nodata,
+            scale: self.scale,
+            width: self.width,
+            first_row: y0,
+            out: vec![f32::NAN; (y1 - y0) * self.width],
+        };
+        let chunks = &self.chunks;
+        let mut buffer = DecodingResult::U8(Vec::new());
+        for index in 0..chunks.count {
+            let (x0, cy, w, h) = chunks.rect(index, self.width as u32, self.height as u32);
+            if cy + h <= y0 || cy >= y1 {
+                continue;
+            }
+            // Read each chunk at its full stored width: the tiff crate's row-by-row path for
+            // narrower edge tiles can fail on valid LZW data ("no lzw end code found").
+            let stride = chunks.width as usize;
+            decoder
+                .read_chunk_to_buffer(&mut buffer, index, stride * self.bytes_per_sample as usize)
+                .map_err(malformed)?;
+            let window = Window {
+                x0,
+                y0: cy,
+                width: w,
+                height: h,
+                stride,
+            };
+            match &buffer {
+                DecodingResult::U8(v) => converter.ints(v, &window, f64::from),
+                DecodingResult::U16(v) => converter.ints(v, &window, f64::from),
+                DecodingResult::U32(v) => converter.ints(v, &window, f64::from),
+                DecodingResult::U64(v) => converter.ints(v, &window, |x| x as f64),
+                DecodingResult::I8(v) => converter.ints(v, &window, f64::from),
+                DecodingResult::I16(v) => converter.ints(v, &window, f64::from),
+                DecodingResult::I32(v) => converter.ints(v, &window, f64::from),
+                DecodingResult::I64(v) => converter.ints(v, &window, |x| x as f64),
+                DecodingResult::F16(v) => converter.floats(v, &window, |x| f64::from(f32::from(x))),
+                DecodingResult::F32(v) => converter.floats(v, &window, f64::from),
+                DecodingResult::F64(v) => converter.floats(v, &window, |x| x),
+            }?;
+        }
+        Ok(converter.out)
+    }
 }
 
 /// `-32768`, `3.4e38`, `nan` (GDAL writes NaN nodata in several spellings).
@@ -280,6 +349,7 @@ fn parse_nodata(text: &str) -> Option<f64> {
 }
 
 /// How the image is cut into chunks (strips are chunks as wide as the image).
+#[derive(Clone, Debug)]
 struct ChunkGrid {
     tiled: bool,
     width: u32,
@@ -435,6 +505,8 @@ struct Converter<'a> {
     nodata: Option<f64>,
     scale: f64,
     width: usize,
+    /// `out` holds rows `first_row..`; a chunk's rows outside them are skipped.
+    first_row: usize,
     out: Vec<f32>,
 }
 
@@ -458,7 +530,10 @@ impl Converter<'_> {
             });
         }
         let (y0, width, height, stride) = (w.y0, w.width, w.height, w.stride);
-        Ok((0..height).map(move |r| (y0 + r, &data[r * stride..][..width])))
+        let (first, end) = (self.first_row, self.first_row + self.out.len() / self.width);
+        Ok((0..height)
+            .map(move |r| (y0 + r, &data[r * stride..][..width]))
+            .filter(move |(y, _)| (first..end).contains(y)))
     }
 
     fn ints<T: Copy>(
@@ -470,7 +545,7 @@ impl Converter<'_> {
         // A NaN or fractional nodata matches no integer: no voids.
         let nodata = self.nodata.unwrap_or(f64::NAN);
         for (y, row) in self.rows(data, w)? {
-            let out = &mut self.out[y * self.width + w.x0..][..w.width];
+            let out = &mut self.out[(y - self.first_row) * self.width + w.x0..][..w.width];
             for (o, &x) in out.iter_mut().zip(row) {
                 let v = to_f64(x);
                 *o = if v == nodata {
@@ -494,7 +569,7 @@ impl Converter<'_> {
         let nodata = self.nodata.map(|n| f64::from(n as f32));
         let nan_is_void = nodata.is_some_and(f64::is_nan);
         for (y, row) in self.rows(data, w)? {
-            let start = y * self.width + w.x0;
+            let start = (y - self.first_row) * self.width + w.x0;
             for (c, &x) in row.iter().enumerate() {
                 let v = to_f64(x);
                 let h = if (v.is_nan() && nan_is_void) || Some(v) == nodata {

@@ -1,7 +1,8 @@
 //! A DEM opened to be read a band of rows at a time ([`open`], [`Stream::rows`]), so that
-//! `tiletool` can build tile sets from grids larger than memory. SRTM tiles and mosaics and
-//! raw `.r16`/`.f32` files are read band by band, straight from the files; the other formats
-//! are decoded whole, as [`crate::read`] does, and served from memory.
+//! `tiletool` can build tile sets from grids larger than memory. SRTM tiles and mosaics, raw
+//! `.r16`/`.f32` files and GeoTIFFs (the strips or tiles a band touches) are read band by
+//! band, straight from the files; PNG and JPEG pictures are decoded whole, as [`crate::read`]
+//! does, and served from memory.
 //!
 //! Opening reads every row once: it checks the samples, finds the range of heights, counts the
 //! voids and plans the fill ([`crate::banded`]). A band is then read again with the margin its
@@ -14,10 +15,12 @@ use std::path::PathBuf;
 use crate::banded::{Plan, Scanner, STORED};
 use crate::placement::Placement;
 use crate::raster::Georef;
-use crate::{kind_of, raw, spacing, srtm, window, DemError, Kind, ReadOptions, MAX_HEIGHT};
+use crate::{
+    geotiff, kind_of, raw, spacing, srtm, window, DemError, Kind, ReadOptions, MAX_HEIGHT,
+};
 
 /// The formats [`open`] reads band by band (the others are decoded whole).
-pub const BAND_FORMATS: &str = "SRTM .hgt tiles and mosaics, raw .r16 and .f32";
+pub const BAND_FORMATS: &str = "SRTM .hgt tiles and mosaics, GeoTIFF, raw .r16 and .f32";
 
 /// Rows read per step of the opening scan.
 const SCAN_ROWS: usize = 256;
@@ -56,6 +59,7 @@ enum Source {
 enum Rows {
     Srtm(srtm::Mosaic),
     Raw(raw::RawRows),
+    Tiff(geotiff::GeoTiff),
 }
 
 impl Rows {
@@ -63,6 +67,7 @@ impl Rows {
         match self {
             Rows::Srtm(m) => m.width,
             Rows::Raw(r) => r.width,
+            Rows::Tiff(t) => t.width,
         }
     }
 
@@ -70,6 +75,7 @@ impl Rows {
         match self {
             Rows::Srtm(m) => m.height,
             Rows::Raw(r) => r.height,
+            Rows::Tiff(t) => t.height,
         }
     }
 
@@ -78,6 +84,7 @@ impl Rows {
         match self {
             Rows::Srtm(m) => m.rows(y0, y1),
             Rows::Raw(r) => r.rows(y0, y1),
+            Rows::Tiff(t) => t.rows(y0, y1),
         }
     }
 }
@@ -91,6 +98,11 @@ pub fn open(paths: &[PathBuf], opts: &ReadOptions) -> Result<Stream, DemError> {
             let m = srtm::layout(paths, opts)?;
             let (georef, placement, description) = (m.georef, m.placement, m.description.clone());
             (Rows::Srtm(m), georef, placement, description)
+        }
+        Kind::Tiff => {
+            let t = geotiff::layout(&paths[0], opts)?;
+            let (georef, placement, description) = (t.georef, t.placement, t.description.clone());
+            (Rows::Tiff(t), georef, placement, description)
         }
         Kind::Raw(raw_kind) => {
             let r = raw::layout(&paths[0], raw_kind, opts)?;

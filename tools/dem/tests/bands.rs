@@ -120,3 +120,45 @@ fn other_formats_are_held_whole() {
         &whole.heights[..]
     );
 }
+
+/// GeoTIFFs are read a band at a time by decoding the strips or tiles the band touches: real
+/// SRTM heights with their voids as GDAL nodata, tiled and stripped, compressed, geographic.
+#[test]
+fn geotiffs_read_in_bands_are_read_whole() {
+    use common::{Layout, Samples, TiffSpec};
+    let dir = tempfile::tempdir().expect("tempdir");
+    // A 900 x 700 crop of N48W125 across the edge of its void (the sea), voids kept.
+    let bytes = std::fs::read(data("srtm/N48W125.hgt")).expect("read hgt");
+    let (w, h, side) = (900usize, 700usize, 3601usize);
+    let mut samples = Vec::with_capacity(w * h);
+    for y in 1500..1500 + h {
+        for x in 2400..2400 + w {
+            let i = 2 * (y * side + x);
+            samples.push(i16::from_be_bytes([bytes[i], bytes[i + 1]]));
+        }
+    }
+    let voids = samples.iter().filter(|&&v| v == -32768).count();
+    assert!(voids > 1000, "{voids} voids");
+    let layouts = [
+        (
+            Layout::Tiles {
+                width: 64,
+                height: 48,
+            },
+            5u16,
+        ),
+        (Layout::Strips { rows: 7 }, 8),
+        (Layout::Strips { rows: 1 }, 1),
+    ];
+    for (k, (layout, compression)) in layouts.into_iter().enumerate() {
+        let mut spec = TiffSpec::new(w as u32, h as u32, Samples::I16(samples.clone()))
+            .geographic(-124.5, 47.4, 1.0 / 3600.0)
+            .nodata("-32768");
+        spec.layout = layout;
+        spec.compression = compression;
+        let path = dir.path().join(format!("n48_{k}.tif"));
+        spec.write(&path);
+        let g = same_in_bands(&[path], &ReadOptions::default(), 97);
+        assert_eq!(g.voids_filled, voids as u64);
+    }
+}
