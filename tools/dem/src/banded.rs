@@ -15,6 +15,8 @@
 //! the same arithmetic as the whole-grid fill: the same bits. The margin is at most
 //! `2^(stored_at + 1) + 2` rows either side.
 
+use std::borrow::Cow;
+
 use crate::fill::{pull, push_rows, tap, Level};
 
 /// The level a [`Plan`] keeps whole when the pyramid goes deeper: 1/4096 of the grid, so a
@@ -185,24 +187,40 @@ impl Plan {
             return read(y0, y1);
         }
         let (a, b) = self.span_filled(0, y0, y1 - 1);
-        let window = read(a, b + 1)?;
-        let rows = Rows {
-            first: a,
-            samples: &window,
-        };
-        // A band without a void needs nothing from the pyramid.
+        let mut window = read(a, b + 1)?;
         let width = self.dims[0].0;
-        let band = &window[(y0 - a) * width..(y1 - a) * width];
-        if !band.iter().any(|v| v.is_nan()) {
-            return Ok(band.to_vec());
+        let band = (y0 - a) * width..(y1 - a) * width;
+        // A band without a void needs nothing from the pyramid; one with voids is filled in
+        // place from the filled level 1 (level 0 is the biggest: it is not copied).
+        if window[band.clone()].iter().any(|v| v.is_nan()) {
+            let rows = Rows {
+                first: a,
+                samples: &window,
+            };
+            let (cw, ch) = self.dims[1];
+            let (clo, chi) = (tap(y0, ch).0, tap(y1 - 1, ch).1);
+            let coarse = Level {
+                width: cw,
+                height: ch,
+                samples: self.filled(1, clo, chi, &rows),
+            };
+            push_rows(
+                &mut window[band.clone()],
+                width,
+                (y0, self.dims[0].1),
+                &coarse,
+                clo,
+            );
         }
-        Ok(self.filled(0, y0, y1 - 1, &rows))
+        window.truncate(band.end);
+        window.drain(..band.start);
+        Ok(window)
     }
 
-    /// Rows `lo..=hi` of pulled level `i`.
-    fn pulled(&self, i: usize, lo: usize, hi: usize, grid: &Rows) -> Vec<f32> {
+    /// Rows `lo..=hi` of pulled level `i` (level 0's borrowed from the rows read).
+    fn pulled<'g>(&self, i: usize, lo: usize, hi: usize, grid: &Rows<'g>) -> Cow<'g, [f32]> {
         if i == 0 {
-            return grid.get(lo, hi, self.dims[0].0).to_vec();
+            return Cow::Borrowed(grid.get(lo, hi, self.dims[0].0));
         }
         let (fw, fh) = self.dims[i - 1];
         let first = 2 * lo;
@@ -213,7 +231,7 @@ impl Plan {
             let rows = if 2 * cy + 1 < fh { 2 } else { 1 };
             out.extend(pull(&fine[start..start + rows * fw], fw, rows).samples);
         }
-        out
+        Cow::Owned(out)
     }
 
     /// Rows `lo..=hi` of filled level `i`.
@@ -224,7 +242,7 @@ impl Plan {
                 return level.samples[lo * w..(hi + 1) * w].to_vec();
             }
         }
-        let mut rows = self.pulled(i, lo, hi, grid);
+        let mut rows = self.pulled(i, lo, hi, grid).into_owned();
         if i == self.depth || !rows.iter().any(|v| v.is_nan()) {
             return rows;
         }
@@ -269,8 +287,8 @@ struct Rows<'a> {
     samples: &'a [f32],
 }
 
-impl Rows<'_> {
-    fn get(&self, lo: usize, hi: usize, width: usize) -> &[f32] {
+impl<'g> Rows<'g> {
+    fn get(&self, lo: usize, hi: usize, width: usize) -> &'g [f32] {
         &self.samples[(lo - self.first) * width..(hi + 1 - self.first) * width]
     }
 }

@@ -4,6 +4,7 @@
 
 use std::borrow::Cow;
 use std::path::Path;
+use std::sync::{Arc, Mutex};
 
 use rayon::prelude::*;
 
@@ -137,11 +138,17 @@ struct Bands<'a> {
     shape: Grid<'a>,
     tiles: (u32, u32),
     per_band: u32,
+    /// The rows read last, kept for a read of the same rows (a grid read as one band is read
+    /// once) and dropped before any other read (one band in memory, not two).
+    last: Mutex<Option<HeldRows<'a>>>,
 }
+
+/// Rows `range` of the grid, shared by the band that read them and the cache.
+type HeldRows<'a> = (std::ops::Range<usize>, Arc<Cow<'a, [f32]>>);
 
 /// One band's rows, and the grid they make.
 struct Band<'a> {
-    rows: Cow<'a, [f32]>,
+    rows: Arc<Cow<'a, [f32]>>,
     first_row: usize,
     tile_rows: std::ops::Range<u32>,
 }
@@ -153,6 +160,7 @@ impl<'a> Bands<'a> {
             shape: source.shape(),
             tiles,
             per_band: source.band_tile_rows().clamp(1, tiles.1.max(1)),
+            last: Mutex::new(None),
         }
     }
 
@@ -171,8 +179,14 @@ impl<'a> Bands<'a> {
         let cells = TILE_CELLS as usize;
         let y0 = (rows.start as usize * cells).saturating_sub(margin);
         let y1 = (rows.end as usize * cells + 1 + margin).min(self.shape.height);
+        let mut last = self.last.lock().unwrap_or_else(|e| e.into_inner());
+        let heights = match last.take() {
+            Some((held, heights)) if held == (y0..y1) => heights,
+            _ => Arc::new(self.source.rows(y0, y1)?),
+        };
+        *last = Some((y0..y1, heights.clone()));
         Ok(Band {
-            rows: self.source.rows(y0, y1)?,
+            rows: heights,
             first_row: y0,
             tile_rows: rows,
         })
@@ -990,7 +1004,8 @@ pub fn build_tileset_from(
     };
     let (agreements, agreement_passes, agreement_meshes) = if params.shared_sides {
         let agreed = agree_sides(&bands, params, step, Remesh::Changed)?;
-        (Some(agreed.tiles), agreed.passes, agreed.meshes)
+        let (passes, meshes) = (agreed.passes, agreed.meshes);
+        (Some(agreed), passes, meshes)
     } else {
         (None, 0, 0)
     };
@@ -1046,9 +1061,12 @@ pub fn build_tileset_from(
             let (tx, ty) = (t as u32 % tiles_x, t as u32 / tiles_x);
             let built = match &agreements {
                 Some(a) => {
-                    let (agreement, sides) = &a[t];
-                    build_tile(&grid, tx, ty, params, step, agreement).and_then(|b| {
-                        if b.sides == *sides {
+                    let agreement = Agreement {
+                        forced: a.forced[t].clone(),
+                        units: Some(a.units.clone()),
+                    };
+                    build_tile(&grid, tx, ty, params, step, &agreement).and_then(|b| {
+                        if b.sides == a.sides[t] {
                             Ok(b)
                         } else {
                             Err(BuildError::Internal(format!(
@@ -1230,17 +1248,18 @@ fn agree_sides(
             }
         }
     }
-    let agreements = (0..count)
-        .map(|t| {
-            let agreement = Agreement {
-                forced: forced(t, &sides),
-                units: Some(units.clone()),
-            };
-            (agreement, sides[t].clone())
-        })
-        .collect();
+    // Every tile was last meshed with its forced sides as they are now: a tile whose forced
+    // sides changed after its last mesh would be in `dirty`. So those are its agreement, and
+    // no further copy of the sides is made (the state is per tile: it grows with the set).
+    let forced = meshed_with
+        .into_iter()
+        .enumerate()
+        .map(|(t, f)| f.ok_or_else(|| BuildError::Internal(format!("tile {t} was never meshed"))))
+        .collect::<Result<Vec<_>, _>>()?;
     Ok(Agreed {
-        tiles: agreements,
+        forced,
+        sides,
+        units,
         passes,
         meshes: rebuilt,
     })
@@ -1258,8 +1277,12 @@ enum Remesh {
 
 /// What [`agree_sides`] settled.
 struct Agreed {
-    /// Per tile (row-major): the agreement to build it with and the sides it will then have.
-    tiles: Vec<(Agreement, Sides)>,
+    /// Per tile (row-major): the side vertices to build it with (its [`Agreement::forced`])
+    /// and the sides it will then have.
+    forced: Vec<Sides>,
+    sides: Vec<Sides>,
+    /// Per level, the morph unit of every tile.
+    units: Vec<f64>,
     passes: u32,
     /// Tiles meshed over all passes.
     meshes: u64,
@@ -1355,11 +1378,11 @@ mod tests {
             fewer.meshes,
             every.meshes
         );
-        assert_eq!(fewer.tiles.len(), every.tiles.len());
-        for (t, (a, b)) in fewer.tiles.iter().zip(&every.tiles).enumerate() {
-            assert_eq!(a.0.forced, b.0.forced, "tile {t}: forced sides");
-            assert_eq!(a.0.units, b.0.units, "tile {t}: morph units");
-            assert_eq!(a.1, b.1, "tile {t}: sides");
+        assert_eq!(fewer.units, every.units, "morph units");
+        assert_eq!(fewer.forced.len(), every.forced.len());
+        for t in 0..fewer.forced.len() {
+            assert_eq!(fewer.forced[t], every.forced[t], "tile {t}: forced sides");
+            assert_eq!(fewer.sides[t], every.sides[t], "tile {t}: sides");
         }
     }
 
