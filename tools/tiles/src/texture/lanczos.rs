@@ -45,15 +45,23 @@ impl Image {
 
     /// Texels rounded to bytes, RGBA with alpha 255 (what the BC1 encoder takes).
     pub fn to_rgba8(&self) -> Vec<u8> {
-        let mut out = Vec::with_capacity(self.texels.len() * 4);
-        for t in &self.texels {
-            for c in t {
-                out.push(c.round().clamp(0.0, 255.0) as u8);
+        let mut out = vec![255u8; self.texels.len() * 4];
+        for (o, t) in out.chunks_exact_mut(4).zip(&self.texels) {
+            for (o, &c) in o.iter_mut().zip(t) {
+                *o = byte(c);
             }
-            out.push(255);
         }
         out
     }
+}
+
+/// `c.round().clamp(0.0, 255.0) as u8`, without the library call (`roundf`, or `floor` on
+/// the baseline x86-64 target: with the loop around it, 9% of a build): `c + 0.5` is exact
+/// in f64, and `as u8` truncates towards zero and saturates, so it is the floor of `c + 0.5`,
+/// that is `c` rounded half away from zero, for `-0.5 <= c < 255.5`; below it gives 0, above
+/// 255, and NaN 0, as the clamp did.
+fn byte(c: f32) -> u8 {
+    (f64::from(c) + 0.5) as u8
 }
 
 /// `sinc(x) sinc(x / RADIUS)` for `|x| < RADIUS`, else 0.
@@ -158,6 +166,32 @@ pub fn resample(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `byte` is the rounding it replaces, on every f32 from -2 to 258 in steps of 1/1024, at
+    /// the halves and their neighbours, and at NaN and the infinities.
+    #[test]
+    fn bytes_round_as_before() {
+        let old = |c: f32| c.round().clamp(0.0, 255.0) as u8;
+        let mut values: Vec<f32> = (-2048..=258 * 1024).map(|i| i as f32 / 1024.0).collect();
+        for k in -2..=257 {
+            let half = k as f32 + 0.5;
+            values.extend([
+                half,
+                f32::from_bits(half.to_bits() - 1),
+                f32::from_bits(half.to_bits() + 1),
+            ]);
+        }
+        values.extend([
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            -0.0,
+            0.499_999_97,
+        ]);
+        for c in values {
+            assert_eq!(byte(c), old(c), "{c:e}");
+        }
+    }
 
     fn ramp(w: usize, h: usize) -> Image {
         let mut img = Image::new(w, h);

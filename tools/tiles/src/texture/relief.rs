@@ -181,15 +181,20 @@ pub fn render(
         (hi(&xs, grid.width), hi(&ys, grid.height)),
     );
     let at = |x: usize, y: usize| lit.colours[(y - lit.y0) * lit.width + (x - lit.x0)];
+    // Each column's two samples and weight, once for all rows (`floor` is a library call).
+    let columns: Vec<(usize, usize, f32)> = xs
+        .iter()
+        .map(|&x| {
+            let xa = x.floor() as usize;
+            (xa, (xa + 1).min(grid.width - 1), (x - xa as f64) as f32)
+        })
+        .collect();
     let mut image = Image::new(width, height);
     for (j, &y) in ys.iter().enumerate() {
         let ya = y.floor() as usize;
         let yb = (ya + 1).min(grid.height - 1);
         let fy = (y - ya as f64) as f32;
-        for (i, &x) in xs.iter().enumerate() {
-            let xa = x.floor() as usize;
-            let xb = (xa + 1).min(grid.width - 1);
-            let fx = (x - xa as f64) as f32;
+        for (i, &(xa, xb, fx)) in columns.iter().enumerate() {
             let (a, b, c, d) = (at(xa, ya), at(xb, ya), at(xa, yb), at(xb, yb));
             image.texels[j * width + i] = [0, 1, 2].map(|k| {
                 let top = a[k] + fx * (b[k] - a[k]);
