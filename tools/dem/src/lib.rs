@@ -25,6 +25,7 @@ mod raster;
 mod raw;
 mod srtm;
 mod stream;
+mod tiff_mosaic;
 
 use std::path::{Path, PathBuf};
 
@@ -167,6 +168,18 @@ pub fn read(paths: &[PathBuf], opts: &ReadOptions) -> Result<HeightGrid, DemErro
     let first = &paths[0];
     let raster = match kind {
         Kind::Hgt => srtm::read(paths, opts)?,
+        Kind::Tiff if paths.len() > 1 => {
+            let m = tiff_mosaic::layout(paths, opts)?;
+            let samples = m.rows(0, m.height)?;
+            Raster {
+                width: m.width,
+                height: m.height,
+                samples,
+                georef: m.georef,
+                placement: m.placement,
+                description: m.description,
+            }
+        }
         Kind::Tiff => geotiff::read(first, opts)?,
         Kind::Png => picture::read(first, image::ImageFormat::Png, opts)?,
         Kind::Jpeg => picture::read(first, image::ImageFormat::Jpeg, opts)?,
@@ -188,12 +201,23 @@ fn kind_of(paths: &[PathBuf], opts: &ReadOptions) -> Result<(Kind, String), DemE
         .collect::<Result<Vec<_>, _>>()?;
     let kind = kinds[0];
     if paths.len() > 1 {
-        if let Some((path, k)) = paths.iter().zip(&kinds).find(|(_, k)| **k != Kind::Hgt) {
+        if !matches!(kind, Kind::Hgt | Kind::Tiff) {
+            return Err(DemError::Mosaic {
+                file: label(first),
+                problem: format!(
+                    "only SRTM .hgt tiles and GeoTIFFs can be mosaicked, this is {}",
+                    kind.name()
+                ),
+            });
+        }
+        if let Some((path, k)) = paths.iter().zip(&kinds).find(|(_, k)| **k != kind) {
             return Err(DemError::Mosaic {
                 file: label(path),
                 problem: format!(
-                    "only SRTM .hgt tiles can be mosaicked, this is {}",
-                    k.name()
+                    "it is {} and {} is {}: a mosaic is of one kind",
+                    k.name(),
+                    label(first),
+                    kind.name()
                 ),
             });
         }

@@ -16,11 +16,13 @@ use crate::banded::{Plan, Scanner, STORED};
 use crate::placement::Placement;
 use crate::raster::Georef;
 use crate::{
-    geotiff, kind_of, raw, spacing, srtm, window, DemError, Kind, ReadOptions, MAX_HEIGHT,
+    geotiff, kind_of, raw, spacing, srtm, tiff_mosaic, window, DemError, Kind, ReadOptions,
+    MAX_HEIGHT,
 };
 
 /// The formats [`open`] reads band by band (the others are decoded whole).
-pub const BAND_FORMATS: &str = "SRTM .hgt tiles and mosaics, GeoTIFF, raw .r16 and .f32";
+pub const BAND_FORMATS: &str =
+    "SRTM .hgt tiles and mosaics, GeoTIFFs and their mosaics, raw .r16 and .f32";
 
 /// Rows read per step of the opening scan.
 const SCAN_ROWS: usize = 256;
@@ -60,6 +62,7 @@ enum Rows {
     Srtm(srtm::Mosaic),
     Raw(raw::RawRows),
     Tiff(geotiff::GeoTiff),
+    TiffMosaic(tiff_mosaic::TiffMosaic),
 }
 
 impl Rows {
@@ -68,6 +71,7 @@ impl Rows {
             Rows::Srtm(m) => m.width,
             Rows::Raw(r) => r.width,
             Rows::Tiff(t) => t.width,
+            Rows::TiffMosaic(m) => m.width,
         }
     }
 
@@ -76,6 +80,7 @@ impl Rows {
             Rows::Srtm(m) => m.height,
             Rows::Raw(r) => r.height,
             Rows::Tiff(t) => t.height,
+            Rows::TiffMosaic(m) => m.height,
         }
     }
 
@@ -85,6 +90,7 @@ impl Rows {
             Rows::Srtm(m) => m.rows(y0, y1),
             Rows::Raw(r) => r.rows(y0, y1),
             Rows::Tiff(t) => t.rows(y0, y1),
+            Rows::TiffMosaic(m) => m.rows(y0, y1),
         }
     }
 }
@@ -98,6 +104,11 @@ pub fn open(paths: &[PathBuf], opts: &ReadOptions) -> Result<Stream, DemError> {
             let m = srtm::layout(paths, opts)?;
             let (georef, placement, description) = (m.georef, m.placement, m.description.clone());
             (Rows::Srtm(m), georef, placement, description)
+        }
+        Kind::Tiff if paths.len() > 1 => {
+            let m = tiff_mosaic::layout(paths, opts)?;
+            let (georef, placement, description) = (m.georef, m.placement, m.description.clone());
+            (Rows::TiffMosaic(m), georef, placement, description)
         }
         Kind::Tiff => {
             let t = geotiff::layout(&paths[0], opts)?;

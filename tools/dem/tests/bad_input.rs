@@ -147,9 +147,14 @@ fn mismatched_mosaics() {
         "{e}"
     );
     let png = write(dir.path(), "x.png", b"not really");
-    let e = read_err(&[a, png], &ReadOptions::default());
+    let e = read_err(&[a, png.clone()], &ReadOptions::default());
     assert!(
-        e.contains("x.png: mismatched mosaic: only SRTM .hgt tiles can be mosaicked"),
+        e.contains("x.png: mismatched mosaic: it is a PNG and ") && e.contains("of one kind"),
+        "{e}"
+    );
+    let e = read_err(&[png.clone(), png], &ReadOptions::default());
+    assert!(
+        e.contains("x.png: mismatched mosaic: only SRTM .hgt tiles and GeoTIFFs can be mosaicked"),
         "{e}"
     );
 }

@@ -127,16 +127,7 @@ fn other_formats_are_held_whole() {
 fn geotiffs_read_in_bands_are_read_whole() {
     use common::{Layout, Samples, TiffSpec};
     let dir = tempfile::tempdir().expect("tempdir");
-    // A 900 x 700 crop of N48W125 across the edge of its void (the sea), voids kept.
-    let bytes = std::fs::read(data("srtm/N48W125.hgt")).expect("read hgt");
-    let (w, h, side) = (900usize, 700usize, 3601usize);
-    let mut samples = Vec::with_capacity(w * h);
-    for y in 1500..1500 + h {
-        for x in 2400..2400 + w {
-            let i = 2 * (y * side + x);
-            samples.push(i16::from_be_bytes([bytes[i], bytes[i + 1]]));
-        }
-    }
+    let (w, h, samples) = n48_crop();
     let voids = samples.iter().filter(|&&v| v == -32768).count();
     assert!(voids > 1000, "{voids} voids");
     let layouts = [
@@ -161,4 +152,113 @@ fn geotiffs_read_in_bands_are_read_whole() {
         let g = same_in_bands(&[path], &ReadOptions::default(), 97);
         assert_eq!(g.voids_filled, voids as u64);
     }
+}
+
+/// A 900 x 700 crop of SRTM1 N48W125 across the edge of its void (the sea), voids kept.
+fn n48_crop() -> (usize, usize, Vec<i16>) {
+    let bytes = std::fs::read(data("srtm/N48W125.hgt")).expect("read hgt");
+    let (w, h, side) = (900usize, 700usize, 3601usize);
+    let mut samples = Vec::with_capacity(w * h);
+    for y in 1500..1500 + h {
+        for x in 2400..2400 + w {
+            let i = 2 * (y * side + x);
+            samples.push(i16::from_be_bytes([bytes[i], bytes[i + 1]]));
+        }
+    }
+    (w, h, samples)
+}
+
+/// Columns `x0..x1` and rows `y0..y1` of the crop as a geographic GeoTIFF placed where they
+/// lie in it.
+fn n48_piece(path: &std::path::Path, (x0, x1): (usize, usize), (y0, y1): (usize, usize)) {
+    use common::{Layout, Samples, TiffSpec};
+    let (w, _, all) = n48_crop();
+    let step = 1.0 / 3600.0;
+    let samples: Vec<i16> = (y0..y1)
+        .flat_map(|y| all[y * w + x0..y * w + x1].to_vec())
+        .collect();
+    let mut spec = TiffSpec::new((x1 - x0) as u32, (y1 - y0) as u32, Samples::I16(samples))
+        .geographic(-124.5 + x0 as f64 * step, 47.4 - y0 as f64 * step, step)
+        .nodata("-32768");
+    spec.layout = Layout::Tiles {
+        width: 32,
+        height: 32,
+    };
+    spec.compression = 8;
+    spec.write(path);
+}
+
+/// GeoTIFFs side by side (overlapping by a row and a column where they meet, as SRTM and
+/// Copernicus tiles do) are the grid they were cut from, read whole and in bands; holes,
+/// misaligned files and other spacings are refused with one line.
+#[test]
+fn geotiff_mosaics_are_the_grid_they_were_cut_from() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = |name: &str| dir.path().join(name);
+    n48_piece(&p("whole.tif"), (0, 900), (0, 700));
+    n48_piece(&p("nw.tif"), (0, 451), (0, 351));
+    n48_piece(&p("ne.tif"), (450, 900), (0, 351));
+    n48_piece(&p("sw.tif"), (0, 451), (350, 700));
+    n48_piece(&p("se.tif"), (450, 900), (350, 700));
+    let opts = ReadOptions::default();
+    let whole = dem::read(&[p("whole.tif")], &opts).expect("read whole");
+    // Given in any order.
+    let pieces = [p("se.tif"), p("nw.tif"), p("sw.tif"), p("ne.tif")];
+    let mosaic = same_in_bands(&pieces, &opts, 129);
+    assert!(
+        mosaic.description.starts_with("GeoTIFF mosaic of 4 files"),
+        "{}",
+        mosaic.description
+    );
+    assert_eq!((mosaic.width, mosaic.height), (900, 700));
+    assert_eq!(mosaic.voids_filled, whole.voids_filled);
+    assert!(whole.voids_filled > 1000);
+    assert!(
+        mosaic
+            .heights
+            .iter()
+            .zip(&whole.heights)
+            .all(|(a, b)| a.to_bits() == b.to_bits()),
+        "the mosaic's heights are not the grid's"
+    );
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * b.abs();
+    assert!(close(mosaic.spacing_x, whole.spacing_x) && close(mosaic.spacing_y, whole.spacing_y));
+    let (m, w) = (
+        mosaic.placement.expect("placed"),
+        whole.placement.expect("placed"),
+    );
+    assert!(
+        (m.x0 - w.x0).abs() < 1e-9 && (m.y0 - w.y0).abs() < 1e-9,
+        "{m:?} vs {w:?}"
+    );
+
+    // A hole where a file is missing.
+    let e = dem::read(&pieces[..3], &opts).expect_err("a hole");
+    let e = e.to_string();
+    assert!(e.contains("do not cover") && !e.contains('\n'), "{e}");
+    // A file half a sample off the others' lattice.
+    let step = 1.0 / 3600.0;
+    {
+        use common::{Samples, TiffSpec};
+        TiffSpec::new(4, 4, Samples::I16(vec![5; 16]))
+            .geographic(-124.5 + 0.5 * step, 47.4 + 10.0 * step, step)
+            .write(&p("off.tif"));
+        TiffSpec::new(4, 4, Samples::I16(vec![5; 16]))
+            .geographic(-124.5, 47.4 + 10.0 * step, 2.0 * step)
+            .write(&p("coarse.tif"));
+    }
+    let e = dem::read(&[p("whole.tif"), p("off.tif")], &opts).expect_err("misaligned");
+    assert!(
+        e.to_string().contains("off.tif: mismatched mosaic")
+            && e.to_string().contains("not aligned"),
+        "{e}"
+    );
+    let e = dem::read(&[p("whole.tif"), p("coarse.tif")], &opts).expect_err("other spacing");
+    assert!(
+        e.to_string().contains("coarse.tif: mismatched mosaic") && e.to_string().contains("apart"),
+        "{e}"
+    );
+    // Two files in one place.
+    let e = dem::read(&[p("nw.tif"), p("nw.tif")], &opts).expect_err("twice");
+    assert!(e.to_string().contains("lies where"), "{e}");
 }
