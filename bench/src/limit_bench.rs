@@ -117,7 +117,18 @@ fn path_start(vkterrain: &Path, set: &Path, path: &str, seconds: f64, out: &Path
     Ok(())
 }
 
-pub fn limit_table() -> Result<()> {
+/// What [`limit_table`] flies besides the flight table.
+#[derive(Clone, Copy, Debug)]
+pub struct Extras {
+    /// The static-mesh limit at each row's triangle count (`tilebench limit`).
+    pub limit: bool,
+    /// The paper's Table 1 on the sets with a source (`tilebench limit`).
+    pub table1: bool,
+}
+
+/// `tilebench limit`: the flight table with the static-mesh limit and Table 1.
+/// `tilebench flights`: the flight table alone (a third of the time).
+pub fn limit_table(extras: Extras) -> Result<()> {
     let vkterrain = sibling("vkterrain", "renderer")?;
     let tiletool = sibling("tiletool", "tiletool")?;
     let dir = std::env::temp_dir().join(format!("tilebench-limit-{}", std::process::id()));
@@ -136,9 +147,9 @@ pub fn limit_table() -> Result<()> {
         ),
     ];
     println!("### Flights against discrete tau 1, brute force and the static-mesh limit (60 frames, 1024 x 768, one run)\n");
-    println!("Frame: median frame time. Limit: the static-mesh limit at the row's triangle count, median of 30 frames. Ratios are to discrete tau 1 of the same flight.\n");
-    println!("| dataset | path | mode | frame ms | triangles | frame / discrete tau 1 | triangles / discrete tau 1 | brute / this | limit ms | frame / limit |");
-    println!("|---|---|---|---:|---:|---:|---:|---:|---:|---:|");
+    println!("Frame: median frame time. GPU draw: the median of the GPU's timestamps around the draws. Limit: the static-mesh limit at the row's triangle count, median of 30 frames (`-` when not flown: `tilebench flights`). Ratios are to discrete tau 1 of the same flight.\n");
+    println!("| dataset | path | mode | frame ms | GPU draw ms | triangles | frame / discrete tau 1 | triangles / discrete tau 1 | brute / this | limit ms | frame / limit |");
+    println!("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|");
     let mut table1 = Vec::new();
     for set in sets()? {
         let file = dir.join(format!("{}.vkt", set.name.replace(' ', "_")));
@@ -164,22 +175,31 @@ pub fn limit_table() -> Result<()> {
             for (mode, extra) in modes {
                 let s = flight(&vkterrain, &file, path, 60, extra)?;
                 let f = |k: &str| s[k].as_f64().unwrap_or(f64::NAN);
-                rows.push((mode, f("frame_ms_median"), f("triangles_per_frame_mean")));
+                rows.push((
+                    mode,
+                    f("frame_ms_median"),
+                    f("triangles_per_frame_mean"),
+                    f("gpu_draw_ms_median"),
+                ));
             }
             let (brute, base) = (rows[0], rows[1]);
-            for (mode, ms, tris) in rows {
-                let l = limit(&vkterrain, tris)?;
+            for (mode, ms, tris, draw) in rows {
+                let (l, ratio) = if extras.limit {
+                    let l = limit(&vkterrain, tris)?;
+                    (format!("{l:.1}"), format!("{:.2}x", ms / l))
+                } else {
+                    ("-".into(), "-".into())
+                };
                 println!(
-                    "| {} | {path} | {mode} | {ms:.1} | {tris:.0} | {:.2}x | {:.2}x | {:.1}x | {l:.1} | {:.2}x |",
+                    "| {} | {path} | {mode} | {ms:.1} | {draw:.1} | {tris:.0} | {:.2}x | {:.2}x | {:.1}x | {l} | {ratio} |",
                     set.name,
                     ms / base.1,
                     tris / base.2,
                     brute.1 / ms,
-                    ms / l
                 );
             }
         }
-        if !set.source.is_empty() {
+        if extras.table1 && !set.source.is_empty() {
             let source: Vec<&str> = set.source.iter().map(String::as_str).collect();
             let start = dir.join(format!("{}_start.csv", set.name.replace(' ', "_")));
             path_start(&vkterrain, &file, "flyover", 12.0, &start)?;
@@ -210,12 +230,14 @@ pub fn limit_table() -> Result<()> {
             }
         }
     }
-    println!("\n### The paper's Table 1: flyovers at 480 x 360, warm, every frame measured against the source\n");
-    println!("Whole path: 120 frames over the 48 s flyover (0.4 s of path a frame). First 12 s: 360 frames (30 a second).\n");
-    println!("| dataset | mode | frame ms | triangles | max_error_px, whole | pop_px, whole | max_error_px, first 12 s | pop_px, first 12 s |");
-    println!("|---|---|---:|---:|---:|---:|---:|---:|");
-    for row in table1 {
-        println!("{row}");
+    if extras.table1 {
+        println!("\n### The paper's Table 1: flyovers at 480 x 360, warm, every frame measured against the source\n");
+        println!("Whole path: 120 frames over the 48 s flyover (0.4 s of path a frame). First 12 s: 360 frames (30 a second).\n");
+        println!("| dataset | mode | frame ms | triangles | max_error_px, whole | pop_px, whole | max_error_px, first 12 s | pop_px, first 12 s |");
+        println!("|---|---|---:|---:|---:|---:|---:|---:|");
+        for row in table1 {
+            println!("{row}");
+        }
     }
     println!();
     let _ = std::fs::remove_dir_all(&dir);

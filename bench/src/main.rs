@@ -41,6 +41,12 @@ fn main() -> std::process::ExitCode {
     }
 }
 
+/// `tilebench limit` flies the static-mesh limit and Table 1 beside the flight table.
+const ALL_EXTRAS: limit_bench::Extras = limit_bench::Extras {
+    limit: true,
+    table1: true,
+};
+
 fn run() -> Result<()> {
     let what = std::env::args().nth(1).unwrap_or_else(|| "all".into());
     match what.as_str() {
@@ -49,18 +55,22 @@ fn run() -> Result<()> {
         "acmr" => acmr(),
         "frames" => frames(),
         "memory" => memory_bench::memory(),
-        "limit" => limit_bench::limit_table(),
+        "limit" => limit_bench::limit_table(ALL_EXTRAS),
+        "flights" => limit_bench::limit_table(limit_bench::Extras {
+            limit: false,
+            table1: false,
+        }),
         "all" => {
             throughput()?;
             economy()?;
             acmr()?;
             frames()?;
-            limit_bench::limit_table()?;
+            limit_bench::limit_table(ALL_EXTRAS)?;
             memory_bench::memory()
         }
         other => {
             bail!(
-                "unknown benchmark {other:?}: throughput, economy, acmr, frames, memory, limit or all"
+                "unknown benchmark {other:?}: throughput, economy, acmr, frames, memory, limit, flights or all"
             )
         }
     }
