@@ -17,7 +17,7 @@
 
 use std::borrow::Cow;
 
-use crate::fill::{pull, push_rows, tap, Level};
+use crate::fill::{pull, pull_push, push_rows, tap, Level};
 
 /// The level a [`Plan`] keeps whole when the pyramid goes deeper: 1/4096 of the grid, so a
 /// 65537² grid keeps about a million samples; a band's margin is then at most 130 rows.
@@ -139,33 +139,22 @@ impl Scanner {
         // pushed down to the kept level.
         let k = self.dims.len() - 1;
         let (w, h) = self.dims[k];
-        let mut pyramid = vec![Level {
-            width: w,
-            height: h,
-            samples: self.top,
-        }];
+        let mut top = self.top;
+        let above = pull_push(&mut top, w, h);
         let mut dims = self.dims;
-        loop {
-            let top = pyramid.last().expect("kept level");
-            let coarse = pull(&top.samples, top.width, top.height);
-            let done = !coarse.samples.iter().any(|v| v.is_nan());
-            dims.push((coarse.width, coarse.height));
-            pyramid.push(coarse);
-            if done {
-                break;
-            }
-        }
-        for i in (1..pyramid.len()).rev() {
-            let (lower, upper) = pyramid.split_at_mut(i);
-            let fine = &mut lower[i - 1];
-            let (w, h) = (fine.width, fine.height);
-            push_rows(&mut fine.samples, w, (0, h), &upper[0], 0);
-        }
+        dims.extend(above.iter().map(|l| (l.width, l.height)));
         let depth = dims.len() - 1;
         Some(Plan {
             dims,
             depth,
-            stored: Some((k, pyramid.swap_remove(0))),
+            stored: Some((
+                k,
+                Level {
+                    width: w,
+                    height: h,
+                    samples: top,
+                },
+            )),
             voids: self.voids,
         })
     }

@@ -26,6 +26,14 @@ pub fn fill_voids(samples: &mut [f32], width: usize, height: usize) -> Option<u6
         return None;
     }
 
+    pull_push(samples, width, height);
+    Some(voids)
+}
+
+/// The push-pull of a `width` x `height` level with voids and at least one valid sample:
+/// pulls coarser levels until one has no void, then pushes them down, filling every void of
+/// each and of `samples`. Returns the coarser levels, filled, from the one just above up.
+pub(crate) fn pull_push(samples: &mut [f32], width: usize, height: usize) -> Vec<Level> {
     // Pull: coarser levels until one has no voids. With at least one valid sample the 1x1
     // level is valid, so this ends.
     let mut pyramid: Vec<Level> = Vec::new();
@@ -49,7 +57,7 @@ pub fn fill_voids(samples: &mut [f32], width: usize, height: usize) -> Option<u6
         push(&mut fine.samples, fine.width, fine.height, &upper[0]);
     }
     push(samples, width, height, &pyramid[0]);
-    Some(voids)
+    pyramid
 }
 
 /// Half-size level: each sample is the mean of the valid samples of its (up to) 2x2 block,

@@ -500,24 +500,22 @@ fn build(
         description: about.description.clone(),
         voids_filled: about.voids_filled,
     };
-    let summary = match &dem {
-        Dem::Whole(grid) => tiles::build_tileset_textured(
-            &view(grid),
-            &params,
-            texturing.as_ref(),
-            &meta,
-            output,
-            &progress,
-        )?,
-        Dem::Bands(heights) => tiles::build::build_tileset_from(
-            heights,
-            &params,
-            texturing.as_ref(),
-            &meta,
-            output,
-            &progress,
-        )?,
+    let whole;
+    let heights: &dyn tiles::build::Heights = match &dem {
+        Dem::Whole(grid) => {
+            whole = view(grid);
+            &whole
+        }
+        Dem::Bands(heights) => heights,
     };
+    let summary = tiles::build::build_tileset_from(
+        heights,
+        &params,
+        texturing.as_ref(),
+        &meta,
+        output,
+        &progress,
+    )?;
     bar.finish_and_clear();
     let total = start.elapsed();
     if !quiet {
