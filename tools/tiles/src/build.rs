@@ -1062,11 +1062,11 @@ pub fn build_tileset_from(
             let built = match &agreements {
                 Some(a) => {
                     let agreement = Agreement {
-                        forced: a.forced[t].clone(),
+                        forced: expand(&a.forced[t]),
                         units: Some(a.units.clone()),
                     };
                     build_tile(&grid, tx, ty, params, step, &agreement).and_then(|b| {
-                        if b.sides == a.sides[t] {
+                        if compact(&b.sides) == a.sides[t] {
                             Ok(b)
                         } else {
                             Err(BuildError::Internal(format!(
@@ -1150,29 +1150,29 @@ fn agree_sides(
         ((0..i64::from(tiles_x)).contains(&nx) && (0..i64::from(tiles_y)).contains(&ny))
             .then(|| (ny * i64::from(tiles_x) + nx) as usize)
     };
-    let forced = |t: usize, sides: &[Sides]| -> Sides {
+    let forced = |t: usize, sides: &[CompactSides]| -> CompactSides {
         (0..levels)
             .map(|level| {
                 std::array::from_fn(|k| {
                     let Some(n) = neighbour(t, k) else {
-                        return Vec::new();
+                        return NO_SIDE;
                     };
-                    let theirs = sides[n].get(level).map_or(&[][..], |s| &s[(k + 2) % 4][..]);
-                    let ours = sides[t].get(level).map_or(&[][..], |s| &s[k][..]);
-                    let mut union: Vec<u16> = ours.iter().chain(theirs).copied().collect();
-                    union.sort_unstable();
-                    union.dedup();
-                    union
+                    let theirs = sides[n].get(level).map_or(NO_SIDE, |s| s[(k + 2) % 4]);
+                    let ours = sides[t].get(level).map_or(NO_SIDE, |s| s[k]);
+                    std::array::from_fn(|w| ours[w] | theirs[w])
                 })
             })
             .collect()
     };
-    let mut sides: Vec<Sides> = vec![Vec::new(); count];
+    // The state is per tile, so it grows with the set: side vertices are held as bitmaps
+    // (1.4 KB a tile and copy at 9 levels; lists of u16 took about 40 KB a tile in all).
+    let mut sides: Vec<CompactSides> = vec![Vec::new(); count];
     // What each tile was last meshed with: a build is a function of its forced sides, so a
     // tile whose forced sides are what they were needs no new mesh.
-    let mut meshed_with: Vec<Option<Sides>> = vec![None; count];
+    let mut meshed_with: Vec<Option<CompactSides>> = vec![None; count];
     let mut deviation = vec![vec![0.0f64; levels]; count];
-    let mut dirty: Vec<(usize, Sides)> = (0..count).map(|t| (t, forced(t, &sides))).collect();
+    let mut dirty: Vec<(usize, CompactSides)> =
+        (0..count).map(|t| (t, forced(t, &sides))).collect();
     let (mut passes, mut rebuilt) = (0u32, 0u64);
     while !dirty.is_empty() {
         passes += 1;
@@ -1184,10 +1184,10 @@ fn agree_sides(
         }
         // Band by band, in row-major order as `dirty` is: each band read only when one of
         // its tiles is to be meshed again.
-        let mut built: Vec<(usize, Sides, Vec<f64>)> = Vec::with_capacity(dirty.len());
+        let mut built: Vec<(usize, CompactSides, Vec<f64>)> = Vec::with_capacity(dirty.len());
         for b in 0..bands.count() {
             let rows = bands.tile_rows(b);
-            let here: Vec<&(usize, Sides)> = dirty
+            let here: Vec<&(usize, CompactSides)> = dirty
                 .iter()
                 .filter(|(t, _)| rows.contains(&(*t as u32 / tiles_x)))
                 .collect();
@@ -1196,16 +1196,16 @@ fn agree_sides(
             }
             let band = bands.load(b, 0)?;
             let grid = band.grid(&bands.shape);
-            let meshed: Vec<(usize, Sides, Vec<f64>)> = here
+            let meshed: Vec<(usize, CompactSides, Vec<f64>)> = here
                 .par_iter()
                 .map(|(t, forced)| {
                     let (tx, ty) = (*t as u32 % tiles_x, *t as u32 / tiles_x);
                     let agreement = Agreement {
-                        forced: forced.clone(),
+                        forced: expand(forced),
                         units: None,
                     };
                     mesh_tile(&grid, (tx, ty), params, step, &agreement, Output::Sides)
-                        .map(|b| (*t, b.sides, b.deviation))
+                        .map(|b| (*t, compact(&b.sides), b.deviation))
                 })
                 .collect::<Result<_, _>>()?;
             built.extend(meshed);
@@ -1275,12 +1275,50 @@ enum Remesh {
     NextToChange,
 }
 
+/// One side's vertices at one level: bit `i` for position `i` (0..=256).
+type SideBits = [u64; 5];
+
+const NO_SIDE: SideBits = [0; 5];
+
+/// A tile's side vertices per level and side (north, east, south, west), as bitmaps: the
+/// agreement's state, a [`Sides`] in 40 bytes a side and level.
+type CompactSides = Vec<[SideBits; 4]>;
+
+fn compact(sides: &Sides) -> CompactSides {
+    sides
+        .iter()
+        .map(|level| {
+            level.each_ref().map(|side| {
+                let mut bits = NO_SIDE;
+                for &at in side {
+                    bits[usize::from(at) / 64] |= 1 << (at % 64);
+                }
+                bits
+            })
+        })
+        .collect()
+}
+
+/// The positions of a [`CompactSides`], ascending.
+fn expand(sides: &CompactSides) -> Sides {
+    sides
+        .iter()
+        .map(|level| {
+            level.each_ref().map(|bits| {
+                (0..TILE_SIZE as u16)
+                    .filter(|&at| bits[usize::from(at) / 64] & (1 << (at % 64)) != 0)
+                    .collect()
+            })
+        })
+        .collect()
+}
+
 /// What [`agree_sides`] settled.
 struct Agreed {
     /// Per tile (row-major): the side vertices to build it with (its [`Agreement::forced`])
     /// and the sides it will then have.
-    forced: Vec<Sides>,
-    sides: Vec<Sides>,
+    forced: Vec<CompactSides>,
+    sides: Vec<CompactSides>,
     /// Per level, the morph unit of every tile.
     units: Vec<f64>,
     passes: u32,
@@ -1384,6 +1422,30 @@ mod tests {
             assert_eq!(fewer.forced[t], every.forced[t], "tile {t}: forced sides");
             assert_eq!(fewer.sides[t], every.sides[t], "tile {t}: sides");
         }
+    }
+
+    /// The agreement's bitmaps hold exactly the side lists: every position 0..=256 of every
+    /// side and level, in and out, round-trips; a list with a repeat does not (the control:
+    /// the bitmaps are sets).
+    #[test]
+    fn side_bitmaps_hold_the_side_lists() {
+        let mut rng = splitmix::Rng(0x51de_b175);
+        for _ in 0..50 {
+            let sides: Sides = (0..9)
+                .map(|_| {
+                    std::array::from_fn(|_| {
+                        (0..TILE_SIZE as u16)
+                            .filter(|_| rng.below(3) == 0)
+                            .collect()
+                    })
+                })
+                .collect();
+            assert_eq!(expand(&compact(&sides)), sides);
+        }
+        let all: Sides = vec![std::array::from_fn(|_| (0..TILE_SIZE as u16).collect())];
+        assert_eq!(expand(&compact(&all)), all);
+        let repeat: Sides = vec![[vec![3, 3], vec![], vec![256], vec![0]]];
+        assert_ne!(expand(&compact(&repeat)), repeat);
     }
 
     #[test]
