@@ -1335,14 +1335,7 @@ mod tests {
     #[test]
     fn a_mesh_for_the_agreement_has_the_whole_builds_sides_and_deviations() {
         let heights = srtm3_crop(2 * 256 + 1);
-        let grid = Grid {
-            width: 2 * 256 + 1,
-            height: 2 * 256 + 1,
-            first_row: 0,
-            heights: &heights,
-            spacing_x: 53.2,
-            spacing_y: 92.6,
-        };
+        let grid = square(&heights);
         let params = BuildParams::default();
         let step = height_step(&grid).expect("step");
         let alone = Agreement::default();
@@ -1377,6 +1370,19 @@ mod tests {
     }
 
     /// `side * side` heights of the SRTM3 tile N55W003 (no voids), from (100, 100).
+    /// A square grid of `heights` at SRTM3's spacing near 55 N.
+    fn square(heights: &[f32]) -> Grid<'_> {
+        let side = heights.len().isqrt();
+        Grid {
+            width: side,
+            height: side,
+            first_row: 0,
+            heights,
+            spacing_x: 53.2,
+            spacing_y: 92.6,
+        }
+    }
+
     fn srtm3_crop(side: usize) -> Vec<f32> {
         let n = 1201;
         let bytes = std::fs::read(testdata::data("srtm/N55W003.hgt")).expect("readable hgt");
@@ -1396,14 +1402,7 @@ mod tests {
     fn agreement_remeshes_only_what_changed_and_settles_the_same() {
         let side = 4 * 256 + 1;
         let heights = srtm3_crop(side);
-        let grid = Grid {
-            width: side,
-            height: side,
-            first_row: 0,
-            heights: &heights,
-            spacing_x: 53.2,
-            spacing_y: 92.6,
-        };
+        let grid = square(&heights);
         let params = BuildParams::default();
         let step = height_step(&grid).expect("step");
         let bands = Bands::new(&grid, (4, 4));
