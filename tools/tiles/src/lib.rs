@@ -20,6 +20,7 @@ pub mod grid;
 pub mod mesh;
 pub mod ordered;
 pub mod pack;
+pub mod parts;
 pub mod quantise;
 pub mod rings;
 pub mod texture;

@@ -1,0 +1,371 @@
+//! A tile drawn part by part: each of its 4 x 4 parts (64 x 64 cells) at a level of its own, in
+//! one conforming mesh. This is the CPU side of what the renderer's index builder
+//! (`spirv/shaders/indices.comp`) makes on the GPU, so that the two can be compared and the
+//! renderer knows an array's length before the GPU writes it.
+//!
+//! # The mesh
+//!
+//! A level's mesh is a function of its vertex set (the quadtree of fans, see the shader's
+//! header): a cell is split exactly when the centre of one of its children is a vertex, a leaf
+//! is drawn as one fan around its centre, and a leaf's edge midpoint is in the fan exactly when
+//! it is a vertex. Levels are nested, and block `j` of a tile holds the vertices level `j` adds,
+//! so "vertex of level `L`" is "vertex of a block `<= L`".
+//!
+//! The mixed mesh takes its vertex set point by point:
+//! - a point inside part `q` is a vertex when its block is `<= L_q`;
+//! - a point on a line between parts, when its block is `<=` the largest level of the parts
+//!   that meet there;
+//! - a point on the tile's outer border, when its block is `<= G`, the largest level of all.
+//!   The border is then the one level `G` draws, so stitching to the neighbours is as for a
+//!   tile drawn at `G`.
+//!
+//! Every cell split is decided by a child's centre, which lies inside one part (never on a
+//! line), so inside each part the leaves are those of its own level `L_q`, provided every
+//! leaf lies in one part: each part's centre must be a vertex of its level (then its ancestors
+//! are split). [`PartKey::new`] ensures it by raising a part to the level that adds its centre,
+//! or by making the four parts of a quadrant one level where a centre never appears, or a
+//! quadrant one leaf. A leaf's edges that lie on a line between parts or on the border may
+//! hold more vertices than the midpoint (a finer neighbour's): the fan takes every vertex
+//! along such an edge, in order. So no vertex lies inside an edge of a fan it is not in, and
+//! the mesh has no T-junction and no crack whatever the heights of its vertices: the parts
+//! need no stitching between them.
+//!
+//! With every part at one level the mixed mesh is that level's mesh, fan for fan.
+
+use crate::mesh::TILE_SIZE;
+use crate::pack::unpack;
+
+/// Parts per tile side, and cells per part side.
+pub const PARTS: usize = 4;
+pub const PART_CELLS: u32 = 64;
+
+/// Lattice points per tile.
+const POINTS: usize = TILE_SIZE * TILE_SIZE;
+/// Block of a point that no level holds.
+const NEVER: u8 = u8::MAX;
+/// Restart index in the arrays this module makes.
+pub const RESTART: u32 = u32::MAX;
+
+/// The level of each part, row by row from the tile's first row (part `(i, j)` covers cells
+/// `64 i .. 64 (i + 1)` across and `64 j .. 64 (j + 1)` down, at index `4 j + i`).
+pub type PartLevels = [u8; PARTS * PARTS];
+
+/// The levels a tile's parts are drawn at, made such that every leaf lies in one part.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct PartKey {
+    pub levels: PartLevels,
+}
+
+/// Where each lattice point of a tile first appears: its block, and its vertex index.
+pub struct Blocks {
+    block: Vec<u8>,
+    vertex: Vec<u32>,
+    mesh_max: (u32, u32),
+    /// Per part, the block that adds its centre ([`NEVER`]: none does).
+    centres: PartLevels,
+    /// Per quadrant (2 x 2 parts), the block that adds its centre.
+    quadrant_centres: [u8; 4],
+}
+
+impl Blocks {
+    /// From the packed positions of blocks `0..`, block by block, and the last column and row
+    /// the tile's meshes cover.
+    pub fn new<'a>(blocks: impl IntoIterator<Item = &'a [u32]>, mesh_max: (u32, u32)) -> Blocks {
+        let mut block = vec![NEVER; POINTS];
+        let mut vertex = vec![u32::MAX; POINTS];
+        let mut index = 0u32;
+        for (j, positions) in blocks.into_iter().enumerate() {
+            for &p in positions {
+                let (x, y, _) = unpack(p);
+                if (x as usize) < TILE_SIZE && (y as usize) < TILE_SIZE {
+                    let i = y as usize * TILE_SIZE + x as usize;
+                    block[i] = j.min(usize::from(NEVER - 1)) as u8;
+                    vertex[i] = index;
+                }
+                index += 1;
+            }
+        }
+        let at = |x: u32, y: u32| block[y as usize * TILE_SIZE + x as usize];
+        let half = PART_CELLS / 2;
+        let centres = std::array::from_fn(|q| {
+            let (i, j) = ((q % PARTS) as u32, (q / PARTS) as u32);
+            at(i * PART_CELLS + half, j * PART_CELLS + half)
+        });
+        let quadrant_centres = std::array::from_fn(|k| {
+            let (i, j) = ((k % 2) as u32, (k / 2) as u32);
+            at(
+                2 * PART_CELLS * i + PART_CELLS,
+                2 * PART_CELLS * j + PART_CELLS,
+            )
+        });
+        Blocks {
+            block,
+            vertex,
+            mesh_max,
+            centres,
+            quadrant_centres,
+        }
+    }
+
+    /// The key that draws part `q` at `wanted[q]` or finer, with every part at most `top` (the
+    /// level whose blocks are resident). None: the parts cannot be drawn apart at `top` (the
+    /// tile is drawn at `top` as one level).
+    pub fn key(&self, wanted: &PartLevels, top: u32) -> Option<PartKey> {
+        let top = u8::try_from(top).ok()?;
+        let mut levels = wanted.map(|l| l.min(top));
+        // A part whose centre is a vertex of some level: at least that level.
+        for (l, &c) in levels.iter_mut().zip(&self.centres) {
+            if c != NEVER {
+                *l = (*l).max(c);
+            }
+        }
+        // Quadrant by quadrant: parts whose centre its level lacks make the quadrant one level.
+        for k in 0..4 {
+            let parts = quadrant_parts(k);
+            if parts.iter().all(|&q| self.centres[q] <= levels[q]) {
+                continue;
+            }
+            let m = parts.iter().map(|&q| levels[q]).max().unwrap_or(0);
+            for q in parts {
+                levels[q] = m;
+            }
+        }
+        if levels.iter().any(|&l| l > top) {
+            return None;
+        }
+        // The root must be split: some quadrant's centre is a vertex where the four parts
+        // around the tile's centre meet... and each quadrant one leaf or split as its parts are.
+        let root_split = (0..4).any(|k| {
+            let c = self.quadrant_centres[k];
+            c != NEVER
+                && c <= quadrant_parts(k)
+                    .iter()
+                    .map(|&q| levels[q])
+                    .max()
+                    .unwrap_or(0)
+        });
+        root_split.then_some(PartKey { levels })
+    }
+
+    /// Whether lattice point `(x, y)` is a vertex of the mixed mesh of `key`.
+    fn is_vertex(&self, key: &PartKey, x: u32, y: u32) -> bool {
+        let b = self.block[y as usize * TILE_SIZE + x as usize];
+        b != NEVER && b <= presence_level(key, x, y)
+    }
+
+    /// The mixed mesh of `key` as an index array (fans in the order of the finest cells along
+    /// the Hilbert curve, each ring from the leaf's north-west corner, [`RESTART`] between
+    /// fans), into the vertices of blocks `0..` in order. None if a fan vertex is missing (the
+    /// blocks do not make a mesh).
+    pub fn indices(&self, key: &PartKey) -> Option<Vec<u32>> {
+        let mut out = Vec::new();
+        let mut ring = Vec::with_capacity(16);
+        let mut h = 0u32;
+        while h < CELLS {
+            let c = hilbert_cell(h);
+            let Some(d) = self.leaf_depth(key, c) else {
+                h += 1;
+                continue;
+            };
+            let run = 1u32 << (2 * (7 - d));
+            if h & (run - 1) == 0 {
+                let s = 256u32 >> d;
+                let o = ((c.0 >> (7 - d)) * s, (c.1 >> (7 - d)) * s);
+                self.fan(key, o, s, &mut ring);
+                if !out.is_empty() {
+                    out.push(RESTART);
+                }
+                for &(x, y) in &ring {
+                    let v = self.vertex[y as usize * TILE_SIZE + x as usize];
+                    if v == u32::MAX || !self.is_vertex(key, x, y) {
+                        return None;
+                    }
+                    out.push(v);
+                }
+            }
+            h = (h | (run - 1)) + 1;
+        }
+        Some(out)
+    }
+
+    /// Depth of the leaf covering finest cell `c`, or None where the mesh does not reach (the
+    /// shader's `leaf_depth`).
+    fn leaf_depth(&self, key: &PartKey, c: (u32, u32)) -> Option<u32> {
+        let (mx, my) = self.mesh_max;
+        for d in 0..7u32 {
+            let s = 256u32 >> d;
+            let o = ((c.0 >> (7 - d)) * s, (c.1 >> (7 - d)) * s);
+            if o.0 >= mx || o.1 >= my {
+                return None;
+            }
+            let straddles = (mx > o.0 && mx < o.0 + s) || (my > o.1 && my < o.1 + s);
+            if !straddles {
+                let child = (
+                    (c.0 >> (6 - d)) * (s / 2) + s / 4,
+                    (c.1 >> (6 - d)) * (s / 2) + s / 4,
+                );
+                if !self.is_vertex(key, child.0, child.1) {
+                    return Some(d);
+                }
+            }
+        }
+        let o = (c.0 * 2, c.1 * 2);
+        (o.0 < mx && o.1 < my).then_some(7)
+    }
+
+    /// The lattice points of leaf `(o, s)`'s fan: centre, then the perimeter counter-clockwise
+    /// from the north-west corner, closed by repeating it. Along an edge on a line between
+    /// parts or on the border, every vertex; along any other, the midpoint when it is one.
+    fn fan(&self, key: &PartKey, o: (u32, u32), s: u32, ring: &mut Vec<(u32, u32)>) {
+        ring.clear();
+        ring.push((o.0 + s / 2, o.1 + s / 2));
+        let corners = [
+            (o.0, o.1),
+            (o.0 + s, o.1),
+            (o.0 + s, o.1 + s),
+            (o.0, o.1 + s),
+        ];
+        ring.push(corners[0]);
+        // Edges W (corner 0 -> 3), S (3 -> 2), E (2 -> 1), N (1 -> 0).
+        for (from, to) in [(0, 3), (3, 2), (2, 1), (1, 0)] {
+            let (a, b) = (corners[from], corners[to]);
+            let on_line = if a.0 == b.0 {
+                a.0.is_multiple_of(PART_CELLS)
+            } else {
+                a.1.is_multiple_of(PART_CELLS)
+            };
+            let step = |t: u32| {
+                (
+                    if a.0 == b.0 {
+                        a.0
+                    } else if b.0 > a.0 {
+                        a.0 + t
+                    } else {
+                        a.0 - t
+                    },
+                    if a.1 == b.1 {
+                        a.1
+                    } else if b.1 > a.1 {
+                        a.1 + t
+                    } else {
+                        a.1 - t
+                    },
+                )
+            };
+            if on_line {
+                for t in 1..s {
+                    let p = step(t);
+                    if self.is_vertex(key, p.0, p.1) {
+                        ring.push(p);
+                    }
+                }
+            } else {
+                let m = step(s / 2);
+                if self.is_vertex(key, m.0, m.1) {
+                    ring.push(m);
+                }
+            }
+            ring.push(b);
+        }
+    }
+}
+
+/// The level a lattice point of the mixed mesh takes (module header).
+pub fn presence_level(key: &PartKey, x: u32, y: u32) -> u8 {
+    let edge = TILE_SIZE as u32 - 1;
+    if x == 0 || y == 0 || x >= edge || y >= edge {
+        return key.levels.iter().copied().max().unwrap_or(0);
+    }
+    let span = |v: u32| {
+        let hi = (v / PART_CELLS) as usize;
+        if v.is_multiple_of(PART_CELLS) {
+            (hi - 1, hi)
+        } else {
+            (hi, hi)
+        }
+    };
+    let ((i0, i1), (j0, j1)) = (span(x), span(y));
+    let at = |i: usize, j: usize| key.levels[j * PARTS + i];
+    at(i0, j0).max(at(i1, j0)).max(at(i0, j1)).max(at(i1, j1))
+}
+
+/// The parts of quadrant `k` (row by row: NW, NE, SW, SE of the tile's 2 x 2 quadrants).
+fn quadrant_parts(k: usize) -> [usize; 4] {
+    let (i, j) = (2 * (k % 2), 2 * (k / 2));
+    [
+        j * PARTS + i,
+        j * PARTS + i + 1,
+        (j + 1) * PARTS + i,
+        (j + 1) * PARTS + i + 1,
+    ]
+}
+
+/// Finest cells per tile (128 x 128).
+const CELLS: u32 = 128 * 128;
+
+/// Finest cell at position `d` of the Hilbert curve over 128 x 128 cells (the shader's
+/// `hilbert_cell`).
+fn hilbert_cell(d: u32) -> (u32, u32) {
+    let (mut x, mut y) = (0u32, 0u32);
+    let mut t = d;
+    let mut s = 1u32;
+    while s < 128 {
+        let rx = 1 & (t / 2);
+        let ry = 1 & (t ^ rx);
+        if ry == 0 {
+            if rx == 1 {
+                x = s - 1 - x;
+                y = s - 1 - y;
+            }
+            std::mem::swap(&mut x, &mut y);
+        }
+        x += s * rx;
+        y += s * ry;
+        t /= 4;
+        s *= 2;
+    }
+    (x, y)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn presence_takes_the_finest_part_at_a_line_and_the_top_on_the_border() {
+        let mut levels = [2u8; 16];
+        levels[5] = 6; // part (1, 1)
+        let key = PartKey { levels };
+        assert_eq!(presence_level(&key, 100, 100), 6);
+        assert_eq!(
+            presence_level(&key, 64, 100),
+            6,
+            "line between parts 4 and 5"
+        );
+        assert_eq!(
+            presence_level(&key, 64, 64),
+            6,
+            "corner of parts 0, 1, 4, 5"
+        );
+        assert_eq!(presence_level(&key, 10, 10), 2);
+        assert_eq!(
+            presence_level(&key, 200, 0),
+            6,
+            "the border takes the top level"
+        );
+        assert_eq!(presence_level(&key, 192, 150), 2);
+    }
+
+    #[test]
+    fn the_curve_visits_every_cell_once_quadrant_by_quadrant() {
+        let mut seen = vec![false; CELLS as usize];
+        for d in 0..CELLS {
+            let (x, y) = hilbert_cell(d);
+            assert!(!std::mem::replace(&mut seen[(y * 128 + x) as usize], true));
+            // Each run of 1024 positions is one part (32 x 32 finest cells).
+            let part = (x / 32, y / 32);
+            let first = hilbert_cell(d & !1023);
+            assert_eq!(part, (first.0 / 32, first.1 / 32));
+        }
+    }
+}

@@ -1,0 +1,251 @@
+//! A tile drawn part by part (`tiles::parts`) on real data: with every part at one level the
+//! mixed mesh is that level's stored mesh, fan for fan; with parts at different levels it is
+//! conforming (no T-junction: every inner edge is shared by two triangles), its border is the
+//! top level's, and it is never longer than the top level's array (the renderer sizes the
+//! array's room by it). The control: the stored meshes of two levels spliced part by part
+//! have T-junctions, and the check finds them.
+
+use std::collections::HashMap;
+
+use testdata::data;
+use tiles::format::Tile;
+use tiles::pack::unpack;
+use tiles::parts::{Blocks, PartKey, PartLevels, RESTART};
+use tiles::{build_tileset, BuildParams, Grid, TileSet, TileSetMeta};
+
+/// A crop of the SRTM3 tile N43E007 (the Alps) in metres: rough ground, every level distinct.
+fn alps(w: usize, h: usize) -> Vec<f32> {
+    let n = 1201;
+    let bytes = std::fs::read(data("srtm/N43E007.hgt")).expect("readable hgt");
+    let mut out = Vec::with_capacity(w * h);
+    for y in 300..300 + h {
+        for x in 400..400 + w {
+            let i = 2 * (y * n + x);
+            out.push(f32::from(i16::from_be_bytes([bytes[i], bytes[i + 1]])));
+        }
+    }
+    out
+}
+
+/// 2 x 2 tiles, the second column and row partial, 9 levels, shared sides.
+fn set(dir: &std::path::Path) -> TileSet {
+    let (w, h) = (257 + 140, 257 + 100);
+    let heights = alps(w, h);
+    let grid = Grid {
+        width: w,
+        height: h,
+        first_row: 0,
+        heights: &heights,
+        spacing_x: 67.5,
+        spacing_y: 92.6,
+    };
+    let out = dir.join("alps.vkt");
+    let params = BuildParams {
+        levels: 9,
+        base_error: 1.0,
+        ..BuildParams::default()
+    };
+    build_tileset(&grid, &params, &TileSetMeta::default(), &out, &|| {}).expect("build");
+    TileSet::open(&out).expect("open")
+}
+
+fn blocks(tile: &Tile) -> Blocks {
+    let n = tile.levels().len() as u32;
+    let positions: Vec<&[u32]> = (0..n)
+        .map(|j| tile.level(j).expect("level").positions)
+        .collect();
+    Blocks::new(positions, (tile.header.mesh_max_x, tile.header.mesh_max_y))
+}
+
+/// The fans of an index array: centre, and the ring without its closing repeat, rotated to
+/// start at its smallest vertex (so rings compare whatever corner they start at).
+fn fans(indices: impl Iterator<Item = Option<u32>>) -> Vec<(u32, Vec<u32>)> {
+    let mut out = Vec::new();
+    let mut cur: Vec<u32> = Vec::new();
+    let mut close = |cur: &mut Vec<u32>| {
+        if cur.is_empty() {
+            return;
+        }
+        let mut ring = cur[1..cur.len() - 1].to_vec();
+        let k = (0..ring.len()).min_by_key(|&k| ring[k]).unwrap_or(0);
+        ring.rotate_left(k);
+        out.push((cur[0], ring));
+        cur.clear();
+    };
+    for i in indices {
+        match i {
+            Some(v) => cur.push(v),
+            None => close(&mut cur),
+        }
+    }
+    close(&mut cur);
+    out
+}
+
+fn mixed(indices: &[u32]) -> impl Iterator<Item = Option<u32>> + '_ {
+    indices.iter().map(|&i| (i != RESTART).then_some(i))
+}
+
+type Point = (u32, u32);
+
+/// Edges of the triangles of `fans` (lattice points) used once only, other than on the mesh's
+/// outline: each is a T-junction or a hole.
+fn open_edges(fans: &[(u32, Vec<u32>)], points: &[(u32, u32)], mesh_max: (u32, u32)) -> usize {
+    let mut edges: HashMap<(Point, Point), i32> = HashMap::new();
+    for (c, ring) in fans {
+        for k in 0..ring.len() {
+            let tri = [
+                points[*c as usize],
+                points[ring[k] as usize],
+                points[ring[(k + 1) % ring.len()] as usize],
+            ];
+            for e in 0..3 {
+                let (a, b) = (tri[e], tri[(e + 1) % 3]);
+                let key = if a < b { (a, b) } else { (b, a) };
+                *edges.entry(key).or_default() += 1;
+            }
+        }
+    }
+    let outline = |a: (u32, u32), b: (u32, u32)| {
+        (a.0 == b.0 && (a.0 == 0 || a.0 == mesh_max.0))
+            || (a.1 == b.1 && (a.1 == 0 || a.1 == mesh_max.1))
+    };
+    edges
+        .iter()
+        .filter(|(&(a, b), &n)| n != 2 && !(n == 1 && outline(a, b)))
+        .count()
+}
+
+/// Parts at levels drawn from a simple generator, the top level at one of them.
+fn wanted(seed: u64, levels: u8) -> PartLevels {
+    let mut s = seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
+    std::array::from_fn(|_| {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s % u64::from(levels)) as u8
+    })
+}
+
+#[test]
+fn parts_at_one_level_make_that_level_and_mixed_parts_make_a_conforming_mesh() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = set(dir.path());
+    let (mut mixed_keys, mut differing, mut fewer, mut refused) = (0, 0, 0, 0);
+    for ty in 0..2 {
+        for tx in 0..2 {
+            let tile = set.tile(tx, ty).expect("tile");
+            let n = tile.levels().len() as u32;
+            let b = blocks(&tile);
+            let points: Vec<(u32, u32)> = (0..n)
+                .flat_map(|j| tile.level(j).expect("level").positions.to_vec())
+                .map(|p| {
+                    let (x, y, _) = unpack(p);
+                    (x, y)
+                })
+                .collect();
+            let mesh_max = (tile.header.mesh_max_x, tile.header.mesh_max_y);
+            for level in 0..n {
+                let stored = fans(tile.level(level).expect("level").indices.iter());
+                let key = PartKey {
+                    levels: [level as u8; 16],
+                };
+                let made = b.indices(&key).expect("the blocks make the mesh");
+                assert_eq!(fans(mixed(&made)), stored, "tile {tx},{ty} level {level}");
+            }
+            for seed in 0..60u64 {
+                let top = n - 1 - (seed % 3) as u32;
+                let Some(key) = b.key(&wanted(seed + 100 * u64::from(tx + 2 * ty), n as u8), top)
+                else {
+                    refused += 1;
+                    continue;
+                };
+                if key.levels.iter().all(|&l| l == key.levels[0]) {
+                    continue;
+                }
+                mixed_keys += 1;
+                let g = u32::from(*key.levels.iter().max().expect("16 parts"));
+                let made = b.indices(&key).expect("the blocks make the mixed mesh");
+                let made_fans = fans(mixed(&made));
+                assert_eq!(
+                    open_edges(&made_fans, &points, mesh_max),
+                    0,
+                    "tile {tx},{ty} key {:?}: T-junctions",
+                    key.levels
+                );
+                let top_level = tile.level(g).expect("level");
+                assert!(
+                    made.len() <= top_level.indices.len(),
+                    "longer than level {g}'s array"
+                );
+                // On a whole tile, where the coarsest part's level draws less than the top, so
+                // does the mix (on a partial one, parts past the mesh draw nothing at any level).
+                let least = u32::from(*key.levels.iter().min().expect("16 parts"));
+                let whole = mesh_max == (256, 256);
+                if whole
+                    && tile.level(least).expect("level").indices.len() < top_level.indices.len()
+                {
+                    differing += 1;
+                    fewer += usize::from(made.len() < top_level.indices.len());
+                }
+                // The border is level g's: every border vertex of level g is in the mesh, and no
+                // other vertex on the border.
+                let on_border =
+                    |&(x, y): &(u32, u32)| x == 0 || y == 0 || x == mesh_max.0 || y == mesh_max.1;
+                let mut used: Vec<u32> = made.iter().copied().filter(|&i| i != RESTART).collect();
+                used.sort_unstable();
+                used.dedup();
+                let border: Vec<u32> = used
+                    .iter()
+                    .copied()
+                    .filter(|&i| on_border(&points[i as usize]))
+                    .collect();
+                let mut expected: Vec<u32> =
+                    top_level.border.iter().flat_map(|s| s.to_vec()).collect();
+                expected.sort_unstable();
+                expected.dedup();
+                assert_eq!(
+                    border, expected,
+                    "tile {tx},{ty}: the border is not level {g}'s"
+                );
+            }
+        }
+    }
+    assert!(mixed_keys > 100, "{mixed_keys} mixed keys");
+    assert!(
+        differing > 40,
+        "{differing} keys whose levels draw differently"
+    );
+    assert_eq!(
+        fewer, differing,
+        "a mix of finer and coarser parts drew no less than the finest"
+    );
+    println!("{mixed_keys} mixed keys, {fewer} shorter than the top level, {refused} refused");
+}
+
+/// The control: the stored fans of level `a` in part 0 and of level `b` elsewhere, spliced, have
+/// T-junctions where the parts meet, and the check above finds them.
+#[test]
+fn spliced_levels_have_t_junctions_and_the_check_finds_them() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = set(dir.path());
+    let tile = set.tile(0, 0).expect("tile");
+    let n = tile.levels().len() as u32;
+    let points: Vec<(u32, u32)> = (0..n)
+        .flat_map(|j| tile.level(j).expect("level").positions.to_vec())
+        .map(|p| {
+            let (x, y, _) = unpack(p);
+            (x, y)
+        })
+        .collect();
+    let in_part0 = |c: u32| points[c as usize].0 < 64 && points[c as usize].1 < 64;
+    let fine = fans(tile.level(n - 1).expect("level").indices.iter());
+    let coarse = fans(tile.level(n - 4).expect("level").indices.iter());
+    let spliced: Vec<(u32, Vec<u32>)> = fine
+        .into_iter()
+        .filter(|(c, _)| in_part0(*c))
+        .chain(coarse.into_iter().filter(|(c, _)| !in_part0(*c)))
+        .collect();
+    let mesh_max = (tile.header.mesh_max_x, tile.header.mesh_max_y);
+    assert!(open_edges(&spliced, &points, mesh_max) > 0);
+}
