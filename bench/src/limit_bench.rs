@@ -133,7 +133,7 @@ pub fn limit_table(extras: Extras) -> Result<()> {
     let tiletool = sibling("tiletool", "tiletool")?;
     let dir = std::env::temp_dir().join(format!("tilebench-limit-{}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
-    let modes: [(&str, &[&str]); 8] = [
+    let modes: [(&str, &[&str]); 10] = [
         ("brute force", &["--brute-force"]),
         ("discrete, tau 1", &["--tau", "1", "--no-geomorph"]),
         ("discrete, tau 3", &["--tau", "3", "--no-geomorph"]),
@@ -141,6 +141,14 @@ pub fn limit_table(extras: Extras) -> Result<()> {
         ("geomorph, tau 2", &["--tau", "2"]),
         ("geomorph, tau 3", &["--tau", "3"]),
         ("geomorph, tau 5", &["--tau", "5"]),
+        (
+            "geomorph, tau 1, whole tiles",
+            &["--tau", "1", "--whole-tiles"],
+        ),
+        (
+            "geomorph, tau 3, whole tiles",
+            &["--tau", "3", "--whole-tiles"],
+        ),
         (
             "geomorph, tau 1, forward differences",
             &["--tau", "1", "--morph-shader", "forward-differences"],

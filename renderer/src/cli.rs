@@ -91,6 +91,11 @@ pub struct Cli {
     /// change in one frame, which pops).
     #[arg(long)]
     pub no_geomorph: bool,
+    /// Geomorphing: draw each tile at one level, rather than each of its 4 x 4 parts at the
+    /// level the part needs (the comparison; part by part needs index arrays built on the GPU,
+    /// and --draw-only draws whole tiles)
+    #[arg(long)]
+    pub whole_tiles: bool,
     /// The vertex shader that blends levels: two-levels (reads the two levels around each
     /// vertex's level) or forward-differences (the paper's clamped forward differences as dot
     /// products over every level; the reference).
@@ -355,6 +360,8 @@ impl Cli {
                 LodBound::Sampled => Bound::Sampled,
             },
             geomorph: !self.no_geomorph,
+            // Pre-recorded frames cannot follow a mix that changes from frame to frame.
+            part_by_part: !self.whole_tiles && !self.draw_only,
             morph_shader: match self.morph_shader {
                 MorphShaderArg::TwoLevels => MorphShader::TwoLevels,
                 MorphShaderArg::ForwardDifferences => MorphShader::ForwardDifferences,

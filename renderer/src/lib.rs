@@ -20,6 +20,7 @@ pub mod lod;
 pub mod log;
 pub mod measure;
 pub mod morph;
+pub mod parts;
 pub mod plan;
 pub mod prefetch;
 pub mod settings;

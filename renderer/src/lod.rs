@@ -240,6 +240,79 @@ pub fn morph_level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: 
     level
 }
 
+/// The levels of a tile's 4 x 4 parts while geomorphing part by part ([`tiles::parts`]): for
+/// each part, [`morph_level`]'s rule over the part alone, the interior table over the part's
+/// box (the whole tile's height range, in 2 x 2 pieces) and each side's table over the stretch
+/// of the side that bounds the part. A part no piece of which touches the frustum has no
+/// vertex on screen and gets level 0. Every on-screen vertex lies in the closed box of each
+/// part whose mesh holds it (a vertex on a line between parts is in the boxes of all parts
+/// there), so its level is within each of those parts' levels: the cover of [`morph_level`],
+/// part by part. The tile's level, the largest of its parts', is at most [`morph_level`]'s.
+pub fn morph_parts(
+    view: &View,
+    camera: DVec3,
+    tile: &TileInfo,
+    tau: f64,
+    rule: Bound,
+) -> tiles::parts::PartLevels {
+    use tiles::parts::{PARTS, PART_CELLS};
+    let finest = tile.levels.len().saturating_sub(1) as u32;
+    if rule == Bound::Sampled {
+        return [morph_level(view, camera, tile, tau, rule) as u8; PARTS * PARTS];
+    }
+    let within =
+        |table: &crate::levels::LevelTable, r: f64| (table.level_f64(r).ceil() as u32).min(finest);
+    let tau = tau * crate::morph::TAU_MARGIN;
+    let (tlo, thi) = tile_box(tile);
+    let (tlo, thi) = (tlo - camera, thi - camera);
+    if within(&tile.drawn_table, error_for(bound(view, tlo, thi), tau)) == 0 {
+        return [0; PARTS * PARTS];
+    }
+    let planes = view.frustum();
+    let interior = &tile.tables[0];
+    // Parts run east with i and south with j (rows from the tile's first, northern, row), 64
+    // cells each; the box's x and y span the mesh (fewer cells in a partial tile).
+    let cells = (
+        f64::from(tile.header.mesh_max_x.max(1)),
+        f64::from(tile.header.mesh_max_y.max(1)),
+    );
+    let part = (
+        (thi.x - tlo.x) / cells.0 * f64::from(PART_CELLS),
+        (thi.y - tlo.y) / cells.1 * f64::from(PART_CELLS),
+    );
+    std::array::from_fn(|q| {
+        let (i, j) = ((q % PARTS) as f64, (q / PARTS) as f64);
+        let lo = DVec3::new(
+            tlo.x + part.0 * i,
+            (thi.y - part.1 * (j + 1.0)).max(tlo.y),
+            tlo.z,
+        );
+        let hi = DVec3::new((lo.x + part.0).min(thi.x), thi.y - part.1 * j, thi.z);
+        if lo.x >= thi.x || hi.y <= tlo.y {
+            return 0;
+        }
+        let s = pieces_bound(view, &planes, lo, hi, (2, 2));
+        if s == 0.0 {
+            return 0;
+        }
+        let mut level = within(interior, error_for(s, tau));
+        // The part's stretch of the N, E, S and W sides, where it has one.
+        let touches = [hi.y == thi.y, hi.x == thi.x, lo.y == tlo.y, lo.x == tlo.x];
+        for (side, (a, b)) in sides(lo, hi).into_iter().enumerate() {
+            let table = &tile.tables[side + 1];
+            if !touches[side] || level == finest || table == interior {
+                continue;
+            }
+            let along = |a: f64, b: f64| if a == b { 1 } else { 2 };
+            let s = pieces_bound(view, &planes, a, b, (along(a.x, b.x), along(a.y, b.y)));
+            if s > 0.0 {
+                level = level.max(within(table, error_for(s, tau)));
+            }
+        }
+        level as u8
+    })
+}
+
 /// The boxes of a tile's sides in the order of its level tables after the interior: the N, E,
 /// S and W sides (north is +y), each over the whole height.
 fn sides(lo: DVec3, hi: DVec3) -> [(DVec3, DVec3); 4] {

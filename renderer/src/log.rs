@@ -13,7 +13,8 @@
 //! `upload_bytes_textures, texture_slots_free, tiles_texture_coarser`, then the index arrays
 //! built on the GPU `index_builds, index_build_bytes`, the heights read back from the vertex
 //! shader `heights_read_back, heights_max_diff_m`, the tiles' checks when first needed
-//! `cpu_check_ms, tiles_checked, tiles_failed`,
+//! `cpu_check_ms, tiles_checked, tiles_failed`, drawing part by part
+//! `tiles_part_by_part, part_builds`,
 //! and last `tiles_level_0 .. tiles_level_{n-1}`.
 
 use std::path::Path;
@@ -114,10 +115,14 @@ pub struct FrameRecord {
     pub cpu_check_ms: f64,
     pub tiles_checked: u64,
     pub tiles_failed: u64,
+    /// Tiles drawn part by part (`crate::parts`), and the arrays built for them this frame
+    /// besides the manager's (`index_builds`).
+    pub tiles_part_by_part: u64,
+    pub part_builds: u64,
     pub tiles_per_level: Vec<u64>,
 }
 
-pub const BASE_COLUMNS: [&str; 53] = [
+pub const BASE_COLUMNS: [&str; 55] = [
     "frame",
     "time_s",
     "frame_ms",
@@ -171,6 +176,8 @@ pub const BASE_COLUMNS: [&str; 53] = [
     "cpu_check_ms",
     "tiles_checked",
     "tiles_failed",
+    "tiles_part_by_part",
+    "part_builds",
 ];
 
 pub fn header(levels: u32) -> String {
@@ -255,6 +262,8 @@ impl FrameRecord {
             ms_cell(self.cpu_check_ms),
             n(self.tiles_checked),
             n(self.tiles_failed),
+            n(self.tiles_part_by_part),
+            n(self.part_builds),
         ];
         let levels = self.tiles_per_level.iter().map(|&v| n(v));
         cells

@@ -59,6 +59,8 @@ type Drawn = (State, Option<Vec<f32>>);
 pub struct State {
     pub level: u32,
     pub morph: Option<morph::TileMorph>,
+    /// Drawn part by part at these levels ([`crate::parts`]); None: at `level` throughout.
+    pub parts: Option<tiles::parts::PartKey>,
 }
 
 impl ErrorMeter {
@@ -97,7 +99,16 @@ impl ErrorMeter {
     ) -> Measured {
         let draws: Vec<(usize, State)> = drawn
             .iter()
-            .map(|&(tile, level, _, morph)| (tile, State { level, morph }))
+            .map(|&(tile, level, _, morph, parts)| {
+                (
+                    tile,
+                    State {
+                        level,
+                        morph,
+                        parts,
+                    },
+                )
+            })
             .collect();
         self.frame(terrain, camera, extent, &draws)
     }
@@ -128,7 +139,7 @@ impl ErrorMeter {
         for &(tile, state) in draws {
             let before = previous.remove(&tile).filter(|(s, _)| *s != state);
             let mut fetch = |s: State| {
-                if s.morph.is_some() {
+                if s.morph.is_some() || s.parts.is_some() {
                     return None;
                 }
                 self.surfaces
@@ -202,7 +213,18 @@ fn surface(terrain: &Terrain, tile: usize, state: State) -> Vec<f32> {
         return grid;
     };
     let (mx, my) = (info.header.mesh_max_x, info.header.mesh_max_y);
-    for fan in l.indices.fans() {
+    let fans = match &state.parts {
+        Some(key) => {
+            let made = crate::parts::blocks(terrain, tile).indices(key);
+            made.map_or_else(Vec::new, |i| {
+                i.split(|&v| v == tiles::parts::RESTART)
+                    .map(<[u32]>::to_vec)
+                    .collect()
+            })
+        }
+        None => l.indices.fans(),
+    };
+    for fan in fans {
         let v = |i: u32| vertices.get(i as usize).copied();
         let Some(c) = fan.first().and_then(|&i| v(i)) else {
             continue;
@@ -248,7 +270,7 @@ pub fn height_tolerance(h: f32, slope: f32) -> f64 {
 /// `bias` is added to every stored morph offset of the mirror (0; the check's control uses 1).
 pub fn check_heights(terrain: &Terrain, read_back: &ReadBack, bias: i8) -> HeightCheck {
     let mut check = HeightCheck::default();
-    for &(tile, level, start, morph) in &read_back.draws {
+    for &(tile, level, start, morph, parts) in &read_back.draws {
         let info = &terrain.tiles[tile];
         let Ok(t) = terrain.set.tile(info.tx, info.ty) else {
             continue;
@@ -258,7 +280,22 @@ pub fn check_heights(terrain: &Terrain, read_back: &ReadBack, bias: i8) -> Heigh
             .values
             .get(start..start + mirror.len())
             .unwrap_or(&[]);
+        // Drawn part by part, a vertex that no fan of the mix takes is not shaded: only the
+        // mix's vertices have a height to compare.
+        let drawn: Option<Vec<bool>> = parts.map(|key| {
+            let mut used = vec![false; mirror.len()];
+            let made = crate::parts::blocks(terrain, tile).indices(&key);
+            for &v in made.iter().flatten() {
+                if let Some(u) = used.get_mut(v as usize) {
+                    *u = true;
+                }
+            }
+            used
+        });
         for (i, (&g, &(_, _, h, slope))) in gpu.iter().zip(&mirror).enumerate() {
+            if drawn.as_ref().is_some_and(|d| !d[i]) {
+                continue;
+            }
             let d = (f64::from(g) - f64::from(h)).abs();
             check.vertices += 1;
             if d.is_nan() || d > height_tolerance(h, slope) {

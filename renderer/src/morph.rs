@@ -93,6 +93,23 @@
 //! own block `j` sit at their own height, bit for bit (every weight below `j` is exactly 0),
 //! so a vertex off screen whose level exceeds `G` is simply on level `G`'s surface.
 //!
+//! # Part by part
+//!
+//! A tile is 257 x 257 samples; under a low camera its near corner wants the finest level while
+//! its far side could do with a much coarser one, and the whole tile took the finest. By
+//! default each of a tile's 4 x 4 parts is drawn at its own level instead
+//! ([`crate::lod::morph_parts`]: the rule above over the part's box and its stretch of the
+//! tile's sides), in one conforming mesh the index builder makes on the GPU
+//! ([`tiles::parts`], [`crate::parts`]): inside a part the part's level's fans; on a line
+//! between parts the finest adjacent part's vertices, which the coarser part's fans take in
+//! along their edges, so the mesh has no T-junction and the parts need no stitching; on the
+//! tile's border the tile's level (the largest part's), so that stitching to the neighbours is
+//! as before. Every on-screen vertex lies in the box of each part whose fans hold it, so the
+//! cover above holds part by part, and with it what follows. The tile's level is the largest
+//! of its parts' and the memory manager sees only that: the mixed array fits in its array's
+//! room. `--whole-tiles` draws each tile at one level (the comparison); where index arrays are
+//! sent from the file, a tile is drawn at its largest part's level throughout.
+//!
 //! The side tables from each tile's errors near the side alone (which the file records,
 //! [`tiles::format::LevelEntry::side_error`]) were tried and measured twice: they cut the
 //! N48W125 orbit at tau 1 to 1.14x discrete's triangles, but the error reached 2.06 px at tau
@@ -111,7 +128,10 @@
 //! mesh changes when a tile's drawn level does. A vertex the finer level adds (block `G + 1`)
 //! has `l <= G` wherever it is on screen (the drawn level covers it), so it starts at
 //! `Σ_m w_m(l) S_m(v)`, on the coarser surfaces, and the surface it joins differs from the
-//! one drawn before by `R` above only. The error meter's `pop_px` measures those jumps.
+//! one drawn before by `R` above only. Drawn part by part, the mesh also changes when a part's
+//! level does, and the same holds part by part: a vertex a part's finer level adds is on
+//! screen only where that part's box covers it. The error meter's `pop_px` measures those
+//! jumps.
 
 use glam::{Mat4, Vec3, Vec4};
 

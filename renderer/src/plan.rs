@@ -28,8 +28,10 @@ pub enum LevelRule {
     Finest,
     /// Geomorphing (paper, section 5): each vertex blends the levels at a continuous level of
     /// its own, from its position and the camera ([`crate::morph`]); each tile is drawn at the
-    /// coarsest level that covers its on-screen vertices' levels ([`lod::morph_level`]).
-    Morph(f64, lod::Bound),
+    /// coarsest level that covers its on-screen vertices' levels ([`lod::morph_level`]). With
+    /// `true`, part by part: each of a tile's 4 x 4 parts gets its own level
+    /// ([`lod::morph_parts`]) and the tile wants the largest ([`crate::parts`] draws them).
+    Morph(f64, lod::Bound, bool),
 }
 
 /// One tile to draw, where its data sits in the pool.
@@ -46,6 +48,12 @@ pub struct Draw {
     /// 2 or 4 bytes.
     pub index_width: u32,
     pub index_count: u32,
+    pub triangle_count: u32,
+    /// Part by part: the level each part wants ([`lod::morph_parts`]), and once
+    /// [`crate::parts::PartDraws::assign`] has found one, the key the tile is drawn at (None:
+    /// at `level` throughout).
+    pub parts: Option<tiles::parts::PartLevels>,
+    pub key: Option<tiles::parts::PartKey>,
 }
 
 /// Everything one frame does, decided before any command is recorded.
@@ -147,7 +155,9 @@ pub fn plan(
 
     let t = Instant::now();
     let morphing = matches!(rule, LevelRule::Morph(..));
-    let requests = wanted_levels(terrain, &view, camera.position, &visible, rule);
+    let (requests, parts) = wanted(terrain, &view, camera.position, &visible, rule);
+    let parts: HashMap<u32, tiles::parts::PartLevels> =
+        requests.iter().map(|r| r.tile).zip(parts).collect();
     let cpu_lod_ms = ms(t);
 
     let t = Instant::now();
@@ -172,6 +182,10 @@ pub fn plan(
                 index_offset: g.index_offset,
                 index_width: g.index_width,
                 index_count: terrain.tiles[g.tile as usize].levels[level as usize].index_count,
+                triangle_count: terrain.tiles[g.tile as usize].levels[level as usize]
+                    .triangle_count,
+                parts: parts.get(&g.tile).copied(),
+                key: None,
             })
         })
         .collect();
@@ -237,8 +251,20 @@ pub fn wanted_levels(
     visible: &[usize],
     rule: LevelRule,
 ) -> Vec<Request> {
+    wanted(terrain, view, camera, visible, rule).0
+}
+
+/// [`wanted_levels`], and part by part, each tile's part levels (empty otherwise).
+fn wanted(
+    terrain: &Terrain,
+    view: &View,
+    camera: DVec3,
+    visible: &[usize],
+    rule: LevelRule,
+) -> (Vec<Request>, Vec<tiles::parts::PartLevels>) {
     let finest = terrain.levels - 1;
-    visible
+    let mut parts = Vec::new();
+    let requests = visible
         .iter()
         .map(|&i| {
             let tile = &terrain.tiles[i];
@@ -246,14 +272,22 @@ pub fn wanted_levels(
                 LevelRule::Finest => finest,
                 LevelRule::Forced(l) => l.min(finest),
                 LevelRule::Tau(tau, bound) => lod::level(view, camera, tile, tau, bound),
-                LevelRule::Morph(tau, bound) => lod::morph_level(view, camera, tile, tau, bound),
+                LevelRule::Morph(tau, bound, false) => {
+                    lod::morph_level(view, camera, tile, tau, bound)
+                }
+                LevelRule::Morph(tau, bound, true) => {
+                    let levels = lod::morph_parts(view, camera, tile, tau, bound);
+                    parts.push(levels);
+                    u32::from(levels.iter().copied().max().unwrap_or(0))
+                }
             };
             Request {
                 tile: i as u32,
                 wanted: wanted.min(finest),
             }
         })
-        .collect()
+        .collect();
+    (requests, parts)
 }
 
 /// Stitches between drawn neighbours at their granted levels, each pair once (from the tile

@@ -27,6 +27,10 @@ pub struct Settings {
     pub bound: crate::lod::Bound,
     /// Continuous levels, heights blended between levels (off: `--no-geomorph`).
     pub geomorph: bool,
+    /// Geomorphing: draw each tile's 4 x 4 parts at levels of their own ([`crate::parts`];
+    /// off: `--whole-tiles`, each tile at one level). Needs index arrays built on the GPU;
+    /// where they are sent, a tile is drawn at its parts' largest level throughout.
+    pub part_by_part: bool,
     pub morph_shader: MorphShader,
 }
 
@@ -82,7 +86,7 @@ impl Settings {
         } else if let Some(l) = self.forced_level {
             LevelRule::Forced(l)
         } else if self.geomorph {
-            LevelRule::Morph(self.tau, self.bound)
+            LevelRule::Morph(self.tau, self.bound, self.part_by_part)
         } else {
             LevelRule::Tau(self.tau, self.bound)
         }

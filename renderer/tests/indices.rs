@@ -108,6 +108,7 @@ impl Bench {
                 mesh_max_x: info.header.mesh_max_x,
                 mesh_max_y: info.header.mesh_max_y,
                 tile: t as u32,
+                ..Default::default()
             };
             tamper(&mut b);
             builds.push(b);
@@ -271,6 +272,109 @@ fn tiles_past_the_data_edge_build_as_the_file_says_and_controls_fail() {
     // Control 2: without the level's last vertex, a fan lacks it.
     let (_, failure) = bench.build(&terrain, t, &[finest], false, |b| b.vertex_count -= 1);
     assert!(failure.is_some(), "a missing vertex went unnoticed");
+    bench.builder.destroy(&bench.gpu);
+    bench.pool.destroy(&bench.gpu);
+    assert_eq!(bench.gpu.validation_messages(), 0);
+}
+
+/// A tile drawn part by part (`tiles::parts`): the GPU's mixed array is the CPU mesher's,
+/// index for index (neither rotates the rings of a mixed array), and as long as the tables
+/// say, for parts at many levels on whole and partial tiles. The control: the same build told
+/// one part a level coarser makes another array (or another count, which it reports).
+#[test]
+fn tiles_drawn_part_by_part_build_as_the_cpu_mesher_says() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let puget = common::open_checked(&common::puget(dir.path()));
+    let opts = dem::ReadOptions {
+        crop: Some("1500,1500,700x530".parse().expect("crop")),
+        ..Default::default()
+    };
+    let srtm = common::open_checked(&common::tileset(
+        dir.path(),
+        &common::data("srtm/N48W125.hgt"),
+        opts,
+    ));
+    let Some(mut bench) = Bench::new() else {
+        return;
+    };
+    let (mut built, mut controls) = (0, 0);
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let mut next = |n: u32| {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state % u64::from(n)) as u8
+    };
+    for terrain in [&puget, &srtm] {
+        for t in 0..terrain.tiles.len() {
+            let info = &terrain.tiles[t];
+            let n = info.levels.len() as u32;
+            let blocks = renderer::parts::blocks(terrain, t);
+            let tile = terrain.set.tile(info.tx, info.ty).expect("tile");
+            let fans: Vec<Vec<Vec<u32>>> = (0..n)
+                .map(|j| tile.level(j).expect("level").indices.fans())
+                .collect();
+            let counts = tiles::parts::Counts::new(&blocks, &fans);
+            for _ in 0..6 {
+                let top = n - 1 - u32::from(next(2));
+                let wanted: tiles::parts::PartLevels = std::array::from_fn(|_| next(n));
+                let Some(key) = blocks.key(&wanted, top) else {
+                    continue;
+                };
+                let g = u32::from(*key.levels.iter().max().expect("parts"));
+                let Some(want) = blocks.indices(&key) else {
+                    panic!("tile {t}: the CPU mesher found no mesh");
+                };
+                let Some((length, _)) = counts.count(&key) else {
+                    continue;
+                };
+                assert_eq!(length as usize, want.len(), "tile {t}: tables");
+                let ends: Vec<u32> = info
+                    .levels
+                    .iter()
+                    .map(|l| l.block_start + l.block_len)
+                    .collect();
+                let (arrays, failure) = bench.build(terrain, t, &[g], true, |b| {
+                    b.part_by_part(&key, ends.iter().copied());
+                    b.index_count = length;
+                });
+                assert_eq!(failure, None, "tile {t} key {:?}", key.levels);
+                let got = common::widen(&arrays[0], 4);
+                same(
+                    &got[..want.len()],
+                    &want,
+                    &format!("tile {t} key {:?}", key.levels),
+                );
+                built += 1;
+                // Control: one part a level coarser than the key says, where that changes the
+                // part's mesh (the tables count another length).
+                let coarser = (0..16).map(|q| {
+                    let mut other = key;
+                    other.levels[q] = other.levels[q].saturating_sub(1);
+                    other
+                });
+                let other = coarser
+                    .filter(|o| o.levels.iter().max() == key.levels.iter().max())
+                    .find(|o| counts.count(o).is_some_and(|(l, _)| l != length));
+                if let Some(other) = other {
+                    let (arrays, failure) = bench.build(terrain, t, &[g], true, |b| {
+                        b.part_by_part(&other, ends.iter().copied());
+                        b.index_count = length;
+                    });
+                    let differs =
+                        failure.is_some() || common::widen(&arrays[0], 4)[..want.len()] != want[..];
+                    assert!(
+                        differs,
+                        "tile {t}: a part a level coarser built the same array"
+                    );
+                    controls += 1;
+                }
+            }
+        }
+    }
+    eprintln!("{built} mixed arrays, {controls} controls");
+    assert!(built >= 40, "{built} mixed arrays built");
+    assert!(controls >= 20, "{controls} controls");
     bench.builder.destroy(&bench.gpu);
     bench.pool.destroy(&bench.gpu);
     assert_eq!(bench.gpu.validation_messages(), 0);

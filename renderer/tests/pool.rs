@@ -28,6 +28,9 @@ fn settings(forced_level: Option<u32>) -> Settings {
         no_stitch: false,
         bound: Default::default(),
         geomorph: true,
+        // Each tile at one level: the pool's index arrays are then the file's levels, which
+        // this test compares (mixed arrays are compared with the CPU mesher in indices.rs).
+        part_by_part: false,
         morph_shader: Default::default(),
     }
 }

@@ -16,6 +16,13 @@
 // vertices it shares with the previous fan (consecutive fans are adjacent cells), so the
 // arrays hold the same fans in the same order, not the same bytes.
 //
+// A tile drawn part by part gets one array whose 4 x 4 parts (64 x 64 cells) each come from
+// a level of their own (tools/tiles/src/parts.rs, the CPU side, argues it): a point inside a
+// part is a vertex when its level holds it, a point on a line between parts when the finest
+// part there holds it, a point on the tile's border when the top level does; and a fan takes
+// every vertex along its edges that lie on such lines, in order, so that the mesh has no
+// T-junction. Those fans are not rotated.
+//
 // One workgroup builds one array: its invocations scatter the blocks' vertices into a
 // position -> vertex lookup (a scratch slot per workgroup, never cleared: only positions this
 // build wrote are read) and into a bitmap of the positions that are vertices (shared memory,
@@ -32,6 +39,8 @@ const uint SIDE = 257;
 const uint LOOKUP_WORDS = SIDE * SIDE;
 const uint CELLS_PER_INVOCATION = 64;
 const uint NONE = 0xffffffffu;
+// Cells per part side (a tile is 4 x 4 parts).
+const uint PART = 64;
 
 struct Build {
     // Pool word of block 0's first packed position, and the vertices of blocks 0..=level.
@@ -45,6 +54,13 @@ struct Build {
     uint mesh_max_y;
     // Tile number, reported on failure.
     uint tile;
+    // Drawn part by part (tiles/src/parts.rs): 1, with the 4 x 4 parts' levels 4 bits each
+    // (part 4 j + i at bits 4 (4 j + i) of the 64) and, per level, the end of its block (the
+    // vertices of blocks 0..=level). 0: one level, every vertex of blocks 0..=level.
+    uint mixed;
+    uint parts[2];
+    uint ends[16];
+    uint pad;
 };
 
 layout(std430, set = 0, binding = 0) readonly buffer Positions { uint positions[]; };
@@ -69,6 +85,34 @@ uint lookup_base;
 bool is_vertex(uint x, uint y) {
     uint i = y * SIDE + x;
     return (present[i / 32] & (1u << (i % 32))) != 0;
+}
+
+// The level of part (i, j) of a mixed build.
+uint part_level(uint i, uint j) {
+    uint k = j * 4 + i;
+    return (b.parts[k / 8] >> (4 * (k % 8))) & 15u;
+}
+
+// The level whose blocks give lattice point (x, y) of a mixed build its vertices: the part's
+// inside a part, the finest of the parts that meet at a line, the top level on the border.
+uint presence_level(uint x, uint y, uint top) {
+    if (x == 0 || y == 0 || x >= SIDE - 1 || y >= SIDE - 1) {
+        return top;
+    }
+    uint i1 = x / PART, j1 = y / PART;
+    uint i0 = x % PART == 0 ? i1 - 1 : i1;
+    uint j0 = y % PART == 0 ? j1 - 1 : j1;
+    return max(max(part_level(i0, j0), part_level(i1, j0)),
+               max(part_level(i0, j1), part_level(i1, j1)));
+}
+
+// The block vertex v belongs to.
+uint block_of(uint v) {
+    uint k = 0;
+    while (k < 15 && v >= b.ends[k]) {
+        k++;
+    }
+    return k;
 }
 
 // The vertex at lattice point (x, y), or NONE.
@@ -147,6 +191,48 @@ void put(uint at, uint value) {
     }
 }
 
+// Counts, or writes at `at` (when `write`), lattice point p of a fan.
+void emit(uvec2 p, bool write, inout uint at, inout bool missing) {
+    if (write) {
+        uint v = vertex_at(p.x, p.y);
+        missing = missing || v == NONE;
+        put(at, v == NONE ? 0 : v);
+    }
+    at++;
+}
+
+// A mixed build's fan of leaf (o, s): centre, then the perimeter counter-clockwise from the
+// north-west corner, closed by repeating it; along an edge on a line between parts or on the
+// border every vertex, along any other the midpoint when it is one.
+void mixed_fan(uvec2 o, uint s, bool write, inout uint at, inout bool missing) {
+    uvec2 corners[4] = uvec2[4](o, o + uvec2(s, 0), o + uvec2(s, s), o + uvec2(0, s));
+    emit(o + uvec2(s / 2), write, at, missing);
+    emit(corners[0], write, at, missing);
+    // Edges W (corner 0 -> 3), S (3 -> 2), E (2 -> 1), N (1 -> 0).
+    const uint from[4] = uint[4](0, 3, 2, 1);
+    const uint to[4] = uint[4](3, 2, 1, 0);
+    for (uint e = 0; e < 4; e++) {
+        ivec2 a = ivec2(corners[from[e]]);
+        ivec2 c = ivec2(corners[to[e]]);
+        ivec2 dir = sign(c - a);
+        bool on_line = a.x == c.x ? (uint(a.x) % PART == 0) : (uint(a.y) % PART == 0);
+        if (on_line) {
+            for (uint t = 1; t < s; t++) {
+                uvec2 p = uvec2(a + dir * int(t));
+                if (is_vertex(p.x, p.y)) {
+                    emit(p, write, at, missing);
+                }
+            }
+        } else {
+            uvec2 m = uvec2(a + dir * int(s / 2));
+            if (is_vertex(m.x, m.y)) {
+                emit(m, write, at, missing);
+            }
+        }
+        emit(uvec2(c), write, at, missing);
+    }
+}
+
 void fail(uint got) {
     if (atomicAdd(status[0], 1) == 0) {
         status[1] = b.tile;
@@ -160,6 +246,11 @@ void main() {
     uint me = gl_LocalInvocationID.x;
     b = builds[pc.first_build + slot];
     lookup_base = slot * LOOKUP_WORDS;
+    // A mixed build's top level, which its border takes.
+    uint top = 0;
+    for (uint k = 0; k < 16 && b.mixed != 0; k++) {
+        top = max(top, part_level(k % 4, k / 4));
+    }
 
     for (uint w = me; w < present.length(); w += 256) {
         present[w] = 0;
@@ -172,7 +263,9 @@ void main() {
         if (x < SIDE && y < SIDE) {
             uint i = y * SIDE + x;
             lookup[lookup_base + i] = v;
-            atomicOr(present[i / 32], 1u << (i % 32));
+            if (b.mixed == 0 || block_of(v) <= presence_level(x, y, top)) {
+                atomicOr(present[i / 32], 1u << (i % 32));
+            }
         }
     }
     memoryBarrierBuffer();
@@ -199,9 +292,16 @@ void main() {
             starts[leaves] = h;
             depths[leaves] = d;
             leaves++;
-            uvec2 points[10];
             uint s = 256u >> d;
-            at += fan((hilbert_cell(h) >> (7 - d)) * s, s, points) + 1;
+            uvec2 o = (hilbert_cell(h) >> (7 - d)) * s;
+            if (b.mixed != 0) {
+                bool unused = false;
+                mixed_fan(o, s, false, at, unused);
+                at++;
+            } else {
+                uvec2 points[10];
+                at += fan(o, s, points) + 1;
+            }
         }
         h = (h | (run - 1)) + 1;
     }
@@ -240,6 +340,11 @@ void main() {
         uint d = depths[k];
         uint s = 256u >> d;
         uvec2 o = (hilbert_cell(starts[k]) >> (7 - d)) * s;
+        if (b.mixed != 0) {
+            mixed_fan(o, s, true, at, missing);
+            put(at++, pc.restart);
+            continue;
+        }
         uvec2 points[10];
         uint n = fan(o, s, points);
         // The ring is points[1 .. n-1) (points[n-1] closes it): start it where the run of

@@ -12,6 +12,7 @@ use super::ring::{Slot, SlotSizes};
 use super::Renderer;
 use crate::fault::Fault;
 use crate::interface::{RECORDS_OFFSET, RECORD_BYTES};
+use crate::parts::PartDraws;
 use crate::prefetch::Prefetcher;
 use crate::settings::MemoryOptions;
 use crate::stitch::MAX_RECORDS;
@@ -138,6 +139,7 @@ impl Renderer {
             collected: Vec::new(),
             prefetcher: Prefetcher::new(options.prefetch, terrain.tiles.len()),
             builder: parts.builder,
+            parts: PartDraws::default(),
         })
     }
 

@@ -43,6 +43,7 @@ use crate::error::FrameError;
 use crate::fault::Fault;
 use crate::log::{ms, FrameRecord};
 use crate::measure::ErrorMeter;
+use crate::parts::PartDraws;
 use crate::plan::{self, Plan};
 use crate::prefetch::{Predicted, Prefetcher};
 use crate::settings::{MemoryOptions, Settings, Shading};
@@ -125,6 +126,8 @@ pub struct Renderer {
     prefetcher: Prefetcher,
     /// Builds index arrays on the GPU (None: they are sent from the file).
     builder: Option<IndexBuilder>,
+    /// What drawing tiles part by part remembers between frames (with the builder only).
+    parts: PartDraws,
 }
 
 /// What the CPU did for a frame before recording it, for its log record.
@@ -271,6 +274,8 @@ impl Renderer {
         record.cpu_upload_ms = cpu_upload_ms;
         record.cpu_record_ms = cpu_record_ms;
         record.staged_bytes = uploads.staged_geometry;
+        record.part_builds = u64::from(uploads.part_builds);
+        record.tiles_part_by_part = plan.draws.iter().filter(|d| d.key.is_some()).count() as u64;
         record.gpu_allocations = gpu.allocations() - allocations;
         record.prediction_error_m = prepared.prediction_error_m;
         record.cpu_prefetch_ms = prepared.cpu_prefetch_ms;
@@ -318,7 +323,7 @@ impl Renderer {
         } else {
             (&[][..], None)
         };
-        let plan = plan::plan(
+        let mut plan = plan::plan(
             terrain,
             &mut self.manager,
             input.camera,
@@ -332,6 +337,12 @@ impl Renderer {
                 prefetch_until,
             },
         )?;
+        // Part by part, where the builder makes the arrays (sent ones are whole levels).
+        let t_parts = Instant::now();
+        if self.builder.is_some() {
+            self.parts.assign(terrain, &mut plan);
+        }
+        plan.cpu_lod_ms += ms(t_parts);
         // One line per tile that failed its check (here, or on the thread checking ahead).
         for (_, problem) in terrain.take_failures() {
             eprintln!("vkterrain: {problem}; the tile is not drawn");

@@ -262,7 +262,7 @@ impl Pass<'_> {
                     0,
                 );
                 let entry = &self.scene.terrain.tiles[d.tile].levels[d.level as usize];
-                counts.triangles += u64::from(entry.triangle_count);
+                counts.triangles += u64::from(d.triangle_count);
                 counts.vertices += u64::from(entry.vertex_count());
             }
             if !self.scene.settings.no_stitch && !self.scene.plan.stitches.is_empty() {

@@ -3,6 +3,7 @@
 //! record from its plan.
 
 use bytemuck::Zeroable;
+use tiles::parts::PartKey;
 
 use crate::camera::Camera;
 use crate::error::FrameError;
@@ -40,8 +41,9 @@ pub(super) fn write_stitches(
 }
 
 /// One draw as its record describes it: the tile, its level, where its vertices' heights go
-/// in the read-back buffer, and how it morphs (None: discrete).
-pub type DrawnTile = (usize, u32, usize, Option<TileMorph>);
+/// in the read-back buffer, how it morphs (None: discrete), and its parts' levels when it is
+/// drawn part by part (None: at its level throughout).
+pub type DrawnTile = (usize, u32, usize, Option<TileMorph>, Option<PartKey>);
 
 /// Writes the frame's morph constants and tile records, one per draw in order (a draw's record
 /// is its index); returns each draw as written, with how it morphs only when `describe` (for
@@ -111,7 +113,7 @@ pub(super) fn write_records(
                 cap: r.cap,
                 tables: r.tables,
             });
-            drawn.push((d.tile, d.level, heights, tile_morph));
+            drawn.push((d.tile, d.level, heights, tile_morph, d.key));
             heights += info.levels[d.level as usize].vertex_count() as usize;
             r
         })
@@ -199,7 +201,7 @@ pub(super) fn frame_record(
 
 /// The draws whose heights the read-back buffer receives, and how many heights they write.
 pub(super) fn read_back_draws(terrain: &Terrain, drawn: Vec<DrawnTile>) -> (Vec<DrawnTile>, usize) {
-    let n = drawn.last().map_or(0, |&(tile, level, start, _)| {
+    let n = drawn.last().map_or(0, |&(tile, level, start, _, _)| {
         start + terrain.tiles[tile].levels[level as usize].vertex_count() as usize
     });
     (drawn, n)

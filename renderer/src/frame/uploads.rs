@@ -20,8 +20,10 @@ pub(super) struct Uploads {
     pub moves: Vec<vk::BufferCopy>,
     /// Copies from the slot's staging memory into the pool.
     pub staged: Vec<vk::BufferCopy>,
-    /// Index arrays the builder makes this frame.
+    /// Index arrays the builder makes this frame, and of them those for tiles drawn part by
+    /// part besides the manager's.
     pub builds: u32,
+    pub part_builds: u32,
     /// Bytes of geometry that went through the staging memory.
     pub staged_geometry: u64,
     /// Copies from the staging memory into the texture array.
@@ -54,7 +56,7 @@ impl Renderer {
         if !plan.uploads.is_empty() {
             check_file(terrain)?;
         }
-        let builds = self.write_builds(terrain, plan, s)?;
+        let (builds, part_builds) = self.write_builds(terrain, plan, s)?;
         let staged = self.write_geometry(terrain, plan, s)?;
         let staged_geometry = self.slots[s].staging.sent();
         let texture_copies = self.write_texture_uploads(terrain, textures, s)?;
@@ -62,6 +64,7 @@ impl Renderer {
             moves,
             staged,
             builds,
+            part_builds,
             staged_geometry,
             texture_copies,
         })
@@ -112,13 +115,25 @@ impl Renderer {
         terrain: &Terrain,
         plan: &Plan,
         s: usize,
-    ) -> Result<u32, FrameError> {
+    ) -> Result<(u32, u32), FrameError> {
         let Some(builder) = self.builder.as_mut() else {
-            return Ok(0);
+            return Ok((0, 0));
+        };
+        // Part by part (crate::parts): the draws whose arrays are built here, replacing the
+        // manager's build where it builds at the same place.
+        let rebuilds = self.parts.rebuilds(plan);
+        let replaced = |u: &memory::Upload| {
+            rebuilds.iter().any(|&k| {
+                let d = &plan.draws[k];
+                d.tile == u.tile as usize && d.index_offset == u.dst
+            })
         };
         let kept = memory::gpu_builds(&plan.uploads);
-        let mut builds = Vec::with_capacity(kept.len());
-        for u in kept {
+        let mut builds = Vec::with_capacity(kept.len() + rebuilds.len());
+        let word = |bytes: u64, width: u64| {
+            u32::try_from(bytes / width).map_err(|_| FrameError::PastIndexing { bytes })
+        };
+        for u in kept.into_iter().filter(|u| !replaced(u)) {
             let memory::Part::Indices(level) = u.part else {
                 return Err(FrameError::BuiltNotIndices {
                     tile: u.tile,
@@ -127,9 +142,6 @@ impl Renderer {
             };
             let tile = &terrain.tiles[u.tile as usize];
             let l = &tile.levels[level as usize];
-            let word = |bytes: u64, width: u64| {
-                u32::try_from(bytes / width).map_err(|_| FrameError::PastIndexing { bytes })
-            };
             builds.push(indices::Build {
                 vertex_word: word(u.chunk, 4)?,
                 vertex_count: l.vertex_count(),
@@ -139,7 +151,27 @@ impl Renderer {
                 mesh_max_x: tile.header.mesh_max_x,
                 mesh_max_y: tile.header.mesh_max_y,
                 tile: u.tile,
+                ..Default::default()
             });
+        }
+        let part_builds = rebuilds.len() as u32;
+        for d in rebuilds.into_iter().map(|k| &plan.draws[k]) {
+            let tile = &terrain.tiles[d.tile];
+            let mut b = indices::Build {
+                vertex_word: word(d.vertex_offset, 4)?,
+                vertex_count: tile.levels[d.level as usize].vertex_count(),
+                index_at: word(d.index_offset, u64::from(d.index_width))?,
+                index_count: d.index_count,
+                index_width: d.index_width,
+                mesh_max_x: tile.header.mesh_max_x,
+                mesh_max_y: tile.header.mesh_max_y,
+                tile: d.tile as u32,
+                ..Default::default()
+            };
+            if let Some(key) = &d.key {
+                b.part_by_part(key, tile.levels.iter().map(|l| l.block_start + l.block_len));
+            }
+            builds.push(b);
         }
         if !builder.write(s, &builds) {
             return Err(FrameError::TooManyBuilds {
@@ -147,7 +179,7 @@ impl Renderer {
                 capacity: builder.capacity(),
             });
         }
-        Ok(builds.len() as u32)
+        Ok((builds.len() as u32, part_builds))
     }
 
     /// Writes the frame's texture mips into the slot's staging memory; returns the copies.

@@ -37,6 +37,26 @@ pub struct Build {
     pub mesh_max_y: u32,
     /// Reported when the build fails.
     pub tile: u32,
+    /// 1: the tile is drawn part by part ([`tiles::parts`]) at `parts`, its levels 4 bits
+    /// each (part `k` at bits `4 k`), with `ends[l]` the end of block `l`. 0: one level.
+    pub mixed: u32,
+    pub parts: [u32; 2],
+    pub ends: [u32; 16],
+    pub pad: u32,
+}
+
+impl Build {
+    /// Makes the build draw `key` part by part; `ends` are the ends of the tile's blocks.
+    pub fn part_by_part(&mut self, key: &tiles::parts::PartKey, ends: impl Iterator<Item = u32>) {
+        self.mixed = 1;
+        self.parts = [0, 0];
+        for (k, &l) in key.levels.iter().enumerate() {
+            self.parts[k / 8] |= u32::from(l & 15) << (4 * (k % 8));
+        }
+        for (slot, end) in self.ends.iter_mut().zip(ends) {
+            *slot = end;
+        }
+    }
 }
 
 /// A build whose array did not come out as the file says (read after its frame completed).

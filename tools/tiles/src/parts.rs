@@ -58,13 +58,22 @@ pub struct PartKey {
 
 /// Where each lattice point of a tile first appears: its block, and its vertex index.
 pub struct Blocks {
+    /// Per vertex in index order, its lattice point.
+    points: Vec<(u32, u32)>,
     block: Vec<u8>,
     vertex: Vec<u32>,
     mesh_max: (u32, u32),
+    centres: Centres,
+}
+
+/// What deciding a tile's [`PartKey`] needs of its vertices (20 bytes, where [`Blocks`] holds
+/// 5 bytes a lattice point): the blocks that add the centres of its parts and quadrants.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Centres {
     /// Per part, the block that adds its centre ([`NEVER`]: none does).
-    centres: PartLevels,
+    parts: PartLevels,
     /// Per quadrant (2 x 2 parts), the block that adds its centre.
-    quadrant_centres: [u8; 4],
+    quadrants: [u8; 4],
 }
 
 impl Blocks {
@@ -74,9 +83,11 @@ impl Blocks {
         let mut block = vec![NEVER; POINTS];
         let mut vertex = vec![u32::MAX; POINTS];
         let mut index = 0u32;
+        let mut points = Vec::new();
         for (j, positions) in blocks.into_iter().enumerate() {
             for &p in positions {
                 let (x, y, _) = unpack(p);
+                points.push((x, y));
                 if (x as usize) < TILE_SIZE && (y as usize) < TILE_SIZE {
                     let i = y as usize * TILE_SIZE + x as usize;
                     block[i] = j.min(usize::from(NEVER - 1)) as u8;
@@ -99,52 +110,29 @@ impl Blocks {
             )
         });
         Blocks {
+            points,
             block,
             vertex,
             mesh_max,
-            centres,
-            quadrant_centres,
+            centres: Centres {
+                parts: centres,
+                quadrants: quadrant_centres,
+            },
         }
     }
 
-    /// The key that draws part `q` at `wanted[q]` or finer, with every part at most `top` (the
-    /// level whose blocks are resident). None: the parts cannot be drawn apart at `top` (the
-    /// tile is drawn at `top` as one level).
+    pub fn centres(&self) -> Centres {
+        self.centres
+    }
+
+    /// [`Centres::key`].
     pub fn key(&self, wanted: &PartLevels, top: u32) -> Option<PartKey> {
-        let top = u8::try_from(top).ok()?;
-        let mut levels = wanted.map(|l| l.min(top));
-        // A part whose centre is a vertex of some level: at least that level.
-        for (l, &c) in levels.iter_mut().zip(&self.centres) {
-            if c != NEVER {
-                *l = (*l).max(c);
-            }
-        }
-        // Quadrant by quadrant: parts whose centre its level lacks make the quadrant one level.
-        for k in 0..4 {
-            let parts = quadrant_parts(k);
-            if parts.iter().all(|&q| self.centres[q] <= levels[q]) {
-                continue;
-            }
-            let m = parts.iter().map(|&q| levels[q]).max().unwrap_or(0);
-            for q in parts {
-                levels[q] = m;
-            }
-        }
-        if levels.iter().any(|&l| l > top) {
-            return None;
-        }
-        // The root must be split: some quadrant's centre is a vertex where the four parts
-        // around the tile's centre meet... and each quadrant one leaf or split as its parts are.
-        let root_split = (0..4).any(|k| {
-            let c = self.quadrant_centres[k];
-            c != NEVER
-                && c <= quadrant_parts(k)
-                    .iter()
-                    .map(|&q| levels[q])
-                    .max()
-                    .unwrap_or(0)
-        });
-        root_split.then_some(PartKey { levels })
+        self.centres.key(wanted, top)
+    }
+
+    /// The length of [`Blocks::indices`]'s array.
+    pub fn count(&self, key: &PartKey) -> Option<u32> {
+        self.indices(key).map(|i| i.len() as u32)
     }
 
     /// Whether lattice point `(x, y)` is a vertex of the mixed mesh of `key`.
@@ -267,6 +255,179 @@ impl Blocks {
             }
             ring.push(b);
         }
+    }
+}
+
+impl Centres {
+    /// The key that draws part `q` at `wanted[q]` or finer, with every part at most `top` (the
+    /// level whose blocks are resident). None: the parts cannot be drawn apart at `top` (the
+    /// tile is drawn at `top` as one level).
+    pub fn key(&self, wanted: &PartLevels, top: u32) -> Option<PartKey> {
+        let top = u8::try_from(top).ok()?;
+        let mut levels = wanted.map(|l| l.min(top));
+        // A part whose centre is a vertex of some level: at least that level.
+        for (l, &c) in levels.iter_mut().zip(&self.parts) {
+            if c != NEVER {
+                *l = (*l).max(c);
+            }
+        }
+        // Quadrant by quadrant: parts whose centre its level lacks make the quadrant one level.
+        for k in 0..4 {
+            let parts = quadrant_parts(k);
+            if parts.iter().all(|&q| self.parts[q] <= levels[q]) {
+                continue;
+            }
+            let m = parts.iter().map(|&q| levels[q]).max().unwrap_or(0);
+            for q in parts {
+                levels[q] = m;
+            }
+        }
+        if levels.iter().any(|&l| l > top) {
+            return None;
+        }
+        // The root must be split: some quadrant's centre is a vertex (it lies where the
+        // quadrant's four parts meet, so its level is theirs).
+        let root_split = (0..4).any(|k| {
+            let c = self.quadrants[k];
+            c != NEVER
+                && c <= quadrant_parts(k)
+                    .iter()
+                    .map(|&q| levels[q])
+                    .max()
+                    .unwrap_or(0)
+        });
+        root_split.then_some(PartKey { levels })
+    }
+}
+
+/// Lines between parts and along the border, cut at the parts' corners: 5 vertical lines
+/// (x = 0, 64, .., 256) by 4 part rows, then 5 horizontal lines by 4 part columns.
+const SEGMENTS: usize = 2 * (PARTS + 1) * PARTS;
+
+/// A tile's array lengths for every key, from tables (about 2.5 KB a tile): what
+/// [`Blocks::indices`] makes, counted without making it.
+///
+/// Inside part `q` the mixed mesh has the leaves of level `L_q`, so its fans are level
+/// `L_q`'s fans centred in the part, as stored, except along the lines: a leaf edge on a line
+/// holds every vertex of the line's level `P` strictly inside it, where level `L_q` held at
+/// most its midpoint. The edges of part `q`'s leaves along a segment cover it, so the segment
+/// adds `V(P) - V(L_q)` to that side, `V(X)` the vertices of level `X` strictly inside the
+/// segment.
+pub struct Counts {
+    /// Per level and part: indices of the level's fans centred in the part, and the fans.
+    indices: Vec<[u32; PARTS * PARTS]>,
+    fans: Vec<[u32; PARTS * PARTS]>,
+    /// Per level and segment: the level's vertices strictly inside the segment.
+    inside: Vec<[u32; SEGMENTS]>,
+    /// Per level and quadrant: the quadrant is one leaf.
+    quadrant_leaf: Vec<[bool; 4]>,
+    /// Parts the mesh reaches.
+    reached: [bool; PARTS * PARTS],
+}
+
+/// The segment lattice point `(x, y)` lies inside, if any (not at a part's corner).
+fn segment(x: u32, y: u32) -> Option<usize> {
+    let (on_x, on_y) = (x.is_multiple_of(PART_CELLS), y.is_multiple_of(PART_CELLS));
+    let (a, b) = ((x / PART_CELLS) as usize, (y / PART_CELLS) as usize);
+    match (on_x, on_y) {
+        (true, false) if b < PARTS => Some(a * PARTS + b),
+        (false, true) if a < PARTS => Some((PARTS + 1) * PARTS + b * PARTS + a),
+        _ => None,
+    }
+}
+
+impl Counts {
+    /// From the tile's blocks and each level's stored fans (vertex indices, centre first).
+    pub fn new(blocks: &Blocks, levels: &[Vec<Vec<u32>>]) -> Counts {
+        let n = levels.len();
+        let mut indices = vec![[0u32; PARTS * PARTS]; n];
+        let mut fans = vec![[0u32; PARTS * PARTS]; n];
+        let mut quadrant_leaf = vec![[false; 4]; n];
+        for (l, level) in levels.iter().enumerate() {
+            for fan in level {
+                let Some(&(x, y)) = fan.first().and_then(|&c| blocks.points.get(c as usize)) else {
+                    continue;
+                };
+                if segment(x, y).is_none()
+                    && !x.is_multiple_of(PART_CELLS)
+                    && !y.is_multiple_of(PART_CELLS)
+                {
+                    let q = (y / PART_CELLS) as usize * PARTS + (x / PART_CELLS) as usize;
+                    indices[l][q] += fan.len() as u32;
+                    fans[l][q] += 1;
+                } else if x % (2 * PART_CELLS) == PART_CELLS && y % (2 * PART_CELLS) == PART_CELLS {
+                    // A quadrant's centre: the quadrant is one leaf.
+                    let k = (y / (2 * PART_CELLS)) as usize * 2 + (x / (2 * PART_CELLS)) as usize;
+                    quadrant_leaf[l][k] = true;
+                }
+            }
+        }
+        let mut inside = vec![[0u32; SEGMENTS]; n];
+        for (i, &b) in blocks.block.iter().enumerate() {
+            let (x, y) = ((i % TILE_SIZE) as u32, (i / TILE_SIZE) as u32);
+            if let (Some(seg), true) = (segment(x, y), usize::from(b) < n) {
+                for level in &mut inside[usize::from(b)..] {
+                    level[seg] += 1;
+                }
+            }
+        }
+        let (mx, my) = blocks.mesh_max;
+        let reached = std::array::from_fn(|q| {
+            ((q % PARTS) as u32 * PART_CELLS) < mx && ((q / PARTS) as u32 * PART_CELLS) < my
+        });
+        Counts {
+            indices,
+            fans,
+            inside,
+            quadrant_leaf,
+            reached,
+        }
+    }
+
+    /// The length of `key`'s array and its triangles. None where a quadrant is one leaf (its
+    /// fan is in no part: the tile is then drawn at one level).
+    pub fn count(&self, key: &PartKey) -> Option<(u32, u32)> {
+        let level = |q: usize| usize::from(key.levels[q]);
+        for k in 0..4 {
+            let parts = quadrant_parts(k);
+            let l = level(parts[0]);
+            if parts.iter().all(|&q| level(q) == l) && self.quadrant_leaf.get(l)?[k] {
+                return None;
+            }
+        }
+        let top = key.levels.iter().copied().max().map(usize::from)?;
+        let (mut length, mut fans) = (0u32, 0u32);
+        for q in 0..PARTS * PARTS {
+            length += self.indices.get(level(q))?[q];
+            fans += self.fans[level(q)][q];
+        }
+        let part = |i: usize, j: usize| j * PARTS + i;
+        for seg in 0..SEGMENTS {
+            // The parts on either side (None past the border or where the mesh does not reach).
+            let (a, b) = if seg < (PARTS + 1) * PARTS {
+                let (line, row) = (seg / PARTS, seg % PARTS);
+                (
+                    (line > 0).then(|| part(line - 1, row)),
+                    (line < PARTS).then(|| part(line, row)),
+                )
+            } else {
+                let s = seg - (PARTS + 1) * PARTS;
+                let (line, column) = (s / PARTS, s % PARTS);
+                (
+                    (line > 0).then(|| part(column, line - 1)),
+                    (line < PARTS).then(|| part(column, line)),
+                )
+            };
+            let presence = match (a, b) {
+                (Some(a), Some(b)) => level(a).max(level(b)),
+                _ => top,
+            };
+            for q in [a, b].into_iter().flatten().filter(|&q| self.reached[q]) {
+                length += self.inside[presence][seg] - self.inside[level(q)][seg];
+            }
+        }
+        let restarts = fans.saturating_sub(1);
+        Some((length + restarts, length - 2 * fans))
     }
 }
 

@@ -10,7 +10,7 @@ use std::collections::HashMap;
 use testdata::data;
 use tiles::format::Tile;
 use tiles::pack::unpack;
-use tiles::parts::{Blocks, PartKey, PartLevels, RESTART};
+use tiles::parts::{Blocks, Counts, PartKey, PartLevels, RESTART};
 use tiles::{build_tileset, BuildParams, Grid, TileSet, TileSetMeta};
 
 /// A crop of the SRTM3 tile N43E007 (the Alps) in metres: rough ground, every level distinct.
@@ -132,6 +132,7 @@ fn parts_at_one_level_make_that_level_and_mixed_parts_make_a_conforming_mesh() {
     let dir = tempfile::tempdir().expect("temp dir");
     let set = set(dir.path());
     let (mut mixed_keys, mut differing, mut fewer, mut refused) = (0, 0, 0, 0);
+    let (mut counted, mut uncounted) = (0, 0);
     for ty in 0..2 {
         for tx in 0..2 {
             let tile = set.tile(tx, ty).expect("tile");
@@ -153,6 +154,10 @@ fn parts_at_one_level_make_that_level_and_mixed_parts_make_a_conforming_mesh() {
                 let made = b.indices(&key).expect("the blocks make the mesh");
                 assert_eq!(fans(mixed(&made)), stored, "tile {tx},{ty} level {level}");
             }
+            let stored: Vec<Vec<Vec<u32>>> = (0..n)
+                .map(|j| tile.level(j).expect("level").indices.fans())
+                .collect();
+            let counts = Counts::new(&b, &stored);
             for seed in 0..60u64 {
                 let top = n - 1 - (seed % 3) as u32;
                 let Some(key) = b.key(&wanted(seed + 100 * u64::from(tx + 2 * ty), n as u8), top)
@@ -167,6 +172,19 @@ fn parts_at_one_level_make_that_level_and_mixed_parts_make_a_conforming_mesh() {
                 let g = u32::from(*key.levels.iter().max().expect("16 parts"));
                 let made = b.indices(&key).expect("the blocks make the mixed mesh");
                 let made_fans = fans(mixed(&made));
+                let triangles: usize = made_fans.iter().map(|(_, ring)| ring.len()).sum();
+                match counts.count(&key) {
+                    Some(c) => {
+                        assert_eq!(
+                            c,
+                            (made.len() as u32, triangles as u32),
+                            "tables, key {:?}",
+                            key.levels
+                        );
+                        counted += 1;
+                    }
+                    None => uncounted += 1,
+                }
                 assert_eq!(
                     open_edges(&made_fans, &points, mesh_max),
                     0,
@@ -220,7 +238,14 @@ fn parts_at_one_level_make_that_level_and_mixed_parts_make_a_conforming_mesh() {
         fewer, differing,
         "a mix of finer and coarser parts drew no less than the finest"
     );
-    println!("{mixed_keys} mixed keys, {fewer} shorter than the top level, {refused} refused");
+    assert!(
+        counted * 10 > mixed_keys * 9,
+        "{counted} of {mixed_keys} counted by the tables"
+    );
+    println!(
+        "{mixed_keys} mixed keys, {fewer} shorter than the top level, {refused} refused, \
+         {counted} counted by the tables ({uncounted} not)"
+    );
 }
 
 /// The control: the stored fans of level `a` in part 0 and of level `b` elsewhere, spliced, have

@@ -1,0 +1,146 @@
+//! Drawing a tile part by part while geomorphing: each of its 4 x 4 parts at the level the part
+//! needs ([`crate::lod::morph_parts`]), in one conforming mesh ([`tiles::parts`]) that the
+//! index builder makes on the GPU in the room of the tile's drawn level.
+//!
+//! A tile drawn at level `G` has blocks `0..=G` resident and room for level `G`'s index array;
+//! the mixed array is never longer ([`tiles::parts`]'s tests). The memory manager knows levels
+//! only: the mixed array is this module's business. It decides each drawn tile's key at its
+//! granted level, the array's length (the CPU mirror of the build, cached per key), and which
+//! draws need their array built again this frame: those whose region does not hold their key,
+//! as far as this module knows. It forgets what a tile's region holds whenever the manager
+//! uploads to or moves the tile, so a region is rebuilt rather than drawn on a guess.
+//!
+//! A rebuilt region may be read by frames still in flight: the build is recorded in the
+//! frame's command buffer after a barrier on earlier frames' index reads
+//! ([`crate::vulkan::indices::IndexBuilder::record`]), as the manager's own rewrites are.
+
+use std::collections::HashMap;
+
+use tiles::parts::{Blocks, Centres, Counts, PartKey};
+
+use crate::plan::Plan;
+use crate::terrain::Terrain;
+
+/// What part-by-part drawing remembers between frames.
+#[derive(Default)]
+pub struct PartDraws {
+    /// Per tile, what deciding a key and its array's length need (about 2.5 KB).
+    tiles: HashMap<usize, (Centres, Counts)>,
+    /// Per tile: the pool offset of the array this module last built for it, and its key
+    /// (None: one level).
+    held: HashMap<usize, (u64, Option<PartKey>)>,
+}
+
+/// One array to build this frame: the draw's index in the plan.
+pub type Rebuild = usize;
+
+impl PartDraws {
+    /// Gives each draw that has part levels the key it is drawn at (at most its granted
+    /// level) and its array's length. A draw whose parts cannot be drawn apart at that level
+    /// keeps its level throughout.
+    pub fn assign(&mut self, terrain: &Terrain, plan: &mut Plan) {
+        for d in &mut plan.draws {
+            d.key = None;
+            let Some(wanted) = d.parts else { continue };
+            let (centres, counts) = self
+                .tiles
+                .entry(d.tile)
+                .or_insert_with(|| tables(terrain, d.tile));
+            let Some(key) = centres.key(&wanted, d.level) else {
+                continue;
+            };
+            if key.levels.iter().all(|&l| u32::from(l) == d.level) {
+                continue;
+            }
+            // The key the region holds, while it covers this one closely enough: finer parts
+            // are within tau, and keeping it saves a build.
+            let key = match self.held.get(&d.tile) {
+                Some(&(at, Some(held))) if at == d.index_offset && keeps(&held, &key, d.level) => {
+                    held
+                }
+                _ => key,
+            };
+            // The room is level G's array: a longer one (never seen) is drawn at G.
+            if let Some((length, triangles)) = counts.count(&key) {
+                if length <= d.index_count {
+                    d.key = Some(key);
+                    d.index_count = length;
+                    d.triangle_count = triangles;
+                }
+            }
+        }
+    }
+
+    /// The draws whose arrays this module builds this frame: every draw whose region is not
+    /// known to hold what it draws. What a region holds is known from this module's builds and
+    /// from the manager's builds of a level, and forgotten when the manager uploads to or moves
+    /// the tile. A draw the manager builds a level for where it draws from, at a key, replaces
+    /// the manager's build (one build writes there). Call after [`PartDraws::assign`].
+    pub fn rebuilds(&mut self, plan: &Plan) -> Vec<Rebuild> {
+        for u in &plan.uploads {
+            self.held.remove(&(u.tile as usize));
+        }
+        for m in &plan.moves {
+            self.held.remove(&(m.tile as usize));
+        }
+        let mut out = Vec::new();
+        for (k, d) in plan.draws.iter().enumerate() {
+            if self.held.get(&d.tile) == Some(&(d.index_offset, d.key)) {
+                continue;
+            }
+            self.held.insert(d.tile, (d.index_offset, d.key));
+            let built_here = plan
+                .uploads
+                .iter()
+                .any(|u| u.built && u.tile as usize == d.tile && u.dst == d.index_offset);
+            // The manager's own build of the level is what a draw at one level wants.
+            if !(built_here && d.key.is_none()) {
+                out.push(k);
+            }
+        }
+        out
+    }
+}
+
+/// Levels finer than wanted a part may stay drawn at rather than its array be built again.
+pub const SLACK: u8 = 1;
+
+/// Whether a tile drawn at `held` may stay so where it wants `key`, at level `top`: every part
+/// at least as fine as wanted and at most [`SLACK`] finer, and the border still `top`'s.
+fn keeps(held: &PartKey, key: &PartKey, top: u32) -> bool {
+    held.levels.iter().copied().max().map(u32::from) == Some(top)
+        && held
+            .levels
+            .iter()
+            .zip(&key.levels)
+            .all(|(&h, &k)| h >= k && h <= k.saturating_add(SLACK))
+}
+
+/// What deciding `tile`'s keys and their lengths needs, from its blocks and stored arrays.
+fn tables(terrain: &Terrain, tile: usize) -> (Centres, Counts) {
+    let b = blocks(terrain, tile);
+    let info = &terrain.tiles[tile];
+    let fans: Vec<Vec<Vec<u32>>> = match terrain.set.tile(info.tx, info.ty) {
+        Ok(t) => (0..t.levels().len() as u32)
+            .map(|j| t.level(j).map_or_else(Vec::new, |l| l.indices.fans()))
+            .collect(),
+        Err(_) => Vec::new(),
+    };
+    (b.centres(), Counts::new(&b, &fans))
+}
+
+/// Where each lattice point of `tile` first appears (the tile passed its check to be drawn).
+pub fn blocks(terrain: &Terrain, tile: usize) -> Blocks {
+    let info = &terrain.tiles[tile];
+    let mesh_max = (info.header.mesh_max_x, info.header.mesh_max_y);
+    match terrain.set.tile(info.tx, info.ty) {
+        Ok(t) => {
+            let levels = t.levels().len() as u32;
+            Blocks::new(
+                (0..levels).filter_map(|j| t.level(j).map(|l| l.positions)),
+                mesh_max,
+            )
+        }
+        Err(_) => Blocks::new(std::iter::empty(), mesh_max),
+    }
+}
