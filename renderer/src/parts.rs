@@ -5,7 +5,8 @@
 //! A tile drawn at level `G` has blocks `0..=G` resident and room for level `G`'s index array;
 //! the mixed array is never longer ([`tiles::parts`]'s tests). The memory manager knows levels
 //! only: the mixed array is this module's business. It decides each drawn tile's key at its
-//! granted level, the array's length (the CPU mirror of the build, cached per key), and which
+//! granted level, the array's length (from the small tables the tile's check reads,
+//! [`tiles::parts::tables`]; the GPU checks it on every build), and which
 //! draws need their array built again this frame: those whose region does not hold their key,
 //! as far as this module knows. It forgets what a tile's region holds whenever the manager
 //! uploads to or moves the tile, so a region is rebuilt rather than drawn on a guess.
@@ -16,7 +17,7 @@
 
 use std::collections::HashMap;
 
-use tiles::parts::{Blocks, Centres, Counts, PartKey};
+use tiles::parts::{Blocks, PartKey};
 
 use crate::plan::Plan;
 use crate::terrain::Terrain;
@@ -24,8 +25,6 @@ use crate::terrain::Terrain;
 /// What part-by-part drawing remembers between frames.
 #[derive(Default)]
 pub struct PartDraws {
-    /// Per tile, what deciding a key and its array's length need (about 2.5 KB).
-    tiles: HashMap<usize, (Centres, Counts)>,
     /// Per tile: the pool offset of the array this module last built for it, and its key
     /// (None: one level).
     held: HashMap<usize, (u64, Option<PartKey>)>,
@@ -42,10 +41,10 @@ impl PartDraws {
         for d in &mut plan.draws {
             d.key = None;
             let Some(wanted) = d.parts else { continue };
-            let (centres, counts) = self
-                .tiles
-                .entry(d.tile)
-                .or_insert_with(|| tables(terrain, d.tile));
+            // Read with the tile's check (drawn tiles passed it).
+            let Some((centres, counts)) = terrain.tiles[d.tile].paged().map(|p| &p.parts) else {
+                continue;
+            };
             let Some(key) = centres.key(&wanted, d.level) else {
                 continue;
             };
@@ -114,19 +113,6 @@ fn keeps(held: &PartKey, key: &PartKey, top: u32) -> bool {
             .iter()
             .zip(&key.levels)
             .all(|(&h, &k)| h >= k && h <= k.saturating_add(SLACK))
-}
-
-/// What deciding `tile`'s keys and their lengths needs, from its blocks and stored arrays.
-fn tables(terrain: &Terrain, tile: usize) -> (Centres, Counts) {
-    let b = blocks(terrain, tile);
-    let info = &terrain.tiles[tile];
-    let fans: Vec<Vec<Vec<u32>>> = match terrain.set.tile(info.tx, info.ty) {
-        Ok(t) => (0..t.levels().len() as u32)
-            .map(|j| t.level(j).map_or_else(Vec::new, |l| l.indices.fans()))
-            .collect(),
-        Err(_) => Vec::new(),
-    };
-    (b.centres(), Counts::new(&b, &fans))
 }
 
 /// Where each lattice point of `tile` first appears (the tile passed its check to be drawn).

@@ -311,10 +311,7 @@ fn tiles_drawn_part_by_part_build_as_the_cpu_mesher_says() {
             let n = info.levels.len() as u32;
             let blocks = renderer::parts::blocks(terrain, t);
             let tile = terrain.set.tile(info.tx, info.ty).expect("tile");
-            let fans: Vec<Vec<Vec<u32>>> = (0..n)
-                .map(|j| tile.level(j).expect("level").indices.fans())
-                .collect();
-            let counts = tiles::parts::Counts::new(&blocks, &fans);
+            let (_, counts) = tiles::parts::tables(&tile);
             for _ in 0..6 {
                 let top = n - 1 - u32::from(next(2));
                 let wanted: tiles::parts::PartLevels = std::array::from_fn(|_| next(n));

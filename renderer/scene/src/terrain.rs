@@ -551,6 +551,7 @@ fn paged(set: &TileSet, info: &TileInfo) -> Result<Paged, String> {
         borders,
         border_indices,
         texture_mips,
+        parts: tiles::parts::tables(&tile),
     })
 }
 

@@ -53,6 +53,8 @@ pub struct Paged {
     /// Per texture mip, finest first: its BC1 blocks' place in the tile's texture blob (empty
     /// when the set has no textures).
     pub(crate) texture_mips: Vec<std::ops::Range<usize>>,
+    /// What drawing the tile part by part needs ([`tiles::parts::tables`]).
+    pub parts: (tiles::parts::Centres, tiles::parts::Counts),
 }
 
 impl TileInfo {

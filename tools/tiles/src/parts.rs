@@ -337,31 +337,54 @@ fn segment(x: u32, y: u32) -> Option<usize> {
 }
 
 impl Counts {
-    /// From the tile's blocks and each level's stored fans (vertex indices, centre first).
-    pub fn new(blocks: &Blocks, levels: &[Vec<Vec<u32>>]) -> Counts {
-        let n = levels.len();
-        let mut indices = vec![[0u32; PARTS * PARTS]; n];
-        let mut fans = vec![[0u32; PARTS * PARTS]; n];
-        let mut quadrant_leaf = vec![[false; 4]; n];
-        for (l, level) in levels.iter().enumerate() {
-            for fan in level {
-                let Some(&(x, y)) = fan.first().and_then(|&c| blocks.points.get(c as usize)) else {
-                    continue;
+    /// From the tile's blocks and each level's stored index array (vertex indices, `None`
+    /// between fans).
+    pub fn new<L, I>(blocks: &Blocks, levels: L) -> Counts
+    where
+        L: IntoIterator<Item = I>,
+        I: IntoIterator<Item = Option<u32>>,
+    {
+        let (mut indices, mut fans, mut quadrant_leaf) = (Vec::new(), Vec::new(), Vec::new());
+        for level in levels {
+            let (mut lengths, mut counts, mut leaves) =
+                ([0u32; PARTS * PARTS], [0u32; PARTS * PARTS], [false; 4]);
+            let mut fan = |centre: Option<u32>, length: u32| {
+                let Some(&(x, y)) = centre.and_then(|c| blocks.points.get(c as usize)) else {
+                    return;
                 };
-                if segment(x, y).is_none()
-                    && !x.is_multiple_of(PART_CELLS)
-                    && !y.is_multiple_of(PART_CELLS)
-                {
+                if !x.is_multiple_of(PART_CELLS) && !y.is_multiple_of(PART_CELLS) {
                     let q = (y / PART_CELLS) as usize * PARTS + (x / PART_CELLS) as usize;
-                    indices[l][q] += fan.len() as u32;
-                    fans[l][q] += 1;
+                    lengths[q] += length;
+                    counts[q] += 1;
                 } else if x % (2 * PART_CELLS) == PART_CELLS && y % (2 * PART_CELLS) == PART_CELLS {
                     // A quadrant's centre: the quadrant is one leaf.
-                    let k = (y / (2 * PART_CELLS)) as usize * 2 + (x / (2 * PART_CELLS)) as usize;
-                    quadrant_leaf[l][k] = true;
+                    leaves[(y / (2 * PART_CELLS)) as usize * 2 + (x / (2 * PART_CELLS)) as usize] =
+                        true;
+                }
+            };
+            let (mut centre, mut length) = (None, 0u32);
+            for i in level {
+                match i {
+                    Some(v) => {
+                        if length == 0 {
+                            centre = Some(v);
+                        }
+                        length += 1;
+                    }
+                    None => {
+                        fan(centre, length);
+                        length = 0;
+                    }
                 }
             }
+            if length > 0 {
+                fan(centre, length);
+            }
+            indices.push(lengths);
+            fans.push(counts);
+            quadrant_leaf.push(leaves);
         }
+        let n = indices.len();
         let mut inside = vec![[0u32; SEGMENTS]; n];
         for (i, &b) in blocks.block.iter().enumerate() {
             let (x, y) = ((i % TILE_SIZE) as u32, (i / TILE_SIZE) as u32);
@@ -429,6 +452,19 @@ impl Counts {
         let restarts = fans.saturating_sub(1);
         Some((length + restarts, length - 2 * fans))
     }
+}
+
+/// What drawing `tile` part by part needs of its data, from its positions and stored arrays
+/// (its [`Centres`] and [`Counts`], about 2.5 KB).
+pub fn tables(tile: &crate::format::Tile) -> (Centres, Counts) {
+    let levels = tile.levels().len() as u32;
+    let blocks = Blocks::new(
+        (0..levels).filter_map(|j| tile.level(j).map(|l| l.positions)),
+        (tile.header.mesh_max_x, tile.header.mesh_max_y),
+    );
+    let arrays: Vec<_> = (0..levels).filter_map(|j| tile.level(j)).collect();
+    let counts = Counts::new(&blocks, arrays.iter().map(|l| l.indices.iter()));
+    (blocks.centres(), counts)
 }
 
 /// The level a lattice point of the mixed mesh takes (module header).

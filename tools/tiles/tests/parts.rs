@@ -10,7 +10,7 @@ use std::collections::HashMap;
 use testdata::data;
 use tiles::format::Tile;
 use tiles::pack::unpack;
-use tiles::parts::{Blocks, Counts, PartKey, PartLevels, RESTART};
+use tiles::parts::{Blocks, PartKey, PartLevels, RESTART};
 use tiles::{build_tileset, BuildParams, Grid, TileSet, TileSetMeta};
 
 /// A crop of the SRTM3 tile N43E007 (the Alps) in metres: rough ground, every level distinct.
@@ -154,10 +154,7 @@ fn parts_at_one_level_make_that_level_and_mixed_parts_make_a_conforming_mesh() {
                 let made = b.indices(&key).expect("the blocks make the mesh");
                 assert_eq!(fans(mixed(&made)), stored, "tile {tx},{ty} level {level}");
             }
-            let stored: Vec<Vec<Vec<u32>>> = (0..n)
-                .map(|j| tile.level(j).expect("level").indices.fans())
-                .collect();
-            let counts = Counts::new(&b, &stored);
+            let (_, counts) = tiles::parts::tables(&tile);
             for seed in 0..60u64 {
                 let top = n - 1 - (seed % 3) as u32;
                 let Some(key) = b.key(&wanted(seed + 100 * u64::from(tx + 2 * ty), n as u8), top)
