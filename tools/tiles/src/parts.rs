@@ -74,6 +74,11 @@ pub struct Centres {
     parts: PartLevels,
     /// Per quadrant (2 x 2 parts), the block that adds its centre.
     quadrants: [u8; 4],
+    /// Per corner of the parts' grid (5 x 5, row by row), the block that adds it.
+    corners: [u8; (PARTS + 1) * (PARTS + 1)],
+    /// The last column and row the mesh covers (a partial tile's cells across its edge are
+    /// split whatever their vertices, and cells past it are not drawn).
+    mesh_max: (u32, u32),
 }
 
 impl Blocks {
@@ -109,6 +114,10 @@ impl Blocks {
                 2 * PART_CELLS * j + PART_CELLS,
             )
         });
+        let corners = std::array::from_fn(|c| {
+            let (i, j) = ((c % (PARTS + 1)) as u32, (c / (PARTS + 1)) as u32);
+            at(i * PART_CELLS, j * PART_CELLS)
+        });
         Blocks {
             points,
             block,
@@ -117,6 +126,8 @@ impl Blocks {
             centres: Centres {
                 parts: centres,
                 quadrants: quadrant_centres,
+                corners,
+                mesh_max,
             },
         }
     }
@@ -285,18 +296,48 @@ impl Centres {
         if levels.iter().any(|&l| l > top) {
             return None;
         }
+        // A quadrant none of whose parts' centres is a vertex of its level is one leaf (all its
+        // parts at one level, above): its own centre must then be a vertex of that level.
+        for k in 0..4 {
+            if !self.is_leaf(&levels, k) {
+                continue;
+            }
+            let parts = quadrant_parts(k);
+            let m = levels[parts[0]].max(self.quadrants[k]);
+            if m > top {
+                return None;
+            }
+            for q in parts {
+                levels[q] = m;
+            }
+        }
         // The root must be split: some quadrant's centre is a vertex (it lies where the
         // quadrant's four parts meet, so its level is theirs).
-        let root_split = (0..4).any(|k| {
-            let c = self.quadrants[k];
-            c != NEVER
-                && c <= quadrant_parts(k)
-                    .iter()
-                    .map(|&q| levels[q])
-                    .max()
-                    .unwrap_or(0)
-        });
+        let (mx, my) = self.mesh_max;
+        let straddles = mx < 256 || my < 256;
+        let root_split = straddles
+            || (0..4).any(|k| {
+                let c = self.quadrants[k];
+                c != NEVER
+                    && c <= quadrant_parts(k)
+                        .iter()
+                        .map(|&q| levels[q])
+                        .max()
+                        .unwrap_or(0)
+            });
         root_split.then_some(PartKey { levels })
+    }
+}
+
+impl Centres {
+    /// Whether quadrant `k` is one leaf at `levels`: it lies inside the mesh (one across the
+    /// mesh's edge is split, one past it not drawn) and none of its parts' centres is a vertex.
+    fn is_leaf(&self, levels: &PartLevels, k: usize) -> bool {
+        let side = 2 * PART_CELLS;
+        let (i, j) = ((k % 2) as u32, (k / 2) as u32);
+        (i + 1) * side <= self.mesh_max.0
+            && (j + 1) * side <= self.mesh_max.1
+            && quadrant_parts(k).iter().all(|&q| self.parts[q] > levels[q])
     }
 }
 
@@ -319,10 +360,9 @@ pub struct Counts {
     fans: Vec<[u32; PARTS * PARTS]>,
     /// Per level and segment: the level's vertices strictly inside the segment.
     inside: Vec<[u32; SEGMENTS]>,
-    /// Per level and quadrant: the quadrant is one leaf.
-    quadrant_leaf: Vec<[bool; 4]>,
     /// Parts the mesh reaches.
     reached: [bool; PARTS * PARTS],
+    centres: Centres,
 }
 
 /// The segment lattice point `(x, y)` lies inside, if any (not at a part's corner).
@@ -344,10 +384,9 @@ impl Counts {
         L: IntoIterator<Item = I>,
         I: IntoIterator<Item = Option<u32>>,
     {
-        let (mut indices, mut fans, mut quadrant_leaf) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut indices, mut fans) = (Vec::new(), Vec::new());
         for level in levels {
-            let (mut lengths, mut counts, mut leaves) =
-                ([0u32; PARTS * PARTS], [0u32; PARTS * PARTS], [false; 4]);
+            let (mut lengths, mut counts) = ([0u32; PARTS * PARTS], [0u32; PARTS * PARTS]);
             let mut fan = |centre: Option<u32>, length: u32| {
                 let Some(&(x, y)) = centre.and_then(|c| blocks.points.get(c as usize)) else {
                     return;
@@ -356,10 +395,6 @@ impl Counts {
                     let q = (y / PART_CELLS) as usize * PARTS + (x / PART_CELLS) as usize;
                     lengths[q] += length;
                     counts[q] += 1;
-                } else if x % (2 * PART_CELLS) == PART_CELLS && y % (2 * PART_CELLS) == PART_CELLS {
-                    // A quadrant's centre: the quadrant is one leaf.
-                    leaves[(y / (2 * PART_CELLS)) as usize * 2 + (x / (2 * PART_CELLS)) as usize] =
-                        true;
                 }
             };
             let (mut centre, mut length) = (None, 0u32);
@@ -382,7 +417,6 @@ impl Counts {
             }
             indices.push(lengths);
             fans.push(counts);
-            quadrant_leaf.push(leaves);
         }
         let n = indices.len();
         let mut inside = vec![[0u32; SEGMENTS]; n];
@@ -402,32 +436,27 @@ impl Counts {
             indices,
             fans,
             inside,
-            quadrant_leaf,
             reached,
+            centres: blocks.centres,
         }
     }
 
-    /// The length of `key`'s array and its triangles. None where a quadrant is one leaf (its
-    /// fan is in no part: the tile is then drawn at one level).
+    /// The length of `key`'s array and its triangles, for a key [`Centres::key`] made (every
+    /// leaf in one part). None for a level the tile does not have.
     pub fn count(&self, key: &PartKey) -> Option<(u32, u32)> {
         let level = |q: usize| usize::from(key.levels[q]);
-        for k in 0..4 {
-            let parts = quadrant_parts(k);
-            let l = level(parts[0]);
-            if parts.iter().all(|&q| level(q) == l) && self.quadrant_leaf.get(l)?[k] {
-                return None;
-            }
-        }
         let top = key.levels.iter().copied().max().map(usize::from)?;
+        let leaf: [bool; 4] = std::array::from_fn(|k| self.centres.is_leaf(&key.levels, k));
+        let in_leaf = |q: usize| leaf[(q / PARTS / 2) * 2 + (q % PARTS) / 2];
         let (mut length, mut fans) = (0u32, 0u32);
         for q in 0..PARTS * PARTS {
             length += self.indices.get(level(q))?[q];
             fans += self.fans[level(q)][q];
         }
         let part = |i: usize, j: usize| j * PARTS + i;
-        for seg in 0..SEGMENTS {
-            // The parts on either side (None past the border or where the mesh does not reach).
-            let (a, b) = if seg < (PARTS + 1) * PARTS {
+        // The parts on either side of a segment (None past the border).
+        let sides = |seg: usize| {
+            if seg < (PARTS + 1) * PARTS {
                 let (line, row) = (seg / PARTS, seg % PARTS);
                 (
                     (line > 0).then(|| part(line - 1, row)),
@@ -440,13 +469,55 @@ impl Counts {
                     (line > 0).then(|| part(column, line - 1)),
                     (line < PARTS).then(|| part(column, line)),
                 )
-            };
-            let presence = match (a, b) {
-                (Some(a), Some(b)) => level(a).max(level(b)),
-                _ => top,
-            };
-            for q in [a, b].into_iter().flatten().filter(|&q| self.reached[q]) {
-                length += self.inside[presence][seg] - self.inside[level(q)][seg];
+            }
+        };
+        let presence = |seg: usize| match sides(seg) {
+            (Some(a), Some(b)) => level(a).max(level(b)),
+            _ => top,
+        };
+        for seg in 0..SEGMENTS {
+            let (a, b) = sides(seg);
+            let p = presence(seg);
+            for q in [a, b].into_iter().flatten() {
+                // A leaf quadrant's fan takes its edges whole (below).
+                if self.reached[q] && !in_leaf(q) {
+                    length += self.inside[p][seg] - self.inside[level(q)][seg];
+                }
+            }
+        }
+        // A leaf quadrant: its centre, its four corners, the ring's closing repeat, and along
+        // each edge (two segments, on lines) every vertex of their levels, with the edge's
+        // midpoint, a corner of the parts' grid, where it is one.
+        for k in (0..4).filter(|&k| leaf[k]) {
+            let (a, b) = (2 * (k % 2), 2 * (k / 2));
+            let vertical = |line: usize, row: usize| line * PARTS + row;
+            let horizontal =
+                |line: usize, column: usize| (PARTS + 1) * PARTS + line * PARTS + column;
+            let edges = [
+                ([vertical(a, b), vertical(a, b + 1)], (a, b + 1)),
+                ([vertical(a + 2, b), vertical(a + 2, b + 1)], (a + 2, b + 1)),
+                ([horizontal(b, a), horizontal(b, a + 1)], (a + 1, b)),
+                (
+                    [horizontal(b + 2, a), horizontal(b + 2, a + 1)],
+                    (a + 1, b + 2),
+                ),
+            ];
+            length += 6;
+            fans += 1;
+            for (segments, (i, j)) in edges {
+                for seg in segments {
+                    length += self.inside[presence(seg)][seg];
+                }
+                let at = if i == 0 || j == 0 || i == PARTS || j == PARTS {
+                    top
+                } else {
+                    level(part(i - 1, j - 1))
+                        .max(level(part(i, j - 1)))
+                        .max(level(part(i - 1, j)))
+                        .max(level(part(i, j)))
+                };
+                let c = self.centres.corners[j * (PARTS + 1) + i];
+                length += u32::from(c != NEVER && usize::from(c) <= at);
             }
         }
         let restarts = fans.saturating_sub(1);
