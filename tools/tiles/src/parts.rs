@@ -233,24 +233,7 @@ impl Blocks {
             } else {
                 a.1.is_multiple_of(PART_CELLS)
             };
-            let step = |t: u32| {
-                (
-                    if a.0 == b.0 {
-                        a.0
-                    } else if b.0 > a.0 {
-                        a.0 + t
-                    } else {
-                        a.0 - t
-                    },
-                    if a.1 == b.1 {
-                        a.1
-                    } else if b.1 > a.1 {
-                        a.1 + t
-                    } else {
-                        a.1 - t
-                    },
-                )
-            };
+            let step = |t: u32| (toward(a.0, b.0, t), toward(a.1, b.1, t));
             if on_line {
                 for t in 1..s {
                     let p = step(t);
@@ -536,6 +519,15 @@ pub fn tables(tile: &crate::format::Tile) -> (Centres, Counts) {
     let arrays: Vec<_> = (0..levels).filter_map(|j| tile.level(j)).collect();
     let counts = Counts::new(&blocks, arrays.iter().map(|l| l.indices.iter()));
     (blocks.centres(), counts)
+}
+
+/// `t` steps from `a` towards `b` (`a` itself when they are equal).
+fn toward(a: u32, b: u32, t: u32) -> u32 {
+    match b.cmp(&a) {
+        std::cmp::Ordering::Greater => a + t,
+        std::cmp::Ordering::Less => a - t,
+        std::cmp::Ordering::Equal => a,
+    }
 }
 
 /// The level a lattice point of the mixed mesh takes (module header).

@@ -88,6 +88,17 @@ fn mixed(indices: &[u32]) -> impl Iterator<Item = Option<u32>> + '_ {
 
 type Point = (u32, u32);
 
+/// Every vertex's lattice point, blocks `0..` in order.
+fn points(tile: &Tile) -> Vec<Point> {
+    (0..tile.levels().len() as u32)
+        .flat_map(|j| tile.level(j).expect("level").positions.to_vec())
+        .map(|p| {
+            let (x, y, _) = unpack(p);
+            (x, y)
+        })
+        .collect()
+}
+
 /// Edges of the triangles of `fans` (lattice points) used once only, other than on the mesh's
 /// outline: each is a T-junction or a hole.
 fn open_edges(fans: &[(u32, Vec<u32>)], points: &[(u32, u32)], mesh_max: (u32, u32)) -> usize {
@@ -138,13 +149,7 @@ fn parts_at_one_level_make_that_level_and_mixed_parts_make_a_conforming_mesh() {
             let tile = set.tile(tx, ty).expect("tile");
             let n = tile.levels().len() as u32;
             let b = blocks(&tile);
-            let points: Vec<(u32, u32)> = (0..n)
-                .flat_map(|j| tile.level(j).expect("level").positions.to_vec())
-                .map(|p| {
-                    let (x, y, _) = unpack(p);
-                    (x, y)
-                })
-                .collect();
+            let points = points(&tile);
             let mesh_max = (tile.header.mesh_max_x, tile.header.mesh_max_y);
             for level in 0..n {
                 let stored = fans(tile.level(level).expect("level").indices.iter());
@@ -255,13 +260,7 @@ fn spliced_levels_have_t_junctions_and_the_check_finds_them() {
     let set = set(dir.path());
     let tile = set.tile(0, 0).expect("tile");
     let n = tile.levels().len() as u32;
-    let points: Vec<(u32, u32)> = (0..n)
-        .flat_map(|j| tile.level(j).expect("level").positions.to_vec())
-        .map(|p| {
-            let (x, y, _) = unpack(p);
-            (x, y)
-        })
-        .collect();
+    let points = points(&tile);
     let in_part0 = |c: u32| points[c as usize].0 < 64 && points[c as usize].1 < 64;
     let fine = fans(tile.level(n - 1).expect("level").indices.iter());
     let coarse = fans(tile.level(n - 4).expect("level").indices.iter());
