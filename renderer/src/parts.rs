@@ -8,8 +8,7 @@
 //! granted level, the array's length (from the small tables the tile's check reads,
 //! [`tiles::parts::tables`]; the GPU checks it on every build), and which
 //! draws need their array built again this frame: those whose region does not hold their key,
-//! as far as this module knows. It forgets what a tile's region holds whenever the manager
-//! uploads to or moves the tile, so a region is rebuilt rather than drawn on a guess.
+//! and those at one level whose region may still hold a mix ([`PartDraws::rebuilds`]).
 //!
 //! A rebuilt region may be read by frames still in flight: the build is recorded in the
 //! frame's command buffer after a barrier on earlier frames' index reads
@@ -25,9 +24,8 @@ use crate::terrain::Terrain;
 /// What part-by-part drawing remembers between frames.
 #[derive(Default)]
 pub struct PartDraws {
-    /// Per tile: the pool offset of the array this module last built for it, and its key
-    /// (None: one level).
-    held: HashMap<usize, (u64, Option<PartKey>)>,
+    /// Per tile: where this module last built a mix for it, and the mix's key.
+    held: HashMap<usize, (u64, PartKey)>,
 }
 
 /// One array to build this frame: the draw's index in the plan.
@@ -54,9 +52,7 @@ impl PartDraws {
             // The key the region holds, while it covers this one closely enough: finer parts
             // are within tau, and keeping it saves a build.
             let key = match self.held.get(&d.tile) {
-                Some(&(at, Some(held))) if at == d.index_offset && keeps(&held, &key, d.level) => {
-                    held
-                }
+                Some(&(at, held)) if at == d.index_offset && keeps(&held, &key, d.level) => held,
                 _ => key,
             };
             // The room is level G's array: a longer one (never seen) is drawn at G.
@@ -70,31 +66,36 @@ impl PartDraws {
         }
     }
 
-    /// The draws whose arrays this module builds this frame: every draw whose region is not
-    /// known to hold what it draws. What a region holds is known from this module's builds and
-    /// from the manager's builds of a level, and forgotten when the manager uploads to or moves
-    /// the tile. A draw the manager builds a level for where it draws from, at a key, replaces
-    /// the manager's build (one build writes there). Call after [`PartDraws::assign`].
+    /// The draws whose arrays this module builds this frame. This module remembers the regions
+    /// it wrote a mix into; any other region holds what the manager built there (a level). A
+    /// draw at a key is built unless its region holds that key; a draw at one level is built
+    /// only where this module wrote a mix into the tile's regions since the manager last built
+    /// there, so that drawing whole tiles (discrete levels, `--whole-tiles`) builds nothing
+    /// more than the manager asks. A build of the manager's where a draw at a key draws from
+    /// is replaced by the draw's (one build writes there). Call after [`PartDraws::assign`].
     pub fn rebuilds(&mut self, plan: &Plan) -> Vec<Rebuild> {
-        for u in &plan.uploads {
-            self.held.remove(&(u.tile as usize));
-        }
-        for m in &plan.moves {
-            self.held.remove(&(m.tile as usize));
-        }
+        let built = |tile: usize, at: u64| {
+            plan.uploads
+                .iter()
+                .any(|u| u.built && u.tile as usize == tile && u.dst == at)
+        };
+        // A level the manager builds over a mix replaces it.
+        self.held.retain(|&tile, &mut (at, _)| !built(tile, at));
         let mut out = Vec::new();
         for (k, d) in plan.draws.iter().enumerate() {
-            if self.held.get(&d.tile) == Some(&(d.index_offset, d.key)) {
-                continue;
-            }
-            self.held.insert(d.tile, (d.index_offset, d.key));
-            let built_here = plan
-                .uploads
-                .iter()
-                .any(|u| u.built && u.tile as usize == d.tile && u.dst == d.index_offset);
-            // The manager's own build of the level is what a draw at one level wants.
-            if !(built_here && d.key.is_none()) {
-                out.push(k);
+            match (d.key, self.held.get(&d.tile)) {
+                (Some(key), held) if held == Some(&(d.index_offset, key)) => {}
+                (Some(key), _) => {
+                    self.held.insert(d.tile, (d.index_offset, key));
+                    out.push(k);
+                }
+                (None, None) => {}
+                (None, Some(_)) => {
+                    self.held.remove(&d.tile);
+                    if !built(d.tile, d.index_offset) {
+                        out.push(k);
+                    }
+                }
             }
         }
         out
