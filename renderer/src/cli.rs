@@ -7,6 +7,7 @@ use std::path::PathBuf;
 use anyhow::{bail, Context, Result};
 use clap::Parser;
 use renderer::lod::Bound;
+use renderer::parts::BuildCost;
 use renderer::prefetch::PrefetchOptions;
 use renderer::settings::{MemoryOptions, MorphShader, Settings, Shading};
 use renderer::terrain::Terrain;
@@ -96,6 +97,12 @@ pub struct Cli {
     /// and --draw-only draws whole tiles)
     #[arg(long)]
     pub whole_tiles: bool,
+    /// Part by part: what building a tile's mixed index array costs on this device, as
+    /// FIXED,SHARE: a mix is built only where it saves at least FIXED + SHARE x G triangles a
+    /// frame, G being the tile's triangles at its drawn level (measure with `tilebench
+    /// part-cost`; 1,0 builds every mix that saves a triangle)
+    #[arg(long, value_name = "FIXED,SHARE", default_value = DEFAULT_PART_BUILD_COST, value_parser = parse_build_cost)]
+    pub part_build_cost: BuildCost,
     /// The vertex shader that blends levels: two-levels (reads the two levels around each
     /// vertex's level) or forward-differences (the paper's clamped forward differences as dot
     /// products over every level; the reference).
@@ -224,6 +231,29 @@ pub struct Cli {
     /// tiles from disk as a first run would.
     #[arg(long)]
     pub cold_file_cache: bool,
+}
+
+/// `--part-build-cost`'s default, measured on lavapipe (bench/README.md, "Part by part").
+const DEFAULT_PART_BUILD_COST: &str = "1000,0.1";
+
+fn parse_build_cost(s: &str) -> Result<BuildCost, String> {
+    let bad = || {
+        format!(
+            "expected FIXED,SHARE (two numbers >= 0, e.g. {DEFAULT_PART_BUILD_COST}), got {s:?}"
+        )
+    };
+    let (fixed, share) = s.split_once(',').ok_or_else(bad)?;
+    let number = |t: &str| {
+        t.trim()
+            .parse::<f32>()
+            .ok()
+            .filter(|v| v.is_finite() && *v >= 0.0)
+            .ok_or_else(bad)
+    };
+    Ok(BuildCost {
+        fixed: number(fixed)?,
+        share: number(share)?,
+    })
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -362,6 +392,7 @@ impl Cli {
             geomorph: !self.no_geomorph,
             // Pre-recorded frames cannot follow a mix that changes from frame to frame.
             part_by_part: !self.whole_tiles && !self.draw_only,
+            part_build_cost: self.part_build_cost,
             morph_shader: match self.morph_shader {
                 MorphShaderArg::TwoLevels => MorphShader::TwoLevels,
                 MorphShaderArg::ForwardDifferences => MorphShader::ForwardDifferences,

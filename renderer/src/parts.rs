@@ -33,10 +33,19 @@ pub type Rebuild = usize;
 
 impl PartDraws {
     /// Gives each draw that has part levels the key it is drawn at (at most its granted
-    /// level) and its array's length. A draw whose parts cannot be drawn apart at that level
-    /// keeps its level throughout.
-    pub fn assign(&mut self, terrain: &Terrain, plan: &mut Plan) {
-        for d in &mut plan.draws {
+    /// level) and its array's length, where drawing the mix pays for building it
+    /// ([`BuildCost`]). A draw whose parts cannot be drawn apart at that level, or whose mix
+    /// would save too little, keeps its level throughout.
+    ///
+    /// What the draw's region holds is kept while it covers the key (every part at least as
+    /// fine as wanted: finer parts are within tau, and their extra vertices sit on the
+    /// coarser surface until their own morph begins, so the image is the key's) and drawing
+    /// it costs fewer extra triangles than a build. The region holds the mix this module last
+    /// built there, or else the manager's array of the whole level, which covers every key
+    /// and is never built again for a part's sake.
+    pub fn assign(&mut self, terrain: &Terrain, plan: &mut Plan, cost: BuildCost) {
+        let Plan { draws, uploads, .. } = plan;
+        for d in draws.iter_mut() {
             d.key = None;
             let Some(wanted) = d.parts else { continue };
             // Read with the tile's check (drawn tiles passed it).
@@ -46,18 +55,34 @@ impl PartDraws {
             let Some(key) = centres.key(&wanted, d.level) else {
                 continue;
             };
-            if key.levels.iter().all(|&l| u32::from(l) == d.level) {
-                continue;
-            }
-            // The key the region holds, while it covers this one closely enough: finer parts
-            // are within tau, and keeping it saves a build.
-            let key = match self.held.get(&d.tile) {
-                Some(&(at, held)) if at == d.index_offset && keeps(&held, &key, d.level) => held,
-                _ => key,
+            // The room is level G's array: a longer mix (never seen) is drawn at G.
+            let whole = (d.index_count, d.triangle_count);
+            let fits = |k: &PartKey| counts.count(k).filter(|&(length, _)| length <= whole.0);
+            let Some(exact) = fits(&key) else { continue };
+            // A region the manager builds this frame holds the whole level.
+            let built = uploads
+                .iter()
+                .any(|u| u.built && u.tile as usize == d.tile && u.dst == d.index_offset);
+            let held = match self.held.get(&d.tile) {
+                Some(&(at, held)) if at == d.index_offset && !built => Some(held),
+                _ => None,
             };
-            // The room is level G's array: a longer one (never seen) is drawn at G.
-            if let Some((length, triangles)) = counts.count(&key) {
-                if length <= d.index_count {
+            let mix_pays = cost.pays(whole.1, exact.1, whole.1);
+            let drawn = match held {
+                // The held mix covers the key: keep it unless the key saves a build's worth.
+                Some(held) if covers(&held, &key, d.level) => match fits(&held) {
+                    Some(h) if !cost.pays(h.1, exact.1, whole.1) => Some((held, h)),
+                    _ => Some((key, exact)),
+                },
+                // The whole level (held by the region, or built again where a held mix no
+                // longer covers): the key only where it saves a build's worth over the whole
+                // level, since a mix must be built again whenever a part wants more, and the
+                // whole level only when the tile's level changes.
+                _ if mix_pays => Some((key, exact)),
+                _ => None,
+            };
+            if let Some((key, (length, triangles))) = drawn {
+                if key.levels.iter().any(|&l| u32::from(l) != d.level) {
                     d.key = Some(key);
                     d.index_count = length;
                     d.triangle_count = triangles;
@@ -102,18 +127,38 @@ impl PartDraws {
     }
 }
 
-/// Levels finer than wanted a part may stay drawn at rather than its array be built again.
-pub const SLACK: u8 = 1;
+/// What building a tile's mix costs, in triangles drawn, on the device at hand: a frame builds
+/// a key only where the triangles it saves each frame over what the region holds are at least
+/// `fixed + share * G`, for a tile of `G` triangles at its drawn level. A build scatters every
+/// vertex of the drawn level and walks the tile's cells (`indices.comp`), so its cost has a
+/// fixed part and a part that grows with the tile; a mix is held for several frames, so the
+/// threshold is a build's cost spread over them. `--part-build-cost` sets it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BuildCost {
+    pub fixed: f32,
+    pub share: f32,
+}
 
-/// Whether a tile drawn at `held` may stay so where it wants `key`, at level `top`: every part
-/// at least as fine as wanted and at most [`SLACK`] finer, and the border still `top`'s.
-fn keeps(held: &PartKey, key: &PartKey, top: u32) -> bool {
+impl BuildCost {
+    /// Builds every mix that saves a triangle (the control: no cost, no hysteresis).
+    pub const FREE: BuildCost = BuildCost {
+        fixed: 1.0,
+        share: 0.0,
+    };
+
+    /// Whether drawing `to` triangles rather than `from` saves a build's worth on a tile of
+    /// `whole` triangles at its drawn level.
+    pub fn pays(self, from: u32, to: u32, whole: u32) -> bool {
+        let saved = from.saturating_sub(to) as f32;
+        saved > 0.0 && saved >= self.fixed + self.share * whole as f32
+    }
+}
+
+/// Whether a tile drawn at `held` covers `key` at level `top`: every part at least as fine as
+/// wanted, and the border still `top`'s.
+fn covers(held: &PartKey, key: &PartKey, top: u32) -> bool {
     held.levels.iter().copied().max().map(u32::from) == Some(top)
-        && held
-            .levels
-            .iter()
-            .zip(&key.levels)
-            .all(|(&h, &k)| h >= k && h <= k.saturating_add(SLACK))
+        && held.levels.iter().zip(&key.levels).all(|(&h, &k)| h >= k)
 }
 
 /// Where each lattice point of `tile` first appears (the tile passed its check to be drawn).
@@ -129,5 +174,43 @@ pub fn blocks(terrain: &Terrain, tile: usize) -> Blocks {
             )
         }
         Err(_) => Blocks::new(std::iter::empty(), mesh_max),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn key(levels: [u8; 16]) -> PartKey {
+        PartKey { levels }
+    }
+
+    #[test]
+    fn a_build_pays_where_it_saves_its_cost() {
+        let cost = BuildCost {
+            fixed: 1000.0,
+            share: 0.1,
+        };
+        // 40,000 triangles at the level: a build's worth is 5,000.
+        assert!(cost.pays(30_000, 25_000, 40_000));
+        assert!(!cost.pays(30_000, 25_001, 40_000));
+        // Drawing more never pays, and the free cost builds whatever saves a triangle.
+        assert!(!cost.pays(25_000, 30_000, 40_000));
+        assert!(BuildCost::FREE.pays(2, 1, 40_000));
+        assert!(!BuildCost::FREE.pays(1, 1, 40_000));
+    }
+
+    #[test]
+    fn a_mix_covers_keys_no_finer_with_the_same_border() {
+        let mut held = [2u8; 16];
+        held[5] = 4;
+        let mut wanted = [1u8; 16];
+        wanted[5] = 4;
+        assert!(covers(&key(held), &key(wanted), 4));
+        // A part wanting more than held, or a drawn level the mix's border is not.
+        let mut more = wanted;
+        more[0] = 3;
+        assert!(!covers(&key(held), &key(more), 4));
+        assert!(!covers(&key(held), &key(wanted), 5));
     }
 }

@@ -31,6 +31,8 @@ pub struct Settings {
     /// off: `--whole-tiles`, each tile at one level). Needs index arrays built on the GPU;
     /// where they are sent, a tile is drawn at its parts' largest level throughout.
     pub part_by_part: bool,
+    /// Part by part: what building a mix costs, in triangles ([`crate::parts::BuildCost`]).
+    pub part_build_cost: crate::parts::BuildCost,
     pub morph_shader: MorphShader,
 }
 

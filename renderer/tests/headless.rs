@@ -504,6 +504,9 @@ fn bad_flags_and_non_files_give_one_clear_line() {
             "--gpu-budget-mb",
         ),
         (&["--frames", "18446744073709551615"][..], "--frames"),
+        (&["--part-build-cost", "1000"][..], "--part-build-cost"),
+        (&["--part-build-cost", "1000,-0.1"][..], "--part-build-cost"),
+        (&["--part-build-cost", "inf,0"][..], "--part-build-cost"),
     ] {
         let mut args = vec![s(&set), "--headless"];
         args.extend(flags);
@@ -913,6 +916,61 @@ fn raising_tau_with_morphing_draws_fewer_triangles() {
     eprintln!("triangles: discrete tau 1 {discrete}, morph tau 1 {morph_1}, tau 3 {morph_3}");
     assert!(morph_1 <= 1.15 * discrete, "{morph_1} vs {discrete}");
     assert!(morph_3 < discrete, "{morph_3} vs {discrete}");
+}
+
+/// Part by part, a tile's mix is built only where it saves a build's worth of triangles
+/// (`--part-build-cost`): on the sample's orbit the default cost builds fewer mixes than
+/// building every mix that saves a triangle (`1,0`), and still draws fewer triangles than
+/// whole tiles. The control: at a cost no mix can pay, no tile is drawn part by part, nothing
+/// is built for parts, and the frames draw each tile whole at its level.
+#[test]
+fn part_by_part_builds_a_mix_only_where_it_pays() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = puget(dir.path());
+    let run = |name: &str, extra: &[&str]| {
+        let log = dir.path().join(format!("{name}.csv"));
+        let mut args = vec![s(&set), "--headless", "--path", "orbit", "--frames", "16"];
+        args.extend(["--size", "640x480", WARM, "--log", s(&log)]);
+        args.extend(extra);
+        let o = vkterrain(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let total = |c: &str| common::log_column(&log, c).iter().sum::<f64>();
+        (
+            total("part_builds"),
+            total("triangles"),
+            total("tiles_part_by_part"),
+        )
+    };
+    let (builds_free, triangles_free, _) = run("free", &["--part-build-cost", "1,0"]);
+    let (builds, triangles, mixed) = run("default", &[]);
+    let (never_builds, never_triangles, never_mixed) =
+        run("never", &["--part-build-cost", "1e9,0"]);
+    let (_, whole, _) = run("whole", &["--whole-tiles"]);
+    eprintln!(
+        "part builds {builds_free} (1,0), {builds} (default), {never_builds} (never); \
+         triangles {triangles_free}, {triangles}, {never_triangles}, whole tiles {whole}"
+    );
+    assert!(mixed > 0.0, "the default draws no tile part by part");
+    assert!(
+        builds < builds_free,
+        "{builds} builds vs {builds_free} at no cost"
+    );
+    assert!(
+        triangles >= triangles_free,
+        "{triangles} vs {triangles_free}"
+    );
+    assert!(
+        triangles < 0.8 * whole,
+        "{triangles} vs whole tiles' {whole}"
+    );
+    assert_eq!((never_builds, never_mixed), (0.0, 0.0));
+    // Each tile at its parts' largest level: more than the mixes, no more than whole tiles
+    // (whose level rule counts the parts off screen too).
+    assert!(
+        never_triangles > 1.5 * triangles,
+        "{never_triangles} vs {triangles}"
+    );
+    assert!(never_triangles <= whole, "{never_triangles} vs {whole}");
 }
 
 /// The heights the vertex shader computes, read back from the GPU, equal the CPU mirror's

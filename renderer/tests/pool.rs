@@ -31,6 +31,7 @@ fn settings(forced_level: Option<u32>) -> Settings {
         // Each tile at one level: the pool's index arrays are then the file's levels, which
         // this test compares (mixed arrays are compared with the CPU mesher in indices.rs).
         part_by_part: false,
+        part_build_cost: renderer::parts::BuildCost::FREE,
         morph_shader: Default::default(),
     }
 }

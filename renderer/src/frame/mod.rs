@@ -340,7 +340,8 @@ impl Renderer {
         // Part by part, where the builder makes the arrays (sent ones are whole levels).
         let t_parts = Instant::now();
         if self.builder.is_some() {
-            self.parts.assign(terrain, &mut plan);
+            self.parts
+                .assign(terrain, &mut plan, settings.part_build_cost);
         }
         plan.cpu_lod_ms += ms(t_parts);
         // One line per tile that failed its check (here, or on the thread checking ahead).
