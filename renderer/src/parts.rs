@@ -14,7 +14,7 @@
 //! frame's command buffer after a barrier on earlier frames' index reads
 //! ([`crate::vulkan::indices::IndexBuilder::record`]), as the manager's own rewrites are.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
 use tiles::parts::{Blocks, PartKey};
 
@@ -45,6 +45,7 @@ impl PartDraws {
     /// and is never built again for a part's sake.
     pub fn assign(&mut self, terrain: &Terrain, plan: &mut Plan, cost: BuildCost) {
         let Plan { draws, uploads, .. } = plan;
+        let built = manager_builds(uploads);
         for d in draws.iter_mut() {
             d.key = None;
             let Some(wanted) = d.parts else { continue };
@@ -60,11 +61,9 @@ impl PartDraws {
             let fits = |k: &PartKey| counts.count(k).filter(|&(length, _)| length <= whole.0);
             let Some(exact) = fits(&key) else { continue };
             // A region the manager builds this frame holds the whole level.
-            let built = uploads
-                .iter()
-                .any(|u| u.built && u.tile as usize == d.tile && u.dst == d.index_offset);
+            let rebuilt = built.contains(&(d.tile, d.index_offset));
             let held = match self.held.get(&d.tile) {
-                Some(&(at, held)) if at == d.index_offset && !built => Some(held),
+                Some(&(at, held)) if at == d.index_offset && !rebuilt => Some(held),
                 _ => None,
             };
             let mix_pays = cost.pays(whole.1, exact.1, whole.1);
@@ -99,11 +98,8 @@ impl PartDraws {
     /// more than the manager asks. A build of the manager's where a draw at a key draws from
     /// is replaced by the draw's (one build writes there). Call after [`PartDraws::assign`].
     pub fn rebuilds(&mut self, plan: &Plan) -> Vec<Rebuild> {
-        let built = |tile: usize, at: u64| {
-            plan.uploads
-                .iter()
-                .any(|u| u.built && u.tile as usize == tile && u.dst == at)
-        };
+        let manager = manager_builds(&plan.uploads);
+        let built = |tile: usize, at: u64| manager.contains(&(tile, at));
         // A level the manager builds over a mix replaces it.
         self.held.retain(|&tile, &mut (at, _)| !built(tile, at));
         let mut out = Vec::new();
@@ -159,6 +155,16 @@ impl BuildCost {
 fn covers(held: &PartKey, key: &PartKey, top: u32) -> bool {
     held.levels.iter().copied().max().map(u32::from) == Some(top)
         && held.levels.iter().zip(&key.levels).all(|(&h, &k)| h >= k)
+}
+
+/// The regions the manager builds a level's array into this frame, by tile and pool offset
+/// (a set, so that a frame's cost follows its draws and uploads, not their product).
+fn manager_builds(uploads: &[memory::Upload]) -> HashSet<(usize, u64)> {
+    uploads
+        .iter()
+        .filter(|u| u.built)
+        .map(|u| (u.tile as usize, u.dst))
+        .collect()
 }
 
 /// Where each lattice point of `tile` first appears (the tile passed its check to be drawn).
