@@ -234,7 +234,7 @@ pub struct Cli {
 }
 
 /// `--part-build-cost`'s default, measured on lavapipe (bench/README.md, "Part by part").
-const DEFAULT_PART_BUILD_COST: &str = "1000,0.1";
+const DEFAULT_PART_BUILD_COST: &str = "500,0.1";
 
 fn parse_build_cost(s: &str) -> Result<BuildCost, String> {
     let bad = || {
