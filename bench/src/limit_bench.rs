@@ -120,6 +120,8 @@ fn path_start(vkterrain: &Path, set: &Path, path: &str, seconds: f64, out: &Path
 /// What [`limit_table`] flies besides the flight table.
 #[derive(Clone, Copy, Debug)]
 pub struct Extras {
+    /// The flight table (`tilebench limit` and `flights`; `tilebench table1` skips it).
+    pub flights: bool,
     /// The static-mesh limit at each row's triangle count (`tilebench limit`).
     pub limit: bool,
     /// The paper's Table 1 on the sets with a source (`tilebench limit`).
@@ -128,6 +130,7 @@ pub struct Extras {
 
 /// `tilebench limit`: the flight table with the static-mesh limit and Table 1.
 /// `tilebench flights`: the flight table alone (a third of the time).
+/// `tilebench table1`: Table 1 alone.
 pub fn limit_table(extras: Extras) -> Result<()> {
     let vkterrain = sibling("vkterrain", "renderer")?;
     let tiletool = sibling("tiletool", "tiletool")?;
@@ -154,12 +157,18 @@ pub fn limit_table(extras: Extras) -> Result<()> {
             &["--tau", "1", "--morph-shader", "forward-differences"],
         ),
     ];
-    println!("### Flights against discrete tau 1, brute force and the static-mesh limit (60 frames, 1024 x 768, one run)\n");
-    println!("Frame: median frame time. GPU draw: the median of the GPU's timestamps around the draws. Limit: the static-mesh limit at the row's triangle count, median of 30 frames (`-` when not flown: `tilebench flights`). Ratios are to discrete tau 1 of the same flight.\n");
-    println!("| dataset | path | mode | frame ms | GPU draw ms | triangles | frame / discrete tau 1 | triangles / discrete tau 1 | brute / this | limit ms | frame / limit |");
-    println!("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    if extras.flights {
+        println!("### Flights against discrete tau 1, brute force and the static-mesh limit (60 frames, 1024 x 768, one run)\n");
+        println!("Frame: median frame time. GPU draw: the median of the GPU's timestamps around the draws. Limit: the static-mesh limit at the row's triangle count, median of 30 frames (`-` when not flown: `tilebench flights`). Ratios are to discrete tau 1 of the same flight.\n");
+        println!("| dataset | path | mode | frame ms | GPU draw ms | triangles | frame / discrete tau 1 | triangles / discrete tau 1 | brute / this | limit ms | frame / limit |");
+        println!("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    }
     let mut table1 = Vec::new();
     for set in sets()? {
+        // Table 1 alone needs only the sets with a source.
+        if !extras.flights && (!extras.table1 || set.source.is_empty()) {
+            continue;
+        }
         let file = dir.join(format!("{}.vkt", set.name.replace(' ', "_")));
         let o = Command::new(&tiletool)
             .arg("build")
@@ -178,7 +187,7 @@ pub fn limit_table(extras: Extras) -> Result<()> {
                 String::from_utf8_lossy(&o.stderr)
             );
         }
-        for path in set.paths {
+        for path in set.paths.iter().filter(|_| extras.flights) {
             let mut rows = Vec::new();
             for (mode, extra) in modes {
                 let s = flight(&vkterrain, &file, path, 60, extra)?;

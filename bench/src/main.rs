@@ -43,6 +43,7 @@ fn main() -> std::process::ExitCode {
 
 /// `tilebench limit` flies the static-mesh limit and Table 1 beside the flight table.
 const ALL_EXTRAS: limit_bench::Extras = limit_bench::Extras {
+    flights: true,
     limit: true,
     table1: true,
 };
@@ -57,8 +58,14 @@ fn run() -> Result<()> {
         "memory" => memory_bench::memory(),
         "limit" => limit_bench::limit_table(ALL_EXTRAS),
         "flights" => limit_bench::limit_table(limit_bench::Extras {
+            flights: true,
             limit: false,
             table1: false,
+        }),
+        "table1" => limit_bench::limit_table(limit_bench::Extras {
+            flights: false,
+            limit: false,
+            table1: true,
         }),
         "all" => {
             throughput()?;
