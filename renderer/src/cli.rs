@@ -99,8 +99,8 @@ pub struct Cli {
     pub whole_tiles: bool,
     /// Part by part: what building a tile's mixed index array costs on this device, as
     /// FIXED,SHARE: a mix is built only where it saves at least FIXED + SHARE x G triangles a
-    /// frame, G being the tile's triangles at its drawn level (measure with `tilebench
-    /// part-cost`; 1,0 builds every mix that saves a triangle)
+    /// frame, G being the tile's triangles at its drawn level (bench/README.md, "A build's
+    /// worth", sweeps it on lavapipe; 1,0 builds every mix that saves a triangle)
     #[arg(long, value_name = "FIXED,SHARE", default_value = DEFAULT_PART_BUILD_COST, value_parser = parse_build_cost)]
     pub part_build_cost: BuildCost,
     /// The vertex shader that blends levels: two-levels (reads the two levels around each
@@ -233,7 +233,7 @@ pub struct Cli {
     pub cold_file_cache: bool,
 }
 
-/// `--part-build-cost`'s default, measured on lavapipe (bench/README.md, "Part by part").
+/// `--part-build-cost`'s default, measured on lavapipe (bench/README.md, "A build's worth").
 const DEFAULT_PART_BUILD_COST: &str = "500,0.1";
 
 fn parse_build_cost(s: &str) -> Result<BuildCost, String> {
