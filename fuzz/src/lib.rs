@@ -112,18 +112,25 @@ pub const TARGETS: &[Target] = &[
 ];
 
 fn run_vkt(p: &Path) {
-    if let Ok(set) = tiles::TileSet::open(p) {
-        let h = *set.header();
-        for ty in 0..h.tiles_y.min(64) {
-            for tx in 0..h.tiles_x.min(64) {
-                if let Ok(tile) = set.tile(tx, ty) {
-                    let _ = tiles::verify::tile_problems(&set, &tile);
-                    let _ = tile.vertices();
-                }
-                if let Ok(Some(texture)) = set.texture(tx, ty) {
-                    for (e, blocks) in &texture.mips {
-                        let _ =
-                            tiles::texture::decode_bc1(blocks, e.width as usize, e.height as usize);
+    if let Ok(file) = tiles::TileSet::open(p) {
+        // The base grid's tiles, then each pyramid layer's, each layer read as a tile set.
+        for layer in (0..=file.pyramid_layers().min(32)).filter_map(|l| file.layer(l)) {
+            let h = *layer.header();
+            for ty in 0..h.tiles_y.min(64) {
+                for tx in 0..h.tiles_x.min(64) {
+                    let _ = layer.decimation_error(tx, ty);
+                    if let Ok(tile) = layer.tile(tx, ty) {
+                        let _ = tiles::verify::tile_problems(&layer, &tile);
+                        let _ = tile.vertices();
+                    }
+                    if let Ok(Some(texture)) = layer.texture(tx, ty) {
+                        for (e, blocks) in &texture.mips {
+                            let _ = tiles::texture::decode_bc1(
+                                blocks,
+                                e.width as usize,
+                                e.height as usize,
+                            );
+                        }
                     }
                 }
             }

@@ -9,12 +9,13 @@ use std::sync::{Arc, Mutex};
 use rayon::prelude::*;
 
 use crate::format::{
-    level_error, side_error_code, tile_count, FileHeader, LevelEntry, TileHeader, TileSetWriter,
-    FLAG_SHARED_SIDES, MAX_LEVELS, TILE_MAGIC,
+    level_error, pyramid_layers, side_error_code, tile_count, FileHeader, LevelEntry, TileHeader,
+    TileSetWriter, FLAG_SHARED_SIDES, MAX_LEVELS, TILE_MAGIC,
 };
 use crate::grid::{tile_samples, Grid};
 use crate::mesh::{lattice, plane, triangle_spans, Mesher, Quad, TILE_CELLS, TILE_SIZE};
 use crate::pack::{morph_offset, morph_unit, pack};
+use crate::pyramid::{decimation_errors, Decimated};
 use crate::quantise::{lattice_step, Quantiser};
 use crate::texture::{self, Prepared, Source, Texturing};
 use crate::BuildError;
@@ -28,6 +29,9 @@ pub struct BuildParams {
     /// side vertices at every level and the same morph offsets for them. Off builds every
     /// tile on its own (one pass, fewer vertices; geomorphing then needs sliver triangles).
     pub shared_sides: bool,
+    /// Build the tile pyramid above the base grid (format version 3): coarser tiles, each
+    /// over 2 x 2 tiles of the layer below, up to one tile (see [`crate::pyramid`]).
+    pub pyramid: bool,
 }
 
 impl Default for BuildParams {
@@ -36,6 +40,7 @@ impl Default for BuildParams {
             levels: 9,
             base_error: 1.0,
             shared_sides: true,
+            pyramid: false,
         }
     }
 }
@@ -871,6 +876,22 @@ pub struct BuildSummary {
     pub texture_mips: Vec<MipStats>,
     /// Thread-seconds spent making textures (filtering, compressing), over all workers.
     pub texture_seconds: f64,
+    /// The tile pyramid's layers above the base, from layer 1 (empty without a pyramid). The
+    /// figures above are the base grid's.
+    pub pyramid: Vec<PyramidLayerSummary>,
+}
+
+/// Totals of one pyramid layer of a build.
+#[derive(Clone, Debug, Default)]
+pub struct PyramidLayerSummary {
+    pub tiles: u64,
+    /// Over all levels of all tiles.
+    pub triangles: u64,
+    pub bytes: u64,
+    pub texture_bytes: u64,
+    /// The largest decimation error of the layer's tiles, metres.
+    pub decimation_error: f32,
+    pub agreement_passes: u32,
 }
 
 /// One texture mip's totals over the tiles of a build.
@@ -1002,16 +1023,14 @@ pub fn build_tileset_from(
         height_step: step,
         ..bytemuck::Zeroable::zeroed()
     };
-    let (agreements, agreement_passes, agreement_meshes) = if params.shared_sides {
-        let agreed = agree_sides(&bands, params, step, Remesh::Changed)?;
-        let (passes, meshes) = (agreed.passes, agreed.meshes);
-        (Some(agreed), passes, meshes)
-    } else {
-        (None, 0, 0)
-    };
     let header = FileHeader {
         flags: if params.shared_sides {
             FLAG_SHARED_SIDES
+        } else {
+            0
+        },
+        pyramid_layers: if params.pyramid {
+            pyramid_layers(shape.width, shape.height)
         } else {
             0
         },
@@ -1028,13 +1047,11 @@ pub fn build_tileset_from(
         },
         None => header,
     };
+    // The relief's tint spans the base grid's heights in every layer, so that colours match.
     let prepared = texturing.map(|t| (Prepared::new((lo, hi), &t.source), t.layout));
-    let margin = texturing.map_or(0, |t| t.layout.rows_beyond_tile());
     let mut writer = TileSetWriter::create(out, header)?;
     let mut summary = BuildSummary {
         levels: vec![LevelStats::default(); params.levels as usize],
-        agreement_passes,
-        agreement_meshes,
         texture_mips: texturing
             .map(|t| {
                 (0..t.layout.mips)
@@ -1047,8 +1064,100 @@ pub fn build_tileset_from(
             .unwrap_or_default(),
         ..Default::default()
     };
-    // Tiles are made on every core and written in row-major order, whatever order they
-    // finish in, so that the same input and options give the same bytes.
+    let base = Layer {
+        index: 0,
+        bands: &bands,
+        step,
+        decimation: None,
+        prepared: prepared.as_ref().map(|(p, l)| (p.for_layer(0), *l)),
+    };
+    build_layer(&mut writer, &base, params, progress, &mut summary)?;
+    // The pyramid: each layer from the grid subsampled, its error bound from the layer below.
+    let mut below = vec![0.0f32; (tiles_x * tiles_y) as usize];
+    let mut below_tiles_x = tiles_x;
+    for p in 1..=header.pyramid_layers {
+        let layer_heights = Decimated::new(heights, p);
+        let finer = Decimated::new(heights, p - 1);
+        let finer: &dyn Heights = if p == 1 { heights } else { &finer };
+        let l = writer.layers()[p as usize - 1];
+        let decimation = decimation_errors(finer, &below, below_tiles_x, (l.tiles_x, l.tiles_y))?;
+        let layer_bands = Bands::new(&layer_heights, (l.tiles_x, l.tiles_y));
+        let scanned = scan(&layer_bands)?;
+        writer.set_layer_heights(p, scanned.step, scanned.lo, scanned.hi);
+        let mut layer_summary = BuildSummary {
+            levels: vec![LevelStats::default(); params.levels as usize],
+            texture_mips: summary
+                .texture_mips
+                .iter()
+                .map(|m| MipStats {
+                    bytes: 0,
+                    squared_error: 0.0,
+                    texels: 0,
+                    ..*m
+                })
+                .collect(),
+            ..Default::default()
+        };
+        let layer = Layer {
+            index: p,
+            bands: &layer_bands,
+            step: scanned.step,
+            decimation: Some(&decimation),
+            prepared: prepared.as_ref().map(|(s, l)| (s.for_layer(p), *l)),
+        };
+        build_layer(&mut writer, &layer, params, progress, &mut layer_summary)?;
+        summary.pyramid.push(PyramidLayerSummary {
+            tiles: layer_summary.tiles,
+            triangles: layer_summary.levels.iter().map(|l| l.triangles).sum(),
+            bytes: layer_summary.levels.iter().map(|l| l.bytes).sum(),
+            texture_bytes: layer_summary.texture_mips.iter().map(|m| m.bytes).sum(),
+            decimation_error: decimation.iter().fold(0.0f32, |a, &d| a.max(d)),
+            agreement_passes: layer_summary.agreement_passes,
+        });
+        summary.texture_seconds += layer_summary.texture_seconds;
+        (below, below_tiles_x) = (decimation, l.tiles_x);
+    }
+    writer.finish()?;
+    summary.file_bytes = std::fs::metadata(out).map(|m| m.len()).unwrap_or(0);
+    Ok(summary)
+}
+
+/// One layer of a build: the base grid (`index` 0) or a pyramid layer, read in bands.
+struct Layer<'a> {
+    index: u32,
+    bands: &'a Bands<'a>,
+    /// The layer's height lattice step.
+    step: f32,
+    /// Per tile (row-major), its decimation error (None: the base grid, all 0).
+    decimation: Option<&'a [f32]>,
+    prepared: Option<(Prepared<'a>, texture::Layout)>,
+}
+
+/// Builds one layer's tiles, shared sides agreed first where the build asks for them, and
+/// writes them (with their textures) in row-major order, whatever order they finish in, so
+/// that the same input and options give the same bytes.
+fn build_layer(
+    writer: &mut TileSetWriter,
+    layer: &Layer,
+    params: &BuildParams,
+    progress: &(dyn Fn() + Sync),
+    summary: &mut BuildSummary,
+) -> Result<(), BuildError> {
+    let bands = layer.bands;
+    let (tiles_x, step) = (bands.tiles.0, layer.step);
+    let agreements = if params.shared_sides {
+        let agreed = agree_sides(bands, params, step, Remesh::Changed)?;
+        summary.agreement_passes = agreed.passes;
+        summary.agreement_meshes = agreed.meshes;
+        Some(agreed)
+    } else {
+        None
+    };
+    let margin = layer
+        .prepared
+        .as_ref()
+        .map_or(0, |(_, l)| l.rows_beyond_tile());
+    // At most a few tiles per worker are in flight, so memory does not grow with the tiles.
     let in_flight = 2 * rayon::current_num_threads();
     let alone = Agreement::default();
     for b in 0..bands.count() {
@@ -1078,7 +1187,7 @@ pub fn build_tileset_from(
                 None => build_tile(&grid, tx, ty, params, step, &alone),
             };
             built.map(|b| {
-                let texture = prepared.as_ref().map(|(source, layout)| {
+                let texture = layer.prepared.as_ref().map(|(source, layout)| {
                     let start = std::time::Instant::now();
                     let (blob, mips) = texture::build_blob(&grid, source, layout, (tx, ty));
                     (blob, mips, start.elapsed().as_secs_f64())
@@ -1086,11 +1195,12 @@ pub fn build_tileset_from(
                 (b, texture)
             })
         };
-        crate::ordered::in_order(count, in_flight, make, |_, built| {
+        crate::ordered::in_order(count, in_flight, make, |i, built| {
             let (built, texture) = built?;
-            writer.add_tile(built.tx, built.ty, &built.blob)?;
+            let d = layer.decimation.map_or(0.0, |d| d[first + i]);
+            writer.add_layer_tile(layer.index, built.tx, built.ty, &built.blob, d)?;
             if let Some((blob, mips, seconds)) = texture {
-                writer.add_texture(built.tx, built.ty, &blob)?;
+                writer.add_layer_texture(layer.index, built.tx, built.ty, &blob)?;
                 summary.texture_seconds += seconds;
                 for (sum, m) in summary.texture_mips.iter_mut().zip(&mips) {
                     sum.bytes += u64::from(m.len);
@@ -1111,9 +1221,7 @@ pub fn build_tileset_from(
             Ok::<(), BuildError>(())
         })?;
     }
-    writer.finish()?;
-    summary.file_bytes = std::fs::metadata(out).map(|m| m.len()).unwrap_or(0);
-    Ok(summary)
+    Ok(())
 }
 
 /// Passes over the tile set until every pair of neighbours agrees on their shared side: the

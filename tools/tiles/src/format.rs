@@ -4,9 +4,14 @@
 //! aligned):
 //!
 //! ```text
-//! FileHeader      256 bytes   magic "VKTILES\0", version, grid, spacing, levels, crc of header+directory
+//! FileHeader      256 bytes   magic "VKTILES\0", version, grid, spacing, levels, pyramid layers,
+//!                             crc of header and every directory
 //! DirEntry * T    40 bytes    per tile (row-major by tile): offset, length, crc32 of the tile blob,
-//!                             offset and length of the tile's texture blob (0 = none)
+//!                             the tile's decimation error (0 for the base grid), offset and
+//!                             length of the tile's texture blob (0 = none)
+//! LayerHeader * P 64 bytes    version 3: per pyramid layer p = 1..=P above the base grid (see
+//!                             "The tile pyramid" below)
+//! DirEntry * T_p  40 bytes    per tile of layer p, p = 1..=P, as the base's
 //! tile blobs      ...         TileHeader, LevelEntry * levels, then per level i:
 //!                               block i positions   block_len * u32 (packed vertex, see `pack`)
 //!                               block i morph       i * block_len * i8, level-major (see `pack`)
@@ -17,7 +22,23 @@
 //!                             (see [`crate::texture`] for the layout and the texel mapping)
 //! ```
 //!
-//! Version 1 files (no texture fields) are still read, as tile sets without textures.
+//! Version 1 files (no texture fields) are still read, as tile sets without textures; version 2
+//! files (no pyramid: the field was reserved and zero) as tile sets without a pyramid.
+//!
+//! # The tile pyramid (version 3)
+//!
+//! Above the base grid's tiles, layer `p` holds tiles of the grid subsampled by `f = 2^p`: its
+//! sample `(x, y)` is the base sample `(min(f x, W-1), min(f y, H-1))`, so a layer has
+//! `ceil((W-1)/f) + 1` columns and each of its tiles covers 2 x 2 tiles of layer `p-1`, up to
+//! the last layer, one tile. Where `W-1` is not a multiple of `f` the last column repeats the
+//! base's last one, `< f` base columns beyond the data (and the same for rows). A layer's tiles
+//! are ordinary tiles of that grid, with their own nested levels, shared sides and textures, so
+//! [`TileSet::layer`] hands a layer out as a tile set of its own.
+//!
+//! A level's `max_error` is measured against the layer's samples. Its error against the base
+//! samples is at most `max_error + D`, where `D` is the tile's decimation error, stored in its
+//! directory entry: a bound on how far any base sample lies from the layer's finest surface.
+//! The builder's argument is in [`crate::pyramid`].
 //! `LevelEntry::side_errors` (each level's error near each side) took the entry's last,
 //! formerly reserved and zero, four bytes within version 2: a zero code reads as the whole
 //! level's error, so files from before it read as they did, and readers from before it ignore
@@ -42,7 +63,7 @@ use crate::texture;
 
 pub const MAGIC: [u8; 8] = *b"VKTILES\0";
 pub const TILE_MAGIC: [u8; 4] = *b"TILE";
-pub const VERSION: u32 = 2;
+pub const VERSION: u32 = 3;
 /// The oldest version this reader reads: version 1 had no textures and zeros in their fields.
 pub const OLDEST_VERSION: u32 = 1;
 
@@ -97,8 +118,10 @@ pub struct FileHeader {
     pub texture_gutter: u32,
     pub texture_mips: u32,
     pub texture_source: u32,
-    pub reserved: u32,
-    /// crc32 of this header (with this field zero) followed by the directory.
+    /// Layers of the tile pyramid above the base grid (version 3; reserved and zero before).
+    pub pyramid_layers: u32,
+    /// crc32 of this header (with this field zero) followed by the directory, then (version 3)
+    /// the layer headers and the layers' directories.
     pub header_crc: u32,
 }
 
@@ -108,9 +131,56 @@ pub struct DirEntry {
     pub offset: u64,
     pub len: u64,
     pub crc: u32,
-    pub flags: u32,
+    /// Metres: how far a base sample may lie from this tile's finest surface (0 in the base
+    /// grid; a reserved, zero field before version 3).
+    pub decimation_error: f32,
     pub texture_offset: u64,
     pub texture_len: u64,
+}
+
+/// One layer of the tile pyramid (version 3), after the base directory.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct LayerHeader {
+    pub grid_width: u32,
+    pub grid_height: u32,
+    pub tiles_x: u32,
+    pub tiles_y: u32,
+    /// Base samples per layer sample, `2^p`.
+    pub factor: u32,
+    /// The layer's own height lattice step: its tiles span more ground than the base's.
+    pub height_step: f32,
+    pub spacing_x: f64,
+    pub spacing_y: f64,
+    pub directory_offset: u64,
+    pub height_min: f32,
+    pub height_max: f32,
+    pub reserved: [u32; 2],
+}
+
+/// The most pyramid layers a file may declare: enough for grids of `256 * 2^32` samples a side.
+pub const MAX_PYRAMID_LAYERS: u32 = 32;
+
+/// The grid of pyramid layer `p` above a base grid of `width x height` samples: its size and
+/// the base samples per layer sample.
+pub fn layer_grid(width: usize, height: usize, p: u32) -> (usize, usize, usize) {
+    let f = 1usize << p;
+    ((width - 1).div_ceil(f) + 1, (height - 1).div_ceil(f) + 1, f)
+}
+
+/// Pyramid layers a grid of `width x height` samples gets above its base: until one tile.
+pub fn pyramid_layers(width: usize, height: usize) -> u32 {
+    let mut p = 0;
+    while let Ok((tx, ty)) = {
+        let (w, h, _) = layer_grid(width, height, p);
+        tile_count(w, h)
+    } {
+        if (tx, ty) == (1, 1) || p >= MAX_PYRAMID_LAYERS {
+            break;
+        }
+        p += 1;
+    }
+    p
 }
 
 #[repr(C)]
@@ -305,39 +375,101 @@ fn remove_stale_temporaries(path: &Path) {
     }
 }
 
+/// The layer headers a header's grid and `pyramid_layers` imply (their height fields zero),
+/// laid out after the base directory, and where the last directory ends.
+pub fn layer_layout(h: &FileHeader) -> Result<(Vec<LayerHeader>, u64), String> {
+    let (w, hh) = (h.grid_width as usize, h.grid_height as usize);
+    let (tx, ty) = tile_count(w, hh)?;
+    let layers = if h.version >= 3 { h.pyramid_layers } else { 0 };
+    if layers > MAX_PYRAMID_LAYERS || layers > pyramid_layers(w, hh) {
+        return Err(format!(
+            "{layers} pyramid layers, but a {w}x{hh} grid has {} at most",
+            pyramid_layers(w, hh)
+        ));
+    }
+    let entry = size_of::<DirEntry>() as u64;
+    let mut at = size_of::<FileHeader>() as u64 + u64::from(tx) * u64::from(ty) * entry;
+    at += u64::from(layers) * size_of::<LayerHeader>() as u64;
+    let mut out = Vec::with_capacity(layers as usize);
+    for p in 1..=layers {
+        let (lw, lh, f) = layer_grid(w, hh, p);
+        let (ltx, lty) = tile_count(lw, lh)?;
+        out.push(LayerHeader {
+            grid_width: lw as u32,
+            grid_height: lh as u32,
+            tiles_x: ltx,
+            tiles_y: lty,
+            factor: f as u32,
+            spacing_x: h.spacing_x * f as f64,
+            spacing_y: h.spacing_y * f as f64,
+            directory_offset: at,
+            ..LayerHeader::default()
+        });
+        at += u64::from(ltx) * u64::from(lty) * entry;
+    }
+    Ok((out, at))
+}
+
 /// Writes a tile set to a temporary file and renames it into place on [`finish`](Self::finish).
-/// Dropped unfinished, it deletes the temporary file.
+/// Dropped unfinished, it deletes the temporary file. Tiles of every pyramid layer go into the
+/// one file; `header.pyramid_layers` says how many layers there are.
 pub struct TileSetWriter {
     path: PathBuf,
     tmp_path: PathBuf,
     file: Option<BufWriter<File>>,
     header: FileHeader,
-    directory: Vec<DirEntry>,
-    written: Vec<bool>,
+    layers: Vec<LayerHeader>,
+    /// Per layer (0: the base), its directory and which tiles were written.
+    directories: Vec<Vec<DirEntry>>,
+    written: Vec<Vec<bool>>,
     pos: u64,
 }
 
 impl TileSetWriter {
     pub fn create(path: &Path, header: FileHeader) -> Result<Self, FormatError> {
+        let header = FileHeader {
+            version: VERSION,
+            ..header
+        };
+        let (layers, dir_end) = layer_layout(&header).map_err(|what| FormatError::Invalid {
+            path: path.to_path_buf(),
+            what: format!("internal: {what}"),
+        })?;
         let tmp_path = temp_path(path)?;
         remove_stale_temporaries(path);
         let file = File::create(&tmp_path).map_err(io_err(path))?;
-        let tiles = header.tiles_x as usize * header.tiles_y as usize;
-        let pos = align_up(
-            (size_of::<FileHeader>() + tiles * size_of::<DirEntry>()) as u64,
-            16,
+        let counts = std::iter::once(header.tiles_x as usize * header.tiles_y as usize).chain(
+            layers
+                .iter()
+                .map(|l| l.tiles_x as usize * l.tiles_y as usize),
         );
+        let pos = align_up(dir_end, 16);
         let mut writer = TileSetWriter {
             path: path.to_path_buf(),
             tmp_path,
             file: Some(BufWriter::with_capacity(1 << 20, file)),
             header,
-            directory: vec![DirEntry::default(); tiles],
-            written: vec![false; tiles],
+            directories: counts
+                .clone()
+                .map(|n| vec![DirEntry::default(); n])
+                .collect(),
+            written: counts.map(|n| vec![false; n]).collect(),
+            layers,
             pos,
         };
         writer.seek(pos)?;
         Ok(writer)
+    }
+
+    /// The pyramid layers above the base, as they will be written (height fields as set).
+    pub fn layers(&self) -> &[LayerHeader] {
+        &self.layers
+    }
+
+    /// Layer `p`'s (>= 1) height lattice step and height range.
+    pub fn set_layer_heights(&mut self, p: u32, step: f32, lo: f32, hi: f32) {
+        let l = &mut self.layers[p as usize - 1];
+        (l.height_step, l.height_min, l.height_max) = (step, lo, hi);
     }
 
     fn file(&mut self) -> &mut BufWriter<File> {
@@ -359,19 +491,41 @@ impl TileSetWriter {
         self.file().write_all(bytes).map_err(io_err(&path))
     }
 
+    fn slot(&self, layer: u32, tx: u32, ty: u32) -> usize {
+        let tiles_x = match layer {
+            0 => self.header.tiles_x,
+            p => self.layers[p as usize - 1].tiles_x,
+        };
+        ty as usize * tiles_x as usize + tx as usize
+    }
+
     /// Appends tile `(tx, ty)`'s blob (tiles may arrive in any order).
     pub fn add_tile(&mut self, tx: u32, ty: u32, blob: &[u8]) -> Result<(), FormatError> {
-        let slot = ty as usize * self.header.tiles_x as usize + tx as usize;
+        self.add_layer_tile(0, tx, ty, blob, 0.0)
+    }
+
+    /// Appends tile `(tx, ty)` of pyramid layer `layer` (0: the base grid) with its decimation
+    /// error.
+    pub fn add_layer_tile(
+        &mut self,
+        layer: u32,
+        tx: u32,
+        ty: u32,
+        blob: &[u8],
+        decimation_error: f32,
+    ) -> Result<(), FormatError> {
+        let slot = self.slot(layer, tx, ty);
         let pad = align_up(self.pos, 16) - self.pos;
         self.write(&[0u8; 16][..pad as usize])?;
         self.pos += pad;
-        self.directory[slot] = DirEntry {
+        self.directories[layer as usize][slot] = DirEntry {
             offset: self.pos,
             len: blob.len() as u64,
             crc: crc32fast::hash(blob),
+            decimation_error,
             ..DirEntry::default()
         };
-        self.written[slot] = true;
+        self.written[layer as usize][slot] = true;
         self.write(blob)?;
         self.pos += blob.len() as u64;
         Ok(())
@@ -379,37 +533,54 @@ impl TileSetWriter {
 
     /// Appends tile `(tx, ty)`'s texture blob (after its tile, in any order).
     pub fn add_texture(&mut self, tx: u32, ty: u32, blob: &[u8]) -> Result<(), FormatError> {
-        let slot = ty as usize * self.header.tiles_x as usize + tx as usize;
+        self.add_layer_texture(0, tx, ty, blob)
+    }
+
+    /// [`add_texture`](Self::add_texture) for a tile of pyramid layer `layer`.
+    pub fn add_layer_texture(
+        &mut self,
+        layer: u32,
+        tx: u32,
+        ty: u32,
+        blob: &[u8],
+    ) -> Result<(), FormatError> {
+        let slot = self.slot(layer, tx, ty);
         let pad = align_up(self.pos, 16) - self.pos;
         self.write(&[0u8; 16][..pad as usize])?;
         self.pos += pad;
-        self.directory[slot].texture_offset = self.pos;
-        self.directory[slot].texture_len = blob.len() as u64;
+        let e = &mut self.directories[layer as usize][slot];
+        e.texture_offset = self.pos;
+        e.texture_len = blob.len() as u64;
         self.write(blob)?;
         self.pos += blob.len() as u64;
         Ok(())
     }
 
-    /// Writes directory and header, syncs, and renames the file into place.
+    /// Writes the directories and the header, syncs, and renames the file into place.
     pub fn finish(mut self) -> Result<(), FormatError> {
-        if let Some(missing) = self.written.iter().position(|w| !w) {
-            return Err(FormatError::Invalid {
-                path: self.path.clone(),
-                what: format!("internal: tile {missing} was never written"),
-            });
+        for (p, written) in self.written.iter().enumerate() {
+            if let Some(missing) = written.iter().position(|w| !w) {
+                return Err(FormatError::Invalid {
+                    path: self.path.clone(),
+                    what: format!("internal: tile {missing} of layer {p} was never written"),
+                });
+            }
         }
         let mut header = self.header;
         header.magic = MAGIC;
-        header.version = VERSION;
         header.header_len = size_of::<FileHeader>() as u32;
         header.directory_offset = size_of::<FileHeader>() as u64;
         header.directory_entry_len = size_of::<DirEntry>() as u32;
+        let mut directory: Vec<u8> = bytemuck::cast_slice(&self.directories[0]).to_vec();
+        directory.extend_from_slice(bytemuck::cast_slice(&self.layers));
+        for d in &self.directories[1..] {
+            directory.extend_from_slice(bytemuck::cast_slice(d));
+        }
         header.header_crc = 0;
-        header.header_crc = header_crc(&header, bytemuck::cast_slice(&self.directory));
-        let directory = self.directory.clone();
+        header.header_crc = header_crc(&header, &directory);
         self.seek(0)?;
         self.write(bytemuck::bytes_of(&header))?;
-        self.write(bytemuck::cast_slice(&directory))?;
+        self.write(&directory)?;
         let path = self.path.clone();
         let file = self.file.take().expect("the file lives until finish");
         let file = file.into_inner().map_err(|e| FormatError::Io {
@@ -499,18 +670,34 @@ pub fn reseal(bytes: &mut [u8]) -> Result<(), String> {
     let n = h.tiles_x as usize * h.tiles_y as usize;
     let dir_at = h.directory_offset as usize;
     let entry_len = size_of::<DirEntry>();
-    let dir_end = n
+    let base_end = n
         .checked_mul(entry_len)
         .and_then(|l| l.checked_add(dir_at))
         .filter(|&end| end <= bytes.len())
         .ok_or("directory outside the file")?;
-    for k in 0..n {
-        let at = dir_at + k * entry_len;
-        let mut e: DirEntry = bytemuck::pod_read_unaligned(&bytes[at..at + entry_len]);
-        let (start, end) = (e.offset as usize, e.offset.saturating_add(e.len) as usize);
-        if start <= end && end <= bytes.len() {
-            e.crc = crc32fast::hash(&bytes[start..end]);
-            bytes[at..at + entry_len].copy_from_slice(bytemuck::bytes_of(&e));
+    // The layers' directories, where the header's grid implies a layout that fits.
+    let mut directories = vec![(dir_at, n)];
+    let mut dir_end = base_end;
+    if let Ok((layers, end)) = layer_layout(&h) {
+        if end as usize <= bytes.len() && dir_at == size_of::<FileHeader>() {
+            directories.extend(layers.iter().map(|l| {
+                (
+                    l.directory_offset as usize,
+                    (l.tiles_x * l.tiles_y) as usize,
+                )
+            }));
+            dir_end = end as usize;
+        }
+    }
+    for (at0, count) in directories {
+        for k in 0..count {
+            let at = at0 + k * entry_len;
+            let mut e: DirEntry = bytemuck::pod_read_unaligned(&bytes[at..at + entry_len]);
+            let (start, end) = (e.offset as usize, e.offset.saturating_add(e.len) as usize);
+            if start <= end && end <= bytes.len() {
+                e.crc = crc32fast::hash(&bytes[start..end]);
+                bytes[at..at + entry_len].copy_from_slice(bytemuck::bytes_of(&e));
+            }
         }
     }
     h.header_crc = 0;
@@ -552,10 +739,15 @@ pub fn tile_count(width: usize, height: usize) -> Result<(u32, u32), String> {
 /// A memory-mapped, validated tile set.
 pub struct TileSet {
     path: PathBuf,
-    map: memmap2::Mmap,
+    map: std::sync::Arc<memmap2::Mmap>,
+    /// The file's header; in a layer's view ([`TileSet::layer`]), the layer's grid, spacing,
+    /// height lattice and directory in place of the base's.
     header: FileHeader,
     /// Every tile's texture layout, when the set has textures.
     texture: Option<texture::Layout>,
+    /// Which pyramid layer this is (0: the base grid), and the file's layers above the base.
+    layer: u32,
+    layers: std::sync::Arc<Vec<LayerHeader>>,
 }
 
 /// The texture layout a header declares (None: no textures); what is wrong with it, if
@@ -667,34 +859,90 @@ impl TileSet {
                 header.tiles_x, header.tiles_y, header.grid_width, header.grid_height
             )));
         }
-        let dir_len = tx as u64 * ty as u64 * size_of::<DirEntry>() as u64;
-        let dir_end = header.directory_offset + dir_len;
+        let (expected, dir_end) = layer_layout(&header).map_err(invalid)?;
         if dir_end > map.len() as u64 {
             return Err(invalid(format!(
-                "directory of {} tiles runs past the end of the file (truncated?)",
-                tx * ty
+                "directory of {} tiles and {} pyramid layers runs past the end of the file (truncated?)",
+                tx * ty,
+                expected.len()
             )));
         }
         let directory = &map[header.directory_offset as usize..dir_end as usize];
         if header_crc(&header, directory) != header.header_crc {
             return Err(invalid("header checksum mismatch (corrupted file)".into()));
         }
+        let layers_at =
+            header.directory_offset as usize + (tx * ty) as usize * size_of::<DirEntry>();
+        let mut layers = Vec::with_capacity(expected.len());
+        for (i, want) in expected.iter().enumerate() {
+            let at = layers_at + i * size_of::<LayerHeader>();
+            let l: LayerHeader =
+                bytemuck::pod_read_unaligned(&map[at..at + size_of::<LayerHeader>()]);
+            let heights = LayerHeader {
+                height_step: l.height_step,
+                height_min: l.height_min,
+                height_max: l.height_max,
+                ..*want
+            };
+            if l != heights {
+                return Err(invalid(format!(
+                    "pyramid layer {} does not match the {}x{} grid",
+                    i + 1,
+                    header.grid_width,
+                    header.grid_height
+                )));
+            }
+            let finite = [l.height_step, l.height_min, l.height_max]
+                .iter()
+                .all(|v| v.is_finite());
+            if !finite || l.height_step <= 0.0 || l.height_min > l.height_max {
+                return Err(invalid(format!(
+                    "pyramid layer {}: height step {} or range {}..{} is not valid",
+                    i + 1,
+                    l.height_step,
+                    l.height_min,
+                    l.height_max
+                )));
+            }
+            layers.push(l);
+        }
         let texture = texture_layout(&header).map_err(invalid)?;
         let set = TileSet {
             path: path.to_path_buf(),
-            map,
+            map: std::sync::Arc::new(map),
             header,
             texture,
+            layer: 0,
+            layers: std::sync::Arc::new(layers),
+        };
+        set.check_entries(dir_end)?;
+        for p in 1..=set.pyramid_layers() {
+            set.layer(p)
+                .expect("a layer it has")
+                .check_entries(dir_end)?;
+        }
+        Ok(set)
+    }
+
+    /// Every directory entry's tile and texture lie inside the file, after the directories.
+    fn check_entries(&self, dir_end: u64) -> Result<(), FormatError> {
+        let (tx, ty) = (self.header.tiles_x, self.header.tiles_y);
+        let invalid = |what: String| FormatError::Invalid {
+            path: self.path.clone(),
+            what: match self.layer {
+                0 => what,
+                p => format!("pyramid layer {p}: {what}"),
+            },
         };
         for i in 0..(tx * ty) as usize {
-            let e = set.entry(i);
-            if let Some(layout) = &set.texture {
+            let e = self.entry(i);
+            if let Some(layout) = &self.texture {
                 if !e.texture_offset.is_multiple_of(16)
                     || e.texture_offset < dir_end
                     || (e.texture_len as usize) < layout.bytes()
                     || e.texture_offset
                         .checked_add(e.texture_len)
-                        .is_none_or(|end| end > set.map.len() as u64)
+                        .is_none_or(|end| end > self.map.len() as u64)
                 {
                     return Err(invalid(format!(
                         "texture of tile {},{} lies outside the file (offset {}, length {}; truncated?)",
@@ -709,7 +957,7 @@ impl TileSet {
                 || e.offset < dir_end
                 || e.offset
                     .checked_add(e.len)
-                    .is_none_or(|end| end > set.map.len() as u64)
+                    .is_none_or(|end| end > self.map.len() as u64)
             {
                 return Err(invalid(format!(
                     "tile {},{} lies outside the file (offset {}, length {}; truncated?)",
@@ -719,8 +967,70 @@ impl TileSet {
                     e.len
                 )));
             }
+            let d = e.decimation_error;
+            if !(d.is_finite() && (0.0..=MAX_METRES as f32).contains(&d)) {
+                return Err(invalid(format!(
+                    "tile {},{}: decimation error {d} is not a distance",
+                    i as u32 % tx,
+                    i as u32 / tx
+                )));
+            }
         }
-        Ok(set)
+        Ok(())
+    }
+
+    /// Layers of the tile pyramid above the base grid (0: none; always 0 before version 3).
+    pub fn pyramid_layers(&self) -> u32 {
+        self.layers.len() as u32
+    }
+
+    /// Which pyramid layer this is (0: the base grid).
+    pub fn layer_index(&self) -> u32 {
+        self.layer
+    }
+
+    /// Pyramid layer `p` (0: the base grid) as a tile set of its own: its grid, spacing, height
+    /// lattice and directory, over the same mapping; levels, base error, flags and texture
+    /// layout as the file's. None past the last layer.
+    pub fn layer(&self, p: u32) -> Option<TileSet> {
+        let base = FileHeader {
+            pyramid_layers: self.layers.len() as u32,
+            ..self.header
+        };
+        let header = match p {
+            0 if self.layer == 0 => base,
+            0 => return None,
+            p => {
+                let l = self.layers.get(p as usize - 1)?;
+                FileHeader {
+                    grid_width: l.grid_width,
+                    grid_height: l.grid_height,
+                    tiles_x: l.tiles_x,
+                    tiles_y: l.tiles_y,
+                    spacing_x: l.spacing_x,
+                    spacing_y: l.spacing_y,
+                    height_step: l.height_step,
+                    height_min: l.height_min,
+                    height_max: l.height_max,
+                    directory_offset: l.directory_offset,
+                    ..base
+                }
+            }
+        };
+        (self.layer == 0).then(|| TileSet {
+            path: self.path.clone(),
+            map: self.map.clone(),
+            header,
+            texture: self.texture,
+            layer: p,
+            layers: self.layers.clone(),
+        })
+    }
+
+    /// Tile `(tx, ty)`'s decimation error, metres (0 in the base grid): base samples lie at
+    /// most this far from its finest surface, so level `i` is within `max_error + D` of them.
+    pub fn decimation_error(&self, tx: u32, ty: u32) -> Option<f32> {
+        self.dir_entry(tx, ty).map(|e| e.decimation_error)
     }
 
     pub fn path(&self) -> &Path {
@@ -886,7 +1196,10 @@ impl TileSet {
     fn tile_error(&self, tx: u32, ty: u32, what: String) -> FormatError {
         FormatError::Invalid {
             path: self.path.clone(),
-            what: format!("tile {tx},{ty}: {what}"),
+            what: match self.layer {
+                0 => format!("tile {tx},{ty}: {what}"),
+                p => format!("pyramid layer {p} tile {tx},{ty}: {what}"),
+            },
         }
     }
 

@@ -21,6 +21,7 @@ pub mod mesh;
 pub mod ordered;
 pub mod pack;
 pub mod parts;
+pub mod pyramid;
 pub mod quantise;
 pub mod rings;
 pub mod texture;

@@ -5,10 +5,12 @@
 //! rasterised with their own barycentric code in f64, and the spacing rule is re-derived from
 //! each fan's geometry. A tile set that passes is what the renderer will draw.
 
+use crate::build::Heights;
 use crate::format::{Tile, TileSet, FLAG_SHARED_SIDES};
 use crate::grid::{tile_samples, Grid};
 use crate::mesh::{TILE_CELLS, TILE_SIZE};
 use crate::pack::unpack;
+use crate::pyramid::Decimated;
 
 /// One place where a level was allowed to exceed its bound (refinement forbidden there).
 #[derive(Clone, Debug, PartialEq)]
@@ -43,8 +45,109 @@ fn tolerance(e: f64) -> f64 {
     1e-3 + 1e-5 * e.abs()
 }
 
-/// Checks every tile; with `source`, also recomputes the errors against it.
+/// Checks every tile, those of the pyramid's layers too; with `source`, also recomputes the
+/// errors against it (a layer's against the source subsampled) and checks each layer tile's
+/// decimation error against every source sample under it.
 pub fn verify(set: &TileSet, source: Option<&Grid>) -> VerifyReport {
+    let mut report = verify_layer(set, source);
+    if set.layer_index() != 0 || (!report.problems.is_empty() && report.tiles == 0) {
+        return report;
+    }
+    for p in 1..=set.pyramid_layers() {
+        let layer = set.layer(p).expect("a layer the set has");
+        let decimated: Option<Vec<f32>> = source.map(|g| {
+            let d = Decimated::new(g, p);
+            let h = d.shape().height;
+            d.rows(0, h).expect("a grid held whole").into_owned()
+        });
+        let grid = source.zip(decimated.as_ref()).map(|(g, heights)| {
+            let shape = layer.header();
+            Grid {
+                width: shape.grid_width as usize,
+                height: shape.grid_height as usize,
+                first_row: 0,
+                heights,
+                spacing_x: g.spacing_x * f64::from(1u32 << p),
+                spacing_y: g.spacing_y * f64::from(1u32 << p),
+            }
+        });
+        let sub = verify_layer(&layer, grid.as_ref());
+        report.tiles += sub.tiles;
+        report.levels_checked += sub.levels_checked;
+        report.problems.extend(sub.problems);
+        report.limited.extend(sub.limited);
+        for (a, b) in report
+            .recomputed_max_error
+            .iter_mut()
+            .zip(&sub.recomputed_max_error)
+        {
+            *a = a.max(*b);
+        }
+        if let Some(g) = source {
+            for ty in 0..layer.header().tiles_y {
+                for tx in 0..layer.header().tiles_x {
+                    if let Ok(tile) = layer.tile(tx, ty) {
+                        check_decimation(&layer, &tile, g, &mut report);
+                    }
+                }
+            }
+        }
+    }
+    report
+}
+
+/// How a tile is named in problems: with its pyramid layer, when it has one.
+fn tile_name(set: &TileSet, tx: u32, ty: u32) -> String {
+    match set.layer_index() {
+        0 => format!("tile {tx},{ty}"),
+        p => format!("layer {p} tile {tx},{ty}"),
+    }
+}
+
+/// A pyramid layer's tile against the base grid's samples: each one under the tile lies within
+/// the finest level's `max_error` plus the tile's decimation error of the level's surface
+/// (the bound [`crate::pyramid`] argues; the coarser levels follow from the same argument).
+fn check_decimation(layer: &TileSet, tile: &Tile, base: &Grid, report: &mut VerifyReport) {
+    let f = 1u32 << layer.layer_index();
+    let (tx, ty) = (tile.header.tx, tile.header.ty);
+    let Some(finest) = tile.level(tile.header.levels - 1) else {
+        return;
+    };
+    let d = f64::from(layer.decimation_error(tx, ty).unwrap_or(0.0));
+    let bound = f64::from(finest.entry.max_error) + d;
+    let vertices = tile.vertices();
+    let (x0, y0) = (
+        (tx * TILE_CELLS * f) as usize,
+        (ty * TILE_CELLS * f) as usize,
+    );
+    let max_x = (base.width - 1 - x0) as u32;
+    let max_y = (base.height - 1 - y0) as u32;
+    let mut worst = 0.0f64;
+    for fan in finest.indices.fans() {
+        let v = |i: u32| {
+            let (x, y, z) = vertices[i as usize];
+            (x * f, y * f, z)
+        };
+        let c = v(fan[0]);
+        for w in fan[1..].windows(2) {
+            raster_barycentric([c, v(w[0]), v(w[1])], max_x, max_y, |x, y, z| {
+                let h = f64::from(base.at(x0 + x as usize, y0 + y as usize));
+                worst = worst.max((h - z).abs());
+            });
+        }
+    }
+    if worst > bound + tolerance(bound) {
+        report.problems.push(format!(
+            "{}: {}: a source sample lies {worst:.3} m from the finest level, past its error {:.3} m plus the decimation error {d:.3} m",
+            layer.path().display(),
+            tile_name(layer, tx, ty),
+            finest.entry.max_error
+        ));
+    }
+}
+
+/// [`verify`] for one layer's tiles (the base grid's, or a pyramid layer's).
+fn verify_layer(set: &TileSet, source: Option<&Grid>) -> VerifyReport {
     let h = set.header();
     let mut report = VerifyReport {
         recomputed_max_error: vec![0.0; h.levels as usize],
@@ -183,8 +286,8 @@ fn check_tile(set: &TileSet, tile: &Tile, source: Option<&Grid>, report: &mut Ve
     let want_y = (fh.grid_height as usize - 1 - ty as usize * cells).min(cells) as u32;
     let mut problem = |level: Option<u32>, what: String| {
         let at = match level {
-            Some(l) => format!("tile {tx},{ty} level {l}"),
-            None => format!("tile {tx},{ty}"),
+            Some(l) => format!("{} level {l}", tile_name(set, tx, ty)),
+            None => tile_name(set, tx, ty),
         };
         report
             .problems

@@ -51,6 +51,26 @@ struct TextureInfo {
     mips: Vec<MipInfo>,
 }
 
+/// One layer of the tile pyramid above the base grid.
+#[derive(Serialize)]
+struct LayerInfo {
+    layer: u32,
+    /// Base samples per layer sample.
+    factor: u32,
+    grid_width: u32,
+    grid_height: u32,
+    tiles_x: u32,
+    tiles_y: u32,
+    spacing_x_m: f64,
+    spacing_y_m: f64,
+    /// The largest of the layer's tiles' decimation errors: base samples lie at most this far
+    /// from a tile's finest surface.
+    max_decimation_error_m: f32,
+    /// Summed over the layer's tiles and levels.
+    triangles: u64,
+    bytes: u64,
+}
+
 #[derive(Serialize)]
 struct Info {
     file: String,
@@ -70,6 +90,44 @@ struct Info {
     base_error_m: f64,
     levels: Vec<LevelInfo>,
     texture: Option<TextureInfo>,
+    /// The tile pyramid above the base grid, from layer 1 (empty: none).
+    pyramid: Vec<LayerInfo>,
+}
+
+/// The pyramid's layers, from their directories and tiles (each tile's checksum checked).
+fn pyramid(set: &tiles::TileSet) -> Result<Vec<LayerInfo>> {
+    let mut out = Vec::new();
+    for p in 1..=set.pyramid_layers() {
+        let layer = set.layer(p).expect("a layer the set has");
+        let h = *layer.header();
+        let (mut d, mut triangles, mut bytes) = (0.0f32, 0u64, 0u64);
+        for ty in 0..h.tiles_y {
+            for tx in 0..h.tiles_x {
+                d = d.max(layer.decimation_error(tx, ty).unwrap_or(0.0));
+                let tile = layer.tile(tx, ty)?;
+                bytes += tile.blob_len() as u64;
+                triangles += tile
+                    .levels()
+                    .iter()
+                    .map(|e| u64::from(e.triangle_count))
+                    .sum::<u64>();
+            }
+        }
+        out.push(LayerInfo {
+            layer: p,
+            factor: 1 << p,
+            grid_width: h.grid_width,
+            grid_height: h.grid_height,
+            tiles_x: h.tiles_x,
+            tiles_y: h.tiles_y,
+            spacing_x_m: h.spacing_x,
+            spacing_y_m: h.spacing_y,
+            max_decimation_error_m: d,
+            triangles,
+            bytes,
+        });
+    }
+    Ok(out)
 }
 
 pub fn run(file: &Path, json: bool) -> Result<ExitCode> {
@@ -172,6 +230,7 @@ pub fn run(file: &Path, json: bool) -> Result<ExitCode> {
         base_error_m: h.base_error,
         levels,
         texture,
+        pyramid: pyramid(&set)?,
     };
     if json {
         println!("{}", serde_json::to_string_pretty(&info)?);
@@ -224,6 +283,24 @@ pub fn run(file: &Path, json: bool) -> Result<ExitCode> {
                 );
             }
         }
+    }
+    if info.pyramid.is_empty() {
+        println!("  pyramid   none (built without --pyramid)");
+    } else {
+        println!("  pyramid   layer  factor        grid  tiles   spacing (m)  decimation error (m)    triangles        bytes");
+    }
+    for l in &info.pyramid {
+        println!(
+            "  {:>13} {:>7} {:>11} {:>6} {:>13.1} {:>21.3} {:>12} {:>12}",
+            l.layer,
+            l.factor,
+            format!("{}x{}", l.grid_width, l.grid_height),
+            l.tiles_x * l.tiles_y,
+            l.spacing_x_m,
+            l.max_decimation_error_m,
+            l.triangles,
+            l.bytes
+        );
     }
     let limited: Vec<&LevelInfo> = info.levels.iter().filter(|l| l.limited_tiles > 0).collect();
     if !limited.is_empty() {

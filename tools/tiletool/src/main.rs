@@ -52,6 +52,11 @@ enum Command {
         /// then close the seams with sliver triangles; kept for comparisons.
         #[arg(long)]
         independent_sides: bool,
+        /// Also build the tile pyramid: coarser tiles over 2 x 2 tiles of the layer below, up
+        /// to one tile, for views that see much of the set (format version 3; see the README,
+        /// "The tile pyramid").
+        #[arg(long)]
+        pyramid: bool,
         /// No progress bar or summary.
         #[arg(long)]
         quiet: bool,
@@ -266,6 +271,7 @@ fn main() -> ExitCode {
             levels,
             base_error,
             independent_sides,
+            pyramid,
             quiet,
             force,
             band_rows,
@@ -279,6 +285,7 @@ fn main() -> ExitCode {
                     levels,
                     base_error,
                     shared_sides: !independent_sides,
+                    pyramid,
                 },
                 &texture,
                 band_rows,
@@ -569,6 +576,20 @@ fn build(
         }
         if let Some(t) = &texturing {
             print_texture(t, laid.as_ref(), &summary, tiles_x * tiles_y);
+        }
+        if !summary.pyramid.is_empty() {
+            println!("  pyramid   layer  tiles    triangles        bytes  texture bytes  decimation error (m)");
+        }
+        for (p, l) in summary.pyramid.iter().enumerate() {
+            println!(
+                "  {:>13} {:>6} {:>12} {:>12} {:>14} {:>21.3}",
+                p + 1,
+                l.tiles,
+                l.triangles,
+                l.bytes,
+                l.texture_bytes,
+                l.decimation_error
+            );
         }
         let secs = total.as_secs_f64();
         println!(

@@ -804,7 +804,7 @@ fn texture_mips_meet_the_psnr_floor_on_the_photo_and_the_relief() {
         ("tint.vkt", vec!["--tint"]),
     ] {
         let (_, info) = build_sample(dir.path(), name, &extra);
-        assert_eq!(info["format_version"], 2);
+        assert_eq!(info["format_version"], 3);
         let t = &info["texture"];
         assert_eq!(t["format"], "BC1", "{name}: {t}");
         let mips = t["mips"].as_array().expect("mips");

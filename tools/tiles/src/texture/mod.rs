@@ -284,7 +284,15 @@ fn base_region(
         Prepared::Relief(lighting) => {
             relief::render(grid, lighting, (cx, cy), cells_per_texel, (n, n))
         }
-        Prepared::Photo(photo) => {
+        Prepared::Photo(photo, factor) => {
+            // A layer's cells in base cells: the photo's frame is in base cells.
+            let f = *factor as f64;
+            let (cx, cy, cells_per_texel) = (cx * f, cy * f, cells_per_texel * f);
+            let grid = &Grid {
+                width: (grid.width - 1) * factor + 1,
+                height: (grid.height - 1) * factor + 1,
+                ..*grid
+            };
             // In pixel *index* space (pixel p's centre at p) a cell position c lies at
             // origin + c * step - 0.5.
             let Frame {
@@ -327,7 +335,9 @@ fn base_region(
 
 /// A source made ready for many tiles (the relief's height range found once).
 pub enum Prepared<'a> {
-    Photo(&'a Photo),
+    /// The photo, and base grid cells per cell of the grid it textures (`2^p` for pyramid
+    /// layer `p`, whose grid is the base's subsampled).
+    Photo(&'a Photo, usize),
     Relief(Lighting),
 }
 
@@ -335,8 +345,17 @@ impl<'a> Prepared<'a> {
     /// `source` for a grid whose heights span `range` (lowest, highest).
     pub fn new(range: (f32, f32), source: &'a Source) -> Prepared<'a> {
         match source {
-            Source::Photo(p) => Prepared::Photo(p),
+            Source::Photo(p) => Prepared::Photo(p, 1),
             Source::Relief(r) => Prepared::Relief(Lighting::with_range(range, *r)),
+        }
+    }
+
+    /// The same source for pyramid layer `p`: a photo is sampled `2^p` base cells per layer
+    /// cell; a relief is computed from the layer's own heights and spacing.
+    pub fn for_layer(&self, p: u32) -> Prepared<'a> {
+        match self {
+            Prepared::Photo(photo, _) => Prepared::Photo(photo, 1 << p),
+            Prepared::Relief(lighting) => Prepared::Relief(*lighting),
         }
     }
 }
@@ -663,7 +682,7 @@ mod tests {
         let (heights, photo) = photo_grid();
         let grid = grid_of(&heights);
         let layout = Layout::new(128).unwrap();
-        let source = Prepared::Photo(&photo);
+        let source = Prepared::Photo(&photo, 1);
         let left = mip_chain(&grid, &source, &layout, (0, 1));
         let right = mip_chain(&grid, &source, &layout, (1, 1));
         for m in 0..layout.aligned_mips() {
@@ -691,7 +710,7 @@ mod tests {
         let (heights, photo) = photo_grid();
         let grid = grid_of(&heights);
         let layout = Layout::new(256).unwrap();
-        let mips = mip_chain(&grid, &Prepared::Photo(&photo), &layout, (1, 0));
+        let mips = mip_chain(&grid, &Prepared::Photo(&photo, 1), &layout, (1, 0));
         let g = layout.gutter as usize;
         for (y, x) in [(0, 0), (17, 200), (255, 255)] {
             let p = (y * photo.width + 256 + x) * 3;
@@ -707,7 +726,7 @@ mod tests {
         let (heights, photo) = photo_grid();
         let grid = grid_of(&heights);
         let layout = Layout::new(64).unwrap();
-        let (blob, entries) = build_blob(&grid, &Prepared::Photo(&photo), &layout, (2, 1));
+        let (blob, entries) = build_blob(&grid, &Prepared::Photo(&photo, 1), &layout, (2, 1));
         let t = parse_blob(&blob, &layout, (2, 1)).unwrap();
         assert_eq!(t.mips.len(), layout.mips as usize);
         for (m, (e, bytes)) in t.mips.iter().enumerate() {

@@ -1,0 +1,272 @@
+//! The tile pyramid's grids and its error bound.
+//!
+//! Layer `p` is the base grid subsampled by `f = 2^p` ([`Decimated`], see the format's "The
+//! tile pyramid"): its samples are base samples, so where a layer tile and a base tile share a
+//! point they hold the same height. A layer tile's levels are built against the layer's samples
+//! like any tile's, so each level `i` is within its measured `e_i` of them. What a layer leaves
+//! out is bounded by the tile's *decimation error* `D`:
+//!
+//! Let `S_p` be layer `p`'s full-lattice surface: the finest restricted-quadtree mesh of its
+//! samples, every 2 x 2-cell quad fanned around its centre with all four midpoints. Every
+//! level's triangles are unions of `S_p`'s (a fan's edges run along the lattice's axes and
+//! through the quads' centres on its diagonals), so `M_i - S_p` is linear on each triangle of
+//! `S_p` and largest at layer samples, where `S_p` is exact: `|S_p - M_i| <= e_i`. In turn
+//! `S_{p-1}` refines `S_p` (a quad of `S_p` is four of `S_{p-1}`, and its eight triangles are
+//! unions of their fans), so `|S_{p-1} - S_p|` is largest at layer `p-1`'s samples. By the
+//! triangle inequality, at every base sample `x` of a layer-`p` tile `T`,
+//!
+//! ```text
+//! |h(x) - M_i(x)| <= e_i + D(T),
+//! D(T) = max over T's children C of D(C)  +  max over layer p-1 samples v in T of |h(v) - S_p(v)|,
+//! ```
+//!
+//! with `D = 0` in the base grid, where `S_0` passes through every sample. [`decimation_errors`]
+//! computes the second term from layer `p-1`'s samples alone, so a layer needs one pass over
+//! the one below it, not over the base grid; `tiletool verify` checks the bound directly
+//! against the base samples. Errors are, as everywhere in a tile set, measured at samples.
+
+use std::borrow::Cow;
+
+use rayon::prelude::*;
+
+use crate::build::Heights;
+use crate::format::layer_grid;
+use crate::grid::Grid;
+use crate::mesh::TILE_CELLS;
+use crate::BuildError;
+
+/// Base samples read at once when a layer reads its rows: about 64 MB of heights.
+const READ_SAMPLES: usize = 1 << 24;
+
+/// Layer `p` of a grid: every `2^p`-th sample of `source`, the last row and column clamped
+/// into the grid.
+pub struct Decimated<'a> {
+    source: &'a dyn Heights,
+    factor: usize,
+    width: usize,
+    height: usize,
+    spacing: (f64, f64),
+    /// The source's size.
+    source_size: (usize, usize),
+}
+
+impl<'a> Decimated<'a> {
+    pub fn new(source: &'a dyn Heights, p: u32) -> Decimated<'a> {
+        let shape = source.shape();
+        let (width, height, factor) = layer_grid(shape.width, shape.height, p);
+        Decimated {
+            source,
+            factor,
+            width,
+            height,
+            spacing: (
+                shape.spacing_x * factor as f64,
+                shape.spacing_y * factor as f64,
+            ),
+            source_size: (shape.width, shape.height),
+        }
+    }
+}
+
+impl Heights for Decimated<'_> {
+    fn shape(&self) -> Grid<'_> {
+        Grid {
+            width: self.width,
+            height: self.height,
+            first_row: 0,
+            heights: &[],
+            spacing_x: self.spacing.0,
+            spacing_y: self.spacing.1,
+        }
+    }
+
+    fn rows(&self, y0: usize, y1: usize) -> Result<Cow<'_, [f32]>, BuildError> {
+        let (sw, sh) = self.source_size;
+        let f = self.factor;
+        let source_row = |y: usize| (y * f).min(sh - 1);
+        let mut out = Vec::with_capacity((y1 - y0) * self.width);
+        // Source rows in runs of about READ_SAMPLES, each run read once: a source that fills
+        // voids or decodes strips per read does so once per run, not once per row.
+        let per_read = (READ_SAMPLES / sw).max(1);
+        let mut y = y0;
+        while y < y1 {
+            let first = source_row(y);
+            let mut end = y + 1;
+            while end < y1 && source_row(end) < first + per_read {
+                end += 1;
+            }
+            let last = source_row(end - 1);
+            let rows = self.source.rows(first, last + 1)?;
+            for yy in y..end {
+                let row = &rows[(source_row(yy) - first) * sw..][..sw];
+                out.extend((0..self.width).map(|x| row[(x * f).min(sw - 1)]));
+            }
+            y = end;
+        }
+        Ok(Cow::Owned(out))
+    }
+
+    fn band_tile_rows(&self) -> u32 {
+        self.source.band_tile_rows()
+    }
+}
+
+/// `S_p` at layer `p-1`'s sample `(u, v)`, given layer `p-1`'s heights (`finer`, clamped to its
+/// size): the layer-`p` sample there when `u` and `v` are even, else the fan of the layer-`p`
+/// quad around it.
+fn coarse_surface(finer: &impl Fn(usize, usize) -> f32, u: usize, v: usize) -> f32 {
+    // Layer p's quad: 2 x 2 layer-p cells from an even layer-p corner, i.e. 4 x 4 cells of
+    // layer p-1 from a multiple of 4, fanned around its centre (+2, +2).
+    let (cx, cy) = ((u / 4) * 4 + 2, (v / 4) * 4 + 2);
+    let (s, t) = (u as i64 - cx as i64, v as i64 - cy as i64); // -2..=1 each
+    let at =
+        |ds: i64, dt: i64| f64::from(finer((cx as i64 + ds) as usize, (cy as i64 + dt) as usize));
+    let (sx, sy) = (if s < 0 { -2 } else { 2 }, if t < 0 { -2 } else { 2 });
+    let (a, b) = (s.abs() as f64 / 2.0, t.abs() as f64 / 2.0);
+    // The octant's triangle: the centre, the side's midpoint and the corner between them.
+    let z = if a >= b {
+        (1.0 - a) * at(0, 0) + (a - b) * at(sx, 0) + b * at(sx, sy)
+    } else {
+        (1.0 - b) * at(0, 0) + (b - a) * at(0, sy) + a * at(sx, sy)
+    };
+    z as f32
+}
+
+/// The decimation error of every tile of layer `p >= 1` (row-major): the largest error of its
+/// children in layer `p-1` (`below`, row-major over `below_tiles_x` columns) plus the largest
+/// `|h - S_p|` over layer `p-1`'s samples in the tile. `finer` is layer `p-1`'s grid.
+pub fn decimation_errors(
+    finer: &dyn Heights,
+    below: &[f32],
+    below_tiles_x: u32,
+    tiles: (u32, u32),
+) -> Result<Vec<f32>, BuildError> {
+    let shape = finer.shape();
+    let (w, h) = (shape.width, shape.height);
+    let cells = TILE_CELLS as usize;
+    let below_tiles_y = below.len() as u32 / below_tiles_x.max(1);
+    let mut out = Vec::with_capacity((tiles.0 * tiles.1) as usize);
+    for ty in 0..tiles.1 {
+        // The tile row's samples of layer p-1: 2 * 256 rows from 2 * 256 * ty, and the layer-p
+        // quads' far rows, clamped into the grid.
+        let y0 = (2 * cells * ty as usize).min(h - 1);
+        let y_end = (y0 + 2 * cells + 4).min(h);
+        let rows = finer.rows(y0, y_end)?;
+        let height = |x: usize, y: usize| rows[(y.min(h - 1) - y0) * w + x.min(w - 1)];
+        let last_v = (y0 + 2 * cells).min(h - 1);
+        let row_errors: Vec<f32> = (0..tiles.0)
+            .into_par_iter()
+            .map(|tx| {
+                let x0 = (2 * cells * tx as usize).min(w - 1);
+                let last_u = (x0 + 2 * cells).min(w - 1);
+                let mut worst = 0.0f32;
+                for v in y0..=last_v {
+                    for u in x0..=last_u {
+                        let d = (height(u, v) - coarse_surface(&height, u, v)).abs();
+                        worst = worst.max(d);
+                    }
+                }
+                let children = (0..4)
+                    .map(|k| (2 * tx + k % 2, 2 * ty + k / 2))
+                    .filter(|&(cx, cy)| cx < below_tiles_x && cy < below_tiles_y)
+                    .map(|(cx, cy)| below[(cy * below_tiles_x + cx) as usize])
+                    .fold(0.0f32, f32::max);
+                // Rounded up a step so that the stored figure is never below the sum.
+                let d = children + worst;
+                if d > 0.0 {
+                    d.next_up()
+                } else {
+                    d
+                }
+            })
+            .collect();
+        out.extend(row_errors);
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A grid held whole, as `Heights`.
+    fn grid(width: usize, height: usize, f: impl Fn(usize, usize) -> f32) -> Vec<f32> {
+        (0..height)
+            .flat_map(|y| (0..width).map(move |x| (x, y)))
+            .map(|(x, y)| f(x, y))
+            .collect()
+    }
+
+    #[test]
+    fn a_layer_is_every_other_sample_with_the_edge_clamped() {
+        let heights = grid(6, 5, |x, y| (10 * y + x) as f32);
+        let g = Grid {
+            width: 6,
+            height: 5,
+            first_row: 0,
+            heights: &heights,
+            spacing_x: 30.0,
+            spacing_y: 20.0,
+        };
+        let layer = Decimated::new(&g, 1);
+        let shape = layer.shape();
+        assert_eq!((shape.width, shape.height), (4, 3));
+        assert_eq!((shape.spacing_x, shape.spacing_y), (60.0, 40.0));
+        let rows = layer.rows(0, 3).unwrap();
+        // Columns 0, 2, 4 and the last (5) clamped in; rows 0, 2, 4.
+        assert_eq!(
+            &rows[..],
+            &[0., 2., 4., 5., 20., 22., 24., 25., 40., 42., 44., 45.]
+        );
+        let two = Decimated::new(&g, 2);
+        assert_eq!(&two.rows(1, 2).unwrap()[..], &[40., 44., 45.]);
+    }
+
+    #[test]
+    fn a_plane_decimates_without_error_and_a_bump_does_not() {
+        // A plane: S_p reproduces it exactly.
+        let n = 2 * 256 + 1;
+        let plane = grid(n, n, |x, y| 3.0 + 0.5 * x as f32 - 0.25 * y as f32);
+        let g = Grid {
+            width: n,
+            height: n,
+            first_row: 0,
+            heights: &plane,
+            spacing_x: 1.0,
+            spacing_y: 1.0,
+        };
+        let d = decimation_errors(&g, &[0.0; 4], 2, (1, 1)).unwrap();
+        assert!(d[0] < 1e-3, "{d:?}");
+        // The control: one odd sample raised 7 m is 7 m off S_p (its neighbours are even or
+        // their fans do not reach it), and a child's error adds on.
+        let mut bump = plane.clone();
+        bump[101 * n + 203] += 7.0;
+        let g = Grid {
+            heights: &bump,
+            ..g
+        };
+        let d = decimation_errors(&g, &[0.0, 0.5, 0.0, 0.25], 2, (1, 1)).unwrap();
+        assert!((d[0] - 7.5).abs() < 1e-3, "{d:?}");
+    }
+
+    #[test]
+    fn the_fan_interpolates_inside_its_octants() {
+        // Heights of a 5 x 5 patch of layer p-1 samples: S_p's quad from (0,0) to (4,4).
+        let h = |x: usize, y: usize| match (x, y) {
+            (2, 2) => 8.0,
+            (4, 2) => 4.0,
+            (4, 4) => 0.0,
+            (x, y) if x % 2 == 0 && y % 2 == 0 => 2.0,
+            _ => 100.0, // odd samples are not layer-p samples: never read
+        };
+        // On the centre-to-midpoint edge, halfway: (8 + 4) / 2.
+        assert_eq!(coarse_surface(&h, 3, 2), 6.0);
+        // On the diagonal to the corner (4,4), halfway: (8 + 0) / 2.
+        assert_eq!(coarse_surface(&h, 3, 3), 4.0);
+        // On the quad's side between the midpoint (4,2) and the corner (4,4).
+        assert_eq!(coarse_surface(&h, 4, 3), 2.0);
+        // Layer-p samples are themselves.
+        assert_eq!(coarse_surface(&h, 2, 2), 8.0);
+        assert_eq!(coarse_surface(&h, 0, 0), 2.0);
+    }
+}

@@ -1,0 +1,372 @@
+//! The tile pyramid end to end: `tiletool build --pyramid` on real data, its layers in `info`,
+//! its error bound checked by `verify` against the source (and caught when forged), corrupted
+//! layers refused, banded builds the same bytes, and files from before it still read.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use testdata::{data, sample};
+use tiles::format::{DirEntry, FileHeader, LayerHeader};
+
+fn tiletool(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_tiletool"))
+        .args(args)
+        .output()
+        .expect("tiletool runs")
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// The sample cropped so that its size is no multiple of 2 or 4 (999 x 998 cells): the
+/// layers' last column and row are clamped onto the grid's.
+const CROP: [&str; 6] = [
+    "--spacing",
+    "160",
+    "--vertical-scale",
+    "0.1",
+    "--crop",
+    "3,5,1000x999",
+];
+
+fn build_cropped(dir: &Path, name: &str, extra: &[&str]) -> PathBuf {
+    let out = dir.join(name);
+    let src = sample();
+    let mut args = vec!["build", s(&src), "-o", s(&out), "--quiet"];
+    args.extend(CROP);
+    args.extend(extra);
+    let o = tiletool(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    out
+}
+
+fn verify_against_source(file: &Path) -> Output {
+    let src = sample();
+    let mut args = vec!["verify", s(file), "--source", s(&src)];
+    args.extend(CROP);
+    tiletool(&args)
+}
+
+/// Where every directory entry of pyramid layer `p` lies in the file.
+fn layer_entries(bytes: &[u8], p: u32) -> Vec<usize> {
+    let h: FileHeader = bytemuck::pod_read_unaligned(&bytes[..size_of::<FileHeader>()]);
+    let (layers, _) = tiles::format::layer_layout(&h).expect("layout");
+    let l = layers[p as usize - 1];
+    (0..(l.tiles_x * l.tiles_y) as usize)
+        .map(|i| l.directory_offset as usize + i * size_of::<DirEntry>())
+        .collect()
+}
+
+#[test]
+fn the_pyramid_is_built_listed_and_verified_and_a_forged_bound_is_caught() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let file = build_cropped(dir.path(), "pyramid.vkt", &["--pyramid"]);
+
+    let o = tiletool(&["info", s(&file), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let info: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    assert_eq!(info["format_version"], 3);
+    let layers = info["pyramid"].as_array().expect("pyramid");
+    // 1000 x 999 samples in 4 x 4 tiles; layer 1 is 501 x 500 samples in 2 x 2 tiles; layer 2
+    // is 251 x 251 in one.
+    let shape: Vec<_> = layers
+        .iter()
+        .map(|l| {
+            (
+                l["factor"].as_u64().unwrap(),
+                l["grid_width"].as_u64().unwrap(),
+                l["grid_height"].as_u64().unwrap(),
+                l["tiles_x"].as_u64().unwrap() * l["tiles_y"].as_u64().unwrap(),
+                l["spacing_x_m"].as_f64().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(
+        shape,
+        [(2, 501, 500, 4, 320.0), (4, 251, 251, 1, 640.0)],
+        "{info:#}"
+    );
+    // The bound grows up the pyramid: a layer's bound is its children's plus its own.
+    let d: Vec<f64> = layers
+        .iter()
+        .map(|l| l["max_decimation_error_m"].as_f64().unwrap())
+        .collect();
+    assert!(0.0 < d[0] && d[0] < d[1], "{d:?}");
+
+    // Against the source: every layer's levels within their errors of the subsampled grid,
+    // and every source sample within the finest level's error plus the tile's bound.
+    let o = verify_against_source(&file);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        out.contains("21 tiles"),
+        "16 base tiles, 4 + 1 above: {out}"
+    );
+
+    // The control: the same file claiming no decimation error. Its structure is sound, so
+    // verify without the source passes; against the source, the bound fails.
+    let mut bytes = std::fs::read(&file).expect("read");
+    for p in [1, 2] {
+        for at in layer_entries(&bytes, p) {
+            let mut e: DirEntry =
+                bytemuck::pod_read_unaligned(&bytes[at..][..size_of::<DirEntry>()]);
+            e.decimation_error = 0.0;
+            bytes[at..][..size_of::<DirEntry>()].copy_from_slice(bytemuck::bytes_of(&e));
+        }
+    }
+    tiles::format::reseal(&mut bytes).expect("reseal");
+    let forged = dir.path().join("forged.vkt");
+    std::fs::write(&forged, &bytes).expect("write");
+    let o = tiletool(&["verify", s(&forged)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = verify_against_source(&forged);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("layer 1 tile") && err.contains("plus the decimation error 0.000 m"),
+        "{err}"
+    );
+    assert!(!err.contains("panicked"), "{err}");
+}
+
+#[test]
+fn a_corrupted_or_forged_layer_is_refused() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let file = build_cropped(dir.path(), "pyramid.vkt", &["--pyramid", "--levels", "4"]);
+    let bytes = std::fs::read(&file).expect("read");
+    let entry = |p: u32, i: usize| -> DirEntry {
+        let at = layer_entries(&bytes, p)[i];
+        bytemuck::pod_read_unaligned(&bytes[at..][..size_of::<DirEntry>()])
+    };
+    let h: FileHeader = bytemuck::pod_read_unaligned(&bytes[..size_of::<FileHeader>()]);
+    let layer_header_at = size_of::<FileHeader>() + 16 * size_of::<DirEntry>();
+    assert_eq!((h.tiles_x, h.tiles_y, h.pyramid_layers), (4, 4, 2));
+
+    let resealed = |mut b: Vec<u8>| {
+        tiles::format::reseal(&mut b).expect("reseal");
+        b
+    };
+    let cases: Vec<(&str, Vec<u8>, &str)> = vec![
+        (
+            // A bit flipped inside layer 1's tile 1,0: its checksum no longer matches.
+            "tile.vkt",
+            {
+                let mut b = bytes.clone();
+                b[entry(1, 1).offset as usize + 300] ^= 0x10;
+                b
+            },
+            "pyramid layer 1 tile 1,0: checksum mismatch",
+        ),
+        (
+            // A layer header that does not follow from the grid, checksums made good.
+            "layer.vkt",
+            resealed({
+                let mut b = bytes.clone();
+                let mut l: LayerHeader =
+                    bytemuck::pod_read_unaligned(&b[layer_header_at..][..size_of::<LayerHeader>()]);
+                l.tiles_x = 3;
+                b[layer_header_at..][..size_of::<LayerHeader>()]
+                    .copy_from_slice(bytemuck::bytes_of(&l));
+                b
+            }),
+            "pyramid layer 1 does not match",
+        ),
+        (
+            // More layers than the grid has.
+            "layers.vkt",
+            resealed({
+                let mut b = bytes.clone();
+                let mut h = h;
+                h.pyramid_layers = 3;
+                b[..size_of::<FileHeader>()].copy_from_slice(bytemuck::bytes_of(&h));
+                b
+            }),
+            "3 pyramid layers, but a 1000x999 grid has 2 at most",
+        ),
+        (
+            // A decimation error that is no distance.
+            "nan.vkt",
+            resealed({
+                let mut b = bytes.clone();
+                let at = layer_entries(&b, 2)[0];
+                let mut e: DirEntry =
+                    bytemuck::pod_read_unaligned(&b[at..][..size_of::<DirEntry>()]);
+                e.decimation_error = f32::NAN;
+                b[at..][..size_of::<DirEntry>()].copy_from_slice(bytemuck::bytes_of(&e));
+                b
+            }),
+            "pyramid layer 2: tile 0,0: decimation error NaN",
+        ),
+        (
+            // Cut inside layer 1's directory.
+            "truncated.vkt",
+            bytes[..layer_header_at + 100].to_vec(),
+            "truncated",
+        ),
+    ];
+    for (name, content, what) in cases {
+        let p = dir.path().join(name);
+        std::fs::write(&p, &content).expect("write");
+        for cmd in ["info", "verify"] {
+            let o = tiletool(&[cmd, s(&p)]);
+            let err = stderr(&o);
+            assert_eq!(o.status.code(), Some(1), "{cmd} {name}: {err}");
+            assert!(!err.contains("panicked"), "{cmd} {name}: {err}");
+            assert!(err.contains(name), "{cmd} {name}: {err}");
+            assert!(err.contains(what), "{cmd} {name}: want {what:?} in {err}");
+        }
+    }
+}
+
+#[test]
+fn a_pyramid_leaves_the_base_tiles_alone_and_builds_the_same_bytes_in_bands() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let (a, b) = (data("srtm/N42E001.hgt"), data("srtm/N41E001.hgt"));
+    let build = |name: &str, extra: &[&str]| {
+        let out = dir.path().join(name);
+        let o = tiletool(
+            &[
+                &[
+                    "build",
+                    s(&a),
+                    s(&b),
+                    "-o",
+                    s(&out),
+                    "--quiet",
+                    "--levels",
+                    "6",
+                ][..],
+                extra,
+            ]
+            .concat(),
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        out
+    };
+    let whole = build("whole.vkt", &["--pyramid"]);
+    // A tile row at a time, the layers' rows read through the subsampling in bands too.
+    let banded = build("banded.vkt", &["--pyramid", "--band-rows", "1"]);
+    assert!(
+        std::fs::read(&whole).unwrap() == std::fs::read(&banded).unwrap(),
+        "a banded pyramid build builds other bytes"
+    );
+    // The base tiles are the same blobs with or without the pyramid above them.
+    let plain = build("plain.vkt", &[]);
+    let (with, without) = (
+        tiles::TileSet::open(&whole).unwrap(),
+        tiles::TileSet::open(&plain).unwrap(),
+    );
+    assert_eq!(
+        with.pyramid_layers(),
+        4,
+        "5 x 10 tiles, then 3 x 5, 2 x 3, 1 x 2, 1 x 1"
+    );
+    assert_eq!(without.pyramid_layers(), 0);
+    let h = without.header();
+    for ty in 0..h.tiles_y {
+        for tx in 0..h.tiles_x {
+            assert!(with.blob(tx, ty) == without.blob(tx, ty), "tile {tx},{ty}");
+            assert!(
+                with.texture_blob(tx, ty) == without.texture_blob(tx, ty),
+                "texture {tx},{ty}"
+            );
+        }
+    }
+    let o = tiletool(&["verify", s(&whole), "--source", s(&a), s(&b)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+#[test]
+fn version_2_files_still_read_without_a_pyramid() {
+    // A file written by the version 2 builder (textured, no pyramid), kept in the fuzz corpus.
+    let old = PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../fuzz/corpus/vkt/srtm-270x40-textured.vkt"
+    ));
+    let o = tiletool(&["info", s(&old), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let info: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    assert_eq!(info["format_version"], 2);
+    assert_eq!(info["pyramid"].as_array().map(Vec::len), Some(0));
+    assert!(!info["texture"].is_null());
+    let o = tiletool(&["verify", s(&old)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+/// PSNR (dB) over pairs of RGB pixels.
+fn psnr(pairs: impl Iterator<Item = ([f64; 3], [f64; 3])>) -> f64 {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for (a, b) in pairs {
+        for k in 0..3 {
+            sum += (a[k] - b[k]).powi(2);
+        }
+        n += 3;
+    }
+    10.0 * (255.0f64.powi(2) / (sum / n as f64).max(1e-12)).log10()
+}
+
+#[test]
+fn a_layer_tile_wears_the_photo_of_the_ground_it_covers() {
+    // Layer 1's tile 1,1 covers base cells 512..1024 across and down, two cells a texel: its
+    // interior texel (x, y) is the mean of photo pixels 512 + 2x.., 512 + 2y.. (the photo spans
+    // the grid, a pixel a cell). The control: the same comparison a layer texel off.
+    let dir = tempfile::tempdir().expect("temp dir");
+    let tex = testdata::sample_texture();
+    let out = dir.path().join("photo.vkt");
+    let src = sample();
+    let o = tiletool(&[
+        "build",
+        s(&src),
+        "-o",
+        s(&out),
+        "--spacing",
+        "160",
+        "--vertical-scale",
+        "0.1",
+        "--texture",
+        s(&tex),
+        "--pyramid",
+        "--levels",
+        "4",
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let set = tiles::TileSet::open(&out).expect("open");
+    let layer = set.layer(1).expect("layer 1");
+    let layout = layer.texture_layout().expect("textured");
+    let texture = layer.texture(1, 1).expect("sound").expect("a texture");
+    let (e, blocks) = texture.mips[0];
+    let (w, h) = (e.width as usize, e.height as usize);
+    let rgba = tiles::texture::decode_bc1(blocks, w, h);
+    let photo = image::open(&tex).expect("photo").to_rgb8();
+    let g = layout.gutter as usize;
+    let compare = |shift: i64| {
+        psnr(
+            (0..256usize)
+                .flat_map(|y| (0..256usize).map(move |x| (x, y)))
+                .map(|(x, y)| {
+                    let t = &rgba[((g + y) * w + g + x) * 4..][..3];
+                    let mut mean = [0.0; 3];
+                    for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                        let px = (512 + 2 * x as i64 + dx + 2 * shift).clamp(0, 1023) as u32;
+                        let py = (512 + 2 * y as i64 + dy).clamp(0, 1023) as u32;
+                        let p = photo.get_pixel(px, py).0;
+                        for k in 0..3 {
+                            mean[k] += f64::from(p[k]) / 4.0;
+                        }
+                    }
+                    ([0, 1, 2].map(|k| f64::from(t[k])), mean)
+                }),
+        )
+    };
+    let (aligned, shifted) = (compare(0), compare(1));
+    assert!(aligned >= 28.0, "aligned: {aligned:.2} dB");
+    assert!(
+        shifted < aligned - 3.0,
+        "a texel off is not worse: {shifted:.2} vs {aligned:.2} dB"
+    );
+}
