@@ -8,11 +8,13 @@
 //! target/release/tilebench frames       # vkterrain flights: LOD at tau 1, 2, 4 vs brute force
 //! target/release/tilebench memory       # residency: traces replayed against Belady, cold
 //!                                       # start, upload budget, manager CPU, frames in flight
+//! target/release/tilebench cut SET.vkt [FRAMES]  # the tile pyramid's cut vs the base grid
 //! target/release/tilebench all
 //! ```
 //!
 //! Each prints Markdown tables. Ratios are measured side by side in one run.
 
+mod cut_bench;
 mod limit_bench;
 mod martini;
 mod memory_bench;
@@ -56,6 +58,7 @@ fn run() -> Result<()> {
         "acmr" => acmr(),
         "frames" => frames(),
         "memory" => memory_bench::memory(),
+        "cut" => cut_bench::cut(),
         "limit" => limit_bench::limit_table(ALL_EXTRAS),
         "flights" => limit_bench::limit_table(limit_bench::Extras {
             flights: true,
@@ -77,7 +80,7 @@ fn run() -> Result<()> {
         }
         other => {
             bail!(
-                "unknown benchmark {other:?}: throughput, economy, acmr, frames, memory, limit, flights or all"
+                "unknown benchmark {other:?}: throughput, economy, acmr, frames, memory, limit, flights, table1, cut or all"
             )
         }
     }

@@ -202,6 +202,11 @@ pub struct Cli {
     /// (shows the cracks they close; sets built with shared sides need none).
     #[arg(long)]
     pub no_slivers: bool,
+    /// Diagnostic: fly over pyramid layer N of a set built with `tiletool build --pyramid`
+    /// instead of its base grid (the same ground, 2^N times the spacing). The renderer does not
+    /// yet choose layers by itself.
+    #[arg(long, default_value_t = 0, value_name = "N")]
+    pub layer: u32,
     /// Write the path flown (CSV keyframes) here.
     #[arg(long)]
     pub record: Option<PathBuf>,

@@ -7,9 +7,10 @@
 //! tests drive without a GPU; [`vulkan`] is the thin layer that owns every Vulkan object, and
 //! [`frame`] turns one frame's plan into commands.
 
-pub use scene::{camera, levels, path, terrain, tile};
+pub use scene::{camera, levels, path, pyramid, terrain, tile};
 
 pub mod cull;
+pub mod cut;
 pub mod error;
 pub mod fault;
 pub mod frame;

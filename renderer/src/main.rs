@@ -91,7 +91,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
         return static_limit(&cli, n);
     }
     let opening = std::time::Instant::now();
-    let mut terrain = Terrain::open(&cli.tileset)?;
+    let mut terrain = Terrain::open_layer(&cli.tileset, cli.layer)?;
     let open_ms = opening.elapsed().as_secs_f64() * 1000.0;
     terrain.shared_sides |= cli.no_slivers;
     let path = match cli.path.as_str() {

@@ -57,7 +57,22 @@ impl Terrain {
     /// header and level table (one page of the file per tile). Tiles' data are checked later,
     /// one tile at a time ([`Terrain::check`]).
     pub fn open(path: &Path) -> Result<Terrain, tiles::FormatError> {
-        let set = TileSet::open(path)?;
+        Terrain::open_layer(path, 0)
+    }
+
+    /// [`Terrain::open`] for pyramid layer `layer` of the set (0: the base grid): the layer's
+    /// tiles as a terrain of their own, over the same ground at `2^layer` times the spacing.
+    pub fn open_layer(path: &Path, layer: u32) -> Result<Terrain, tiles::FormatError> {
+        let file = TileSet::open(path)?;
+        let set = file
+            .layer(layer)
+            .ok_or_else(|| tiles::FormatError::Invalid {
+                path: path.to_path_buf(),
+                what: format!(
+                    "no pyramid layer {layer}: the set has {} above its base grid",
+                    file.pyramid_layers()
+                ),
+            })?;
         let h = *set.header();
         let (sx, sy) = (h.spacing_x, h.spacing_y);
         let mut tiles = Vec::with_capacity((h.tiles_x * h.tiles_y) as usize);
@@ -474,7 +489,14 @@ fn tile_info(set: &TileSet, tx: u32, ty: u32) -> Result<TileInfo, tiles::FormatE
     let (sx, sy) = (h.spacing_x, h.spacing_y);
     let tile = set.tile_outline(tx, ty)?;
     let th = tile.header;
-    let levels: Vec<LevelEntry> = tile.levels().to_vec();
+    let mut levels: Vec<LevelEntry> = tile.levels().to_vec();
+    // A pyramid layer's tile: its levels' errors against the base grid's samples under it,
+    // not its own subsampled grid's, so that it is chosen by the ground it stands for.
+    if let Some(errors) = set.base_errors(tx, ty) {
+        for (l, e) in levels.iter_mut().zip(errors) {
+            l.max_error = e;
+        }
+    }
     let z_min = levels.iter().map(|l| l.z_min).fold(f32::INFINITY, f32::min);
     let z_max = levels
         .iter()

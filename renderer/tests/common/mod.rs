@@ -53,6 +53,11 @@ pub fn grid_view(grid: &dem::HeightGrid) -> Grid<'_> {
 /// every edge, voids and heights below 0 as 0, 90 m spacing), built with the default
 /// parameters into `dir/mirror-SIZE.vkt`.
 pub fn mirror(dir: &Path, size: usize) -> PathBuf {
+    mirror_with(dir, size, &BuildParams::default())
+}
+
+/// [`mirror`] built with `params`.
+pub fn mirror_with(dir: &Path, size: usize, params: &BuildParams) -> PathBuf {
     let path = data("srtm/N55W003.hgt");
     let raw = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let side = ((raw.len() / 2) as f64).sqrt().round() as usize;
@@ -86,14 +91,7 @@ pub fn mirror(dir: &Path, size: usize) -> PathBuf {
         spacing_y: 90.0,
     };
     let out = dir.join(format!("mirror-{size}.vkt"));
-    build_tileset(
-        &grid,
-        &BuildParams::default(),
-        &TileSetMeta::default(),
-        &out,
-        &|| {},
-    )
-    .expect("build");
+    build_tileset(&grid, params, &TileSetMeta::default(), &out, &|| {}).expect("build");
     out
 }
 

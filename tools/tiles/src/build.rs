@@ -15,7 +15,7 @@ use crate::format::{
 use crate::grid::{tile_samples, Grid};
 use crate::mesh::{lattice, plane, triangle_spans, Mesher, Quad, TILE_CELLS, TILE_SIZE};
 use crate::pack::{morph_offset, morph_unit, pack};
-use crate::pyramid::{decimation_errors, Decimated};
+use crate::pyramid::{base_errors, decimation_errors, Decimated, Surfaces};
 use crate::quantise::{lattice_step, Quantiser};
 use crate::texture::{self, Prepared, Source, Texturing};
 use crate::BuildError;
@@ -232,6 +232,11 @@ pub struct BuiltTile {
     /// Per level, the largest distance of a finer vertex from the level's surface (metres;
     /// 0 for the finest level).
     pub deviation: Vec<f64>,
+    /// A pyramid layer's tile ([`build_layer_tile`]): every level's surface at every lattice
+    /// point of the mesh extent, interleaved (`[point * levels + level]`); empty otherwise.
+    pub surfaces: Vec<f32>,
+    /// The last column and row of real data.
+    pub data_max: (u32, u32),
 }
 
 /// The side vertices of a tile, per level and side (north, east, south, west): each vertex's
@@ -499,11 +504,25 @@ pub fn build_tile(
     mesh_tile(grid, (tx, ty), params, step, agreement, Output::Tile)
 }
 
+/// [`build_tile`] for a tile of a pyramid layer: with [`BuiltTile::surfaces`] filled in.
+pub fn build_layer_tile(
+    grid: &Grid,
+    tx: u32,
+    ty: u32,
+    params: &BuildParams,
+    step: f32,
+    agreement: &Agreement,
+) -> Result<BuiltTile, BuildError> {
+    mesh_tile(grid, (tx, ty), params, step, agreement, Output::LayerTile)
+}
+
 /// What [`mesh_tile`] makes: the whole tile, or only what the shared-sides agreement reads of
 /// it (its sides and deviations; no fan order, index arrays, morph offsets or blob).
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Output {
     Tile,
+    /// The whole tile and every level's surface.
+    LayerTile,
     Sides,
 }
 
@@ -517,7 +536,9 @@ fn mesh_tile(
     agreement: &Agreement,
     output: Output,
 ) -> Result<BuiltTile, BuildError> {
-    let full = output == Output::Tile;
+    let full = output != Output::Sides;
+    let keep_surfaces = output == Output::LayerTile;
+    let mut finest_surface = Vec::new();
     let samples = tile_samples(grid, tx, ty);
     let lo = samples
         .heights
@@ -602,10 +623,14 @@ fn mesh_tile(
             sides[k].iter().map(|&(_, v)| v).collect::<Vec<u32>>()
         });
         positions.push([0, 1, 2, 3].map(|k| sides[k].iter().map(|&(at, _)| at as u16).collect()));
-        if level + 1 < n {
+        if level + 1 < n || keep_surfaces {
             let mut surface = rasterise_surface(&mesher, &leaves, mesh_max);
             along_sides(&mut surface, &positions[level], heights, mesh_max);
-            surfaces.push(surface);
+            if level + 1 < n {
+                surfaces.push(surface);
+            } else {
+                finest_surface = surface;
+            }
         }
         let vertex_count = vertices.lattice_of.len() as u32;
         let max_error = round_up_f32(measured.max_error);
@@ -651,6 +676,8 @@ fn mesh_tile(
             levels: Vec::new(),
             sides: positions,
             deviation,
+            surfaces: Vec::new(),
+            data_max: (samples.data_max_x, samples.data_max_y),
         });
     }
     let units: Vec<f64> = match &agreement.units {
@@ -690,6 +717,19 @@ fn mesh_tile(
         height_base: quantiser.base,
     };
     let (blob, stats) = serialise(&header, &mut levels, &morph);
+    let surfaces = if keep_surfaces {
+        // Interleaved by level: a lattice point's levels side by side.
+        surfaces.push(finest_surface);
+        let mut all = vec![f32::NAN; TILE_SIZE * TILE_SIZE * n];
+        for (k, surface) in surfaces.iter().enumerate() {
+            for (l, &z) in surface.iter().enumerate() {
+                all[l * n + k] = z;
+            }
+        }
+        all
+    } else {
+        Vec::new()
+    };
     Ok(BuiltTile {
         tx,
         ty,
@@ -697,6 +737,8 @@ fn mesh_tile(
         levels: stats,
         sides: positions,
         deviation,
+        surfaces,
+        data_max: (samples.data_max_x, samples.data_max_y),
     })
 }
 
@@ -891,6 +933,8 @@ pub struct PyramidLayerSummary {
     pub texture_bytes: u64,
     /// The largest decimation error of the layer's tiles, metres.
     pub decimation_error: f32,
+    /// Per level, the largest error against the base grid's samples over the layer's tiles.
+    pub base_errors: Vec<f64>,
     pub agreement_passes: u32,
 }
 
@@ -1070,6 +1114,7 @@ pub fn build_tileset_from(
         step,
         decimation: None,
         prepared: prepared.as_ref().map(|(p, l)| (p.for_layer(0), *l)),
+        base: None,
     };
     build_layer(&mut writer, &base, params, progress, &mut summary)?;
     // The pyramid: each layer from the grid subsampled, its error bound from the layer below.
@@ -1104,6 +1149,7 @@ pub fn build_tileset_from(
             step: scanned.step,
             decimation: Some(&decimation),
             prepared: prepared.as_ref().map(|(s, l)| (s.for_layer(p), *l)),
+            base: Some(heights),
         };
         build_layer(&mut writer, &layer, params, progress, &mut layer_summary)?;
         summary.pyramid.push(PyramidLayerSummary {
@@ -1112,6 +1158,7 @@ pub fn build_tileset_from(
             bytes: layer_summary.levels.iter().map(|l| l.bytes).sum(),
             texture_bytes: layer_summary.texture_mips.iter().map(|m| m.bytes).sum(),
             decimation_error: decimation.iter().fold(0.0f32, |a, &d| a.max(d)),
+            base_errors: layer_summary.levels.iter().map(|l| l.max_error).collect(),
             agreement_passes: layer_summary.agreement_passes,
         });
         summary.texture_seconds += layer_summary.texture_seconds;
@@ -1131,6 +1178,8 @@ struct Layer<'a> {
     /// Per tile (row-major), its decimation error (None: the base grid, all 0).
     decimation: Option<&'a [f32]>,
     prepared: Option<(Prepared<'a>, texture::Layout)>,
+    /// Above the base: the base grid, which the layer's levels are measured against.
+    base: Option<&'a dyn Heights>,
 }
 
 /// Builds one layer's tiles, shared sides agreed first where the build asks for them, and
@@ -1165,16 +1214,24 @@ fn build_layer(
         let grid = band.grid(&bands.shape);
         let first = (band.tile_rows.start * tiles_x) as usize;
         let count = (band.tile_rows.len() as u32 * tiles_x) as usize;
+        let layer_tile = layer.base.is_some();
         let make = |i: usize| {
             let t = first + i;
             let (tx, ty) = (t as u32 % tiles_x, t as u32 / tiles_x);
+            let mesh = |agreement: &Agreement| {
+                if layer_tile {
+                    build_layer_tile(&grid, tx, ty, params, step, agreement)
+                } else {
+                    build_tile(&grid, tx, ty, params, step, agreement)
+                }
+            };
             let built = match &agreements {
                 Some(a) => {
                     let agreement = Agreement {
                         forced: expand(&a.forced[t]),
                         units: Some(a.units.clone()),
                     };
-                    build_tile(&grid, tx, ty, params, step, &agreement).and_then(|b| {
+                    mesh(&agreement).and_then(|b| {
                         if compact(&b.sides) == a.sides[t] {
                             Ok(b)
                         } else {
@@ -1184,7 +1241,7 @@ fn build_layer(
                         }
                     })
                 }
-                None => build_tile(&grid, tx, ty, params, step, &alone),
+                None => mesh(&alone),
             };
             built.map(|b| {
                 let texture = layer.prepared.as_ref().map(|(source, layout)| {
@@ -1195,32 +1252,93 @@ fn build_layer(
                 (b, texture)
             })
         };
+        // A layer's tiles wait for the band (one tile row) to be measured against the base
+        // grid; the base grid's are written as they come.
+        let mut held = Vec::new();
         crate::ordered::in_order(count, in_flight, make, |i, built| {
             let (built, texture) = built?;
-            let d = layer.decimation.map_or(0.0, |d| d[first + i]);
-            writer.add_layer_tile(layer.index, built.tx, built.ty, &built.blob, d)?;
-            if let Some((blob, mips, seconds)) = texture {
-                writer.add_layer_texture(layer.index, built.tx, built.ty, &blob)?;
-                summary.texture_seconds += seconds;
-                for (sum, m) in summary.texture_mips.iter_mut().zip(&mips) {
-                    sum.bytes += u64::from(m.len);
-                    sum.squared_error += m.squared_error;
-                    sum.texels += m.texels;
-                }
+            if layer_tile {
+                held.push((i, built, texture));
+                Ok(())
+            } else {
+                write_tile(
+                    writer,
+                    layer,
+                    summary,
+                    first + i,
+                    (built, texture),
+                    &[],
+                    progress,
+                )
             }
-            summary.tiles += 1;
-            for (sum, l) in summary.levels.iter_mut().zip(&built.levels) {
-                sum.vertices += l.vertices;
-                sum.triangles += l.triangles;
-                sum.bytes += l.bytes;
-                sum.max_error = sum.max_error.max(l.max_error);
-                sum.limited_triangles += l.limited_triangles;
-                sum.limited_excess = sum.limited_excess.max(l.limited_excess);
-            }
-            progress();
-            Ok::<(), BuildError>(())
         })?;
+        if let Some(base) = layer.base {
+            let levels = params.levels as usize;
+            let surfaces: Vec<Surfaces> = held
+                .iter()
+                .map(|(_, b, _)| Surfaces {
+                    tx: b.tx,
+                    surfaces: &b.surfaces,
+                    data_max: b.data_max,
+                })
+                .collect();
+            let errors = match held.first() {
+                Some((_, b, _)) => base_errors(base, layer.index, b.ty, levels, &surfaces)?,
+                None => Vec::new(),
+            };
+            drop(surfaces);
+            for ((i, built, texture), errors) in held.drain(..).zip(errors) {
+                write_tile(
+                    writer,
+                    layer,
+                    summary,
+                    first + i,
+                    (built, texture),
+                    &errors,
+                    progress,
+                )?;
+            }
+        }
     }
+    Ok(())
+}
+
+/// A tile's texture blob, its mips' figures and the thread-seconds it took.
+type MadeTexture = (Vec<u8>, Vec<texture::MipEntry>, f64);
+
+/// A built tile (of `layer`, directory slot `t`) and its texture into the file and the summary.
+fn write_tile(
+    writer: &mut TileSetWriter,
+    layer: &Layer,
+    summary: &mut BuildSummary,
+    t: usize,
+    (built, texture): (BuiltTile, Option<MadeTexture>),
+    base_errors: &[f32],
+    progress: &(dyn Fn() + Sync),
+) -> Result<(), BuildError> {
+    let d = layer.decimation.map_or(0.0, |d| d[t]);
+    writer.add_layer_tile(layer.index, built.tx, built.ty, &built.blob, d, base_errors)?;
+    if let Some((blob, mips, seconds)) = texture {
+        writer.add_layer_texture(layer.index, built.tx, built.ty, &blob)?;
+        summary.texture_seconds += seconds;
+        for (sum, m) in summary.texture_mips.iter_mut().zip(&mips) {
+            sum.bytes += u64::from(m.len);
+            sum.squared_error += m.squared_error;
+            sum.texels += m.texels;
+        }
+    }
+    summary.tiles += 1;
+    for (k, (sum, l)) in summary.levels.iter_mut().zip(&built.levels).enumerate() {
+        sum.vertices += l.vertices;
+        sum.triangles += l.triangles;
+        sum.bytes += l.bytes;
+        // A layer's errors against the base grid: what the renderer goes by.
+        let e = base_errors.get(k).map_or(l.max_error, |&e| f64::from(e));
+        sum.max_error = sum.max_error.max(e);
+        sum.limited_triangles += l.limited_triangles;
+        sum.limited_excess = sum.limited_excess.max(l.limited_excess);
+    }
+    progress();
     Ok(())
 }
 

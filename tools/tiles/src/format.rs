@@ -155,7 +155,9 @@ pub struct LayerHeader {
     pub directory_offset: u64,
     pub height_min: f32,
     pub height_max: f32,
-    pub reserved: [u32; 2],
+    /// Where the layer's error table starts: per tile (row-major), per level, the level's
+    /// largest distance from the base grid's samples under the tile (f32 metres).
+    pub errors_offset: u64,
 }
 
 /// The most pyramid layers a file may declare: enough for grids of `256 * 2^32` samples a side.
@@ -407,6 +409,11 @@ pub fn layer_layout(h: &FileHeader) -> Result<(Vec<LayerHeader>, u64), String> {
         });
         at += u64::from(ltx) * u64::from(lty) * entry;
     }
+    // The layers' error tables, after the directories.
+    for l in &mut out {
+        l.errors_offset = at;
+        at += u64::from(l.tiles_x) * u64::from(l.tiles_y) * u64::from(h.levels) * 4;
+    }
     Ok((out, at))
 }
 
@@ -421,6 +428,8 @@ pub struct TileSetWriter {
     layers: Vec<LayerHeader>,
     /// Per layer (0: the base), its directory and which tiles were written.
     directories: Vec<Vec<DirEntry>>,
+    /// Per layer above the base, its error table (tiles x levels).
+    errors: Vec<Vec<f32>>,
     written: Vec<Vec<bool>>,
     pos: u64,
 }
@@ -454,6 +463,10 @@ impl TileSetWriter {
                 .map(|n| vec![DirEntry::default(); n])
                 .collect(),
             written: counts.map(|n| vec![false; n]).collect(),
+            errors: layers
+                .iter()
+                .map(|l| vec![0.0; (l.tiles_x * l.tiles_y * header.levels) as usize])
+                .collect(),
             layers,
             pos,
         };
@@ -501,11 +514,11 @@ impl TileSetWriter {
 
     /// Appends tile `(tx, ty)`'s blob (tiles may arrive in any order).
     pub fn add_tile(&mut self, tx: u32, ty: u32, blob: &[u8]) -> Result<(), FormatError> {
-        self.add_layer_tile(0, tx, ty, blob, 0.0)
+        self.add_layer_tile(0, tx, ty, blob, 0.0, &[])
     }
 
     /// Appends tile `(tx, ty)` of pyramid layer `layer` (0: the base grid) with its decimation
-    /// error.
+    /// error and, above the base, each level's error against the base grid's samples.
     pub fn add_layer_tile(
         &mut self,
         layer: u32,
@@ -513,8 +526,19 @@ impl TileSetWriter {
         ty: u32,
         blob: &[u8],
         decimation_error: f32,
+        base_errors: &[f32],
     ) -> Result<(), FormatError> {
         let slot = self.slot(layer, tx, ty);
+        if layer > 0 {
+            let n = self.header.levels as usize;
+            if base_errors.len() != n {
+                return Err(FormatError::Invalid {
+                    path: self.path.clone(),
+                    what: format!("internal: {} errors for {n} levels", base_errors.len()),
+                });
+            }
+            self.errors[layer as usize - 1][slot * n..][..n].copy_from_slice(base_errors);
+        }
         let pad = align_up(self.pos, 16) - self.pos;
         self.write(&[0u8; 16][..pad as usize])?;
         self.pos += pad;
@@ -575,6 +599,9 @@ impl TileSetWriter {
         directory.extend_from_slice(bytemuck::cast_slice(&self.layers));
         for d in &self.directories[1..] {
             directory.extend_from_slice(bytemuck::cast_slice(d));
+        }
+        for e in &self.errors {
+            directory.extend_from_slice(bytemuck::cast_slice(e));
         }
         header.header_crc = 0;
         header.header_crc = header_crc(&header, &directory);
@@ -1031,6 +1058,24 @@ impl TileSet {
     /// most this far from its finest surface, so level `i` is within `max_error + D` of them.
     pub fn decimation_error(&self, tx: u32, ty: u32) -> Option<f32> {
         self.dir_entry(tx, ty).map(|e| e.decimation_error)
+    }
+
+    /// In a pyramid layer, tile `(tx, ty)`'s levels' errors against the base grid's samples
+    /// under it, metres, one per level (None in the base grid, whose `max_error`s are these).
+    pub fn base_errors(&self, tx: u32, ty: u32) -> Option<Vec<f32>> {
+        let l = self.layers.get((self.layer as usize).checked_sub(1)?)?;
+        if tx >= l.tiles_x || ty >= l.tiles_y {
+            return None;
+        }
+        let n = self.header.levels as usize;
+        let at = l.errors_offset as usize + ((ty * l.tiles_x + tx) as usize) * n * 4;
+        let bytes = self.map.get(at..at + n * 4)?;
+        Some(
+            bytes
+                .chunks_exact(4)
+                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                .collect(),
+        )
     }
 
     pub fn path(&self) -> &Path {

@@ -32,7 +32,7 @@ use rayon::prelude::*;
 use crate::build::Heights;
 use crate::format::layer_grid;
 use crate::grid::Grid;
-use crate::mesh::TILE_CELLS;
+use crate::mesh::{TILE_CELLS, TILE_SIZE};
 use crate::BuildError;
 
 /// Base samples read at once when a layer reads its rows: about 64 MB of heights.
@@ -106,8 +106,10 @@ impl Heights for Decimated<'_> {
         Ok(Cow::Owned(out))
     }
 
+    /// A tile row a band: a layer's tiles are measured against the base grid's rows under
+    /// them a tile row at a time (their surfaces held meanwhile), see [`base_errors`].
     fn band_tile_rows(&self) -> u32 {
-        self.source.band_tile_rows()
+        1
     }
 }
 
@@ -183,6 +185,108 @@ pub fn decimation_errors(
         out.extend(row_errors);
     }
     Ok(out)
+}
+
+/// One tile of a layer row whose levels [`base_errors`] measures: its column, its levels'
+/// surfaces ([`crate::build::BuiltTile::surfaces`]) and its last real column and row.
+pub struct Surfaces<'a> {
+    pub tx: u32,
+    pub surfaces: &'a [f32],
+    pub data_max: (u32, u32),
+}
+
+/// Each level's largest distance from the base grid's samples under each tile of tile row `ty`
+/// of layer `p` (metres, rounded up to f32), read from `base` a run of rows at a time. A level's
+/// surface is linear on each triangle of the layer's full lattice (every level's triangles are
+/// unions of them), so its height at a base sample is the blend of its heights at the corners
+/// of the full-lattice triangle around the sample: the same three corners and weights for every
+/// level.
+pub fn base_errors(
+    base: &dyn Heights,
+    p: u32,
+    ty: u32,
+    levels: usize,
+    tiles: &[Surfaces],
+) -> Result<Vec<Vec<f32>>, BuildError> {
+    let shape = base.shape();
+    let (w, h) = (shape.width, shape.height);
+    let f = 1usize << p;
+    let span = TILE_CELLS as usize * f;
+    let y0 = (ty as usize * span).min(h - 1);
+    let y_last = (y0 + span).min(h - 1);
+    let mut worst = vec![vec![0.0f64; levels]; tiles.len()];
+    let per_read = (READ_SAMPLES / w).max(1);
+    let mut y = y0;
+    while y <= y_last {
+        let end = (y + per_read).min(y_last + 1);
+        let rows = base.rows(y, end)?;
+        worst.par_iter_mut().zip(tiles).for_each(|(worst, t)| {
+            let x0 = t.tx as usize * span;
+            let x_last = (x0 + t.data_max.0 as usize * f).min(w - 1);
+            let lattice_max = (t.data_max.0.div_ceil(2) * 2, t.data_max.1.div_ceil(2) * 2);
+            for yy in y..end {
+                let row = &rows[(yy - y) * w..][..w];
+                let b = (yy - y0) as f64 / f as f64;
+                for (xx, &z) in row.iter().enumerate().take(x_last + 1).skip(x0) {
+                    let a = (xx - x0) as f64 / f as f64;
+                    let [(i, wi), (j, wj), (k, wk)] = corners(a, b, lattice_max);
+                    let (si, sj, sk) = (
+                        &t.surfaces[i * levels..][..levels],
+                        &t.surfaces[j * levels..][..levels],
+                        &t.surfaces[k * levels..][..levels],
+                    );
+                    for l in 0..levels {
+                        let m =
+                            wi * f64::from(si[l]) + wj * f64::from(sj[l]) + wk * f64::from(sk[l]);
+                        worst[l] = worst[l].max((f64::from(z) - m).abs());
+                    }
+                }
+            }
+        });
+        y = end;
+    }
+    Ok(worst
+        .into_iter()
+        .map(|w| w.into_iter().map(round_up).collect())
+        .collect())
+}
+
+/// The smallest f32 at or above `v`.
+fn round_up(v: f64) -> f32 {
+    let r = v as f32;
+    if f64::from(r) < v {
+        r.next_up()
+    } else {
+        r
+    }
+}
+
+/// The full-lattice triangle around the point `(a, b)` of a tile (lattice units), as three
+/// lattice points (index `y * 257 + x`) and their weights: the octant of the 2 x 2-cell quad
+/// around it, fanned from the quad's centre. `lattice_max` is the mesh's last column and row.
+fn corners(a: f64, b: f64, (max_x, max_y): (u32, u32)) -> [(usize, f64); 3] {
+    let quad = |v: f64, max: u32| ((v / 2.0).floor() * 2.0).clamp(0.0, f64::from(max.max(2) - 2));
+    let (cx, cy) = (quad(a, max_x) + 1.0, quad(b, max_y) + 1.0);
+    let (s, t) = (a - cx, b - cy);
+    let (sx, sy) = (
+        if s < 0.0 { -1.0 } else { 1.0 },
+        if t < 0.0 { -1.0 } else { 1.0 },
+    );
+    let (u, v) = (s.abs().min(1.0), t.abs().min(1.0));
+    let at = |x: f64, y: f64| y as usize * TILE_SIZE + x as usize;
+    if u >= v {
+        [
+            (at(cx, cy), 1.0 - u),
+            (at(cx + sx, cy), u - v),
+            (at(cx + sx, cy + sy), v),
+        ]
+    } else {
+        [
+            (at(cx, cy), 1.0 - v),
+            (at(cx, cy + sy), v - u),
+            (at(cx + sx, cy + sy), u),
+        ]
+    }
 }
 
 #[cfg(test)]

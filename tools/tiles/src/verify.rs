@@ -104,17 +104,17 @@ fn tile_name(set: &TileSet, tx: u32, ty: u32) -> String {
     }
 }
 
-/// A pyramid layer's tile against the base grid's samples: each one under the tile lies within
-/// the finest level's `max_error` plus the tile's decimation error of the level's surface
-/// (the bound [`crate::pyramid`] argues; the coarser levels follow from the same argument).
+/// A pyramid layer's tile against the base grid's samples under it: each level's stored error
+/// against them ([`TileSet::base_errors`]) is what rasterising the level's fans over them gives,
+/// and no more than the level's own `max_error` plus the tile's decimation error (the bound
+/// [`crate::pyramid`] argues).
 fn check_decimation(layer: &TileSet, tile: &Tile, base: &Grid, report: &mut VerifyReport) {
     let f = 1u32 << layer.layer_index();
     let (tx, ty) = (tile.header.tx, tile.header.ty);
-    let Some(finest) = tile.level(tile.header.levels - 1) else {
+    let d = f64::from(layer.decimation_error(tx, ty).unwrap_or(0.0));
+    let Some(stored) = layer.base_errors(tx, ty) else {
         return;
     };
-    let d = f64::from(layer.decimation_error(tx, ty).unwrap_or(0.0));
-    let bound = f64::from(finest.entry.max_error) + d;
     let vertices = tile.vertices();
     let (x0, y0) = (
         (tx * TILE_CELLS * f) as usize,
@@ -122,27 +122,39 @@ fn check_decimation(layer: &TileSet, tile: &Tile, base: &Grid, report: &mut Veri
     );
     let max_x = (base.width - 1 - x0) as u32;
     let max_y = (base.height - 1 - y0) as u32;
-    let mut worst = 0.0f64;
-    for fan in finest.indices.fans() {
-        let v = |i: u32| {
-            let (x, y, z) = vertices[i as usize];
-            (x * f, y * f, z)
+    for level in 0..tile.header.levels {
+        let Some(l) = tile.level(level) else {
+            continue;
         };
-        let c = v(fan[0]);
-        for w in fan[1..].windows(2) {
-            raster_barycentric([c, v(w[0]), v(w[1])], max_x, max_y, |x, y, z| {
-                let h = f64::from(base.at(x0 + x as usize, y0 + y as usize));
-                worst = worst.max((h - z).abs());
-            });
+        let mut worst = 0.0f64;
+        for fan in l.indices.fans() {
+            let v = |i: u32| {
+                let (x, y, z) = vertices[i as usize];
+                (x * f, y * f, z)
+            };
+            let c = v(fan[0]);
+            for w in fan[1..].windows(2) {
+                raster_barycentric([c, v(w[0]), v(w[1])], max_x, max_y, |x, y, z| {
+                    let h = f64::from(base.at(x0 + x as usize, y0 + y as usize));
+                    worst = worst.max((h - z).abs());
+                });
+            }
         }
-    }
-    if worst > bound + tolerance(bound) {
-        report.problems.push(format!(
-            "{}: {}: a source sample lies {worst:.3} m from the finest level, past its error {:.3} m plus the decimation error {d:.3} m",
-            layer.path().display(),
-            tile_name(layer, tx, ty),
-            finest.entry.max_error
-        ));
+        let name = tile_name(layer, tx, ty);
+        let path = layer.path().display();
+        let s = f64::from(stored[level as usize]);
+        if (worst - s).abs() > tolerance(worst) {
+            report.problems.push(format!(
+                "{path}: {name} level {level}: recomputed error against the base grid {worst:.4} m, stored {s:.4} m"
+            ));
+        }
+        let bound = f64::from(l.entry.max_error) + d;
+        if worst > bound + tolerance(bound) {
+            report.problems.push(format!(
+                "{path}: {name} level {level}: a source sample lies {worst:.3} m from the level, past its error {:.3} m plus the decimation error {d:.3} m",
+                l.entry.max_error
+            ));
+        }
     }
 }
 

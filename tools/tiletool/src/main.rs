@@ -578,17 +578,19 @@ fn build(
             print_texture(t, laid.as_ref(), &summary, tiles_x * tiles_y);
         }
         if !summary.pyramid.is_empty() {
-            println!("  pyramid   layer  tiles    triangles        bytes  texture bytes  decimation error (m)");
+            println!("  pyramid   layer  tiles    triangles        bytes  texture bytes  decimation error (m)  finest, coarsest level's error (m)");
         }
         for (p, l) in summary.pyramid.iter().enumerate() {
             println!(
-                "  {:>13} {:>6} {:>12} {:>12} {:>14} {:>21.3}",
+                "  {:>13} {:>6} {:>12} {:>12} {:>14} {:>21.3}  {:.3}, {:.3}",
                 p + 1,
                 l.tiles,
                 l.triangles,
                 l.bytes,
                 l.texture_bytes,
-                l.decimation_error
+                l.decimation_error,
+                l.base_errors.last().copied().unwrap_or(0.0),
+                l.base_errors.first().copied().unwrap_or(0.0)
             );
         }
         let secs = total.as_secs_f64();

@@ -131,6 +131,26 @@ fn the_pyramid_is_built_listed_and_verified_and_a_forged_bound_is_caught() {
         "{err}"
     );
     assert!(!err.contains("panicked"), "{err}");
+
+    // Each level's error against the base grid, which the renderer chooses layer tiles by,
+    // is recomputed by verify from the stored fans; a table that claims less is caught.
+    let mut bytes = std::fs::read(&file).expect("read");
+    let h: FileHeader = bytemuck::pod_read_unaligned(&bytes[..size_of::<FileHeader>()]);
+    let (layers, _) = tiles::format::layer_layout(&h).expect("layout");
+    let at = layers[0].errors_offset as usize + 3 * 4; // layer 1, tile 0,0, level 3
+    let claimed = f32::from_le_bytes(bytes[at..at + 4].try_into().unwrap());
+    assert!(claimed > 0.0);
+    bytes[at..at + 4].copy_from_slice(&(claimed * 0.5).to_le_bytes());
+    tiles::format::reseal(&mut bytes).expect("reseal");
+    let low = dir.path().join("low.vkt");
+    std::fs::write(&low, &bytes).expect("write");
+    let o = verify_against_source(&low);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("layer 1 tile 0,0 level 3: recomputed error against the base grid"),
+        "{err}"
+    );
 }
 
 #[test]

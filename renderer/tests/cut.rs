@@ -1,0 +1,194 @@
+//! The tile pyramid's cut (`renderer::cut`), CPU only: it covers what the base grid sees, each
+//! base tile once; far views take the top tile and near ones the base grid; and on a set large
+//! enough for the pyramid to matter it draws far fewer tiles for about the same triangles,
+//! which the rule without its look ahead does not.
+
+mod common;
+
+use std::f64::consts::TAU;
+
+use glam::DVec3;
+use renderer::camera::Camera;
+use renderer::cut::{cut, cut_with, Cut};
+use renderer::path::CameraPath;
+use renderer::pyramid::Pyramid;
+use renderer::terrain::Terrain;
+use tiles::BuildParams;
+
+const EXTENT: (u32, u32) = (1024, 768);
+
+fn with_pyramid() -> BuildParams {
+    BuildParams {
+        pyramid: true,
+        ..BuildParams::default()
+    }
+}
+
+/// The Puget sample and a GENERATED 2049² mirror tiling of SRTM N55W003 (see
+/// `common::mirror`), both with their pyramids, in `dir`.
+fn sets(dir: &std::path::Path) -> Vec<Pyramid> {
+    let puget = dir.join("puget");
+    let mirror = dir.join("mirror");
+    std::fs::create_dir_all(&puget).unwrap();
+    std::fs::create_dir_all(&mirror).unwrap();
+    let puget = common::tileset_with(
+        &puget,
+        &[testdata::sample()],
+        common::puget_options(),
+        &with_pyramid(),
+    );
+    let mirror = common::mirror_with(&mirror, 2049, &with_pyramid());
+    [puget, mirror]
+        .iter()
+        .map(|p| Pyramid::open(p).unwrap_or_else(|e| panic!("{}: {e}", p.display())))
+        .collect()
+}
+
+/// The cameras of the orbit and the flyover, and a few random ones above the ground.
+fn cameras(terrain: &Terrain, rng: &mut splitmix::Rng) -> Vec<Camera> {
+    let mut out = Vec::new();
+    for path in [CameraPath::orbit(terrain), CameraPath::flyover(terrain)] {
+        for k in 0..24 {
+            let t = path.keys[0].time + k as f64 * path.duration() / 24.0;
+            out.push(path.at(t));
+        }
+    }
+    let (lo, hi) = terrain.bounds();
+    out.extend((0..8).map(|_| Camera {
+        position: DVec3::new(
+            rng.range(lo.x, hi.x),
+            rng.range(lo.y, hi.y),
+            hi.z + rng.range(50.0, 5000.0),
+        ),
+        yaw: rng.range(0.0, TAU),
+        pitch: rng.range(-0.9, -0.02),
+        fov_y: 1.0,
+    }));
+    out
+}
+
+/// For each base tile (row-major), how many of the cut's tiles cover it.
+fn cover(pyramid: &Pyramid, c: &Cut) -> Vec<u32> {
+    let base = &pyramid.layers[0];
+    let mut covered = vec![0u32; base.tiles.len()];
+    for n in &c.nodes {
+        let (xs, ys) = pyramid.base_tiles_under(n.layer, n.tile);
+        for y in ys {
+            for x in xs.clone() {
+                covered[(y * base.tiles_x + x) as usize] += 1;
+            }
+        }
+    }
+    covered
+}
+
+#[test]
+fn the_cut_covers_what_the_base_grid_sees_each_tile_once() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut rng = splitmix::Rng(0x6375_745f_636f_7665);
+    let (mut views, mut layer_tiles) = (0, 0);
+    for pyramid in sets(dir.path()) {
+        assert!(pyramid.top() >= 2, "{} layers", pyramid.top());
+        let path = pyramid.layers[0].set.path().to_path_buf();
+        let base = Pyramid {
+            layers: vec![Terrain::open(&path).unwrap()],
+        };
+        for camera in cameras(&pyramid.layers[0], &mut rng) {
+            let view = camera.view(EXTENT.0, EXTENT.1);
+            for tau in [1.0, 4.0] {
+                let seen = cut(&base, &view, camera.position, tau);
+                let chosen = cut(&pyramid, &view, camera.position, tau);
+                let covered = cover(&pyramid, &chosen);
+                // No base tile twice: the cut's tiles do not overlap.
+                assert!(covered.iter().all(|&c| c <= 1), "{covered:?}");
+                // Every base tile the base grid alone would draw is under one of the cut's.
+                for n in &seen.nodes {
+                    assert_eq!(covered[n.tile], 1, "base tile {} uncovered", n.tile);
+                }
+                layer_tiles += chosen.nodes.iter().filter(|n| n.layer > 0).count();
+                views += 1;
+            }
+        }
+    }
+    // The test saw layer tiles chosen, not only base tiles.
+    assert!(
+        layer_tiles > 100,
+        "{layer_tiles} layer tiles in {views} cuts"
+    );
+}
+
+#[test]
+fn far_views_take_the_top_tile_and_near_views_the_base_grid() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = common::mirror_with(dir.path(), 2049, &with_pyramid());
+    let pyramid = Pyramid::open(&set).expect("open");
+    let (lo, hi) = pyramid.layers[0].bounds();
+    let centre = (lo + hi) * 0.5;
+    let extent = hi.x - lo.x;
+    // High above the middle, looking straight down at all of it: one tile, the top one.
+    let far = Camera {
+        position: DVec3::new(centre.x, centre.y, hi.z + 40.0 * extent),
+        yaw: 0.0,
+        pitch: -std::f64::consts::FRAC_PI_2 + 1e-3,
+        fov_y: 0.5,
+    };
+    let c = cut(&pyramid, &far.view(EXTENT.0, EXTENT.1), far.position, 1.0);
+    assert_eq!(c.nodes.len(), 1, "{:?}", c.nodes);
+    assert_eq!(c.nodes[0].layer, pyramid.top());
+    // Just above the ground, looking along it: the base grid under the camera.
+    let near = Camera {
+        position: DVec3::new(centre.x, centre.y, hi.z + 10.0),
+        yaw: 0.3,
+        pitch: -0.3,
+        fov_y: 1.0,
+    };
+    let c = cut(&pyramid, &near.view(EXTENT.0, EXTENT.1), near.position, 1.0);
+    assert!(c.nodes.iter().any(|n| n.layer == 0), "{:?}", c.nodes);
+}
+
+#[test]
+fn the_pyramid_draws_fewer_tiles_for_about_the_same_triangles() {
+    // The orbit that sees all of a set of 64 base tiles (GENERATED mirror): the base grid
+    // alone draws every visible tile at least at its coarsest level. The look ahead keeps a
+    // layer tile only where it costs less than its children; the rule without it keeps every
+    // layer tile that meets tau and draws several times the triangles (the control).
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = common::mirror_with(dir.path(), 2049, &with_pyramid());
+    let pyramid = Pyramid::open(&set).expect("open");
+    let base = Pyramid {
+        layers: vec![Terrain::open(&set).expect("open")],
+    };
+    let path = CameraPath::orbit(&pyramid.layers[0]);
+    let (mut draws, mut triangles) = ([0usize; 3], [0u64; 3]);
+    for k in 0..24 {
+        let camera = path.at(path.keys[0].time + k as f64 * path.duration() / 24.0);
+        let view = camera.view(EXTENT.0, EXTENT.1);
+        let cuts = [
+            cut(&base, &view, camera.position, 1.0),
+            cut(&pyramid, &view, camera.position, 1.0),
+            cut_with(&pyramid, &view, camera.position, 1.0, false),
+        ];
+        for (k, c) in cuts.iter().enumerate() {
+            let p = if k == 0 { &base } else { &pyramid };
+            draws[k] += c.nodes.len();
+            triangles[k] += c.triangles(p);
+        }
+    }
+    let ratio = |k: usize| triangles[k] as f64 / triangles[0] as f64;
+    assert!(
+        2 * draws[1] <= draws[0],
+        "draws: base grid {}, pyramid {}",
+        draws[0],
+        draws[1]
+    );
+    assert!(
+        ratio(1) <= 1.5,
+        "triangles {:.2}x the base grid's",
+        ratio(1)
+    );
+    assert!(
+        ratio(2) > 1.5,
+        "without the look ahead: triangles {:.2}x the base grid's",
+        ratio(2)
+    );
+}
