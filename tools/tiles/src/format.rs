@@ -12,6 +12,8 @@
 //! LayerHeader * P 64 bytes    version 3: per pyramid layer p = 1..=P above the base grid (see
 //!                             "The tile pyramid" below)
 //! DirEntry * T_p  40 bytes    per tile of layer p, p = 1..=P, as the base's
+//! f32 * T_p * L   4 bytes     per tile of layer p and level, the level's error against the base
+//!                             grid's samples under the tile
 //! tile blobs      ...         TileHeader, LevelEntry * levels, then per level i:
 //!                               block i positions   block_len * u32 (packed vertex, see `pack`)
 //!                               block i morph       i * block_len * i8, level-major (see `pack`)
@@ -35,10 +37,15 @@
 //! are ordinary tiles of that grid, with their own nested levels, shared sides and textures, so
 //! [`TileSet::layer`] hands a layer out as a tile set of its own.
 //!
-//! A level's `max_error` is measured against the layer's samples. Its error against the base
-//! samples is at most `max_error + D`, where `D` is the tile's decimation error, stored in its
-//! directory entry: a bound on how far any base sample lies from the layer's finest surface.
-//! The builder's argument is in [`crate::pyramid`].
+//! A level's `max_error` (and the rest of its entry) is measured against the layer's samples,
+//! as in any tile. What a renderer chooses a layer tile by is its error against the ground it
+//! stands for: the layer's error table holds, per tile and level, the largest distance of the
+//! base grid's samples under the tile from the level ([`TileSet::base_errors`]). It is at most
+//! `max_error + D`, where `D` is the tile's decimation error, stored in its directory entry: a
+//! bound on how far any base sample lies from the layer's finest surface, which grows with the
+//! worst sample of the tile and is far looser at coarse levels than the measured table. Both
+//! are argued and computed in [`crate::pyramid`]; `tiletool verify --source` recomputes the
+//! table and checks the bound.
 //! `LevelEntry::side_errors` (each level's error near each side) took the entry's last,
 //! formerly reserved and zero, four bytes within version 2: a zero code reads as the whole
 //! level's error, so files from before it read as they did, and readers from before it ignore

@@ -24,6 +24,15 @@
 //! computes the second term from layer `p-1`'s samples alone, so a layer needs one pass over
 //! the one below it, not over the base grid; `tiletool verify` checks the bound directly
 //! against the base samples. Errors are, as everywhere in a tile set, measured at samples.
+//!
+//! `D` is a maximum over the whole tile: one steep spike anywhere makes every level look that
+//! much worse, and a coarse level, far from most samples anyway, rarely errs by `e_i + D`. So
+//! the builder also measures each level against the base samples directly ([`base_errors`]),
+//! with the same fact that makes the bound: a level is linear on each full-lattice triangle, so
+//! its height at a base sample is the blend of its heights at the triangle's three lattice
+//! points, found once per sample for all levels. That is one pass over the base grid per
+//! layer, a tile row of the layer at a time. The renderer goes by these; `D` stays in the file
+//! as the bound they must keep, and `verify` checks both.
 
 use std::borrow::Cow;
 

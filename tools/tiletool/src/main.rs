@@ -487,10 +487,19 @@ fn build(
     let about = dem.about();
     let (tiles_x, tiles_y) = tiles::format::tile_count(about.width, about.height)
         .map_err(|e| anyhow::anyhow!("{}: {e}", input.inputs[0].display()))?;
-    let bar = ProgressBar::with_draw_target(
-        Some(u64::from(tiles_x * tiles_y)),
-        ProgressDrawTarget::hidden(),
-    );
+    // The pyramid's layers' tiles count too.
+    let layers = if params.pyramid {
+        tiles::format::pyramid_layers(about.width, about.height)
+    } else {
+        0
+    };
+    let all_tiles: u64 = (0..=layers)
+        .map(|p| {
+            let (w, h, _) = tiles::format::layer_grid(about.width, about.height, p);
+            tiles::format::tile_count(w, h).map_or(0, |(x, y)| u64::from(x) * u64::from(y))
+        })
+        .sum();
+    let bar = ProgressBar::with_draw_target(Some(all_tiles), ProgressDrawTarget::hidden());
     bar.set_style(
         ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} tiles ({eta} left)")
             .unwrap_or_else(|_| ProgressStyle::default_bar())
