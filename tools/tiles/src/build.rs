@@ -15,7 +15,7 @@ use crate::format::{
 use crate::grid::{tile_samples, Grid};
 use crate::mesh::{lattice, plane, triangle_spans, Mesher, Quad, TILE_CELLS, TILE_SIZE};
 use crate::pack::{morph_offset, morph_unit, pack};
-use crate::pyramid::{base_errors, decimation_errors, Decimated, Surfaces};
+use crate::pyramid::{base_errors, decimation_errors, level_floor, Decimated, Surfaces};
 use crate::quantise::{lattice_step, Quantiser};
 use crate::texture::{self, Prepared, Source, Texturing};
 use crate::BuildError;
@@ -232,7 +232,7 @@ pub struct BuiltTile {
     /// Per level, the largest distance of a finer vertex from the level's surface (metres;
     /// 0 for the finest level).
     pub deviation: Vec<f64>,
-    /// A pyramid layer's tile ([`build_layer_tile`]): every level's surface at every lattice
+    /// A pyramid layer's tile (built with `Output::LayerTile`): every level's surface at every lattice
     /// point of the mesh extent, interleaved (`[point * levels + level]`); empty otherwise.
     pub surfaces: Vec<f32>,
     /// The last column and row of real data.
@@ -250,6 +250,9 @@ pub struct Agreement {
     pub forced: Sides,
     /// Per level, the morph unit every tile of the set uses (None: the tile's own units).
     pub units: Option<Vec<f64>>,
+    /// Metres no level is built finer than (0 in the base grid; a pyramid layer's tile is
+    /// built to `max(e_i, floor)`, see [`crate::pyramid::level_floor`]).
+    pub floor: f64,
 }
 
 /// Position of a cell along the Hilbert curve over `n x n` cells (`n` a power of two).
@@ -504,18 +507,6 @@ pub fn build_tile(
     mesh_tile(grid, (tx, ty), params, step, agreement, Output::Tile)
 }
 
-/// [`build_tile`] for a tile of a pyramid layer: with [`BuiltTile::surfaces`] filled in.
-pub fn build_layer_tile(
-    grid: &Grid,
-    tx: u32,
-    ty: u32,
-    params: &BuildParams,
-    step: f32,
-    agreement: &Agreement,
-) -> Result<BuiltTile, BuildError> {
-    mesh_tile(grid, (tx, ty), params, step, agreement, Output::LayerTile)
-}
-
 /// What [`mesh_tile`] makes: the whole tile, or only what the shared-sides agreement reads of
 /// it (its sides and deviations; no fan order, index arrays, morph offsets or blob).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -562,7 +553,7 @@ fn mesh_tile(
 
     let mut positions: Sides = Vec::with_capacity(n);
     for level in 0..n {
-        let e = params.level_error(level as u32);
+        let e = params.level_error(level as u32).max(agreement.floor);
         mesher.refine(e);
         if let Some(forced) = agreement.forced.get(level) {
             for (k, side) in forced.iter().enumerate() {
@@ -1195,7 +1186,7 @@ fn build_layer(
     let bands = layer.bands;
     let (tiles_x, step) = (bands.tiles.0, layer.step);
     let agreements = if params.shared_sides {
-        let agreed = agree_sides(bands, params, step, Remesh::Changed)?;
+        let agreed = agree_sides(bands, params, step, layer.decimation, Remesh::Changed)?;
         summary.agreement_passes = agreed.passes;
         summary.agreement_meshes = agreed.meshes;
         Some(agreed)
@@ -1208,7 +1199,7 @@ fn build_layer(
         .map_or(0, |(_, l)| l.rows_beyond_tile());
     // At most a few tiles per worker are in flight, so memory does not grow with the tiles.
     let in_flight = 2 * rayon::current_num_threads();
-    let alone = Agreement::default();
+    let floor = |t: usize| layer.decimation.map_or(0.0, |d| level_floor(d[t]));
     for b in 0..bands.count() {
         let band = bands.load(b, margin)?;
         let grid = band.grid(&bands.shape);
@@ -1218,18 +1209,20 @@ fn build_layer(
         let make = |i: usize| {
             let t = first + i;
             let (tx, ty) = (t as u32 % tiles_x, t as u32 / tiles_x);
-            let mesh = |agreement: &Agreement| {
-                if layer_tile {
-                    build_layer_tile(&grid, tx, ty, params, step, agreement)
-                } else {
-                    build_tile(&grid, tx, ty, params, step, agreement)
-                }
+            // A layer's tiles keep their levels' surfaces, to be measured against the base.
+            let output = if layer_tile {
+                Output::LayerTile
+            } else {
+                Output::Tile
             };
+            let mesh =
+                |agreement: &Agreement| mesh_tile(&grid, (tx, ty), params, step, agreement, output);
             let built = match &agreements {
                 Some(a) => {
                     let agreement = Agreement {
                         forced: expand(&a.forced[t]),
                         units: Some(a.units.clone()),
+                        floor: floor(t),
                     };
                     mesh(&agreement).and_then(|b| {
                         if compact(&b.sides) == a.sides[t] {
@@ -1241,7 +1234,10 @@ fn build_layer(
                         }
                     })
                 }
-                None => mesh(&alone),
+                None => mesh(&Agreement {
+                    floor: floor(t),
+                    ..Agreement::default()
+                }),
             };
             built.map(|b| {
                 let texture = layer.prepared.as_ref().map(|(source, layout)| {
@@ -1255,21 +1251,16 @@ fn build_layer(
         // A layer's tiles wait for the band (one tile row) to be measured against the base
         // grid; the base grid's are written as they come.
         let mut held = Vec::new();
+        let mut write = |i: usize, made, errors: &[f32]| {
+            write_tile(writer, layer, summary, first + i, made, errors, progress)
+        };
         crate::ordered::in_order(count, in_flight, make, |i, built| {
             let (built, texture) = built?;
             if layer_tile {
                 held.push((i, built, texture));
                 Ok(())
             } else {
-                write_tile(
-                    writer,
-                    layer,
-                    summary,
-                    first + i,
-                    (built, texture),
-                    &[],
-                    progress,
-                )
+                write(i, (built, texture), &[])
             }
         })?;
         if let Some(base) = layer.base {
@@ -1288,15 +1279,7 @@ fn build_layer(
             };
             drop(surfaces);
             for ((i, built, texture), errors) in held.drain(..).zip(errors) {
-                write_tile(
-                    writer,
-                    layer,
-                    summary,
-                    first + i,
-                    (built, texture),
-                    &errors,
-                    progress,
-                )?;
+                write(i, (built, texture), &errors)?;
             }
         }
     }
@@ -1358,6 +1341,7 @@ fn agree_sides(
     bands: &Bands,
     params: &BuildParams,
     step: f32,
+    floors: Option<&[f32]>,
     remesh: Remesh,
 ) -> Result<Agreed, BuildError> {
     let (tiles_x, tiles_y) = bands.tiles;
@@ -1429,6 +1413,7 @@ fn agree_sides(
                     let agreement = Agreement {
                         forced: expand(forced),
                         units: None,
+                        floor: floors.map_or(0.0, |d| level_floor(d[*t])),
                     };
                     mesh_tile(&grid, (tx, ty), params, step, &agreement, Output::Sides)
                         .map(|b| (*t, compact(&b.sides), b.deviation))
@@ -1579,6 +1564,7 @@ mod tests {
             Agreement {
                 forced,
                 units: None,
+                floor: 0.0,
             },
         ] {
             let whole = mesh_tile(&grid, (1, 1), &params, step, &agreement, Output::Tile);
@@ -1632,7 +1618,7 @@ mod tests {
         let params = BuildParams::default();
         let step = height_step(&grid).expect("step");
         let bands = Bands::new(&grid, (4, 4));
-        let agree = |remesh| agree_sides(&bands, &params, step, remesh).expect("agreed");
+        let agree = |remesh| agree_sides(&bands, &params, step, None, remesh).expect("agreed");
         let (fewer, every) = (agree(Remesh::Changed), agree(Remesh::NextToChange));
         assert!(fewer.passes > 1, "the sides did not need agreeing: no test");
         assert!(

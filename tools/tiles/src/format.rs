@@ -45,7 +45,8 @@
 //! bound on how far any base sample lies from the layer's finest surface, which grows with the
 //! worst sample of the tile and is far looser at coarse levels than the measured table. Both
 //! are argued and computed in [`crate::pyramid`]; `tiletool verify --source` recomputes the
-//! table and checks the bound.
+//! table and checks the bound. A layer tile's level `i` is built to `max(e_i, D / 4)`
+//! ([`crate::pyramid::level_floor`]), its `error_bound`; verify holds it to that.
 //! `LevelEntry::side_errors` (each level's error near each side) took the entry's last,
 //! formerly reserved and zero, four bytes within version 2: a zero code reads as the whole
 //! level's error, so files from before it read as they did, and readers from before it ignore

@@ -44,6 +44,18 @@ use crate::grid::Grid;
 use crate::mesh::{TILE_CELLS, TILE_SIZE};
 use crate::BuildError;
 
+/// The error a pyramid layer's tile is built to at most, as a share of its decimation error
+/// `D`: its level `i` is built to `max(e_i, D / 4)` against the layer's samples. Against the
+/// base grid no level of the tile errs by less than its decimation leaves (about `D` where
+/// the worst sample is), so the renderer takes the tile only where `D` is tolerable; levels
+/// built finer than that would hold vertices it never draws.
+pub const FLOOR_SHARE: f64 = 0.25;
+
+/// The error no level of a layer tile with decimation error `d` is built finer than.
+pub fn level_floor(d: f32) -> f64 {
+    f64::from(d) * FLOOR_SHARE
+}
+
 /// Base samples read at once when a layer reads its rows: about 64 MB of heights.
 const READ_SAMPLES: usize = 1 << 24;
 

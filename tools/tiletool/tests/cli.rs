@@ -1,23 +1,12 @@
 //! `tiletool` end to end on real data: build, info, verify, export, and what bad input gets.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
+
+use common::{build_sample, s, stderr, tiletool};
 use testdata::{data, sample};
-
-fn tiletool(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tiletool"))
-        .args(args)
-        .output()
-        .expect("tiletool runs")
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 path")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
 
 /// A failed command: non-zero exit, exactly one line on stderr that names `file`, no panic.
 fn assert_one_line_error(o: &Output, file: &str) -> String {
@@ -754,29 +743,6 @@ fn shared_sides_verify_and_a_forged_claim_is_caught() {
     );
 }
 
-/// Builds the sample into `dir/name` with `extra` flags; returns the file and `info --json`.
-fn build_sample(dir: &Path, name: &str, extra: &[&str]) -> (PathBuf, serde_json::Value) {
-    let out = dir.join(name);
-    let src = sample();
-    let mut args = vec![
-        "build",
-        s(&src),
-        "-o",
-        s(&out),
-        "--spacing",
-        "160",
-        "--vertical-scale",
-        "0.1",
-        "--quiet",
-    ];
-    args.extend(extra);
-    let o = tiletool(&args);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let o = tiletool(&["info", s(&out), "--json"]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    (out, serde_json::from_slice(&o.stdout).expect("json"))
-}
-
 /// PSNR (dB) over pairs of RGB pixels.
 fn psnr(pairs: impl Iterator<Item = ([u8; 3], [u8; 3])>) -> f64 {
     let (mut sum, mut n) = (0.0f64, 0u64);
@@ -881,19 +847,25 @@ fn the_photo_lands_on_the_tiles_texel_for_texel() {
 }
 
 #[test]
-fn version_1_files_still_read_without_textures() {
-    // A file written by the version 1 builder, kept in the fuzz corpus.
-    let old = PathBuf::from(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../fuzz/corpus/vkt/srtm-270x40.vkt"
-    ));
-    let o = tiletool(&["info", s(&old), "--json"]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let info: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
-    assert_eq!(info["format_version"], 1);
-    assert!(info["texture"].is_null());
-    let o = tiletool(&["verify", s(&old)]);
-    assert!(o.status.success(), "{}", stderr(&o));
+fn old_versions_still_read() {
+    // Files written by the version 1 builder (no textures) and the version 2 builder
+    // (textured, no pyramid), kept in the fuzz corpus.
+    for (name, version, textured) in [
+        ("srtm-270x40.vkt", 1, false),
+        ("srtm-270x40-textured.vkt", 2, true),
+    ] {
+        let old = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("../../fuzz/corpus/vkt")
+            .join(name);
+        let o = tiletool(&["info", s(&old), "--json"]);
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        let info: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+        assert_eq!(info["format_version"], version, "{name}");
+        assert_eq!(info["texture"].is_null(), !textured, "{name}");
+        assert_eq!(info["pyramid"].as_array().map(Vec::len), Some(0), "{name}");
+        let o = tiletool(&["verify", s(&old)]);
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+    }
 }
 
 #[test]

@@ -1,26 +1,16 @@
 //! The tile pyramid end to end: `tiletool build --pyramid` on real data, its layers in `info`,
 //! its error bound checked by `verify` against the source (and caught when forged), corrupted
-//! layers refused, banded builds the same bytes, and files from before it still read.
+//! layers refused, banded builds the same bytes, and layer tiles textured where they lie.
+//! (Files from before it still read: `cli.rs`, `old_versions_still_read`.)
+
+mod common;
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
+
+use common::{build_sample, s, stderr, tiletool};
 use testdata::{data, sample};
 use tiles::format::{DirEntry, FileHeader, LayerHeader};
-
-fn tiletool(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tiletool"))
-        .args(args)
-        .output()
-        .expect("tiletool runs")
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 path")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
 
 /// The sample cropped so that its size is no multiple of 2 or 4 (999 x 998 cells): the
 /// layers' last column and row are clamped onto the grid's.
@@ -97,6 +87,31 @@ fn the_pyramid_is_built_listed_and_verified_and_a_forged_bound_is_caught() {
         .collect();
     assert!(0.0 < d[0] && d[0] < d[1], "{d:?}");
 
+    // A layer tile's levels are built no finer than a quarter of its decimation error: the
+    // finest levels of rough tiles stop there (their vertices would never be drawn).
+    let set = tiles::TileSet::open(&file).expect("open");
+    let mut floored = 0;
+    for p in 1..=set.pyramid_layers() {
+        let layer = set.layer(p).unwrap();
+        for ty in 0..layer.header().tiles_y {
+            for tx in 0..layer.header().tiles_x {
+                let d = layer.decimation_error(tx, ty).unwrap();
+                let tile = layer.tile(tx, ty).unwrap();
+                for (i, e) in tile.levels().iter().enumerate() {
+                    let want = set.level_error(i as u32).max(f64::from(d) / 4.0);
+                    assert_eq!(
+                        f64::from(e.error_bound),
+                        want as f32 as f64,
+                        "layer {p} tile {tx},{ty} level {i}"
+                    );
+                    floored += usize::from(want > set.level_error(i as u32));
+                }
+            }
+        }
+    }
+    assert!(floored > 0, "no level of any layer tile is floored");
+    drop(set);
+
     // Against the source: every layer's levels within their errors of the subsampled grid,
     // and every source sample within the finest level's error plus the tile's bound.
     let o = verify_against_source(&file);
@@ -107,10 +122,9 @@ fn the_pyramid_is_built_listed_and_verified_and_a_forged_bound_is_caught() {
         "16 base tiles, 4 + 1 above: {out}"
     );
 
-    // The control: the same file claiming no decimation error. Its structure is sound, so
-    // verify without the source passes; against the source, the bound fails.
+    // The control: the same file whose top tile (layer 2) claims no decimation error.
     let mut bytes = std::fs::read(&file).expect("read");
-    for p in [1, 2] {
+    for p in [2] {
         for at in layer_entries(&bytes, p) {
             let mut e: DirEntry =
                 bytemuck::pod_read_unaligned(&bytes[at..][..size_of::<DirEntry>()]);
@@ -121,13 +135,16 @@ fn the_pyramid_is_built_listed_and_verified_and_a_forged_bound_is_caught() {
     tiles::format::reseal(&mut bytes).expect("reseal");
     let forged = dir.path().join("forged.vkt");
     std::fs::write(&forged, &bytes).expect("write");
+    // Without the source, the levels' floors no longer follow from the claimed bound.
     let o = tiletool(&["verify", s(&forged)]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("error bound"), "{err}");
     let o = verify_against_source(&forged);
     let err = stderr(&o);
     assert_eq!(o.status.code(), Some(1), "{err}");
     assert!(
-        err.contains("layer 1 tile") && err.contains("plus the decimation error 0.000 m"),
+        err.contains("layer 2 tile 0,0") && err.contains("plus the decimation error 0.000 m"),
         "{err}"
     );
     assert!(!err.contains("panicked"), "{err}");
@@ -300,23 +317,6 @@ fn a_pyramid_leaves_the_base_tiles_alone_and_builds_the_same_bytes_in_bands() {
     assert!(o.status.success(), "{}", stderr(&o));
 }
 
-#[test]
-fn version_2_files_still_read_without_a_pyramid() {
-    // A file written by the version 2 builder (textured, no pyramid), kept in the fuzz corpus.
-    let old = PathBuf::from(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../fuzz/corpus/vkt/srtm-270x40-textured.vkt"
-    ));
-    let o = tiletool(&["info", s(&old), "--json"]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let info: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
-    assert_eq!(info["format_version"], 2);
-    assert_eq!(info["pyramid"].as_array().map(Vec::len), Some(0));
-    assert!(!info["texture"].is_null());
-    let o = tiletool(&["verify", s(&old)]);
-    assert!(o.status.success(), "{}", stderr(&o));
-}
-
 /// PSNR (dB) over pairs of RGB pixels.
 fn psnr(pairs: impl Iterator<Item = ([f64; 3], [f64; 3])>) -> f64 {
     let (mut sum, mut n) = (0.0, 0usize);
@@ -336,25 +336,8 @@ fn a_layer_tile_wears_the_photo_of_the_ground_it_covers() {
     // the grid, a pixel a cell). The control: the same comparison a layer texel off.
     let dir = tempfile::tempdir().expect("temp dir");
     let tex = testdata::sample_texture();
-    let out = dir.path().join("photo.vkt");
-    let src = sample();
-    let o = tiletool(&[
-        "build",
-        s(&src),
-        "-o",
-        s(&out),
-        "--spacing",
-        "160",
-        "--vertical-scale",
-        "0.1",
-        "--texture",
-        s(&tex),
-        "--pyramid",
-        "--levels",
-        "4",
-        "--quiet",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    let pyramid = ["--texture", s(&tex), "--pyramid", "--levels", "4"];
+    let (out, _) = build_sample(dir.path(), "photo.vkt", &pyramid);
     let set = tiles::TileSet::open(&out).expect("open");
     let layer = set.layer(1).expect("layer 1");
     let layout = layer.texture_layout().expect("textured");
