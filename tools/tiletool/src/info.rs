@@ -285,7 +285,7 @@ pub fn run(file: &Path, json: bool) -> Result<ExitCode> {
         }
     }
     if info.pyramid.is_empty() {
-        println!("  pyramid   none (built without --pyramid)");
+        println!("  pyramid   none (built without --pyramid, or a single tile)");
     } else {
         println!("  pyramid   layer  factor        grid  tiles   spacing (m)  decimation error (m)    triangles        bytes");
     }
