@@ -15,14 +15,14 @@ pub struct Pyramid {
 }
 
 impl Pyramid {
-    /// Opens every layer of the set (the base grid alone for a set without a pyramid).
+    /// Opens every layer of the set (the base grid alone for a set without a pyramid): the
+    /// file once, then each layer's view of it.
     pub fn open(path: &Path) -> Result<Pyramid, tiles::FormatError> {
-        let base = Terrain::open(path)?;
-        let count = base.set.pyramid_layers();
-        let mut layers = vec![base];
-        for p in 1..=count {
-            layers.push(Terrain::open_layer(path, p)?);
-        }
+        let file = tiles::TileSet::open(path)?;
+        let layers = (0..=file.pyramid_layers())
+            .filter_map(|p| file.layer(p))
+            .map(Terrain::of_layer)
+            .collect::<Result<Vec<_>, _>>()?;
         Ok(Pyramid { layers })
     }
 

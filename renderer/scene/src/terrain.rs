@@ -73,6 +73,12 @@ impl Terrain {
                     file.pyramid_layers()
                 ),
             })?;
+        Terrain::of_layer(set)
+    }
+
+    /// The terrain of a tile set already open (a layer's view, [`TileSet::layer`], or the
+    /// base grid): every tile's header and level table.
+    pub fn of_layer(set: TileSet) -> Result<Terrain, tiles::FormatError> {
         let h = *set.header();
         let (sx, sy) = (h.spacing_x, h.spacing_y);
         let mut tiles = Vec::with_capacity((h.tiles_x * h.tiles_y) as usize);
