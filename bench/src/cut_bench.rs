@@ -83,5 +83,51 @@ pub fn cut() -> Result<()> {
         "\nMedians over {frames} frames at {}x{}, tau {TAU}.",
         SIZE.0, SIZE.1
     );
+    first_views(&set)
+}
+
+/// What the first frame of each flight must check before it can draw (each chosen tile's
+/// checksum and `tiletool verify`'s per-tile checks, on every core, as `vkterrain` does before
+/// its first frame), for the base grid's choice and the pyramid's. Each on a terrain opened
+/// afresh, so no check is cached; the file is in the page cache (warm).
+fn first_views(set: &std::path::Path) -> Result<()> {
+    println!("\n| flight | selection | first view's tiles | checked in | per tile |");
+    println!("|---|---|---:|---:|---:|");
+    for name in ["orbit", "flyover"] {
+        for what in ["base grid", "pyramid"] {
+            let mut p = Pyramid::open(set)?;
+            if what == "base grid" {
+                p.layers.truncate(1);
+            }
+            let path = if name == "orbit" {
+                CameraPath::orbit(&p.layers[0])
+            } else {
+                CameraPath::flyover(&p.layers[0])
+            };
+            let camera = path.at(path.keys[0].time);
+            let view = camera.view(SIZE.0, SIZE.1);
+            let c = renderer::cut::cut(&p, &view, camera.position, TAU);
+            let start = Instant::now();
+            for (l, layer) in p.layers.iter().enumerate() {
+                let tiles: Vec<usize> = c
+                    .nodes
+                    .iter()
+                    .filter(|n| n.layer as usize == l)
+                    .map(|n| n.tile)
+                    .collect();
+                layer.check_all(&tiles);
+                if layer.failed_count() > 0 {
+                    bail!("{}: tiles failed their checks", set.display());
+                }
+            }
+            let s = start.elapsed().as_secs_f64();
+            println!(
+                "| {name} | {what} | {} | {s:.2} s | {:.0} ms |",
+                c.nodes.len(),
+                s * 1e3 / c.nodes.len().max(1) as f64
+            );
+        }
+    }
+    println!("\nOne run; the first frame of each flight; both cores.");
     Ok(())
 }
