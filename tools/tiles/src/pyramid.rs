@@ -46,9 +46,10 @@ use crate::BuildError;
 
 /// The error a pyramid layer's tile is built to at most, as a share of its decimation error
 /// `D`: its level `i` is built to `max(e_i, D / 4)` against the layer's samples. Against the
-/// base grid no level of the tile errs by less than its decimation leaves (about `D` where
-/// the worst sample is), so the renderer takes the tile only where `D` is tolerable; levels
-/// built finer than that would hold vertices it never draws.
+/// base grid even the tile's finest level errs by what the subsampling left out (up to `D`,
+/// often near it), so the renderer takes the tile only where that is tolerable; levels built
+/// much finer would hold vertices it never draws (on the mirror sets the cut chose the same
+/// tiles with and without the floor).
 pub const FLOOR_SHARE: f64 = 0.25;
 
 /// The error no level of a layer tile with decimation error `d` is built finer than.
