@@ -15,10 +15,16 @@
 //! children where their triangles, plus [`DRAW_TRIANGLES`] a draw, come to less than its own:
 //! one look ahead, so the walk visits at most five tiles for each it keeps or splits.
 //!
+//! Last, the cut is balanced: a kept tile beside ground that was split two layers finer is
+//! split as well, until every two neighbours are at most one layer apart, so that a tile's
+//! side meets one tile of its own layer or two of the layer below, never more.
+//!
 //! What the frame will need besides, and this does not do yet: stitching where tiles of two
 //! layers meet (a layer tile's side spans two of the layer below), geomorphing that carries on
 //! across the change from a parent to its children, and the manager and the prefetcher keyed by
 //! (layer, tile).
+
+use std::collections::HashSet;
 
 use glam::DVec3;
 
@@ -60,34 +66,126 @@ pub const DRAW_TRIANGLES: u64 = 256;
 
 /// The cut for a view: see the module header. Nodes come in no particular order.
 pub fn cut(pyramid: &Pyramid, view: &View, camera: DVec3, tau: f64) -> Cut {
-    cut_with(pyramid, view, camera, tau, true)
+    cut_with(pyramid, view, camera, tau, Rules::ALL)
 }
 
-/// [`cut`], where `weigh_children` false keeps every layer tile that meets tau (the rule
-/// without the look ahead, kept to measure what it costs).
-pub fn cut_with(
-    pyramid: &Pyramid,
-    view: &View,
-    camera: DVec3,
-    tau: f64,
-    weigh_children: bool,
-) -> Cut {
-    let planes = view.frustum();
+/// Which of the cut's rules apply beyond meeting tau: each can be turned off to measure what
+/// it does.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Rules {
+    /// Replace a layer tile that meets tau by its children where they cost less.
+    pub weigh_children: bool,
+    /// Split tiles until every two neighbours are at most a layer apart.
+    pub balance: bool,
+}
+
+impl Rules {
+    pub const ALL: Rules = Rules {
+        weigh_children: true,
+        balance: true,
+    };
+}
+
+/// [`cut`] under `rules`.
+pub fn cut_with(pyramid: &Pyramid, view: &View, camera: DVec3, tau: f64, rules: Rules) -> Cut {
+    let weigh_children = rules.weigh_children;
+    let walk = Walk {
+        pyramid,
+        view,
+        planes: view.frustum(),
+        camera,
+        tau,
+        weigh_children,
+    };
     let top = pyramid.top();
     let mut stack: Vec<(u32, usize)> = (0..pyramid.layers[top as usize].tiles.len())
         .map(|i| (top, i))
         .collect();
     let mut out = Cut::default();
-    // A tile's level, and its triangles there, if it is on screen and meets tau (None: it
-    // needs its children; Some(None): off screen).
-    let choose = |p: u32, i: usize, visited: &mut usize| -> Option<Option<(u32, u64)>> {
+    let mut split = HashSet::new();
+    walk.run(&mut stack, &mut out, &mut split);
+    if !rules.balance {
+        return out;
+    }
+    // Balance: a tile beside ground drawn two or more layers finer is split too, until every
+    // two neighbours are at most a layer apart. Splitting only goes down, so it ends.
+    loop {
+        let mut balance: Vec<usize> = (0..out.nodes.len())
+            .filter(|&k| {
+                let n = out.nodes[k];
+                n.layer >= 2 && finer_beside(pyramid, &split, n.layer, n.tile)
+            })
+            .collect();
+        if balance.is_empty() {
+            break;
+        }
+        balance.sort_unstable();
+        for k in balance.into_iter().rev() {
+            let n = out.nodes.swap_remove(k);
+            split.insert((n.layer, n.tile));
+            stack.extend(pyramid.children(n.layer, n.tile).map(|c| (n.layer - 1, c)));
+        }
+        walk.run(&mut stack, &mut out, &mut split);
+    }
+    out
+}
+
+/// Whether tile `i` of layer `p` has, across one of its sides, ground drawn two or more layers
+/// finer: its neighbour in layer `p` was split, and so was one of that neighbour's children
+/// along the shared side (conservative: those children's own children might all be culled).
+fn finer_beside(pyramid: &Pyramid, split: &HashSet<(u32, usize)>, p: u32, i: usize) -> bool {
+    let (layer, below) = (&pyramid.layers[p as usize], &pyramid.layers[p as usize - 1]);
+    let (tx, ty) = (
+        (i as u32 % layer.tiles_x) as i64,
+        (i as u32 / layer.tiles_x) as i64,
+    );
+    [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)]
+        .iter()
+        .any(|&(dx, dy)| {
+            let (nx, ny) = (tx + dx, ty + dy);
+            if nx < 0 || ny < 0 || nx >= i64::from(layer.tiles_x) || ny >= i64::from(layer.tiles_y)
+            {
+                return false;
+            }
+            if !split.contains(&(p, (ny * i64::from(layer.tiles_x) + nx) as usize)) {
+                return false;
+            }
+            // The neighbour's two children that touch this tile.
+            let along: [(i64, i64); 2] = match (dx, dy) {
+                (1, _) => [(2 * nx, 2 * ny), (2 * nx, 2 * ny + 1)],
+                (-1, _) => [(2 * nx + 1, 2 * ny), (2 * nx + 1, 2 * ny + 1)],
+                (_, 1) => [(2 * nx, 2 * ny), (2 * nx + 1, 2 * ny)],
+                _ => [(2 * nx, 2 * ny + 1), (2 * nx + 1, 2 * ny + 1)],
+            };
+            along.iter().any(|&(cx, cy)| {
+                cx < i64::from(below.tiles_x)
+                    && cy < i64::from(below.tiles_y)
+                    && split.contains(&(p - 1, (cy * i64::from(below.tiles_x) + cx) as usize))
+            })
+        })
+}
+
+/// One view's walk down the pyramid.
+struct Walk<'a> {
+    pyramid: &'a Pyramid,
+    view: &'a View,
+    planes: [glam::Vec4; 5],
+    camera: DVec3,
+    tau: f64,
+    weigh_children: bool,
+}
+
+impl Walk<'_> {
+    /// A tile's level, and its triangles there, if it is on screen and meets tau (None: it
+    /// needs its children; Some(None): off screen).
+    fn choose(&self, p: u32, i: usize, visited: &mut usize) -> Option<Option<(u32, u64)>> {
         *visited += 1;
-        let tile = &pyramid.layers[p as usize].tiles[i];
+        let tile = &self.pyramid.layers[p as usize].tiles[i];
         let (lo, hi) = lod::tile_box(tile);
-        if crate::cull::box_outside(&planes, lo - camera, hi - camera) {
+        if crate::cull::box_outside(&self.planes, lo - self.camera, hi - self.camera) {
             return Some(None);
         }
-        let r = lod::tolerable_error(view, camera, tile, tau, Bound::Guaranteed);
+        let r = lod::tolerable_error(self.view, self.camera, tile, self.tau, Bound::Guaranteed);
         let finest = tile.levels.last().map_or(0.0, |l| f64::from(l.max_error));
         if p > 0 && finest > r {
             return None;
@@ -97,41 +195,48 @@ pub fn cut_with(
             level,
             u64::from(tile.levels[level as usize].triangle_count),
         )))
-    };
-    while let Some((p, i)) = stack.pop() {
-        let chosen = match choose(p, i, &mut out.visited) {
-            None => {
-                stack.extend(pyramid.children(p, i).map(|c| (p - 1, c)));
-                continue;
-            }
-            Some(None) => continue,
-            Some(Some(chosen)) => chosen,
-        };
-        // A layer tile that meets tau is still replaced by its children where they cost less:
-        // a big tile takes the level its nearest point needs all over, its children each their
-        // own.
-        if p > 0 && weigh_children {
-            let mut children = 0u64;
-            for c in pyramid.children(p, i) {
-                match choose(p - 1, c, &mut out.visited) {
-                    Some(Some((_, t))) => children += t + DRAW_TRIANGLES,
-                    Some(None) => {}
-                    None => {
-                        children = u64::MAX;
-                        break;
+    }
+
+    /// Walks the tiles on `stack` and all they split into, keeping tiles into `out` and
+    /// noting the tiles split.
+    fn run(&self, stack: &mut Vec<(u32, usize)>, out: &mut Cut, split: &mut HashSet<(u32, usize)>) {
+        let pyramid = self.pyramid;
+        while let Some((p, i)) = stack.pop() {
+            let chosen = match self.choose(p, i, &mut out.visited) {
+                None => {
+                    split.insert((p, i));
+                    stack.extend(pyramid.children(p, i).map(|c| (p - 1, c)));
+                    continue;
+                }
+                Some(None) => continue,
+                Some(Some(chosen)) => chosen,
+            };
+            // A layer tile that meets tau is still replaced by its children where they cost
+            // less: a big tile takes the level its nearest point needs all over, its children
+            // each their own.
+            if p > 0 && self.weigh_children {
+                let mut children = 0u64;
+                for c in pyramid.children(p, i) {
+                    match self.choose(p - 1, c, &mut out.visited) {
+                        Some(Some((_, t))) => children += t + DRAW_TRIANGLES,
+                        Some(None) => {}
+                        None => {
+                            children = u64::MAX;
+                            break;
+                        }
                     }
                 }
+                if children < chosen.1 + DRAW_TRIANGLES {
+                    split.insert((p, i));
+                    stack.extend(pyramid.children(p, i).map(|c| (p - 1, c)));
+                    continue;
+                }
             }
-            if children < chosen.1 + DRAW_TRIANGLES {
-                stack.extend(pyramid.children(p, i).map(|c| (p - 1, c)));
-                continue;
-            }
+            out.nodes.push(Node {
+                layer: p,
+                tile: i,
+                level: chosen.0,
+            });
         }
-        out.nodes.push(Node {
-            layer: p,
-            tile: i,
-            level: chosen.0,
-        });
     }
-    out
 }

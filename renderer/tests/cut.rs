@@ -9,7 +9,7 @@ use std::f64::consts::TAU;
 
 use glam::DVec3;
 use renderer::camera::Camera;
-use renderer::cut::{cut, cut_with, Cut};
+use renderer::cut::{cut, cut_with, Cut, Rules};
 use renderer::path::CameraPath;
 use renderer::pyramid::Pyramid;
 use renderer::terrain::Terrain;
@@ -166,7 +166,16 @@ fn the_pyramid_draws_fewer_tiles_for_about_the_same_triangles() {
         let cuts = [
             cut(&base, &view, camera.position, 1.0),
             cut(&pyramid, &view, camera.position, 1.0),
-            cut_with(&pyramid, &view, camera.position, 1.0, false),
+            cut_with(
+                &pyramid,
+                &view,
+                camera.position,
+                1.0,
+                Rules {
+                    weigh_children: false,
+                    ..Rules::ALL
+                },
+            ),
         ];
         for (k, c) in cuts.iter().enumerate() {
             let p = if k == 0 { &base } else { &pyramid };
@@ -191,4 +200,69 @@ fn the_pyramid_draws_fewer_tiles_for_about_the_same_triangles() {
         "without the look ahead: triangles {:.2}x the base grid's",
         ratio(2)
     );
+}
+
+/// Where two tiles of the cut meet, they are at most one layer apart, so that a tile's side
+/// meets either one tile of its own layer or two of the layer below (what stitching across
+/// layers will have to close). Over the flights and random cameras of the first test; the
+/// control is the same cuts unbalanced, which put neighbours two layers apart.
+#[test]
+fn neighbouring_tiles_of_the_cut_are_at_most_a_layer_apart() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut rng = splitmix::Rng(0x6e65_6967_6862_6f75);
+    let (mut pairs, mut worst, mut unbalanced) = (0usize, 0u32, 0u32);
+    let unbalanced_rules = Rules {
+        balance: false,
+        ..Rules::ALL
+    };
+    for pyramid in sets(dir.path()) {
+        let base = &pyramid.layers[0];
+        for camera in cameras(base, &mut rng) {
+            let view = camera.view(EXTENT.0, EXTENT.1);
+            for tau in [1.0, 4.0] {
+                let balanced = cut(&pyramid, &view, camera.position, tau);
+                let (n, w) = layers_apart(&pyramid, &balanced);
+                (pairs, worst) = (pairs + n, worst.max(w));
+                let loose = cut_with(&pyramid, &view, camera.position, tau, unbalanced_rules);
+                unbalanced = unbalanced.max(layers_apart(&pyramid, &loose).1);
+            }
+        }
+    }
+    assert!(pairs > 1000, "{pairs} neighbouring pairs");
+    assert!(worst <= 1, "neighbours {worst} layers apart");
+    assert!(
+        unbalanced >= 2,
+        "unbalanced, neighbours at most {unbalanced} apart"
+    );
+}
+
+/// Neighbouring base tiles both under the cut, and the most layers apart their cut tiles are.
+fn layers_apart(pyramid: &Pyramid, c: &Cut) -> (usize, u32) {
+    let base = &pyramid.layers[0];
+    // The layer of the cut's tile over each base tile (None: not covered).
+    let mut layer = vec![None; base.tiles.len()];
+    for n in &c.nodes {
+        let (xs, ys) = pyramid.base_tiles_under(n.layer, n.tile);
+        for y in ys {
+            for x in xs.clone() {
+                layer[(y * base.tiles_x + x) as usize] = Some(n.layer);
+            }
+        }
+    }
+    let (mut pairs, mut worst) = (0, 0);
+    for y in 0..base.tiles_y {
+        for x in 0..base.tiles_x {
+            let here = layer[(y * base.tiles_x + x) as usize];
+            for (nx, ny) in [(x + 1, y), (x, y + 1)] {
+                if nx >= base.tiles_x || ny >= base.tiles_y {
+                    continue;
+                }
+                if let (Some(a), Some(b)) = (here, layer[(ny * base.tiles_x + nx) as usize]) {
+                    pairs += 1;
+                    worst = worst.max(a.abs_diff(b));
+                }
+            }
+        }
+    }
+    (pairs, worst)
 }
