@@ -1,7 +1,8 @@
 //! The tile pyramid's cut (`renderer::cut`), CPU only: it covers what the base grid sees, each
-//! base tile once; far views take the top tile and near ones the base grid; and on a set large
+//! base tile once; far views take the top tile and near ones the base grid; on a set large
 //! enough for the pyramid to matter it draws far fewer tiles for about the same triangles,
-//! which the rule without its look ahead does not.
+//! which the rule without its look ahead does not; and its neighbours are at most a layer
+//! apart, which the cut without its balance does not keep.
 
 mod common;
 
