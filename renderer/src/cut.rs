@@ -13,7 +13,8 @@
 //! it. Base tiles are kept when visible, as today. A kept tile takes the coarsest level that
 //! meets `tau` ([`lod::level_for`]). A layer tile that meets `tau` is still replaced by its
 //! children where their triangles, plus [`DRAW_TRIANGLES`] a draw, come to less than its own:
-//! one look ahead, so the walk visits at most five tiles for each it keeps or splits.
+//! one look ahead, whose choices for the children are kept for when they are walked, so no
+//! tile is looked at twice.
 //!
 //! Last, the cut is balanced: a kept tile beside ground that was split two layers finer is
 //! split as well, until every two neighbours are at most one layer apart, so that a tile's
@@ -98,8 +99,8 @@ pub fn cut_with(pyramid: &Pyramid, view: &View, camera: DVec3, tau: f64, rules: 
         weigh_children,
     };
     let top = pyramid.top();
-    let mut stack: Vec<(u32, usize)> = (0..pyramid.layers[top as usize].tiles.len())
-        .map(|i| (top, i))
+    let mut stack: Vec<Pending> = (0..pyramid.layers[top as usize].tiles.len())
+        .map(|i| (top, i, None))
         .collect();
     let mut out = Cut::default();
     let mut split = HashSet::new();
@@ -123,7 +124,11 @@ pub fn cut_with(pyramid: &Pyramid, view: &View, camera: DVec3, tau: f64, rules: 
         for k in balance.into_iter().rev() {
             let n = out.nodes.swap_remove(k);
             split.insert((n.layer, n.tile));
-            stack.extend(pyramid.children(n.layer, n.tile).map(|c| (n.layer - 1, c)));
+            stack.extend(
+                pyramid
+                    .children(n.layer, n.tile)
+                    .map(|c| (n.layer - 1, c, None)),
+            );
         }
         walk.run(&mut stack, &mut out, &mut split);
     }
@@ -165,6 +170,13 @@ fn finer_beside(pyramid: &Pyramid, split: &HashSet<(u32, usize)>, p: u32, i: usi
         })
 }
 
+/// A tile to walk, and its choice when already made ([`Walk::choose`]'s answer).
+type Pending = (u32, usize, Option<Choice>);
+
+/// A tile's level and its triangles there, if it is on screen and meets tau (None: it needs
+/// its children; Some(None): off screen).
+type Choice = Option<Option<(u32, u64)>>;
+
 /// One view's walk down the pyramid.
 struct Walk<'a> {
     pyramid: &'a Pyramid,
@@ -176,9 +188,8 @@ struct Walk<'a> {
 }
 
 impl Walk<'_> {
-    /// A tile's level, and its triangles there, if it is on screen and meets tau (None: it
-    /// needs its children; Some(None): off screen).
-    fn choose(&self, p: u32, i: usize, visited: &mut usize) -> Option<Option<(u32, u64)>> {
+    /// The tile's [`Choice`].
+    fn choose(&self, p: u32, i: usize, visited: &mut usize) -> Choice {
         *visited += 1;
         let tile = &self.pyramid.layers[p as usize].tiles[i];
         let (lo, hi) = lod::tile_box(tile);
@@ -198,14 +209,15 @@ impl Walk<'_> {
     }
 
     /// Walks the tiles on `stack` and all they split into, keeping tiles into `out` and
-    /// noting the tiles split.
-    fn run(&self, stack: &mut Vec<(u32, usize)>, out: &mut Cut, split: &mut HashSet<(u32, usize)>) {
+    /// noting the tiles split. A tile on the stack may come with its choice already made (by
+    /// its parent's look ahead), so that no tile is weighed twice.
+    fn run(&self, stack: &mut Vec<Pending>, out: &mut Cut, split: &mut HashSet<(u32, usize)>) {
         let pyramid = self.pyramid;
-        while let Some((p, i)) = stack.pop() {
-            let chosen = match self.choose(p, i, &mut out.visited) {
+        while let Some((p, i, known)) = stack.pop() {
+            let chosen = match known.unwrap_or_else(|| self.choose(p, i, &mut out.visited)) {
                 None => {
                     split.insert((p, i));
-                    stack.extend(pyramid.children(p, i).map(|c| (p - 1, c)));
+                    stack.extend(pyramid.children(p, i).map(|c| (p - 1, c, None)));
                     continue;
                 }
                 Some(None) => continue,
@@ -216,8 +228,11 @@ impl Walk<'_> {
             // each their own.
             if p > 0 && self.weigh_children {
                 let mut children = 0u64;
+                let mut weighed = Vec::with_capacity(4);
                 for c in pyramid.children(p, i) {
-                    match self.choose(p - 1, c, &mut out.visited) {
+                    let choice = self.choose(p - 1, c, &mut out.visited);
+                    weighed.push((p - 1, c, Some(choice)));
+                    match choice {
                         Some(Some((_, t))) => children += t + DRAW_TRIANGLES,
                         Some(None) => {}
                         None => {
@@ -228,7 +243,7 @@ impl Walk<'_> {
                 }
                 if children < chosen.1 + DRAW_TRIANGLES {
                     split.insert((p, i));
-                    stack.extend(pyramid.children(p, i).map(|c| (p - 1, c)));
+                    stack.extend(weighed);
                     continue;
                 }
             }
