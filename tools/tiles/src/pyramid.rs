@@ -135,27 +135,6 @@ impl Heights for Decimated<'_> {
     }
 }
 
-/// `S_p` at layer `p-1`'s sample `(u, v)`, given layer `p-1`'s heights (`finer`, clamped to its
-/// size): the layer-`p` sample there when `u` and `v` are even, else the fan of the layer-`p`
-/// quad around it.
-fn coarse_surface(finer: &impl Fn(usize, usize) -> f32, u: usize, v: usize) -> f32 {
-    // Layer p's quad: 2 x 2 layer-p cells from an even layer-p corner, i.e. 4 x 4 cells of
-    // layer p-1 from a multiple of 4, fanned around its centre (+2, +2).
-    let (cx, cy) = ((u / 4) * 4 + 2, (v / 4) * 4 + 2);
-    let (s, t) = (u as i64 - cx as i64, v as i64 - cy as i64); // -2..=1 each
-    let at =
-        |ds: i64, dt: i64| f64::from(finer((cx as i64 + ds) as usize, (cy as i64 + dt) as usize));
-    let (sx, sy) = (if s < 0 { -2 } else { 2 }, if t < 0 { -2 } else { 2 });
-    let (a, b) = (s.abs() as f64 / 2.0, t.abs() as f64 / 2.0);
-    // The octant's triangle: the centre, the side's midpoint and the corner between them.
-    let z = if a >= b {
-        (1.0 - a) * at(0, 0) + (a - b) * at(sx, 0) + b * at(sx, sy)
-    } else {
-        (1.0 - b) * at(0, 0) + (b - a) * at(0, sy) + a * at(sx, sy)
-    };
-    z as f32
-}
-
 /// The decimation error of every tile of layer `p >= 1` (row-major): the largest error of its
 /// children in layer `p-1` (`below`, row-major over `below_tiles_x` columns) plus the largest
 /// `|h - S_p|` over layer `p-1`'s samples in the tile. `finer` is layer `p-1`'s grid.
@@ -183,11 +162,18 @@ pub fn decimation_errors(
             .map(|tx| {
                 let x0 = (2 * cells * tx as usize).min(w - 1);
                 let last_u = (x0 + 2 * cells).min(w - 1);
+                // The layer-p tile's lattice point `i`: layer p-1's sample at twice it.
+                let at = |i: usize| {
+                    f64::from(height(x0 + 2 * (i % TILE_SIZE), y0 + 2 * (i / TILE_SIZE)))
+                };
+                let whole = (TILE_CELLS, TILE_CELLS);
                 let mut worst = 0.0f32;
                 for v in y0..=last_v {
                     for u in x0..=last_u {
-                        let d = (height(u, v) - coarse_surface(&height, u, v)).abs();
-                        worst = worst.max(d);
+                        let (a, b) = ((u - x0) as f64 / 2.0, (v - y0) as f64 / 2.0);
+                        let [(i, wi), (j, wj), (k, wk)] = corners(a, b, whole);
+                        let s = (wi * at(i) + wj * at(j) + wk * at(k)) as f32;
+                        worst = worst.max((height(u, v) - s).abs());
                     }
                 }
                 let children = (0..4)
@@ -286,6 +272,8 @@ fn round_up(v: f64) -> f32 {
 /// The full-lattice triangle around the point `(a, b)` of a tile (lattice units), as three
 /// lattice points (index `y * 257 + x`) and their weights: the octant of the 2 x 2-cell quad
 /// around it, fanned from the quad's centre. `lattice_max` is the mesh's last column and row.
+/// Both the decimation error (layer `p-1`'s samples, at half steps) and the errors against
+/// the base grid (at `1 / 2^p` steps) interpolate through it.
 fn corners(a: f64, b: f64, (max_x, max_y): (u32, u32)) -> [(usize, f64); 3] {
     let quad = |v: f64, max: u32| ((v / 2.0).floor() * 2.0).clamp(0.0, f64::from(max.max(2) - 2));
     let (cx, cy) = (quad(a, max_x) + 1.0, quad(b, max_y) + 1.0);
@@ -377,22 +365,27 @@ mod tests {
 
     #[test]
     fn the_fan_interpolates_inside_its_octants() {
-        // Heights of a 5 x 5 patch of layer p-1 samples: S_p's quad from (0,0) to (4,4).
-        let h = |x: usize, y: usize| match (x, y) {
-            (2, 2) => 8.0,
-            (4, 2) => 4.0,
-            (4, 4) => 0.0,
-            (x, y) if x % 2 == 0 && y % 2 == 0 => 2.0,
-            _ => 100.0, // odd samples are not layer-p samples: never read
+        // Heights of a layer-p quad from (0,0) to (2,2), lattice points by index y * 257 + x.
+        let h = |i: usize| match (i % TILE_SIZE, i / TILE_SIZE) {
+            (1, 1) => 8.0,
+            (2, 1) => 4.0,
+            (2, 2) => 0.0,
+            _ => 2.0,
+        };
+        let at = |a: f64, b: f64| {
+            corners(a, b, (2, 2))
+                .iter()
+                .map(|&(i, w)| w * h(i))
+                .sum::<f64>()
         };
         // On the centre-to-midpoint edge, halfway: (8 + 4) / 2.
-        assert_eq!(coarse_surface(&h, 3, 2), 6.0);
-        // On the diagonal to the corner (4,4), halfway: (8 + 0) / 2.
-        assert_eq!(coarse_surface(&h, 3, 3), 4.0);
-        // On the quad's side between the midpoint (4,2) and the corner (4,4).
-        assert_eq!(coarse_surface(&h, 4, 3), 2.0);
-        // Layer-p samples are themselves.
-        assert_eq!(coarse_surface(&h, 2, 2), 8.0);
-        assert_eq!(coarse_surface(&h, 0, 0), 2.0);
+        assert_eq!(at(1.5, 1.0), 6.0);
+        // On the diagonal to the corner (2,2), halfway: (8 + 0) / 2.
+        assert_eq!(at(1.5, 1.5), 4.0);
+        // On the quad's side between the midpoint (2,1) and the corner (2,2).
+        assert_eq!(at(2.0, 1.5), 2.0);
+        // Lattice points are themselves.
+        assert_eq!(at(1.0, 1.0), 8.0);
+        assert_eq!(at(0.0, 0.0), 2.0);
     }
 }
