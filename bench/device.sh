@@ -14,11 +14,13 @@
 #                  Puget 1K and N48W125 flyovers, geomorph at tau 1 and 3 (cold and warm),
 #                  discrete at tau 1
 #   shots.tar      frame 0 of the Puget flyover, discrete and geomorph at tau 1 (compared with
-#                  lavapipe's frames by `bench/device.sh --compare DIR` here)
+#                  lavapipe's frames here by `bench/device.sh --compare DIR`, DIR holding
+#                  shots.tar unpacked; needs Python's Pillow)
 #   limit.md       `tilebench limit`: every flight with brute force, discrete and geomorph at
 #                  several tau, each beside the static-mesh limit, and the paper's Table 1
-# The binaries look for the shared data at /work/shared/data (a path fixed when they were
-# built), so the script points that path at the carried copy.
+# The binaries look for the shared data at a path fixed when they were built
+# (tools/testdata/../../../shared/data from this checkout), so --pack writes that path down
+# and the device run makes it lead to the carried copy.
 set -uo pipefail
 here=$(pwd)
 
@@ -29,6 +31,8 @@ if [ "${1:-}" = --pack ]; then
   done
   cp ../shared/data/puget/ps_height_1k.png ../shared/data/puget/ps_height_4k_8bit.jpg .dev/data/puget/
   cp ../shared/data/srtm/N48W125.hgt .dev/data/srtm/
+  # testdata's path as the binaries hold it: the folder it starts from must exist there too.
+  echo "$here/tools/testdata $(cd .. && pwd)/shared" > .dev/paths
   du -sh .dev
   exit 0
 fi
@@ -36,6 +40,8 @@ fi
 if [ "${1:-}" = --compare ]; then
   # Frames from the device against the same frames drawn here (lavapipe).
   dir=$2; mkdir -p /tmp/device-shots-here
+  [ -f /tmp/device-puget.vkt ] || target/release/tiletool build ../shared/data/puget/ps_height_1k.png \
+    --spacing 160 --vertical-scale 0.1 -o /tmp/device-puget.vkt --quiet --force
   python3 - "$dir" <<'EOF'
 import sys, os, subprocess
 from PIL import Image, ImageChops
@@ -45,7 +51,7 @@ for name, extra in [("discrete", ["--no-geomorph"]), ("geomorph", [])]:
     os.makedirs(here, exist_ok=True)
     subprocess.run(["target/release/vkterrain", "/tmp/device-puget.vkt", "--headless", "--path", "flyover",
                     "--frames", "1", "--size", "1024x768", "--tau", "1", "--out", here,
-                    "--screenshot-every", "30", *extra], check=True, stdout=subprocess.DEVNULL)
+                    "--screenshot-every", "1", *extra], check=True, stdout=subprocess.DEVNULL)
     a = Image.open(f"{here}/frame_000000.png").convert("RGB")
     b = Image.open(f"{d}/{name}/frame_000000.png").convert("RGB")
     diff = ImageChops.difference(a, b).convert("L")
@@ -59,8 +65,9 @@ fi
 
 OUT=${OUT:-/tmp/device-out}; mkdir -p "$OUT"
 for f in .gl/*.deb; do dpkg -x "$f" /; done; ldconfig
-mkdir -p /work/main/tools/testdata /work/shared
-[ -e /work/shared/data ] || ln -s "$here/.dev/data" /work/shared/data
+read -r testdata shared < .dev/paths
+mkdir -p "$testdata" "$shared"
+[ -e "$shared/data" ] || ln -s "$here/.dev/data" "$shared/data"
 B=$here/.dev
 V=$B/vkterrain
 
@@ -99,8 +106,8 @@ done 2>&1 | tee "$OUT/readback.txt"
 for name in discrete geomorph; do
   extra=""; [ $name = discrete ] && extra=--no-geomorph
   mkdir -p /tmp/shots/$name
-  $V $P --headless --path flyover --frames 30 --size 1024x768 --tau 1 --out /tmp/shots/$name \
-    --screenshot-every 30 $extra > /dev/null
+  $V $P --headless --path flyover --frames 1 --size 1024x768 --tau 1 --out /tmp/shots/$name \
+    --screenshot-every 1 $extra > /dev/null
 done
 tar -C /tmp/shots -cf "$OUT/shots.tar" .
 
