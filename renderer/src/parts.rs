@@ -14,18 +14,33 @@
 //! frame's command buffer after a barrier on earlier frames' index reads
 //! ([`crate::vulkan::indices::IndexBuilder::record`]), as the manager's own rewrites are.
 
-use std::collections::{HashMap, HashSet};
+use std::collections::BTreeMap;
 
 use tiles::parts::{Blocks, PartKey};
 
 use crate::plan::Plan;
 use crate::terrain::Terrain;
 
-/// What part-by-part drawing remembers between frames.
+/// What part-by-part drawing remembers between frames: the mixes this module built that the
+/// pool still holds, by where they start. A region's content changes only by a copy or a
+/// build; the manager's (a move, an upload, a level's array built) are followed in
+/// [`PartDraws::assign`], this module's own builds in [`PartDraws::rebuilds`]. A tile can
+/// hold arrays in several regions at once (a level and a spare for the next, or the old and
+/// the new chunk in the frame a move copies it), and a move carries a mix to its new place:
+/// a draw reads whatever its own region holds.
 #[derive(Default)]
 pub struct PartDraws {
-    /// Per tile: where this module last built a mix for it, and the mix's key.
-    held: HashMap<usize, (u64, PartKey)>,
+    mixes: BTreeMap<u64, Mix>,
+    /// The longest mix in `mixes`, in bytes: the bound for finding those a range overlaps.
+    longest: u64,
+}
+
+/// A mix held in the pool: whose, which key, how many bytes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Mix {
+    tile: usize,
+    key: PartKey,
+    bytes: u64,
 }
 
 /// One array to build this frame: the draw's index in the plan.
@@ -41,11 +56,14 @@ impl PartDraws {
     /// fine as wanted: finer parts are within tau, and their extra vertices sit on the
     /// coarser surface until their own morph begins, so the image is the key's) and drawing
     /// it costs fewer extra triangles than a build. The region holds the mix this module last
-    /// built there, or else the manager's array of the whole level, which covers every key
-    /// and is never built again for a part's sake.
+    /// built there (or a move copied there), or else the manager's array of the whole level,
+    /// which covers every key and is never built again for a part's sake.
+    ///
+    /// Call once per frame, after the manager's step: it first follows the plan's moves and
+    /// uploads.
     pub fn assign(&mut self, terrain: &Terrain, plan: &mut Plan, cost: BuildCost) {
-        let Plan { draws, uploads, .. } = plan;
-        let built = manager_builds(uploads);
+        self.follow(&plan.moves, &plan.uploads);
+        let Plan { draws, .. } = plan;
         for d in draws.iter_mut() {
             d.key = None;
             let Some(wanted) = d.parts else { continue };
@@ -60,12 +78,7 @@ impl PartDraws {
             let whole = (d.index_count, d.triangle_count);
             let fits = |k: &PartKey| counts.count(k).filter(|&(length, _)| length <= whole.0);
             let Some(exact) = fits(&key) else { continue };
-            // A region the manager builds this frame holds the whole level.
-            let rebuilt = built.contains(&(d.tile, d.index_offset));
-            let held = match self.held.get(&d.tile) {
-                Some(&(at, held)) if at == d.index_offset && !rebuilt => Some(held),
-                _ => None,
-            };
+            let held = self.held(d.tile, d.index_offset);
             let mix_pays = cost.pays(whole.1, exact.1, whole.1);
             let drawn = match held {
                 // The held mix covers the key: keep it unless the key saves a build's worth.
@@ -90,36 +103,85 @@ impl PartDraws {
         }
     }
 
-    /// The draws whose arrays this module builds this frame. This module remembers the regions
-    /// it wrote a mix into; any other region holds what the manager built there (a level). A
-    /// draw at a key is built unless its region holds that key; a draw at one level is built
-    /// only where this module wrote a mix into the tile's regions since the manager last built
-    /// there, so that drawing whole tiles (discrete levels, `--whole-tiles`) builds nothing
-    /// more than the manager asks. A build of the manager's where a draw at a key draws from
-    /// is replaced by the draw's (one build writes there). Call after [`PartDraws::assign`].
+    /// The draws whose arrays this module builds this frame: a draw at a key unless its
+    /// region holds that key, and a draw at one level where its region holds a mix. Any
+    /// other region holds what the manager put there (a level), so drawing whole tiles
+    /// (discrete levels, `--whole-tiles`) builds nothing more than the manager asks. A build
+    /// of the manager's where a draw at a key draws from is replaced by the draw's (one build
+    /// writes there). Call after [`PartDraws::assign`].
     pub fn rebuilds(&mut self, plan: &Plan) -> Vec<Rebuild> {
-        let manager = manager_builds(&plan.uploads);
-        let built = |tile: usize, at: u64| manager.contains(&(tile, at));
-        // A level the manager builds over a mix replaces it.
-        self.held.retain(|&tile, &mut (at, _)| !built(tile, at));
         let mut out = Vec::new();
         for (k, d) in plan.draws.iter().enumerate() {
-            match (d.key, self.held.get(&d.tile)) {
-                (Some(key), held) if held == Some(&(d.index_offset, key)) => {}
-                (Some(key), _) => {
-                    self.held.insert(d.tile, (d.index_offset, key));
+            let held = self.held(d.tile, d.index_offset);
+            match d.key {
+                Some(key) if held == Some(key) => {}
+                Some(key) => {
+                    let bytes = u64::from(d.index_count) * u64::from(d.index_width);
+                    self.built(d.tile, d.index_offset, key, bytes);
                     out.push(k);
                 }
-                (None, None) => {}
-                (None, Some(_)) => {
-                    self.held.remove(&d.tile);
-                    if !built(d.tile, d.index_offset) {
-                        out.push(k);
-                    }
+                None if held.is_some() => {
+                    self.mixes.remove(&d.index_offset);
+                    out.push(k);
                 }
+                None => {}
             }
         }
         out
+    }
+
+    /// Remembers a mix built for `tile` at `offset`.
+    fn built(&mut self, tile: usize, offset: u64, key: PartKey, bytes: u64) {
+        self.longest = self.longest.max(bytes);
+        self.mixes.insert(offset, Mix { tile, key, bytes });
+    }
+
+    /// The key of the mix `tile`'s region at `offset` holds, if it holds one.
+    fn held(&self, tile: usize, offset: u64) -> Option<PartKey> {
+        self.mixes
+            .get(&offset)
+            .filter(|m| m.tile == tile)
+            .map(|m| m.key)
+    }
+
+    /// Follows what the frame's copies and the manager's builds do to the pool, in the order
+    /// the frame records them: moves (each carries the mixes it copies whole, as they were
+    /// before the frame), then uploads and the manager's builds, each of which overwrites
+    /// what it overlaps. A move's source keeps its mixes: draws of the frame that moves a
+    /// chunk still read there.
+    fn follow(&mut self, moves: &[memory::Move], uploads: &[memory::Upload]) {
+        let carried: Vec<(u64, Mix)> = moves
+            .iter()
+            .flat_map(|m| {
+                self.mixes
+                    .range(m.src..m.src + m.bytes)
+                    .filter(move |(&at, mix)| at + mix.bytes <= m.src + m.bytes)
+                    .map(move |(&at, &mix)| (m.dst + (at - m.src), mix))
+            })
+            .collect();
+        for m in moves {
+            self.overwrite(m.dst, m.bytes);
+        }
+        for (at, mix) in carried {
+            self.mixes.insert(at, mix);
+        }
+        for u in uploads {
+            self.overwrite(u.dst, u.bytes);
+        }
+    }
+
+    /// Forgets the mixes that `bytes` written at `dst` overlap.
+    fn overwrite(&mut self, dst: u64, bytes: u64) {
+        let from = dst.saturating_sub(self.longest);
+        let hit: Vec<u64> = self
+            .mixes
+            .range(from..dst + bytes)
+            .filter(|(&at, mix)| at + mix.bytes > dst)
+            .map(|(&at, _)| at)
+            .collect();
+        for at in hit {
+            self.mixes.remove(&at);
+        }
     }
 }
 
@@ -155,16 +217,6 @@ impl BuildCost {
 fn covers(held: &PartKey, key: &PartKey, top: u32) -> bool {
     held.levels.iter().copied().max().map(u32::from) == Some(top)
         && held.levels.iter().zip(&key.levels).all(|(&h, &k)| h >= k)
-}
-
-/// The regions the manager builds a level's array into this frame, by tile and pool offset
-/// (a set, so that a frame's cost follows its draws and uploads, not their product).
-fn manager_builds(uploads: &[memory::Upload]) -> HashSet<(usize, u64)> {
-    uploads
-        .iter()
-        .filter(|u| u.built)
-        .map(|u| (u.tile as usize, u.dst))
-        .collect()
 }
 
 /// Where each lattice point of `tile` first appears (the tile passed its check to be drawn).
@@ -218,5 +270,55 @@ mod tests {
         more[0] = 3;
         assert!(!covers(&key(held), &key(more), 4));
         assert!(!covers(&key(held), &key(wanted), 5));
+    }
+
+    fn moved(src: u64, dst: u64, bytes: u64) -> memory::Move {
+        memory::Move {
+            tile: 4,
+            src,
+            dst,
+            bytes,
+        }
+    }
+
+    fn upload(dst: u64, bytes: u64) -> memory::Upload {
+        memory::Upload {
+            tile: 9,
+            part: memory::Part::Positions(0),
+            dst,
+            bytes,
+            in_flight: false,
+            chunk: dst,
+            built: false,
+        }
+    }
+
+    /// A move copies the mixes in its source to its destination (the source keeps them: the
+    /// moving frame's draws read there); what a move or an upload overwrites holds no mix.
+    #[test]
+    fn mixes_follow_the_pools_copies_and_writes() {
+        let (a, b) = (key([1; 16]), key([2; 16]));
+        let mut parts = PartDraws::default();
+        parts.built(4, 100, a, 50);
+        parts.built(4, 300, b, 50);
+        parts.built(7, 2000, b, 40);
+        // The chunk 80..200 moves to 1000; 300 is not in it; 2000 is overwritten by a move
+        // from a region without a mix.
+        parts.follow(&[moved(80, 1000, 120), moved(500, 1990, 20)], &[]);
+        assert_eq!(parts.held(4, 1020), Some(a));
+        assert_eq!(parts.held(4, 100), Some(a));
+        assert_eq!(parts.held(4, 300), Some(b));
+        assert_eq!(parts.held(7, 2000), None);
+        // Another tile's region, and a tile's region at another offset, are not its mix.
+        assert_eq!(parts.held(5, 1020), None);
+        assert_eq!(parts.held(4, 1000), None);
+        // An upload that starts inside a mix clears it; one that ends where a mix starts, not.
+        parts.follow(&[], &[upload(1060, 4), upload(280, 20)]);
+        assert_eq!(parts.held(4, 1020), None);
+        assert_eq!(parts.held(4, 300), Some(b));
+        // A mix only partly in a move's source is not carried (its copy would be a torso).
+        parts.follow(&[moved(320, 3000, 100)], &[]);
+        assert_eq!(parts.held(4, 3000), None);
+        assert_eq!(parts.held(4, 300), Some(b));
     }
 }
