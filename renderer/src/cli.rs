@@ -93,10 +93,15 @@ pub struct Cli {
     #[arg(long)]
     pub no_geomorph: bool,
     /// Geomorphing: draw each tile at one level, rather than each of its 4 x 4 parts at the
-    /// level the part needs (the comparison; part by part needs index arrays built on the GPU,
-    /// and --draw-only draws whole tiles)
-    #[arg(long)]
+    /// level the part needs (the default on GPUs, where index builds cost more than the
+    /// triangles a mix saves; --draw-only draws whole tiles)
+    #[arg(long, conflicts_with = "part_by_part")]
     pub whole_tiles: bool,
+    /// Geomorphing: draw each of a tile's 4 x 4 parts at the level the part needs, in one
+    /// index array built on the GPU per tile (the default on software rasterisers such as
+    /// lavapipe, where triangles are dear)
+    #[arg(long)]
+    pub part_by_part: bool,
     /// Part by part: what building a tile's mixed index array costs on this device, as
     /// FIXED,SHARE: a mix is built only where it saves at least FIXED + SHARE x G triangles a
     /// frame, G being the tile's triangles at its drawn level (bench/README.md, "A build's
@@ -396,6 +401,8 @@ impl Cli {
             },
             geomorph: !self.no_geomorph,
             // Pre-recorded frames cannot follow a mix that changes from frame to frame.
+            // Where the user did not choose, the device does once it is known
+            // (`Cli::parts_by_device`).
             part_by_part: !self.whole_tiles && !self.draw_only,
             part_build_cost: self.part_build_cost,
             morph_shader: match self.morph_shader {
@@ -403,6 +410,13 @@ impl Cli {
                 MorphShaderArg::ForwardDifferences => MorphShader::ForwardDifferences,
             },
         })
+    }
+
+    /// Whether the device decides between part by part and whole tiles
+    /// ([`renderer::settings::parts_pay_on`]): the user chose neither, and frames are drawn
+    /// live.
+    pub fn parts_by_device(&self) -> bool {
+        !(self.whole_tiles || self.part_by_part || self.draw_only)
     }
 
     /// GPU memory, uploads and prefetching; `textures`: whether texture slots are wanted.

@@ -308,6 +308,8 @@ pub struct RunInfo {
     pub upload_scheme: &'static str,
     /// Where index arrays came from: "built" on the GPU or "sent" from the file.
     pub index_arrays: &'static str,
+    /// Geomorphing tiles drawn part by part (chosen, or the device's default; arrays built).
+    pub part_by_part: bool,
     /// Device memory of the texture slots (0: none).
     pub texture_bytes: u64,
     /// The tile set's mapping resident in the process when the flight ended (None: unknown).
@@ -382,6 +384,7 @@ pub struct Summary {
     pub staging: bool,
     pub upload_scheme: &'static str,
     pub index_arrays: &'static str,
+    pub part_by_part: bool,
     /// Index arrays built on the GPU, and their megabytes (written in GPU memory, not sent).
     pub index_builds: u64,
     pub index_build_mb: f64,
@@ -510,6 +513,7 @@ impl Summary {
             staging: run.staging,
             upload_scheme: run.upload_scheme,
             index_arrays: run.index_arrays,
+            part_by_part: run.part_by_part,
             index_builds: sum(|r| r.index_builds),
             index_build_mb: sum(|r| r.index_build_bytes) as f64 / 1e6,
             heights_read_back: sum(|r| r.heights_read_back),

@@ -16,7 +16,7 @@ use renderer::headless::{fly, Flight, FlightResult};
 use renderer::log::{write_csv, RunInfo, Summary};
 use renderer::measure::ErrorMeter;
 use renderer::path::CameraPath;
-use renderer::settings::{MemoryOptions, Settings, Shading};
+use renderer::settings::{self, MemoryOptions, Settings, Shading};
 use renderer::terrain::Terrain;
 use renderer::vulkan::{Gpu, GpuOptions};
 use renderer::window::{self, WindowOptions};
@@ -142,6 +142,8 @@ struct Flown {
     result: FlightResult,
     device: String,
     validation: u64,
+    /// Geomorphing part by part, as chosen or as the device decided.
+    part_by_part: bool,
 }
 
 /// Opening read every tile's outline (a page each):
@@ -191,11 +193,13 @@ fn fly_path(
     (settings, memory): (Settings, MemoryOptions),
     windowed: bool,
 ) -> Result<Flown> {
+    let parts_by_device = cli.parts_by_device();
     if windowed {
         let options = WindowOptions {
             gpu: gpu_options(cli),
             size: cli.size,
             settings,
+            parts_by_device,
             memory,
             trace: cli.trace.is_some(),
             frames: cli.frames,
@@ -204,12 +208,13 @@ fn fly_path(
             record: cli.record.clone(),
             start: path.at(path.keys[0].time),
         };
-        let (result, device, validation) =
+        let (result, device, validation, part_by_part) =
             window::run(terrain, options).map_err(anyhow::Error::msg)?;
         return Ok(Flown {
             result,
             device,
             validation,
+            part_by_part,
         });
     }
     if let Some(record) = &cli.record {
@@ -217,6 +222,11 @@ fn fly_path(
             .with_context(|| format!("{}: cannot write", record.display()))?;
     }
     let gpu = Gpu::new(&gpu_options(cli))?;
+    let mut settings = settings;
+    if parts_by_device {
+        settings.part_by_part = settings::parts_pay_on(gpu.properties.device_type);
+    }
+    let part_by_part = settings.geomorph && settings.part_by_part;
     let flight = Flight {
         terrain,
         path,
@@ -243,6 +253,7 @@ fn fly_path(
         result,
         device,
         validation,
+        part_by_part,
     })
 }
 
@@ -259,6 +270,7 @@ fn finish(
         result,
         device,
         validation,
+        part_by_part,
     } = flown;
     let validation = *validation;
     let run = RunInfo {
@@ -284,6 +296,7 @@ fn finish(
         open_ms,
         first_view_check_ms: result.first_view_check_ms,
         tiles_failed: terrain.failed_count() as u64,
+        part_by_part: *part_by_part && result.built_indices,
         index_arrays: if result.built_indices {
             "built"
         } else {

@@ -29,7 +29,8 @@ pub struct Settings {
     pub geomorph: bool,
     /// Geomorphing: draw each tile's 4 x 4 parts at levels of their own ([`crate::parts`];
     /// off: `--whole-tiles`, each tile at one level). Needs index arrays built on the GPU;
-    /// where they are sent, a tile is drawn at its parts' largest level throughout.
+    /// where they are sent, a tile is drawn at its parts' largest level throughout. Unless
+    /// the user chose, the device decides ([`parts_pay_on`]).
     pub part_by_part: bool,
     /// Part by part: what building a mix costs, in triangles ([`crate::parts::BuildCost`]).
     pub part_build_cost: crate::parts::BuildCost,
@@ -79,6 +80,19 @@ pub enum MorphShader {
     /// The paper's clamped forward differences as dot products over every stored level (the
     /// reference, `--morph-shader forward-differences`).
     ForwardDifferences,
+}
+
+/// Whether drawing tiles part by part pays on a device of this type, when the user has not
+/// chosen (`--part-by-part`, `--whole-tiles`). A mix saves triangles and costs an index build
+/// on the GPU (a dispatch, a barrier, a walk of the tile's cells). On a software rasteriser a
+/// triangle costs about 0.3 us, and the saving wins (lavapipe: geomorph tau 1 at 0.72-0.95x
+/// discrete tau 1's frame part by part, against 0.77-1.35x with whole tiles; bench/README.md,
+/// "A build's worth"). On a GPU a triangle costs about a nanosecond, and the builds lose: in
+/// the one run on a GPU (an NVIDIA H200, bench/README.md, "On a real GPU") part by part took
+/// 2.0x and 2.8x discrete tau 1's frame on the N48W125 flyover and orbit against 1.09x and
+/// 1.84x with whole tiles, and gained 10% on the Puget flyover only.
+pub fn parts_pay_on(device: ash::vk::PhysicalDeviceType) -> bool {
+    device == ash::vk::PhysicalDeviceType::CPU
 }
 
 impl Settings {
@@ -148,3 +162,23 @@ impl Default for MemoryOptions {
 
 /// The share of the GPU budget texture slots take by default.
 pub const DEFAULT_TEXTURE_SHARE: f64 = 0.25;
+
+#[cfg(test)]
+mod tests {
+    use ash::vk::PhysicalDeviceType as Kind;
+
+    use super::parts_pay_on;
+
+    #[test]
+    fn part_by_part_is_the_software_rasterisers_default() {
+        assert!(parts_pay_on(Kind::CPU));
+        for gpu in [
+            Kind::DISCRETE_GPU,
+            Kind::INTEGRATED_GPU,
+            Kind::VIRTUAL_GPU,
+            Kind::OTHER,
+        ] {
+            assert!(!parts_pay_on(gpu), "{gpu:?}");
+        }
+    }
+}

@@ -21,7 +21,7 @@ use crate::frame::{Finished, FrameInput, Present, Renderer};
 use crate::headless::{write_png, FlightResult};
 use crate::log::FrameRecord;
 use crate::path::{CameraPath, Keyframe};
-use crate::settings::{MemoryOptions, Settings, Shading};
+use crate::settings::{self, MemoryOptions, Settings, Shading};
 use crate::terrain::Terrain;
 use crate::vulkan::swapchain::Swapchain;
 use crate::vulkan::{Gpu, GpuOptions, VkError};
@@ -30,6 +30,8 @@ pub struct WindowOptions {
     pub gpu: GpuOptions,
     pub size: (u32, u32),
     pub settings: Settings,
+    /// The device decides `settings.part_by_part` ([`crate::settings::parts_pay_on`]).
+    pub parts_by_device: bool,
     pub memory: MemoryOptions,
     /// Keep every frame's requests (`--trace`).
     pub trace: bool,
@@ -78,7 +80,7 @@ struct App<'a> {
 pub fn run(
     terrain: &Terrain,
     mut options: WindowOptions,
-) -> Result<(FlightResult, String, u64), String> {
+) -> Result<(FlightResult, String, u64, bool), String> {
     let event_loop =
         EventLoop::new().map_err(|e| format!("cannot open a window (is there a display?): {e}"))?;
     event_loop.set_control_flow(ControlFlow::Poll);
@@ -88,6 +90,9 @@ pub fn run(
         .as_raw();
     options.gpu.display = Some(display);
     let gpu = Gpu::new(&options.gpu).map_err(|e| e.to_string())?;
+    if options.parts_by_device {
+        options.settings.part_by_part = settings::parts_pay_on(gpu.properties.device_type);
+    }
     let camera = options.start;
     let mut app = App {
         gpu,
@@ -155,7 +160,9 @@ pub fn run(
         first_view_check_ms: 0.0,
         error: None,
     };
-    Ok((result, app.gpu.device_name.clone(), validation))
+    // What the flight ended with (the window's keys may switch geomorphing).
+    let parts = app.options.settings.geomorph && app.options.settings.part_by_part;
+    Ok((result, app.gpu.device_name.clone(), validation, parts))
 }
 
 impl App<'_> {

@@ -975,6 +975,44 @@ fn part_by_part_builds_a_mix_only_where_it_pays() {
     assert!(never_triangles <= whole, "{never_triangles} vs {whole}");
 }
 
+/// Part by part or whole tiles: the user's choice where made, else the device's
+/// (`settings::parts_pay_on`: part by part on a software rasteriser such as lavapipe, whole
+/// tiles on a GPU), reported in the summary and seen in what the frames drew.
+#[test]
+fn the_device_chooses_part_by_part_unless_the_user_does() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = puget(dir.path());
+    let run = |name: &str, extra: &[&str]| {
+        let log = dir.path().join(format!("{name}.csv"));
+        let mut args = vec![s(&set), "--headless", "--validation", "--path", "orbit"];
+        args.extend(["--frames", "6", "--size", "480x360", WARM, "--log", s(&log)]);
+        args.extend(extra);
+        let o = vkterrain(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("summary");
+        let device = v["device"].as_str().expect("device").to_string();
+        let parts = v["part_by_part"].as_bool().expect("part_by_part");
+        let drawn = common::log_column(&log, "tiles_part_by_part")
+            .iter()
+            .sum::<f64>();
+        (device, parts, drawn)
+    };
+    let (device, parts, drawn) = run("default", &[]);
+    let software = device.contains("llvmpipe");
+    assert_eq!(parts, software, "{device}: part by part {parts} by default");
+    assert_eq!(
+        drawn > 0.0,
+        software,
+        "{device}: {drawn} tile-frames part by part"
+    );
+    let (_, parts, drawn) = run("chosen", &["--part-by-part"]);
+    assert!(parts && drawn > 0.0, "--part-by-part: {parts}, {drawn}");
+    for (name, flag) in [("whole", "--whole-tiles"), ("discrete", "--no-geomorph")] {
+        let (_, parts, drawn) = run(name, &[flag]);
+        assert!(!parts && drawn == 0.0, "{flag}: {parts}, {drawn}");
+    }
+}
+
 /// The heights the vertex shader computes, read back from the GPU, equal the CPU mirror's
 /// (`renderer::morph`, which the error meter measures) vertex for vertex within float
 /// rounding, on Puget and SRTM flights, morphing at two tolerances and discrete. The control:
