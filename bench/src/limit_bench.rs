@@ -156,7 +156,13 @@ pub fn limit_table(extras: Extras) -> Result<()> {
         ),
         (
             "geomorph, tau 1, forward differences",
-            &["--tau", "1", "--part-by-part", "--morph-shader", "forward-differences"],
+            &[
+                "--tau",
+                "1",
+                "--part-by-part",
+                "--morph-shader",
+                "forward-differences",
+            ],
         ),
     ];
     if extras.flights {

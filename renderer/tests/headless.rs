@@ -1030,6 +1030,16 @@ fn the_gpus_morphed_heights_equal_the_cpu_mirror() {
         args.extend(extra);
         vkterrain(&args)
     };
+    // A flight's summary, and the largest height difference it read back.
+    let summary = |o: &std::process::Output, what: &str| {
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{what}: {err}");
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("summary");
+        let diff = v["heights_max_diff_m"]
+            .as_f64()
+            .expect("heights_max_diff_m");
+        (v, diff)
+    };
     for (set, path, tau, morph) in [
         (&set, "flyover", "1", WARM),
         (&set, "flyover", "3", WARM),
@@ -1039,13 +1049,8 @@ fn the_gpus_morphed_heights_equal_the_cpu_mirror() {
         (&srtm, "orbit", "2", WARM),
     ] {
         let o = read_back(set, path, &["--tau", tau, morph]);
-        let err = String::from_utf8_lossy(&o.stderr);
-        assert!(o.status.success(), "{path} tau {tau} {morph}: {err}");
-        let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("summary");
+        let (v, diff) = summary(&o, &format!("{path} tau {tau} {morph}"));
         let checked = v["heights_read_back"].as_u64().expect("heights_read_back");
-        let diff = v["heights_max_diff_m"]
-            .as_f64()
-            .expect("heights_max_diff_m");
         eprintln!("{path} tau {tau} {morph}: {checked} vertices, largest difference {diff:.2e} m");
         assert!(
             checked > 20_000,
@@ -1075,13 +1080,8 @@ fn the_gpus_morphed_heights_equal_the_cpu_mirror() {
     ];
     let same = ["--frames-in-flight", "1", "--prefetch-ms", "200"];
     let o = vkterrain(&[&[s(&set)][..], &args, &more, &same].concat());
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success(), "cold 1024x768 flyover, tau 3: {err}");
-    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("summary");
+    let (v, diff) = summary(&o, "cold 1024x768 flyover, tau 3");
     let moves = v["chunk_moves"].as_u64().expect("chunk_moves");
-    let diff = v["heights_max_diff_m"]
-        .as_f64()
-        .expect("heights_max_diff_m");
     eprintln!("cold 1024x768 flyover tau 3: {moves} chunk moves, largest difference {diff:.2e} m");
     assert!(
         moves > 0,
