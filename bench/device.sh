@@ -13,6 +13,8 @@
 #   readback.txt   the GPU's morphed heights against the CPU mirror (--read-back-heights) on the
 #                  Puget 1K and N48W125 flyovers, geomorph at tau 1 and 3 (cold and warm),
 #                  discrete at tau 1
+#   split.txt      N48W125 at tau 1: the device's default, discrete, whole tiles and part by part
+#                  (three build costs), each with its frame, CPU, GPU and pass medians and builds
 #   shots.tar      frame 0 of the Puget flyover, discrete and geomorph at tau 1 (compared with
 #                  lavapipe's frames here by `bench/device.sh --compare DIR`, DIR holding
 #                  shots.tar unpacked; needs Python's Pillow)
@@ -92,6 +94,20 @@ grep -o '"device": *"[^"]*"' "$OUT/smoke.json" | tee -a "$OUT/gpu.txt"
 P=/tmp/device-puget.vkt; N=/tmp/device-n48.vkt
 $B/tiletool build "$B/data/puget/ps_height_1k.png" --spacing 160 --vertical-scale 0.1 -o $P --quiet --force
 $B/tiletool build "$B/data/srtm/N48W125.hgt" -o $N --quiet --force
+# Where an N48W125 frame goes (the H200 run found geomorph 1.8-2.8x discrete there with the pass
+# itself as fast): the device's default against each mode named, and part by part at build
+# costs far above lavapipe's fit, with the frame's CPU, GPU and pass medians and the builds.
+for path in orbit flyover; do
+  for mode in "--no-geomorph" "" "--whole-tiles" "--part-by-part" \
+      "--part-by-part --part-build-cost 5000,0.2" "--part-by-part --part-build-cost 50000,1"; do
+    # shellcheck disable=SC2086
+    o=$($V $N --headless --path $path --frames 60 --size 1024x768 --tau 1 $mode 2>&1)
+    printf 'N48W125 %s tau 1 %s: ' $path "${mode:-(default)}"
+    echo "$o" | python3 -c "import json,sys; t=sys.stdin.read(); s=json.loads(t[t.index('{'):])
+print(*(f'{k} {s[k]}' for k in ['part_by_part', 'frame_ms_median', 'cpu_ms_median', 'gpu_ms_median',
+      'gpu_draw_ms_median', 'triangles_per_frame_mean', 'index_builds']))" 2>/dev/null || echo "$o" | tail -1
+  done
+done 2>&1 | tee "$OUT/split.txt"
 for set in $P $N; do
   # Part by part named: it is the default on lavapipe only, and held mixes are what it checks.
   for mode in "--tau 1 --part-by-part" "--tau 3 --part-by-part" "--tau 1 --no-geomorph" \
