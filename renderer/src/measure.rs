@@ -254,7 +254,9 @@ pub struct HeightCheck {
 
 /// How far the GPU's vertex level may be from the mirror's, in levels: the shader's
 /// `inversesqrt` is within 2 ulp, and `a_k - r b_k` cancels by up to the table's ratio of an
-/// error to its step (2 where errors double; up to 1000 where two levels' errors nearly agree).
+/// error to its step (2 where errors double; at most `1 / (1 - 1 / MIN_RATIO)` = 5, since
+/// every table falls by at least [`crate::levels::MIN_RATIO`] a level), so a few 1e-6 of a
+/// level; this allows far more.
 pub const LEVEL_TOLERANCE: f64 = 1e-4;
 
 /// How far a GPU height may be from the mirror's: four float steps at its magnitude (the two
