@@ -3,17 +3,17 @@
 //! ring), records the transfers, the terrain pass (one indexed fan draw per tile straight from
 //! the pool, then the stitches), the read-back and the window blit, and submits.
 //!
-//! - [`ring`]: the frames in flight. Each of `frames_in_flight` slots owns a command buffer, a
+//! - `ring`: the frames in flight. Each of `frames_in_flight` slots owns a command buffer, a
 //!   fence, timestamp queries, a stitch buffer, a staging slot, a render target and the
 //!   semaphore a window image is acquired with. Starting a frame waits only for its slot's
 //!   previous frame; the frame just submitted is never waited for. Results (GPU times,
 //!   screenshots) come back as [`Finished`] frames when their slot's fence has signalled.
-//! - [`create`]: every GPU allocation, made in [`Renderer::new`] (and on a window resize) as
+//! - `create`: every GPU allocation, made in [`Renderer::new`] (and on a window resize) as
 //!   `memory::budget` splits the budget; the log's `gpu_allocations` proves none happens later.
-//! - [`uploads`]: the plan's blocks, index arrays (sent, or built on the GPU) and texture mips,
+//! - `uploads`: the plan's blocks, index arrays (sent, or built on the GPU) and texture mips,
 //!   written where the GPU will read them.
-//! - [`records`] and [`pass`]: what the shaders read for each draw, and the pass itself, shared
-//!   by live frames and [`replay`]ed ones.
+//! - `records` and `pass`: what the shaders read for each draw, and the pass itself, shared
+//!   by live frames and replayed ones (`replay`).
 //!
 //! Textures: when the tile set has texture tiles, a fixed array of texture slots (one layer
 //! each) is allocated beside the pool; each frame the drawn tiles ask for the mips their
