@@ -2,7 +2,8 @@
 //! `tiletool build --pyramid` (layer 0 the base grid), and which tiles of the layer below a
 //! tile covers. A layer's tiles are a terrain of their own ([`Terrain::open_layer`]): their
 //! boxes, level tables and checks are worked out exactly as the base grid's, at the layer's
-//! spacing, and each carries its decimation error ([`crate::tile::TileInfo::decimation_error`]).
+//! spacing, with each level's error measured against the base grid's samples under the tile
+//! (`tiles::pyramid::base_errors`).
 
 use std::path::Path;
 

@@ -22,7 +22,7 @@
 //! Every cell split is decided by a child's centre, which lies inside one part (never on a
 //! line), so inside each part the leaves are those of its own level `L_q`, provided every
 //! leaf lies in one part: each part's centre must be a vertex of its level (then its ancestors
-//! are split). [`PartKey::new`] ensures it by raising a part to the level that adds its centre,
+//! are split). [`Centres::key`] ensures it by raising a part to the level that adds its centre,
 //! or by making the four parts of a quadrant one level where a centre never appears, or a
 //! quadrant one leaf. A leaf's edges that lie on a line between parts or on the border may
 //! hold more vertices than the midpoint (a finer neighbour's): the fan takes every vertex
