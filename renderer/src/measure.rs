@@ -20,6 +20,8 @@
 
 use std::collections::HashMap;
 
+use rayon::prelude::*;
+
 use glam::DVec3;
 use tiles::grid::tile_samples;
 use tiles::mesh::{TILE_CELLS, TILE_SIZE};
@@ -115,7 +117,8 @@ impl ErrorMeter {
 
     /// Measures a frame that drew `draws` (tile, state) seen by `camera` at `extent`; the
     /// previous call's draws are the previous frame's (call it on consecutive frames for
-    /// `pop_px` to mean what it says).
+    /// `pop_px` to mean what it says). Tiles are measured in parallel: the frame's value is
+    /// the largest of theirs, whatever the order.
     pub fn frame(
         &mut self,
         terrain: &Terrain,
@@ -123,6 +126,39 @@ impl ErrorMeter {
         extent: (u32, u32),
         draws: &[(usize, State)],
     ) -> Measured {
+        let had_previous = self.previous.is_some();
+        let previous = self.previous.take().unwrap_or_default();
+        // The previous state of each tile whose state changed.
+        let before = |tile: usize, state: State| previous.get(&tile).filter(|(s, _)| *s != state);
+        let unmorphed = |s: &State| s.morph.is_none() && s.parts.is_none();
+        // Unmorphed levels are rasterised once and kept: those this frame needs first.
+        let mut needed: Vec<(usize, u32)> = draws
+            .iter()
+            .flat_map(|&(tile, state)| {
+                let then = before(tile, state).map(|(s, _)| *s);
+                [Some(state), then]
+                    .into_iter()
+                    .flatten()
+                    .filter(unmorphed)
+                    .map(move |s| (tile, s.level))
+            })
+            .filter(|k| !self.surfaces.contains_key(k))
+            .collect();
+        needed.sort_unstable();
+        needed.dedup();
+        let made: Vec<_> = needed
+            .into_par_iter()
+            .map(|(tile, level)| {
+                let state = State {
+                    level,
+                    morph: None,
+                    parts: None,
+                };
+                ((tile, level), surface(terrain, tile, state))
+            })
+            .collect();
+        self.surfaces.extend(made);
+        let (surfaces, samples) = (&self.surfaces, &self.samples);
         let view = camera.view(extent.0, extent.1);
         let (w, h) = (f64::from(extent.0), f64::from(extent.1));
         let on_image = |p: DVec3| {
@@ -132,70 +168,66 @@ impl ErrorMeter {
         let (sx, sy) = terrain.spacing;
         let distance =
             |a: (f64, f64), b: (f64, f64)| ((a.0 - b.0).powi(2) + (a.1 - b.1).powi(2)).sqrt();
-        let mut error = 0.0f64;
-        let mut pop = self.previous.as_ref().map(|_| 0.0f64);
-        let mut previous = self.previous.take().unwrap_or_default();
-        let mut current = HashMap::new();
-        for &(tile, state) in draws {
-            let before = previous.remove(&tile).filter(|(s, _)| *s != state);
-            let mut fetch = |s: State| {
-                if s.morph.is_some() || s.parts.is_some() {
-                    return None;
-                }
-                self.surfaces
-                    .entry((tile, s.level))
-                    .or_insert_with(|| surface(terrain, tile, s));
-                Some(s.level)
-            };
-            let morphed_now = match fetch(state) {
-                Some(_) => None,
-                None => Some(surface(terrain, tile, state)),
-            };
-            let before = before.map(|(s, grid)| (fetch(s), grid));
-            let now = morphed_now
-                .as_ref()
-                .unwrap_or_else(|| &self.surfaces[&(tile, state.level)]);
-            let then = before.as_ref().and_then(|(level, grid)| match level {
-                Some(l) => self.surfaces.get(&(tile, *l)),
-                None => grid.as_ref(),
-            });
-            let info = &terrain.tiles[tile];
-            let (c0, r0) = (
-                f64::from(info.tx * TILE_CELLS),
-                f64::from(info.ty * TILE_CELLS),
-            );
-            let (source, max_x, max_y) = &self.samples[tile];
-            for y in 0..=*max_y as usize {
-                for x in 0..=*max_x as usize {
-                    let k = y * TILE_SIZE + x;
-                    let z = now[k];
-                    if z.is_nan() {
-                        continue;
+        let measured: Vec<(usize, Drawn, f64, f64)> = draws
+            .par_iter()
+            .map(|&(tile, state)| {
+                let morphed_now = (!unmorphed(&state)).then(|| surface(terrain, tile, state));
+                let now = morphed_now
+                    .as_ref()
+                    .unwrap_or_else(|| &surfaces[&(tile, state.level)]);
+                let then = before(tile, state).and_then(|(s, grid)| {
+                    if unmorphed(s) {
+                        surfaces.get(&(tile, s.level))
+                    } else {
+                        grid.as_ref()
                     }
-                    let at = |z: f32| {
-                        on_image(DVec3::new(
-                            (c0 + x as f64) * sx,
-                            -(r0 + y as f64) * sy,
-                            f64::from(z),
-                        ))
-                    };
-                    let Some(drawn) = at(z) else { continue };
-                    if let Some(truth) = at(source[k]) {
-                        error = error.max(distance(drawn, truth));
-                    }
-                    if let (Some(pop), Some(then)) = (pop.as_mut(), then) {
-                        if let Some(old) = Some(then[k]).filter(|z| !z.is_nan()).and_then(at) {
-                            *pop = pop.max(distance(drawn, old));
+                });
+                let info = &terrain.tiles[tile];
+                let (c0, r0) = (
+                    f64::from(info.tx * TILE_CELLS),
+                    f64::from(info.ty * TILE_CELLS),
+                );
+                let (source, max_x, max_y) = &samples[tile];
+                let (mut error, mut pop) = (0.0f64, 0.0f64);
+                for y in 0..=*max_y as usize {
+                    for x in 0..=*max_x as usize {
+                        let k = y * TILE_SIZE + x;
+                        let z = now[k];
+                        if z.is_nan() {
+                            continue;
+                        }
+                        let at = |z: f32| {
+                            on_image(DVec3::new(
+                                (c0 + x as f64) * sx,
+                                -(r0 + y as f64) * sy,
+                                f64::from(z),
+                            ))
+                        };
+                        let Some(drawn) = at(z) else { continue };
+                        if let Some(truth) = at(source[k]) {
+                            error = error.max(distance(drawn, truth));
+                        }
+                        if let Some(then) = then {
+                            if let Some(old) = Some(then[k]).filter(|z| !z.is_nan()).and_then(at) {
+                                pop = pop.max(distance(drawn, old));
+                            }
                         }
                     }
                 }
-            }
-            current.insert(tile, (state, morphed_now));
+                (tile, (state, morphed_now), error, pop)
+            })
+            .collect();
+        let mut current = HashMap::new();
+        let (mut error, mut pop) = (0.0f64, 0.0f64);
+        for (tile, drawn, e, p) in measured {
+            error = error.max(e);
+            pop = pop.max(p);
+            current.insert(tile, drawn);
         }
         self.previous = Some(current);
         Measured {
             max_error_px: error,
-            pop_px: pop.unwrap_or(f64::NAN),
+            pop_px: if had_previous { pop } else { f64::NAN },
         }
     }
 }
