@@ -87,10 +87,11 @@ pub enum MorphShader {
 /// on the GPU (a dispatch, a barrier, a walk of the tile's cells). On a software rasteriser a
 /// triangle costs about 0.3 us, and the saving wins (lavapipe: geomorph tau 1 at 0.72-1.22x
 /// discrete tau 1's frame part by part, against 0.77-1.35x with whole tiles, at or below whole
-/// tiles on each of the five flights; bench/README.md, "A build's worth"). On a GPU a triangle costs about a nanosecond, and the builds lose: in
-/// the one run on a GPU (an NVIDIA H200, bench/README.md, "On a real GPU") part by part took
-/// 2.0x and 2.8x discrete tau 1's frame on the N48W125 flyover and orbit against 1.09x and
-/// 1.84x with whole tiles, and gained 10% on the Puget flyover only.
+/// tiles on each of the five flights; bench/README.md, "A build's worth"). On a GPU a
+/// triangle costs about a nanosecond, and the builds lose: in the one run on a GPU (an NVIDIA
+/// H200, bench/README.md, "On a real GPU") part by part took 2.0x and 2.8x discrete tau 1's
+/// frame on the N48W125 flyover and orbit against 1.09x and 1.84x with whole tiles, and
+/// gained 10% on the Puget flyover only.
 pub fn parts_pay_on(device: ash::vk::PhysicalDeviceType) -> bool {
     device == ash::vk::PhysicalDeviceType::CPU
 }
