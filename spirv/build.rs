@@ -13,12 +13,18 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 /// (constant, file, stage, macro defined for this build).
-const SHADERS: [(&str, &str, shaderc::ShaderKind, Option<&str>); 8] = [
+const SHADERS: [(&str, &str, shaderc::ShaderKind, Option<&str>); 10] = [
     (
         "TERRAIN_VERT",
         "terrain.vert",
         shaderc::ShaderKind::Vertex,
         None,
+    ),
+    (
+        "TERRAIN_VERT_TWO_LEVELS",
+        "terrain.vert",
+        shaderc::ShaderKind::Vertex,
+        Some("TWO_LEVELS"),
     ),
     (
         "TERRAIN_VERT_ALL_ROWS",
@@ -54,6 +60,12 @@ const SHADERS: [(&str, &str, shaderc::ShaderKind, Option<&str>); 8] = [
         "LIMIT_FRAG",
         "limit.frag",
         shaderc::ShaderKind::Fragment,
+        None,
+    ),
+    (
+        "MORPH_COMP",
+        "morph.comp",
+        shaderc::ShaderKind::Compute,
         None,
     ),
     (

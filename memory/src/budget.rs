@@ -3,6 +3,10 @@
 //! most one per tile and the device's array layers). The GPU index builder gets at most an
 //! eighth: it saves bus bytes, not pool bytes, so it must not crowd out tile data; as many
 //! lookups (arrays built at once) as fit, none below a few MB, and index arrays are then sent.
+//! The morph pass, while geomorphing, gets at most a sixteenth: half for its scratch regions
+//! (as many as fit), half for each frame slot's morphed heights (a float per vertex a frame
+//! draws, at most every tile at its finest level); none when not one region and
+//! [`MIN_MORPHED_VERTICES`] a slot fit (frames are then drawn unmorphed).
 //! The tile pool gets the rest, at most what one storage-buffer binding can read, since the
 //! shaders read the whole pool through one. Also here: the staging bytes a frame can need,
 //! derived from the managers' budget rules ([`staging_bound`], [`texture_staging_bound`]).
@@ -23,6 +27,7 @@
 //!     textures: true,
 //!     index_arrays: IndexArrays::Built,
 //!     frames_in_flight: 2,
+//!     morph: None,
 //! };
 //! let builder = BuilderCost {
 //!     lookup_bytes: 257 * 257 * 4,
@@ -69,7 +74,61 @@ pub struct Wishes {
     pub index_arrays: IndexArrays,
     /// Frames recorded ahead (at least one): the builder has a build list per frame.
     pub frames_in_flight: usize,
+    /// The morph pass's needs while geomorphing with it (None: it does not run).
+    pub morph: Option<MorphCost>,
 }
+
+/// The morph pass's GPU memory (`renderer/src/vulkan/pipeline.rs`): a scratch region per
+/// workgroup, and per frame slot the morphed heights of the frame's drawn vertices.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MorphCost {
+    pub region_bytes: u64,
+    /// Workgroups at most (regions beyond it are not allocated).
+    pub max_groups: u32,
+    /// Bytes of one vertex's morphed height.
+    pub vertex_bytes: u64,
+    /// The most vertices a frame can draw: every tile at its finest level.
+    pub max_vertices: u64,
+}
+
+/// The morph pass the budget holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MorphSize {
+    /// Workgroups (scratch regions).
+    pub groups: u32,
+    /// Bytes of each frame slot's morphed heights: a frame drawing more vertices draws the
+    /// tiles past them unmorphed.
+    pub slot_bytes: u64,
+    /// All of it: the regions and every slot's heights.
+    pub bytes: u64,
+}
+
+impl MorphCost {
+    /// What a sixteenth of `budget` holds for `slots` frame slots (module header), if enough.
+    pub fn size(&self, budget: u64, slots: usize) -> Option<MorphSize> {
+        let half = budget / 32;
+        let slots = slots.max(1) as u64;
+        let mut groups = self.max_groups.max(1);
+        while groups > 1 && u64::from(groups) * self.region_bytes > half {
+            groups /= 2;
+        }
+        let whole = self.max_vertices.max(1).saturating_mul(self.vertex_bytes);
+        let slot_bytes = (half / slots).min(whole);
+        let fits = u64::from(groups) * self.region_bytes <= half
+            && slot_bytes >= (MIN_MORPHED_VERTICES * self.vertex_bytes).min(whole);
+        fits.then(|| MorphSize {
+            groups,
+            slot_bytes,
+            bytes: u64::from(groups) * self.region_bytes + slots * slot_bytes,
+        })
+    }
+}
+
+/// The fewest vertices a frame slot's morphed heights are worth having for (a few tiles at
+/// their middle levels; fewer when the set has fewer at its finest).
+pub const MIN_MORPHED_VERTICES: u64 = 1 << 16;
+
+impl MorphCost {}
 
 /// One tile's texture mip chain, as the tile set stores it.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -171,6 +230,8 @@ pub struct Split {
     pub builds_per_frame: usize,
     /// Frames in flight, at least one: the frame slots, each with its own build list.
     pub frame_slots: usize,
+    /// The morph pass (None: not wished for, or the budget holds too little of it).
+    pub morph: Option<MorphSize>,
 }
 
 impl Split {
@@ -200,10 +261,13 @@ impl Split {
             Some(_) => IndexArrays::Built,
             None => IndexArrays::Sent,
         };
+        let morph = wishes.morph.and_then(|m| m.size(budget, frame_slots));
         let others = textures
             .bytes()
-            .saturating_add(builder.map_or(0, |b| b.bytes));
+            .saturating_add(builder.map_or(0, |b| b.bytes))
+            .saturating_add(morph.map_or(0, |m| m.bytes));
         Split {
+            morph,
             pool_bytes: budget.saturating_sub(others).min(device.max_storage_range),
             textures,
             builder,
@@ -334,7 +398,64 @@ mod tests {
             textures: true,
             index_arrays: IndexArrays::Built,
             frames_in_flight: 2,
+            morph: None,
         }
+    }
+
+    /// The morph pass's constants in `renderer/src/vulkan/pipeline.rs`, for a set of
+    /// `max_vertices` vertices at its finest.
+    fn morph(max_vertices: u64) -> MorphCost {
+        MorphCost {
+            region_bytes: 2 * 257 * 257 * 8,
+            max_groups: 16,
+            vertex_bytes: 4,
+            max_vertices,
+        }
+    }
+
+    /// The morph pass takes at most a sixteenth of the budget (half regions, half heights, no
+    /// more heights than the set has vertices), and the pool what is left; a budget whose
+    /// sixteenth holds no region, or too few heights, has none.
+    #[test]
+    fn the_morph_pass_takes_a_sixteenth_at_most() {
+        let region = 2 * 257 * 257 * 8;
+        // 1 GiB: a 32nd (32 MiB) holds all 16 regions (16.9 MB); 16 MiB of heights a slot.
+        let mut w = wishes(1 << 30);
+        w.morph = Some(morph(100_000_000));
+        let s = Split::new(&device(), &w, &set(1000), &BUILDER);
+        let m = s.morph.expect("morph");
+        assert_eq!((m.groups, m.slot_bytes), (16, 16 << 20));
+        assert_eq!(m.bytes, 16 * region + 2 * (16 << 20));
+        assert!(m.bytes <= (1 << 30) / 16);
+        // 64 MiB: a 32nd (2 MiB) holds one region (1.06 MB), not two; a mebibyte a slot.
+        w.gpu_budget = 64 << 20;
+        let s = Split::new(&device(), &w, &set(1000), &BUILDER);
+        let m = s.morph.expect("morph");
+        assert_eq!((m.groups, m.slot_bytes), (1, 1 << 20));
+        let without = Split::new(&device(), &wishes(64 << 20), &set(1000), &BUILDER);
+        assert_eq!(s.pool_bytes, without.pool_bytes - m.bytes);
+        // A small set needs no more heights than it has vertices.
+        w.morph = Some(morph(10_000));
+        let m = Split::new(&device(), &w, &set(10), &BUILDER)
+            .morph
+            .expect("morph");
+        assert_eq!(m.slot_bytes, 40_000);
+        // 16 MiB: a 32nd (512 KiB) holds no region: no pass, and the pool keeps it all.
+        w.gpu_budget = 16 << 20;
+        let s = Split::new(&device(), &w, &set(10), &BUILDER);
+        assert_eq!(s.morph, None);
+        let without = Split::new(&device(), &wishes(16 << 20), &set(10), &BUILDER);
+        assert_eq!(s.pool_bytes, without.pool_bytes);
+        // 40 MiB: one region fits the 32nd (1.25 MiB), and 640 KiB of heights a slot.
+        w.gpu_budget = 40 << 20;
+        w.morph = Some(morph(100_000_000));
+        let m = Split::new(&device(), &w, &set(10), &BUILDER)
+            .morph
+            .expect("morph");
+        assert_eq!((m.groups, m.slot_bytes), (1, 655_360));
+        // With six frames in flight, 213 KiB a slot hold fewer than 65,536 heights: none.
+        w.frames_in_flight = 6;
+        assert_eq!(Split::new(&device(), &w, &set(10), &BUILDER).morph, None);
     }
 
     fn chain() -> MipChain {
@@ -607,11 +728,13 @@ mod tests {
             max_image_layers in 0u32..4096,
             storage_16bit in any::<bool>(),
             bc1_textures in any::<bool>(),
+            morph_vertices in prop::option::of(magnitude(32)),
         ) -> (DeviceLimits, Wishes, TileSet) {
             let index_arrays = if built { IndexArrays::Built } else { IndexArrays::Sent };
+            let morph = morph_vertices.map(morph);
             (
                 DeviceLimits { max_storage_range, max_image_layers, storage_16bit, bc1_textures },
-                Wishes { gpu_budget, texture_share, textures, index_arrays, frames_in_flight },
+                Wishes { gpu_budget, texture_share, textures, index_arrays, frames_in_flight, morph },
                 TileSet { tiles, texture: size.map(chain_of) },
             )
         }
@@ -622,15 +745,30 @@ mod tests {
     fn check(d: &DeviceLimits, w: &Wishes, set: &TileSet, s: &Split) -> Result<(), TestCaseError> {
         let budget = w.gpu_budget;
         let (textures, builder) = (s.texture_bytes(), s.builder_bytes());
+        let morph = s.morph.map_or(0, |m| m.bytes);
         prop_assert!(textures <= budget, "{s:?}");
         prop_assert!(builder <= budget / 8, "{s:?}");
         prop_assert!(s.pool_bytes <= d.max_storage_range);
-        if textures + builder <= budget {
-            prop_assert!(s.pool_bytes + textures + builder <= budget, "{s:?}");
+        prop_assert!(s.morph.is_none() || w.morph.is_some());
+        if let (Some(m), Some(cost)) = (s.morph, w.morph) {
+            // A sixteenth at most: regions in half of it, heights in the other half.
+            let whole = cost.max_vertices.max(1).saturating_mul(cost.vertex_bytes);
+            prop_assert!(m.groups >= 1 && m.groups <= cost.max_groups);
+            prop_assert!(m.slot_bytes <= whole);
+            prop_assert!(u64::from(m.groups) * cost.region_bytes <= budget / 32);
+            prop_assert!(m.slot_bytes * s.frame_slots as u64 <= budget / 32);
+            prop_assert!(m.bytes <= budget / 16);
+            prop_assert_eq!(
+                m.bytes,
+                u64::from(m.groups) * cost.region_bytes + s.frame_slots as u64 * m.slot_bytes
+            );
+        }
+        if textures + builder + morph <= budget {
+            prop_assert!(s.pool_bytes + textures + builder + morph <= budget, "{s:?}");
             // The pool takes all the rest it can read.
             prop_assert_eq!(
                 s.pool_bytes,
-                (budget - textures - builder).min(d.max_storage_range)
+                (budget - textures - builder - morph).min(d.max_storage_range)
             );
         } else {
             prop_assert_eq!(s.pool_bytes, 0);
@@ -693,16 +831,24 @@ mod tests {
         #![proptest_config(ProptestConfig::with_cases(2000))]
 
         /// Budgets the CLI takes in practice (up to 2^53 bytes, where f64 holds every byte
-        /// count): the renderer's split at e73847d, bit for bit, and every rule of a split.
+        /// count): without the morph pass, the renderer's split at e73847d, bit for bit; with
+        /// it, the same but for the pool, which gives the pass its bytes; and every rule of a
+        /// split.
         #[test]
         fn random_splits_match_the_renderers_and_keep_the_rules(
             (d, w, set) in inputs(53),
         ) {
-            let s = Split::new(&d, &w, &set, &BUILDER);
+            let unmorphed = Wishes { morph: None, ..w };
+            let plain = Split::new(&d, &unmorphed, &set, &BUILDER);
             let (slots, builder, arrays, pool) = renderer_e73847d(&d, &w, &set);
-            prop_assert_eq!(s.textures.config().map(|c| c.slots as u64), slots);
-            prop_assert_eq!(s.builder.map(|b| (b.lookups, b.bytes)), builder);
-            prop_assert_eq!((s.index_arrays, s.pool_bytes), (arrays, pool));
+            prop_assert_eq!(plain.textures.config().map(|c| c.slots as u64), slots);
+            prop_assert_eq!(plain.builder.map(|b| (b.lookups, b.bytes)), builder);
+            prop_assert_eq!((plain.index_arrays, plain.pool_bytes), (arrays, pool));
+            check(&d, &unmorphed, &set, &plain)?;
+            let s = Split::new(&d, &w, &set, &BUILDER);
+            prop_assert_eq!(&s.textures, &plain.textures);
+            prop_assert_eq!((s.builder, s.index_arrays), (plain.builder, plain.index_arrays));
+            prop_assert!(s.pool_bytes <= plain.pool_bytes);
             check(&d, &w, &set, &s)?;
         }
 

@@ -108,16 +108,19 @@ pub struct Cli {
     /// worth", sweeps it on lavapipe; 1,0 builds every mix that saves a triangle)
     #[arg(long, value_name = "FIXED,SHARE", default_value = DEFAULT_PART_BUILD_COST, value_parser = parse_build_cost)]
     pub part_build_cost: BuildCost,
-    /// The vertex shader that blends levels: two-levels (reads the two levels around each
-    /// vertex's level) or forward-differences (the paper's clamped forward differences as dot
-    /// products over every level; the reference).
-    #[arg(long, value_enum, default_value_t = MorphShaderArg::TwoLevels)]
+    /// How vertices morph: hierarchical (a pass places each vertex from its parents' morphed
+    /// heights, coarse to fine, so that a finer level starts on the surface drawn before it),
+    /// two-levels (the previous per-vertex rule: the vertex shader blends the two stored
+    /// levels around each vertex's own level) or forward-differences (the same rule with the
+    /// paper's clamped forward differences as dot products over every level).
+    #[arg(long, value_enum, default_value_t = MorphShaderArg::Hierarchical)]
     pub morph_shader: MorphShaderArg,
     /// Diagnostic (headless): the vertex shader writes every drawn vertex's height to a buffer
     /// that is read back and compared with the CPU mirror the error meter uses (log columns
     /// heights_read_back, heights_max_diff_m); a difference beyond float rounding stops the
-    /// flight with one line naming the tile and vertex.
-    #[arg(long)]
+    /// flight with one line naming the tile and vertex. It checks the default morph (the morph
+    /// pass's heights, as the vertex shader drew them), so it takes no --morph-shader.
+    #[arg(long, conflicts_with = "morph_shader")]
     pub read_back_heights: bool,
     /// How tile levels travel: progressive (new blocks and one index array per refinement),
     /// per-level (each level from scratch) or whole-tile (every level at once, the old scheme).
@@ -331,6 +334,7 @@ pub enum ShadingArg {
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum MorphShaderArg {
+    Hierarchical,
     TwoLevels,
     ForwardDifferences,
 }
@@ -406,6 +410,7 @@ impl Cli {
             part_by_part: !self.whole_tiles && !self.draw_only,
             part_build_cost: self.part_build_cost,
             morph_shader: match self.morph_shader {
+                MorphShaderArg::Hierarchical => MorphShader::Hierarchical,
                 MorphShaderArg::TwoLevels => MorphShader::TwoLevels,
                 MorphShaderArg::ForwardDifferences => MorphShader::ForwardDifferences,
             },

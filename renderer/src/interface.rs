@@ -27,7 +27,8 @@ pub struct FrameConstants {
     pub height_step: f32,
     /// `FLAG_*`.
     pub flags: u32,
-    pub pad: u32,
+    /// Tile records this frame (the morph pass's count).
+    pub draws: u32,
     /// Texture coordinate of tile-local sample coordinate `s`: `x + s * y` (the texture
     /// layout's `(g + s * T / 256) / S`); `z`: `S`, texels across a layer; `w`: the tiles
     /// shading's grid offset.
@@ -92,7 +93,8 @@ pub struct TileRecord {
     pub level: u32,
     /// The level the draw's vertices morph to at most.
     pub cap: f32,
-    /// With `--read-back-heights`: where in the heights buffer the tile's vertex 0 goes.
+    /// Where the tile's vertex 0 goes in the morphed heights (and, with
+    /// `--read-back-heights`, in the heights read back).
     pub heights: u32,
     /// The tile's texture layer (u32::MAX: none) and finest resident mip.
     pub texture_layer: u32,
@@ -100,8 +102,11 @@ pub struct TileRecord {
     /// Samples the texture is moved by (0; `VKTERRAIN_FAULT=texture-seam` moves every other
     /// tile's, the seam test's negative control).
     pub texture_shift: f32,
-    pub pad0: u32,
-    pub pad1: u32,
+    /// The levels of the tile's 4 x 4 parts, 4 bits each (part `4 j + i` at bits `4 (k % 8)`
+    /// of word `k / 8`); drawn whole, the level in every part. The morph pass places the
+    /// vertices the draw's mesh holds ([`tiles::parts::presence_level`]).
+    pub parts_lo: u32,
+    pub parts_hi: u32,
     /// The level tables of the tile's vertices: inside, the N, E, S, W sides, the NW, NE, SW,
     /// SE corners ([`crate::tile::TileInfo::tables`]).
     pub tables: [LevelCoefficients; 9],
@@ -138,13 +143,13 @@ macro_rules! fields {
 /// `(struct, field, offset)` of the mirrors, plus each array element's `"stride"` (its size),
 /// in the form of `spirv::TERRAIN_LAYOUT`.
 pub fn host_layout() -> Vec<(&'static str, &'static str, u32)> {
-    let frame = fields!(FrameConstants: view_proj, camera, spacing_y, height_step, flags, pad,
+    let frame = fields!(FrameConstants: view_proj, camera, spacing_y, height_step, flags, draws,
         texture_map);
     let morph = fields!(MorphFrame: jacobian, tau, near, pad);
     let coefficients = fields!(LevelCoefficients: a_lo, a_hi, b_lo, b_hi);
     let record = fields!(TileRecord: tile_offset, height_base, positions, starts_lo, starts_hi,
-        blocks, units, level, cap, heights, texture_layer, texture_finest, texture_shift, pad0,
-        pad1, tables, pad2);
+        blocks, units, level, cap, heights, texture_layer, texture_finest, texture_shift,
+        parts_lo, parts_hi, tables, pad2);
     let named = |name: &'static str, fields: Vec<(&'static str, u32)>| {
         fields.into_iter().map(move |(f, o)| (name, f, o))
     };

@@ -14,7 +14,7 @@
 //! built on the GPU `index_builds, index_build_bytes`, the heights read back from the vertex
 //! shader `heights_read_back, heights_max_diff_m`, the tiles' checks when first needed
 //! `cpu_check_ms, tiles_checked, tiles_failed`, drawing part by part
-//! `tiles_part_by_part, part_builds`,
+//! `tiles_part_by_part, part_builds`, the morph pass's `tiles_unmorphed`,
 //! and last `tiles_level_0 .. tiles_level_{n-1}`.
 
 use std::path::Path;
@@ -119,10 +119,13 @@ pub struct FrameRecord {
     /// besides the manager's (`index_builds`).
     pub tiles_part_by_part: u64,
     pub part_builds: u64,
+    /// Morphing tiles the morph pass skipped, drawn at their own heights: the frame's morphed
+    /// heights (a share of the GPU budget) could not hold its vertices, so none was morphed.
+    pub tiles_unmorphed: u64,
     pub tiles_per_level: Vec<u64>,
 }
 
-pub const BASE_COLUMNS: [&str; 55] = [
+pub const BASE_COLUMNS: [&str; 56] = [
     "frame",
     "time_s",
     "frame_ms",
@@ -178,6 +181,7 @@ pub const BASE_COLUMNS: [&str; 55] = [
     "tiles_failed",
     "tiles_part_by_part",
     "part_builds",
+    "tiles_unmorphed",
 ];
 
 pub fn header(levels: u32) -> String {
@@ -264,6 +268,7 @@ impl FrameRecord {
             n(self.tiles_failed),
             n(self.tiles_part_by_part),
             n(self.part_builds),
+            n(self.tiles_unmorphed),
         ];
         let levels = self.tiles_per_level.iter().map(|&v| n(v));
         cells

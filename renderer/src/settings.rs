@@ -74,8 +74,12 @@ impl Shading {
 /// Which vertex shader blends the levels.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum MorphShader {
-    /// The two levels around each vertex's level, two bytes read (the default).
+    /// The morph pass places every drawn vertex from its parents' morphed heights, coarse to
+    /// fine; the vertex shader reads the result (the default; `crate::morph`).
     #[default]
+    Hierarchical,
+    /// The previous per-vertex rule: the two stored levels around each vertex's level, two
+    /// bytes read (`--morph-shader two-levels`).
     TwoLevels,
     /// The paper's clamped forward differences as dot products over every stored level (the
     /// reference, `--morph-shader forward-differences`).

@@ -623,3 +623,74 @@ fn a_mirror_set_is_checked_where_it_is_seen_and_passes_everywhere() {
     assert_eq!(terrain.failed_count(), 0, "{:?}", terrain.take_failures());
     assert!(terrain.tiles.iter().all(|t| t.usable() == Some(true)));
 }
+
+/// The morph places every vertex from its two parents (`renderer::morph::parents`): each is
+/// the midpoint of its parents, which lie on a coarser scale; and in real tile sets (the Puget
+/// sample and SRTM3 N55W003, whose last row and column of tiles are partial) every vertex of
+/// block 1 or later has both parents in its block or an earlier one, at every level. The
+/// control: a tile's vertices less one parent are caught.
+#[test]
+fn every_vertex_has_its_parents_in_its_block_or_before() {
+    use renderer::morph::{block_points, orphan, parents, scale_of};
+    for y in 0..=256u32 {
+        for x in 0..=256u32 {
+            let corner = (x == 0 || x == 256) && (y == 0 || y == 256);
+            match parents(x, y) {
+                None => assert!(corner, "({x}, {y}) has no parents"),
+                Some([a, b]) => {
+                    assert!(!corner, "corner ({x}, {y}) has parents");
+                    assert_eq!((a.0 + b.0, a.1 + b.1), (2 * x, 2 * y), "({x}, {y})");
+                    for p in [a, b] {
+                        assert!(p.0 <= 256 && p.1 <= 256, "({x}, {y}): {p:?}");
+                        assert!(scale_of(p.0, p.1) > scale_of(x, y), "({x}, {y}): {p:?}");
+                    }
+                }
+            }
+        }
+    }
+    let (a, b) = (
+        tempfile::tempdir().expect("tempdir"),
+        tempfile::tempdir().expect("tempdir"),
+    );
+    let srtm = common::tileset(
+        b.path(),
+        &common::data("srtm/N55W003.hgt"),
+        dem::ReadOptions::default(),
+    );
+    let mut checked = 0;
+    let mut control = None;
+    for set in [common::puget(a.path()), srtm] {
+        let terrain = Terrain::open(&set).expect("open");
+        for info in &terrain.tiles {
+            let tile = terrain.set.tile(info.tx, info.ty).expect("tile");
+            for level in 0..terrain.levels {
+                let points = block_points(&tile, level);
+                assert_eq!(
+                    orphan(&points),
+                    None,
+                    "tile {},{} level {level}",
+                    info.tx,
+                    info.ty
+                );
+                checked += points.len();
+            }
+            let points = block_points(&tile, terrain.levels - 1);
+            if control.is_none() {
+                control = points.iter().find(|p| p.2 > 0).map(|&(x, y, _)| {
+                    let [p, _] = parents(x, y).expect("parents");
+                    let less: Vec<_> = points
+                        .iter()
+                        .copied()
+                        .filter(|&(px, py, _)| (px, py) != p)
+                        .collect();
+                    orphan(&less)
+                });
+            }
+        }
+    }
+    assert!(checked > 100_000, "{checked} vertices checked");
+    assert!(
+        matches!(control, Some(Some(_))),
+        "the missing parent was not caught"
+    );
+}

@@ -18,11 +18,11 @@ layout(push_constant) uniform FrameConstants {
     float spacing_y;         // metres per row (rows run south)
     float height_step;       // metres per height code, one for the tile set
     uint flags;              // FLAG_*
-    uint pad;
+    uint draws;              // tile records this frame (the morph pass's count)
     vec4 texture_map;        // texture coordinate of tile-local sample s: x + s * y; z: texels across a layer; w: tile grid offset (samples) for the tiles shading
 } frame;
 
-#ifdef TERRAIN_VERTEX
+#if defined(TERRAIN_VERTEX) || defined(MORPH_PASS)
 // The frame's constants of the vertex level rule (renderer/src/morph.rs): a vertex whose
 // unmorphed position relative to the camera is at clip position c has |J z| =
 // |jacobian.xy * c.w + jacobian.zw * c.xy| / c.w^2 pixels per vertical metre, and level
@@ -54,12 +54,12 @@ struct TileRecord {
     vec4 units[2];           // metres per morph offset unit of levels 0..3, 4..7 (vec4s: std140 = std430)
     uint level;              // the level drawn
     float cap;               // the level the vertices morph to at most
-    uint heights;            // read-back: where the tile's first vertex's height goes
+    uint heights;            // where the tile's first vertex's morphed height goes (Morphed, read-back)
     uint texture_layer;      // the tile's texture slot (0xffffffff: none)
     float texture_finest;    // its finest resident mip
     float texture_shift;     // samples the texture is moved by (0; a test's fault injection)
-    uint pad0;
-    uint pad1;
+    uint parts_lo;           // the levels of parts 0..7 (part 4 j + i: (i, j) of 4 x 4), 4 bits each,
+    uint parts_hi;           // and of parts 8..15 (drawn whole: the level in every part)
     // The level tables of the tile's vertices: its own (interior), the N, E, S, W sides (the
     // larger errors of the tile and that neighbour) and the NW, NE, SW, SE corners (of the
     // tiles there), so that every tile holding a vertex gives it the same table.
@@ -77,14 +77,43 @@ layout(std430, set = 0, binding = 1) readonly buffer Records {
 } records;
 // The records buffer's first bytes as a uniform buffer: the frame's morph constants.
 layout(std140, set = 0, binding = 5) uniform Morph { MorphFrame morph; } frame_morph;
+#endif
+
+#ifdef TERRAIN_VERTEX
 // The tile a draw draws, read with uniform offsets: the same records through a dynamic
 // uniform buffer whose offset each tile's draw moves to its own record. A shader's reads of a
 // whole draw's record are then one load for all its vertices (on lavapipe, a broadcast
 // instead of a per-vertex loop over the storage buffer). Stitches join two tiles and read the
 // records above by each vertex's record number.
 layout(std140, set = 0, binding = 4) uniform Tile { TileRecord tile; } draw;
+// Each drawn vertex's morphed height (m), at its record's `heights` plus its index in the
+// tile: written by the morph pass (morph.comp) before the frame's draws.
+layout(std430, set = 0, binding = 6) readonly buffer Morphed { float values[]; } morphed;
 #ifdef READ_BACK
 // Each drawn vertex's height (m), at its record's `heights` plus its index in the tile.
 layout(std430, set = 0, binding = 3) writeonly buffer Heights { float values[]; } heights;
 #endif
+#endif
+
+#if defined(TERRAIN_VERTEX) || defined(MORPH_PASS)
+// Which of a record's level tables a vertex at tile-local (x, y) takes: 0 inside, 1..4 on
+// the N, E, S, W sides, 5..8 at the NW, NE, SW, SE corners.
+uint table_of(uint x, uint y) {
+    uint column = x == 0u ? 0u : (x == 256u ? 2u : 1u);
+    uint row = y == 0u ? 0u : (y == 256u ? 2u : 1u);
+    const uint tables[9] = uint[](5u, 1u, 6u, 4u, 0u, 2u, 7u, 3u, 8u);
+    return tables[row * 3u + column];
+}
+
+// l(v) for a vertex whose unmorphed position is at `clip`, with level table `c`: the finest
+// level behind the near plane (r = 0). renderer/src/morph.rs has the rule and its CPU mirror.
+float vertex_level(vec4 clip, LevelCoefficients c) {
+    float d = clip.w;
+    MorphFrame m = frame_morph.morph;
+    vec2 g = m.jacobian.xy * d + m.jacobian.zw * clip.xy;
+    float e = d < m.near ? 0.0 : m.tau * d * d * inversesqrt(max(dot(g, g), 1e-30));
+    vec4 lo = clamp(c.a_lo - e * c.b_lo, 0.0, 1.0);
+    vec4 hi = clamp(c.a_hi - e * c.b_hi, 0.0, 1.0);
+    return dot(lo + hi, vec4(1.0));
+}
 #endif

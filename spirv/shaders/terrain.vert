@@ -14,7 +14,7 @@
 // at an address the same for every vertex is one load for the whole batch. So a tile's draw
 // reads its record through the Tile binding (moved to the record by the draw's dynamic
 // offset) and the frame's morph constants through the Morph binding: what remains per vertex
-// is the pool: its packed position, and two morph bytes when it morphs.
+// is the pool: its packed position, and its morphed height when it morphs.
 //
 // Positions are computed relative to the camera from integers wherever possible, so a grid
 // point shared by two tiles lands on the same f32 position in every draw: its sample
@@ -22,19 +22,19 @@
 // integer code on the tile set's height lattice.
 //
 // Geomorphing (renderer/src/morph.rs has the rule, its bound, and the CPU mirror of this
-// arithmetic): the vertex's continuous level l depends on its own unmorphed position and the
-// camera only, l = sum_k clamp(a_k - r b_k, 0, 1) with r = tau / |J z| at the vertex and the
-// level table of where it lies (its tile's inside, a side, a corner: the same table in every
-// tile holding it), so two tiles holding a grid point give it one level. Its height blends the two nested levels
-// around l, k = floor(l) and k + 1: H = own + (1 - t) o_k u_k + t o_(k+1) u_(k+1), from the
-// stored offsets o (one byte per coarser level) and the morph units u; from the vertex's own
-// block j on, t = 1 against a zero offset and the vertex is at its own height, bit for bit.
-// Two bytes are read, whatever the number of levels.
+// arithmetic): every drawn vertex's morphed height is placed once a frame by the morph pass
+// (morph.comp), coarse to fine, each vertex from its two parents' morphed heights, so that a
+// vertex a finer level adds starts on the surface drawn before it. The vertex shader reads
+// that height: one read beside its packed position, as a discrete vertex reads none.
 //
-// MORPH_ALL_ROWS (a second build) blends with the paper's clamped forward differences
+// TWO_LEVELS (a second build, `--morph-shader two-levels`) is the previous per-vertex rule,
+// kept for comparison: the vertex's own level l picks the two nested levels around it, k =
+// floor(l) and k + 1, and its height blends the stored offsets o of those levels (one byte
+// per coarser level) with the morph units u: H = own + (1 - t) o_k u_k + t o_(k+1) u_(k+1).
+// MORPH_ALL_ROWS (a third) blends the same rule with the paper's clamped forward differences
 // h = clamp(l - (0, 1, 2, ...), 0, 1), h'_0 = 1 - h_0, h'_k = h_{k-1} - h_k as dot products
-// over every stored row: the reference. READ_BACK (a third) also writes each vertex's height
-// to the Heights buffer, for the test that compares it with the CPU mirror.
+// over every stored row. READ_BACK (a fourth, of the default) also writes each vertex's
+// height to the Heights buffer, for the test that compares it with the CPU mirror.
 
 #define TERRAIN_VERTEX
 #include "interface.glsl"
@@ -62,28 +62,6 @@ float pool_byte(uint byte) {
     return float(bitfieldExtract(int(pool.words[byte >> 2]), int((byte & 3u) * 8u), 8));
 }
 
-// Which of the record's level tables a vertex at tile-local (x, y) takes: 0 inside, 1..4 on
-// the N, E, S, W sides, 5..8 at the NW, NE, SW, SE corners.
-uint table_of(uint x, uint y) {
-    uint column = x == 0u ? 0u : (x == 256u ? 2u : 1u);
-    uint row = y == 0u ? 0u : (y == 256u ? 2u : 1u);
-    const uint tables[9] = uint[](5u, 1u, 6u, 4u, 0u, 2u, 7u, 3u, 8u);
-    return tables[row * 3u + column];
-}
-
-// l(v) for a vertex whose unmorphed position is at `clip`, with level table `t` of record
-// `r`: the finest level behind the near plane (r = 0).
-float vertex_level(vec4 clip, uint r, uint t) {
-    float d = clip.w;
-    MorphFrame m = frame_morph.morph;
-    vec2 g = m.jacobian.xy * d + m.jacobian.zw * clip.xy;
-    float e = d < m.near ? 0.0 : m.tau * d * d * inversesqrt(max(dot(g, g), 1e-30));
-    LevelCoefficients c = REC(r, tables[t]);
-    vec4 lo = clamp(c.a_lo - e * c.b_lo, 0.0, 1.0);
-    vec4 hi = clamp(c.a_hi - e * c.b_hi, 0.0, 1.0);
-    return dot(lo + hi, vec4(1.0));
-}
-
 // Metres per morph offset unit of level k.
 float unit_of(uint r, uint k) {
     return REC(r, units[k >> 2u])[k & 3u];
@@ -104,8 +82,9 @@ void main() {
     float l = float(REC(r, level));
     height = own;
     if ((frame.flags & FLAG_GEOMORPH) != 0u) {
+#if defined(TWO_LEVELS) || defined(MORPH_ALL_ROWS)
         vec4 clip = frame.view_proj * vec4(relative, 1.0);
-        l = min(vertex_level(clip, r, table_of(x, y)), REC(r, cap));
+        l = min(vertex_level(clip, REC(r, tables[table_of(x, y)])), REC(r, cap));
         // The vertex's block j: how many block starts it has passed.
         uvec4 passed = uvec4(greaterThanEqual(uvec4(local), REC(r, starts_lo)))
                      + uvec4(greaterThanEqual(uvec4(local), REC(r, starts_hi)));
@@ -137,6 +116,18 @@ void main() {
         float shift = lower * (1.0 - t) + upper * t;
 #endif
         height = own + shift;
+#else
+        // The morph pass placed every drawn vertex: one read (none for a tile past the frame's
+        // morphed heights, drawn unmorphed).
+        uint at = REC(r, heights);
+        if (at != 0xffffffffu) {
+            height = morphed.values[at + local];
+        }
+        if ((frame.flags & FLAG_LEVEL_COLOURS) != 0u) {
+            vec4 clip = frame.view_proj * vec4(relative, 1.0);
+            l = min(vertex_level(clip, REC(r, tables[table_of(x, y)])), REC(r, cap));
+        }
+#endif
         relative.z = height - frame.camera.z;
     }
 #ifdef READ_BACK

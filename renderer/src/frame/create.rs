@@ -19,8 +19,11 @@ use crate::stitch::MAX_RECORDS;
 use crate::target::{COLOR_FORMAT, DEPTH_FORMAT};
 use crate::terrain::Terrain;
 use crate::tile::Side;
+use crate::vulkan::buffer::BufferDesc;
 use crate::vulkan::indices::{self, IndexBuilder};
-use crate::vulkan::pipeline::{TerrainPipeline, TerrainSets};
+use crate::vulkan::pipeline::{
+    SetBuffers, TerrainPipeline, TerrainSets, MORPH_GROUPS, MORPH_REGION_BYTES,
+};
 use crate::vulkan::pool::TilePool;
 use crate::vulkan::sync::Commands;
 use crate::vulkan::texture::{TextureArray, TextureDesc};
@@ -38,6 +41,7 @@ struct Parts {
     pipeline: Option<TerrainPipeline>,
     slots: Vec<Slot>,
     builder: Option<IndexBuilder>,
+    morph_scratch: Option<Buffer>,
     sets: Option<TerrainSets>,
 }
 
@@ -48,6 +52,9 @@ impl Parts {
             s.destroy(gpu);
         }
         if let Some(b) = self.builder {
+            b.destroy(gpu);
+        }
+        if let Some(b) = self.morph_scratch {
             b.destroy(gpu);
         }
         for s in self.slots {
@@ -103,7 +110,7 @@ impl Renderer {
                 parts.commands.take(),
                 parts.textures.take(),
             ) {
-                (Some(p), Some(c), Some(t)) => Ok((p, c, t)),
+                (Some(p), Some(c), Some(t)) if parts.morph_scratch.is_some() => Ok((p, c, t)),
                 (p, c, t) => {
                     (parts.pipeline, parts.commands, parts.textures) = (p, c, t);
                     Err(VkError::Unsupported(
@@ -120,8 +127,10 @@ impl Renderer {
                 return Err(e);
             }
         };
+        let morph_scratch = parts.morph_scratch.take().expect("checked above");
         Ok(Renderer {
             pipeline,
+            morph_scratch,
             sets: parts.sets,
             commands,
             slots: parts.slots,
@@ -155,6 +164,7 @@ impl Renderer {
         if let Some(b) = self.builder {
             b.destroy(gpu);
         }
+        self.morph_scratch.destroy(gpu);
         self.textures.destroy(gpu);
         self.pipeline.destroy(gpu);
         self.commands.destroy(gpu);
@@ -197,13 +207,41 @@ fn make_parts(
         let builder = IndexBuilder::new(gpu, &pool.buffer, slots, builds, b.lookups)?;
         parts.builder = Some(builder);
     }
-    let records: Vec<(&Buffer, &Buffer)> = parts
+    // The budget's regions; reading heights back (a diagnostic) morphs every frame, with one
+    // region if the budget had none; without any, a placeholder for the set's binding (every
+    // frame is then drawn unmorphed).
+    let groups = match (split.morph, options.read_back_heights) {
+        (Some(m), _) => m.groups,
+        (None, true) => 1,
+        (None, false) => 0,
+    };
+    let scratch = parts.morph_scratch.insert(Buffer::new(
+        gpu,
+        BufferDesc {
+            size: (u64::from(groups) * MORPH_REGION_BYTES).max(16),
+            usage: vk::BufferUsageFlags::STORAGE_BUFFER,
+            location: gpu_allocator::MemoryLocation::GpuOnly,
+        },
+        "morph pass scratch",
+    )?);
+    let buffers: Vec<SetBuffers<'_>> = parts
         .slots
         .iter()
-        .map(|s| (&s.records, &s.heights))
+        .map(|s| SetBuffers {
+            records: &s.records,
+            heights: &s.heights,
+            morphed: &s.morphed,
+        })
         .collect();
     let name = "frame descriptor sets";
-    let sets = TerrainSets::new(gpu, pipeline, &pool.buffer, &records, textures, name)?;
+    let sets = TerrainSets::new(
+        gpu,
+        pipeline,
+        (&pool.buffer, scratch),
+        &buffers,
+        textures,
+        name,
+    )?;
     parts.sets = Some(sets);
     Ok(())
 }
@@ -247,6 +285,13 @@ fn split_budget(gpu: &Gpu, terrain: &Terrain, options: &MemoryOptions) -> Split 
         textures: options.textures,
         index_arrays: options.index_arrays,
         frames_in_flight: options.frames_in_flight,
+        // Always: the window turns geomorphing on and off while it runs.
+        morph: Some(budget::MorphCost {
+            region_bytes: MORPH_REGION_BYTES,
+            max_groups: MORPH_GROUPS,
+            vertex_bytes: 4,
+            max_vertices: finest_vertices(terrain),
+        }),
     };
     let set = budget::TileSet {
         tiles: terrain.tiles.len(),
@@ -288,15 +333,16 @@ fn slot_sizes(
         records: RECORDS_OFFSET + RECORD_BYTES * terrain.tiles.len().clamp(1, MAX_RECORDS) as u64,
         // Every tile at most once a frame, at its finest level at most.
         heights: if options.read_back_heights {
-            4 * terrain
-                .tiles
-                .iter()
-                .filter_map(|t| t.levels.last())
-                .map(|l| u64::from(l.vertex_count()))
-                .sum::<u64>()
-                .max(4)
+            4 * finest_vertices(terrain).max(1)
         } else {
             16
+        },
+        // The split's share (a placeholder without one: frames are drawn unmorphed); reading
+        // heights back (a diagnostic) morphs every draw, past it.
+        morphed: if options.read_back_heights {
+            4 * finest_vertices(terrain).max(1)
+        } else {
+            split.morph.map_or(4, |m| m.slot_bytes)
         },
         staging: budget::staging_bound(&costs, options.upload_budget)
             + textures.map_or(0, |c: &TextureConfig| {
@@ -304,6 +350,16 @@ fn slot_sizes(
             }),
         extent,
     }
+}
+
+/// Vertices of every tile at its finest level: the most a frame can draw.
+fn finest_vertices(terrain: &Terrain) -> u64 {
+    terrain
+        .tiles
+        .iter()
+        .filter_map(|t| t.levels.last())
+        .map(|l| u64::from(l.vertex_count()))
+        .sum()
 }
 
 /// Plans and allocates the tile pool; when device memory runs out, halves the budget and tries

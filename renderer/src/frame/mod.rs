@@ -54,7 +54,7 @@ use crate::vulkan::pipeline::{TerrainPipeline, TerrainSets};
 use crate::vulkan::pool::TilePool;
 use crate::vulkan::sync::{self, Commands};
 use crate::vulkan::texture::TextureArray;
-use crate::vulkan::{Gpu, VkError};
+use crate::vulkan::{Buffer, Gpu, VkError};
 
 /// Where a windowed frame goes: the acquired swapchain image, copied into after rendering.
 #[derive(Clone, Copy, Debug)]
@@ -96,6 +96,8 @@ pub struct ReadBack {
 
 pub struct Renderer {
     pipeline: TerrainPipeline,
+    /// The morph pass's scratch grids (shared by the slots: the pass waits for earlier ones).
+    morph_scratch: Buffer,
     /// One descriptor set per slot: the pool and the slot's records.
     sets: Option<TerrainSets>,
     commands: Commands,
@@ -139,6 +141,12 @@ struct Prepared {
 }
 
 impl Renderer {
+    /// The morph pass's workgroups: one per scratch region the budget gave it (0: none, and
+    /// frames are drawn unmorphed).
+    pub(super) fn morph_groups(&self) -> u32 {
+        (self.morph_scratch.size / crate::vulkan::pipeline::MORPH_REGION_BYTES) as u32
+    }
+
     /// Whether index arrays are built on the GPU (else sent from the file).
     pub fn builds_indices(&self) -> bool {
         self.builder.is_some()
@@ -276,6 +284,7 @@ impl Renderer {
         record.staged_bytes = uploads.staged_geometry;
         record.part_builds = u64::from(uploads.part_builds);
         record.tiles_part_by_part = plan.draws.iter().filter(|d| d.key.is_some()).count() as u64;
+        record.tiles_unmorphed = written.unmorphed;
         record.gpu_allocations = gpu.allocations() - allocations;
         record.prediction_error_m = prepared.prediction_error_m;
         record.cpu_prefetch_ms = prepared.cpu_prefetch_ms;

@@ -33,6 +33,8 @@ pub(super) struct PassInputs {
     pub constants: FrameConstants,
     pub drawn: Vec<DrawnTile>,
     pub stitch_ranges: Vec<(u32, u32)>,
+    /// Draws the morph pass skipped: its heights held no more vertices.
+    pub unmorphed: u64,
 }
 
 impl Renderer {
@@ -49,20 +51,22 @@ impl Renderer {
         let slot = &mut self.slots[s];
         let stitch_ranges = records::write_stitches(&mut slot.stitch, &plan.stitches)?;
         let textured = self.texture_slots.is_some();
-        let (constants, morph) = pass_constants(terrain, camera, &plan.view, settings, textured);
+        let (constants, morph) = pass_constants(terrain, camera, plan, settings, textured);
         // The meter and the read-back need each draw's morph inputs; nothing else does.
         let describe = self.meter.is_some() || self.options.read_back_heights;
-        let drawn = records::write_records(
+        let capacity = (slot.morphed.size / 4) as usize;
+        let (drawn, unmorphed) = records::write_records(
             &mut slot.records,
             terrain,
             camera,
             (plan, textures),
             morph.as_ref().map(|m| (m, &constants)),
             self.fault,
-            describe,
+            (describe, capacity),
         )?;
         Ok(PassInputs {
             constants,
+            unmorphed: if constants.draws > 0 { unmorphed } else { 0 },
             drawn,
             stitch_ranges,
         })
@@ -96,6 +100,12 @@ impl Renderer {
         if let Some(b) = &self.builder {
             b.record(gpu, cmd, s, uploads.builds);
         }
+        let set = self
+            .sets
+            .as_ref()
+            .map_or(vk::DescriptorSet::null(), |t| t.sets[s]);
+        self.pipeline
+            .record_morph_pass(gpu, cmd, (set, self.morph_groups()), scene.constants);
         if self.fault == Some(Fault::Validation) && self.frame == 0 {
             // SAFETY: deliberately invalid (offset 1 for 16-bit indices), for the tests of
             // the validation path; the pass rebinds a valid index buffer before any draw.
@@ -108,10 +118,7 @@ impl Renderer {
         let at = Bindings {
             target: &slot.target,
             timestamps: &slot.timestamps,
-            set: self
-                .sets
-                .as_ref()
-                .map_or(vk::DescriptorSet::null(), |t| t.sets[s]),
+            set,
             stitch: slot.stitch.raw,
         };
         let counts = self.record_pass(gpu, cmd, at, scene);
@@ -212,7 +219,8 @@ impl Pass<'_> {
                 self.pipeline.read_back.unwrap_or(self.pipeline.fill)
             }
             (false, MorphShader::ForwardDifferences) => self.pipeline.all_rows,
-            (false, MorphShader::TwoLevels) => self.pipeline.fill,
+            (false, MorphShader::TwoLevels) => self.pipeline.two_levels,
+            (false, MorphShader::Hierarchical) => self.pipeline.fill,
         };
         let constants = *self.scene.constants;
         let mut counts = DrawCounts::default();
@@ -291,18 +299,32 @@ impl Pass<'_> {
     }
 }
 
-/// The frame's push constants, and its morph constants when it morphs.
+/// The frame's push constants, and its morph constants when it morphs. `draws` counts the
+/// plan's draws when the morph pass places their vertices (hierarchical morphing), 0 otherwise.
 pub(super) fn pass_constants(
     terrain: &Terrain,
     camera: &Camera,
-    view: &View,
+    plan: &Plan,
     settings: &Settings,
     textured: bool,
 ) -> (FrameConstants, Option<MorphFrame>) {
-    let constants = frame_constants(terrain, camera, view, settings, textured);
-    let morph = matches!(settings.rule(), LevelRule::Morph(..))
-        .then(|| morph::frame_constants(view, settings.tau));
+    let view = &plan.view;
+    let mut constants = frame_constants(terrain, camera, view, settings, textured);
+    let morphing = matches!(settings.rule(), LevelRule::Morph(..));
+    if morphing && settings.morph_shader == MorphShader::Hierarchical {
+        constants.draws = plan.draws.len() as u32;
+    }
+    let morph = morphing.then(|| morph::frame_constants(view, settings.tau));
     (constants, morph)
+}
+
+/// Bytes of the morphed heights of `plan`'s draws: a float per vertex of each drawn level (the
+/// records' `heights` offsets count the same).
+pub(super) fn morphed_bytes(terrain: &Terrain, plan: &Plan) -> u64 {
+    plan.draws
+        .iter()
+        .map(|d| 4 * u64::from(terrain.tiles[d.tile].levels[d.level as usize].vertex_count()))
+        .sum()
 }
 
 /// The frame's push constants: the camera, the spacing, the flags for `settings`.
@@ -349,7 +371,7 @@ fn frame_constants(
         spacing_y: sy as f32,
         height_step: terrain.height_step,
         flags,
-        pad: 0,
+        draws: 0,
         texture_map,
     }
 }

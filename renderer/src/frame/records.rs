@@ -10,7 +10,7 @@ use crate::error::FrameError;
 use crate::fault::Fault;
 use crate::interface::{FrameConstants, LevelCoefficients, MorphFrame, TileRecord, RECORDS_OFFSET};
 use crate::log::FrameRecord;
-use crate::morph::{TileMorph, MAX_LEVELS};
+use crate::morph::{MorphRule, TileMorph, MAX_LEVELS};
 use crate::plan::Plan;
 use crate::stitch::{Stitch, MAX_RECORDS};
 use crate::terrain::Terrain;
@@ -47,7 +47,11 @@ pub type DrawnTile = (usize, u32, usize, Option<TileMorph>, Option<PartKey>);
 
 /// Writes the frame's morph constants and tile records, one per draw in order (a draw's record
 /// is its index); returns each draw as written, with how it morphs only when `describe` (for
-/// the error meter and the read-back).
+/// the error meter and the read-back), and how many draws are unmorphed because the morphed
+/// heights (`capacity` of them) cannot hold the frame's vertices. Then every draw is: their
+/// records say `heights` = `u32::MAX`, the morph pass skips them and the vertex shader draws
+/// their own heights, so the frame is drawn as discrete levels are, crack-free (a morphed
+/// tile beside an unmorphed one would open a seam).
 pub(super) fn write_records(
     buffer: &mut Buffer,
     terrain: &Terrain,
@@ -55,8 +59,8 @@ pub(super) fn write_records(
     (plan, textures): (&Plan, &TexturePlan),
     morph: Option<(&MorphFrame, &FrameConstants)>,
     fault: Option<Fault>,
-    describe: bool,
-) -> Result<Vec<DrawnTile>, FrameError> {
+    (describe, capacity): (bool, usize),
+) -> Result<(Vec<DrawnTile>, u64), FrameError> {
     if plan.draws.len() > MAX_RECORDS {
         return Err(FrameError::TooManyTiles {
             tiles: plan.draws.len(),
@@ -66,6 +70,13 @@ pub(super) fn write_records(
     let (cam_tile, _) = terrain.camera_tile(camera.position);
     let mut drawn = Vec::with_capacity(plan.draws.len());
     let mut heights = 0usize;
+    let needed: usize = plan
+        .draws
+        .iter()
+        .map(|d| terrain.tiles[d.tile].levels[d.level as usize].vertex_count() as usize)
+        .sum();
+    let placed = needed <= capacity;
+    let unmorphed = if placed { 0 } else { plan.draws.len() as u64 };
     let records: Vec<TileRecord> = plan
         .draws
         .iter()
@@ -85,7 +96,16 @@ pub(super) fn write_records(
             r.positions = (d.vertex_offset / 4) as u32;
             r.level = d.level;
             r.cap = d.level as f32;
-            r.heights = heights as u32;
+            r.heights = if placed { heights as u32 } else { u32::MAX };
+            let levels = d.key.map_or([d.level as u8; 16], |k| k.levels);
+            for (k, &l) in levels.iter().enumerate() {
+                let word = if k < 8 {
+                    &mut r.parts_lo
+                } else {
+                    &mut r.parts_hi
+                };
+                *word |= u32::from(l & 15) << (4 * (k % 8));
+            }
             let mut starts = [u32::MAX; 8];
             let (mut start, mut rows) = (0u32, d.morph_offset as u32);
             for (j, l) in info.levels.iter().enumerate().take(MAX_LEVELS) {
@@ -103,16 +123,25 @@ pub(super) fn write_records(
             if morph.is_some() {
                 r.tables = info.tables.map(|t| LevelCoefficients::of(&t));
             }
-            let tile_morph = morph.filter(|_| describe).map(|(frame, c)| TileMorph {
-                view_proj: glam::Mat4::from_cols_array(&c.view_proj),
-                camera: glam::Vec4::from_array(c.camera),
-                spacing_y: c.spacing_y,
-                height_step: c.height_step,
-                frame: *frame,
-                tile_offset: r.tile_offset,
-                cap: r.cap,
-                tables: r.tables,
-            });
+            let tile_morph = morph
+                .filter(|_| describe && placed)
+                .map(|(frame, c)| TileMorph {
+                    view_proj: glam::Mat4::from_cols_array(&c.view_proj),
+                    camera: glam::Vec4::from_array(c.camera),
+                    spacing_y: c.spacing_y,
+                    height_step: c.height_step,
+                    frame: *frame,
+                    tile_offset: r.tile_offset,
+                    cap: r.cap,
+                    tables: r.tables,
+                    parts: d.key,
+                    // The morph pass runs exactly when the frame's constants count its draws.
+                    rule: if c.draws > 0 {
+                        MorphRule::Hierarchical
+                    } else {
+                        MorphRule::TwoLevels
+                    },
+                });
             drawn.push((d.tile, d.level, heights, tile_morph, d.key));
             heights += info.levels[d.level as usize].vertex_count() as usize;
             r
@@ -128,7 +157,7 @@ pub(super) fn write_records(
             capacity: buffer.size,
         });
     }
-    Ok(drawn)
+    Ok((drawn, unmorphed))
 }
 
 /// The halves of an eight-element array (a record's `_lo` and `_hi` vectors).

@@ -4,7 +4,7 @@
 
 use ash::vk;
 
-use super::pass::{pass_constants, Bindings, DrawCounts, Scene};
+use super::pass::{morphed_bytes, pass_constants, Bindings, DrawCounts, Scene};
 use super::records::{self, frame_record};
 use super::Renderer;
 use crate::camera::Camera;
@@ -16,7 +16,7 @@ use crate::settings::Settings;
 use crate::terrain::Terrain;
 use crate::textures::TexturePlan;
 use crate::vulkan::buffer::BufferDesc;
-use crate::vulkan::pipeline::TerrainSets;
+use crate::vulkan::pipeline::{SetBuffers, TerrainSets};
 use crate::vulkan::sync;
 use crate::vulkan::{Buffer, Gpu, VkResult};
 
@@ -27,6 +27,8 @@ pub struct StaticFrame {
     records: Option<Buffer>,
     /// Nothing reads heights back from a replayed frame: a placeholder for the set.
     heights: Option<Buffer>,
+    /// The morph pass's heights for its draws (a placeholder when it does not morph).
+    morphed: Option<Buffer>,
     sets: Option<TerrainSets>,
     record: FrameRecord,
 }
@@ -65,6 +67,7 @@ impl Renderer {
             stitch: None,
             records: None,
             heights: None,
+            morphed: None,
             sets: None,
             record: FrameRecord::default(),
         };
@@ -109,7 +112,7 @@ impl Renderer {
             .records
             .insert(Buffer::new(gpu, desc, "static tile records")?);
         let textured = self.texture_slots.is_some();
-        let (constants, morph) = pass_constants(terrain, camera, &plan.view, settings, textured);
+        let (constants, morph) = pass_constants(terrain, camera, plan, settings, textured);
         let morph = morph.as_ref().map(|m| (m, &constants));
         records::write_records(
             records,
@@ -118,18 +121,38 @@ impl Renderer {
             (plan, textures),
             morph,
             None,
-            false,
+            // Its own morphed heights hold every draw (none without the pass's regions).
+            (
+                false,
+                if self.morph_groups() > 0 {
+                    usize::MAX
+                } else {
+                    0
+                },
+            ),
         )?;
         let desc = BufferDesc::readback_storage(16);
         let heights =
             frame
                 .heights
                 .insert(Buffer::new(gpu, desc, "static frame heights (unused)")?);
+        let desc = BufferDesc {
+            size: morphed_bytes(terrain, plan).max(4),
+            usage: vk::BufferUsageFlags::STORAGE_BUFFER,
+            location: gpu_allocator::MemoryLocation::GpuOnly,
+        };
+        let morphed = frame
+            .morphed
+            .insert(Buffer::new(gpu, desc, "static frame morphed heights")?);
         let sets = frame.sets.insert(TerrainSets::new(
             gpu,
             &self.pipeline,
-            &self.pool.buffer,
-            &[(&*records, &*heights)],
+            (&self.pool.buffer, &self.morph_scratch),
+            &[SetBuffers {
+                records,
+                heights,
+                morphed,
+            }],
             &self.textures,
             "static frame descriptor set",
         )?);
@@ -139,6 +162,8 @@ impl Renderer {
         let slot = &self.slots[0];
         sync::begin(gpu, cmd, false)?;
         slot.timestamps.begin(gpu, cmd);
+        self.pipeline
+            .record_morph_pass(gpu, cmd, (set, self.morph_groups()), &constants);
         let at = Bindings {
             target: &slot.target,
             timestamps: &slot.timestamps,
@@ -175,7 +200,7 @@ impl Renderer {
         if frame.cmd != vk::CommandBuffer::null() {
             self.commands.free(gpu, frame.cmd);
         }
-        for b in [frame.stitch, frame.records, frame.heights]
+        for b in [frame.stitch, frame.records, frame.heights, frame.morphed]
             .into_iter()
             .flatten()
         {

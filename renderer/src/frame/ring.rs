@@ -15,6 +15,20 @@ use crate::vulkan::sync::{self, Commands};
 use crate::vulkan::timestamps::Timestamps;
 use crate::vulkan::{Buffer, Gpu, VkError, VkResult};
 
+/// A slot's morphed heights (device memory, written by the morph pass, read by the vertex
+/// shader).
+fn morphed_buffer(gpu: &Gpu, slot: usize, size: u64) -> VkResult<Buffer> {
+    Buffer::new(
+        gpu,
+        BufferDesc {
+            size,
+            usage: vk::BufferUsageFlags::STORAGE_BUFFER,
+            location: gpu_allocator::MemoryLocation::GpuOnly,
+        },
+        &format!("frame slot {slot} morphed heights"),
+    )
+}
+
 /// A frame submitted from a slot and not yet collected.
 struct Pending {
     record: FrameRecord,
@@ -38,6 +52,9 @@ pub(super) struct Slot {
     pub(super) records: Buffer,
     /// The vertex shader's heights (read-back; 16 bytes unused otherwise).
     pub(super) heights: Buffer,
+    /// The morph pass's heights for the frame's draws (`memory::budget`'s share: draws past
+    /// it are drawn unmorphed).
+    pub(super) morphed: Buffer,
     pub(super) staging: Staging,
     pub(super) target: Target,
     pending: Option<Pending>,
@@ -49,6 +66,7 @@ pub(super) struct SlotSizes {
     pub(super) stitch: u64,
     pub(super) records: u64,
     pub(super) heights: u64,
+    pub(super) morphed: u64,
     pub(super) staging: u64,
     pub(super) extent: (u32, u32),
 }
@@ -83,6 +101,7 @@ impl Slot {
                 BufferDesc::readback_storage(sizes.heights),
                 &format!("frame slot {i} heights read back"),
             )?,
+            morphed: morphed_buffer(gpu, i, sizes.morphed)?,
             staging: Staging::new(gpu, sizes.staging, &format!("frame slot {i} staging"))?,
             target: Target::new(gpu, sizes.extent.0, sizes.extent.1)?,
             pending: None,
@@ -96,6 +115,7 @@ impl Slot {
         self.stitch.destroy(gpu);
         self.records.destroy(gpu);
         self.heights.destroy(gpu);
+        self.morphed.destroy(gpu);
         self.staging.destroy(gpu);
         self.target.destroy(gpu);
     }

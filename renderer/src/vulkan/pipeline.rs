@@ -1,9 +1,11 @@
 //! The terrain pipeline: vertices pulled from the tile pool (a storage buffer) with each draw's
 //! tile record (another), triangle fans with primitive restart, one push-constant block per
-//! frame, reversed-Z depth, dynamic rendering. Vertex shaders: geomorphing from the two levels
-//! around each vertex's level (the default), the paper's forward differences over every level
-//! (the reference), and, for `--read-back-heights`, the default writing every vertex's height
-//! to a buffer. The fragment shader samples the texture array (one layer per texture slot).
+//! frame, reversed-Z depth, dynamic rendering. Vertex shaders: geomorphing from the heights the
+//! morph pass placed (the default; the pass is a compute pipeline of the same set layout), the
+//! previous per-vertex rule from the two levels around each vertex's level and from the
+//! paper's forward differences over every level (the comparisons), and, for
+//! `--read-back-heights`, the default writing every vertex's height to a buffer. The fragment
+//! shader samples the texture array (one layer per texture slot).
 
 use std::ffi::CStr;
 
@@ -18,12 +20,19 @@ pub struct TerrainPipeline {
     /// binding 2: the texture array and its sampler; binding 3: the heights read back;
     /// binding 4: the drawn tile's record (a dynamic uniform buffer over binding 1, moved to
     /// each draw's record); binding 5: the frame's morph constants (the records buffer's first
-    /// bytes, a uniform buffer).
+    /// bytes, a uniform buffer); binding 6: the frame's morphed heights (written by the morph
+    /// pass, read by the vertex shader); binding 7: the morph pass's scratch grids.
     pub set_layout: vk::DescriptorSetLayout,
     pub layout: vk::PipelineLayout,
     pub fill: Pair,
-    /// The same with the forward-differences morph (`--morph-shader forward-differences`).
+    /// The previous per-vertex rule (`--morph-shader two-levels`).
+    pub two_levels: Pair,
+    /// The same rule with the paper's forward differences (`--morph-shader forward-differences`).
     pub all_rows: Pair,
+    /// The morph pass (`morph.comp`) and its layout: the set layout above, the frame's push
+    /// constants for the compute stage.
+    pub morph_layout: vk::PipelineLayout,
+    pub morph_pass: vk::Pipeline,
     /// The default writing each vertex's height (`--read-back-heights`; needs
     /// `vertexPipelineStoresAndAtomics`).
     pub read_back: Option<Pair>,
@@ -33,17 +42,9 @@ pub struct TerrainPipeline {
 
 /// The terrain set's bindings (as [`TerrainPipeline::set_layout`] describes them): number,
 /// kind and stages, the one list the layout, the pool's sizes and the writes take them from.
-const BINDINGS: [(u32, vk::DescriptorType, vk::ShaderStageFlags); 6] = [
-    (
-        0,
-        vk::DescriptorType::STORAGE_BUFFER,
-        vk::ShaderStageFlags::VERTEX,
-    ),
-    (
-        1,
-        vk::DescriptorType::STORAGE_BUFFER,
-        vk::ShaderStageFlags::VERTEX,
-    ),
+const BINDINGS: [(u32, vk::DescriptorType, vk::ShaderStageFlags); 8] = [
+    (0, vk::DescriptorType::STORAGE_BUFFER, VERTEX_AND_MORPH),
+    (1, vk::DescriptorType::STORAGE_BUFFER, VERTEX_AND_MORPH),
     (
         2,
         vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
@@ -59,12 +60,35 @@ const BINDINGS: [(u32, vk::DescriptorType, vk::ShaderStageFlags); 6] = [
         vk::DescriptorType::UNIFORM_BUFFER_DYNAMIC,
         vk::ShaderStageFlags::VERTEX,
     ),
+    (5, vk::DescriptorType::UNIFORM_BUFFER, VERTEX_AND_MORPH),
+    (6, vk::DescriptorType::STORAGE_BUFFER, VERTEX_AND_MORPH),
     (
-        5,
-        vk::DescriptorType::UNIFORM_BUFFER,
-        vk::ShaderStageFlags::VERTEX,
+        7,
+        vk::DescriptorType::STORAGE_BUFFER,
+        vk::ShaderStageFlags::COMPUTE,
     ),
 ];
+
+/// The stages of the bindings both the vertex shader and the morph pass read.
+const VERTEX_AND_MORPH: vk::ShaderStageFlags = vk::ShaderStageFlags::from_raw(
+    vk::ShaderStageFlags::VERTEX.as_raw() | vk::ShaderStageFlags::COMPUTE.as_raw(),
+);
+
+/// Workgroups of the morph pass at most: each places one tile at a time in a scratch region of
+/// its own (`memory::budget` decides how many the budget holds).
+pub const MORPH_GROUPS: u32 = 16;
+/// Bytes of one workgroup's scratch region: a grid of 257 x 257 pairs of floats and its lists
+/// of vertices by scale (as many 8-byte entries again at most).
+pub const MORPH_REGION_BYTES: u64 = 2 * 257 * 257 * 8;
+
+/// What one terrain set points at beside the pool, the textures and the morph scratch: its
+/// frame's records, read-back heights and morphed heights.
+#[derive(Clone, Copy)]
+pub struct SetBuffers<'a> {
+    pub records: &'a super::Buffer,
+    pub heights: &'a super::Buffer,
+    pub morphed: &'a super::Buffer,
+}
 
 /// One vertex shader's two pipelines: for tiles, which read their record through the Tile
 /// binding, and for stitches, whose vertices read theirs by record number (`STITCH`).
@@ -121,6 +145,11 @@ impl TerrainPipeline {
         gpu.name(layout, "terrain pipeline layout");
         let vert = shader(gpu, spirv::TERRAIN_VERT, "terrain.vert")?;
         let vert_all_rows = shader(gpu, spirv::TERRAIN_VERT_ALL_ROWS, "terrain.vert (all rows)")?;
+        let vert_two_levels = shader(
+            gpu,
+            spirv::TERRAIN_VERT_TWO_LEVELS,
+            "terrain.vert (two levels)",
+        )?;
         let vert_read_back = shader(
             gpu,
             spirv::TERRAIN_VERT_READ_BACK,
@@ -158,6 +187,11 @@ impl TerrainPipeline {
             })
         };
         let fill = pair(vert, vk::PolygonMode::FILL, "terrain (fill)");
+        let two_levels = pair(
+            vert_two_levels,
+            vk::PolygonMode::FILL,
+            "terrain (fill, two levels)",
+        );
         let all_rows = pair(
             vert_all_rows,
             vk::PolygonMode::FILL,
@@ -177,21 +211,79 @@ impl TerrainPipeline {
         unsafe {
             gpu.device.destroy_shader_module(vert, None);
             gpu.device.destroy_shader_module(vert_all_rows, None);
+            gpu.device.destroy_shader_module(vert_two_levels, None);
             gpu.device.destroy_shader_module(vert_read_back, None);
             gpu.device.destroy_shader_module(frag, None);
         }
         let fill = fill?;
+        let two_levels = two_levels?;
         let all_rows = all_rows?;
         let read_back = read_back.transpose()?;
         let wireframe = wireframe.transpose()?;
+        let (morph_layout, morph_pass) = morph_pipeline(gpu, set_layout)?;
         Ok(TerrainPipeline {
             set_layout,
             layout,
             fill,
+            two_levels,
             all_rows,
+            morph_layout,
+            morph_pass,
             read_back,
             wireframe,
         })
+    }
+
+    /// Records the morph pass over the frame's `constants.draws` records, with `set` (its
+    /// records, morphed heights and the scratch): after the frame's copies and index builds
+    /// (and the previous frames' passes, which share the scratch), before its draws.
+    pub fn record_morph_pass(
+        &self,
+        gpu: &Gpu,
+        cmd: vk::CommandBuffer,
+        (set, groups): (vk::DescriptorSet, u32),
+        constants: &crate::interface::FrameConstants,
+    ) {
+        if constants.draws == 0 || groups == 0 {
+            return;
+        }
+        let compute = vk::PipelineStageFlags::COMPUTE_SHADER;
+        let earlier = vk::PipelineStageFlags::TRANSFER | compute;
+        let written = vk::AccessFlags::TRANSFER_WRITE | vk::AccessFlags::SHADER_WRITE;
+        let shader = vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE;
+        super::sync::memory_barrier(gpu, cmd, (earlier, written), (compute, shader));
+        // SAFETY: recording outside rendering; the set's buffers outlive the command buffer.
+        unsafe {
+            gpu.device
+                .cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.morph_pass);
+            gpu.device.cmd_bind_descriptor_sets(
+                cmd,
+                vk::PipelineBindPoint::COMPUTE,
+                self.morph_layout,
+                0,
+                &[set],
+                // The set's Tile binding (dynamic) at the first record; the pass reads none.
+                &[crate::interface::tile_binding_offset(0)],
+            );
+            gpu.device.cmd_push_constants(
+                cmd,
+                self.morph_layout,
+                vk::ShaderStageFlags::COMPUTE,
+                0,
+                bytemuck::bytes_of(constants),
+            );
+            gpu.device
+                .cmd_dispatch(cmd, constants.draws.min(groups), 1, 1);
+        }
+        super::sync::memory_barrier(
+            gpu,
+            cmd,
+            (compute, vk::AccessFlags::SHADER_WRITE),
+            (
+                vk::PipelineStageFlags::VERTEX_SHADER,
+                vk::AccessFlags::SHADER_READ,
+            ),
+        );
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -278,8 +370,11 @@ impl TerrainPipeline {
     pub fn destroy(self, gpu: &Gpu) {
         // SAFETY: no command buffer in flight uses them.
         unsafe {
+            gpu.device.destroy_pipeline(self.morph_pass, None);
+            gpu.device.destroy_pipeline_layout(self.morph_layout, None);
             let pairs = [
                 Some(self.fill),
+                Some(self.two_levels),
                 Some(self.all_rows),
                 self.read_back,
                 self.wireframe,
@@ -361,16 +456,17 @@ pub struct TerrainSets {
 }
 
 impl TerrainSets {
-    /// `count` sets, each pointing at the tile pool, at its own records and heights buffers
-    /// and at the texture array.
+    /// A set for each of `buffers`, pointing at the tile pool, at its own records, heights and
+    /// morphed heights, at the morph pass's `scratch` and at the texture array.
     pub fn new(
         gpu: &Gpu,
         pipeline: &TerrainPipeline,
-        tile_pool: &super::Buffer,
-        records: &[(&super::Buffer, &super::Buffer)],
+        (tile_pool, scratch): (&super::Buffer, &super::Buffer),
+        buffers: &[SetBuffers<'_>],
         textures: &super::texture::TextureArray,
         name: &str,
     ) -> VkResult<TerrainSets> {
+        let records = buffers;
         let count = records.len().max(1) as u32;
         // Per descriptor kind, its bindings' count in every set.
         let mut sizes: Vec<vk::DescriptorPoolSize> = Vec::new();
@@ -406,7 +502,8 @@ impl TerrainSets {
         let range = tile_pool
             .size
             .min(u64::from(gpu.properties.limits.max_storage_buffer_range));
-        for (&set, (r, heights)) in sets.iter().zip(records) {
+        for (&set, b) in sets.iter().zip(records) {
+            let (r, heights) = (b.records, b.heights);
             let pool_info = [vk::DescriptorBufferInfo::default()
                 .buffer(tile_pool.raw)
                 .range(range)];
@@ -422,6 +519,12 @@ impl TerrainSets {
                 .range(std::mem::size_of::<MorphFrame>() as u64)];
             let heights_info = [vk::DescriptorBufferInfo::default()
                 .buffer(heights.raw)
+                .range(vk::WHOLE_SIZE)];
+            let morphed_info = [vk::DescriptorBufferInfo::default()
+                .buffer(b.morphed.raw)
+                .range(vk::WHOLE_SIZE)];
+            let scratch_info = [vk::DescriptorBufferInfo::default()
+                .buffer(scratch.raw)
                 .range(vk::WHOLE_SIZE)];
             let texture_info = [vk::DescriptorImageInfo::default()
                 .sampler(textures.sampler)
@@ -440,6 +543,8 @@ impl TerrainSets {
                 write(3).buffer_info(&heights_info),
                 write(4).buffer_info(&tile_info),
                 write(5).buffer_info(&morph_info),
+                write(6).buffer_info(&morphed_info),
+                write(7).buffer_info(&scratch_info),
             ];
             // SAFETY: the set is not in use; the buffers, view and sampler are live.
             unsafe { gpu.device.update_descriptor_sets(&writes, &[]) };
@@ -450,5 +555,55 @@ impl TerrainSets {
     pub fn destroy(self, gpu: &Gpu) {
         // SAFETY: no command buffer in flight uses the sets.
         unsafe { gpu.device.destroy_descriptor_pool(self.pool, None) };
+    }
+}
+
+/// The morph pass's pipeline and layout over the terrain set layout.
+fn morph_pipeline(
+    gpu: &Gpu,
+    set_layout: vk::DescriptorSetLayout,
+) -> VkResult<(vk::PipelineLayout, vk::Pipeline)> {
+    let ranges = [vk::PushConstantRange::default()
+        .stage_flags(vk::ShaderStageFlags::COMPUTE)
+        .size(PUSH_CONSTANT_BYTES)];
+    let set_layouts = [set_layout];
+    let layout_info = vk::PipelineLayoutCreateInfo::default()
+        .set_layouts(&set_layouts)
+        .push_constant_ranges(&ranges);
+    // SAFETY: valid create info.
+    let layout = unsafe { gpu.device.create_pipeline_layout(&layout_info, None) }?;
+    gpu.name(layout, "morph pass pipeline layout");
+    let module = match shader(gpu, spirv::MORPH_COMP, "morph.comp") {
+        Ok(m) => m,
+        Err(e) => {
+            // SAFETY: unused.
+            unsafe { gpu.device.destroy_pipeline_layout(layout, None) };
+            return Err(e);
+        }
+    };
+    let stage = vk::PipelineShaderStageCreateInfo::default()
+        .stage(vk::ShaderStageFlags::COMPUTE)
+        .module(module)
+        .name(c"main");
+    let info = [vk::ComputePipelineCreateInfo::default()
+        .stage(stage)
+        .layout(layout)];
+    // SAFETY: valid create info; the module is destroyed once the pipeline exists.
+    let pipelines = unsafe {
+        gpu.device
+            .create_compute_pipelines(vk::PipelineCache::null(), &info, None)
+    };
+    // SAFETY: no longer needed either way.
+    unsafe { gpu.device.destroy_shader_module(module, None) };
+    match pipelines {
+        Ok(p) => {
+            gpu.name(p[0], "morph pass");
+            Ok((layout, p[0]))
+        }
+        Err((_, e)) => {
+            // SAFETY: unused.
+            unsafe { gpu.device.destroy_pipeline_layout(layout, None) };
+            Err(e.into())
+        }
     }
 }

@@ -1,0 +1,191 @@
+#version 450
+// The morph pass: places every vertex a frame draws at its morphed height, once a frame,
+// before the draws (renderer/src/morph.rs has the rule, its error bound and the CPU mirror of
+// this arithmetic; renderer/src/vulkan/morph_pass.rs records the dispatch).
+//
+// The vertices of a tile's meshes form a hierarchy: every vertex but the tile's corners lies
+// midway between two parents of a coarser scale (an edge's midpoint between the edge's ends,
+// a cell's centre between its parent cell's centre and the parent's corner it faces), and a
+// mesh that lacks the vertex has the segment between its parents as an edge, so its surface
+// there is the parents' mean. A vertex of block j with level l is placed at
+//
+//     m(v) = (m(p) + m(q)) / 2 + w (own(v) - (own(p) + own(q)) / 2),   w = clamp(l - j + 1, 0, 1),
+//
+// its parents' mean plus its share w of its own detail; block 0 is always at its own height.
+// Where every vertex is at w = 1 that is the level's surface; where a vertex has w = 0 it lies
+// on the surface drawn without it, so a finer level arriving moves nothing at first.
+//
+// One workgroup places one tile at a time (the records r = g, g + groups, ...), in a scratch
+// region of its own (never cleared: every parent is a vertex of the tile's drawn blocks, so
+// only what was written for this tile is read). First each invocation takes vertices of the
+// tile, writes their own heights into the region's 257 x 257 grid, places block 0, and lists
+// every other vertex under its scale (a list per scale, at a fixed place, as long as the grid
+// has points of that scale). Then, from the coarsest scale (128 samples) to the finest (1),
+// the invocations place the vertices of one list each round from the grid, with a barrier
+// between scales: a vertex is read from the pool once and placed once.
+
+#define MORPH_PASS
+#include "interface.glsl"
+
+layout(local_size_x = 32) in;
+const uint LANES = 32u;
+
+const uint SIDE = 257;
+const uint GRID = SIDE * SIDE;
+// A workgroup's region: the grid of (own, morphed) heights, then the lists of (vertex, packed
+// position) by scale.
+const uint REGION = 2u * GRID;
+
+// Per workgroup: the grid (vec2 per point), then the lists (uvec2 per entry), as floats' bits.
+layout(std430, set = 0, binding = 7) coherent buffer Scratch { uvec2 cells[]; } scratch;
+layout(std430, set = 0, binding = 6) writeonly buffer Morphed { float values[]; } morphed;
+
+// The level whose blocks the draw's mesh takes at tile-local (x, y) (indices.comp and
+// tiles::parts::presence_level): the part's inside a part, the finest of the parts that meet
+// at a line, the finest of all on the tile's border.
+uint presence_level(uint x, uint y, uint parts_lo, uint parts_hi, uint top) {
+    if (x == 0u || y == 0u || x >= SIDE - 1u || y >= SIDE - 1u) {
+        return top;
+    }
+    uint i1 = x / 64u, j1 = y / 64u;
+    uint i0 = x % 64u == 0u ? i1 - 1u : i1;
+    uint j0 = y % 64u == 0u ? j1 - 1u : j1;
+    uint best = 0u;
+    for (uint c = 0u; c < 4u; ++c) {
+        uint k = ((c & 2u) != 0u ? j1 : j0) * 4u + ((c & 1u) != 0u ? i1 : i0);
+        uint word = k < 8u ? parts_lo : parts_hi;
+        best = max(best, (word >> (4u * (k % 8u))) & 15u);
+    }
+    return best;
+}
+
+// Vertices listed per scale index (scale 2^k at k) for the tile being placed.
+shared uint listed[8];
+
+// Where the list of scale index k starts in a region: after the grid and the lists of the
+// coarser scales, each as long as the grid's points of its scale, (256/s + 1)^2 - (128/s + 1)^2
+// for s = 2^k < 256 (the first of which, s = 128, has 5: the tile's centre and edge midpoints).
+uint list_start(uint k) {
+    uint start = GRID;
+    for (uint c = 7u; c > k; --c) {
+        uint a = (256u >> c) + 1u;
+        uint b = (128u >> c) + 1u;
+        start += a * a - b * b;
+    }
+    return start;
+}
+
+// The scale index of tile-local grid point (x, y): log2 of the largest power of two dividing
+// both (8 or more for the tile's corners, which have no parents and stay at their own height).
+uint scale_index(uint x, uint y) {
+    uint m = x | y;
+    return m == 0u ? 9u : uint(findLSB(m));
+}
+
+void main() {
+    uint g = gl_WorkGroupID.x;
+    uint groups = gl_NumWorkGroups.x;
+    uint lane = gl_LocalInvocationID.x;
+    uint region = g * REGION;
+    for (uint r = g; r < frame.draws; r += groups) {
+        uint positions = records.tiles[r].positions;
+        uint level = records.tiles[r].level;
+        uint out_at = records.tiles[r].heights;
+        if (out_at == 0xffffffffu) {
+            continue;   // past the frame's morphed heights: drawn unmorphed (the same for the group)
+        }
+        int height_base = records.tiles[r].height_base;
+        ivec2 tile_offset = records.tiles[r].tile_offset;
+        float cap = records.tiles[r].cap;
+        uvec4 starts_lo = records.tiles[r].starts_lo;
+        uvec4 starts_hi = records.tiles[r].starts_hi;
+        // The interior's level table, which most vertices take, read once for the tile.
+        LevelCoefficients interior = records.tiles[r].tables[0];
+        uint parts_lo = records.tiles[r].parts_lo;
+        uint parts_hi = records.tiles[r].parts_hi;
+        uvec4 last = records.tiles[r].blocks[min(level, 8u)];
+        uint count = last.x + last.y;
+        if (lane < 8u) {
+            listed[lane] = 0u;
+        }
+        barrier();
+        // Own heights into the grid; block 0 placed; the others listed by scale.
+        for (uint i = lane; i < count; i += LANES) {
+            uint v = pool.words[positions + i];
+            uint x = v & 511u;
+            uint y = (v >> 9) & 511u;
+            float own = float(height_base + int(v >> 18)) * frame.height_step;
+            scratch.cells[region + y * SIDE + x] = uvec2(floatBitsToUint(own));
+            uint k = scale_index(x, y);
+            uvec4 passed = uvec4(greaterThanEqual(uvec4(i), starts_lo))
+                         + uvec4(greaterThanEqual(uvec4(i), starts_hi));
+            uint j = passed.x + passed.y + passed.z + passed.w;
+            if (i < starts_lo.x || k > 7u) {
+                morphed.values[out_at + i] = own;
+            } else if (j <= presence_level(x, y, parts_lo, parts_hi, level)) {
+                // (A vertex the mesh does not hold is neither placed nor drawn.)
+                uint slot = atomicAdd(listed[k], 1u);
+                scratch.cells[region + list_start(k) + slot] = uvec2(i, v);
+            }
+        }
+        memoryBarrierBuffer();
+        barrier();
+        for (int k = 7; k >= 0; --k) {
+            uint s = 1u << uint(k);
+            uint start = region + list_start(uint(k));
+            uint n = listed[k];
+            if (n == 0u) {
+                continue;   // the same for the whole workgroup: no barrier is skipped by part
+            }
+            for (uint e = lane; e < n; e += LANES) {
+                uvec2 entry = scratch.cells[start + e];
+                uint i = entry.x;
+                uint v = entry.y;
+                uint x = v & 511u;
+                uint y = (v >> 9) & 511u;
+                bool ox = ((x >> k) & 1u) == 1u;
+                bool oy = ((y >> k) & 1u) == 1u;
+                uvec2 p, q;
+                if (ox && oy) {
+                    // A cell's centre: the diagonal through its parent cell's centre (the
+                    // tile's centre, whose cell has no parent: the north-west one).
+                    bool dx = s == 128u || (((x + s) >> (k + 1)) & 1u) == 1u;
+                    bool dy = s == 128u || (((y + s) >> (k + 1)) & 1u) == 1u;
+                    p = uvec2(dx ? x + s : x - s, dy ? y + s : y - s);
+                    q = uvec2(dx ? x - s : x + s, dy ? y - s : y + s);
+                } else if (ox) {
+                    p = uvec2(x - s, y);
+                    q = uvec2(x + s, y);
+                } else {
+                    p = uvec2(x, y - s);
+                    q = uvec2(x, y + s);
+                }
+                vec2 a = uintBitsToFloat(scratch.cells[region + p.y * SIDE + p.x]);
+                vec2 b = uintBitsToFloat(scratch.cells[region + q.y * SIDE + q.x]);
+                float own = float(height_base + int(v >> 18)) * frame.height_step;
+                ivec2 sample_pos = tile_offset + ivec2(int(x), int(y));
+                vec3 relative = vec3(float(sample_pos.x) * frame.camera.w,
+                                     -float(sample_pos.y) * frame.spacing_y, own)
+                              - frame.camera.xyz;
+                vec4 clip = frame.view_proj * vec4(relative, 1.0);
+                uint t = table_of(x, y);
+                LevelCoefficients c;
+                if (t == 0u) {
+                    c = interior;
+                } else {
+                    c = records.tiles[r].tables[t];
+                }
+                float l = min(vertex_level(clip, c), cap);
+                uvec4 passed = uvec4(greaterThanEqual(uvec4(i), starts_lo))
+                             + uvec4(greaterThanEqual(uvec4(i), starts_hi));
+                uint j = passed.x + passed.y + passed.z + passed.w;
+                float w = clamp(l - float(j) + 1.0, 0.0, 1.0);
+                float m = 0.5 * (a.y + b.y) + w * (own - 0.5 * (a.x + b.x));
+                scratch.cells[region + y * SIDE + x].y = floatBitsToUint(m);
+                morphed.values[out_at + i] = m;
+            }
+            memoryBarrierBuffer();
+            barrier();
+        }
+    }
+}
