@@ -138,7 +138,7 @@ pub fn limit_table(extras: Extras) -> Result<()> {
     std::fs::create_dir_all(&dir)?;
     // "geomorph" rows draw part by part on every device (the default only on software
     // rasterisers), so that the table compares the same modes on lavapipe and on a GPU.
-    let modes: [(&str, &[&str]); 10] = [
+    let modes: [(&str, &[&str]); 11] = [
         ("brute force", &["--brute-force"]),
         ("discrete, tau 1", &["--tau", "1", "--no-geomorph"]),
         ("discrete, tau 3", &["--tau", "3", "--no-geomorph"]),
@@ -155,13 +155,23 @@ pub fn limit_table(extras: Extras) -> Result<()> {
             &["--tau", "3", "--whole-tiles"],
         ),
         (
-            "geomorph, tau 1, forward differences",
+            "geomorph, tau 1, two levels (no morph pass)",
             &[
                 "--tau",
                 "1",
                 "--part-by-part",
                 "--morph-shader",
-                "forward-differences",
+                "two-levels",
+            ],
+        ),
+        (
+            "geomorph, tau 3, two levels (no morph pass)",
+            &[
+                "--tau",
+                "3",
+                "--part-by-part",
+                "--morph-shader",
+                "two-levels",
             ],
         ),
     ];
