@@ -128,8 +128,6 @@ impl MorphCost {
 /// their middle levels; fewer when the set has fewer at its finest).
 pub const MIN_MORPHED_VERTICES: u64 = 1 << 16;
 
-impl MorphCost {}
-
 /// One tile's texture mip chain, as the tile set stores it.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct MipChain {
