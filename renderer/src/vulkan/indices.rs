@@ -156,25 +156,12 @@ impl IndexBuilder {
         // SAFETY: valid create info.
         self.layout = unsafe { gpu.device.create_pipeline_layout(&layout_info, None) }?;
         gpu.name(self.layout, "index build pipeline layout");
-        let info = vk::ShaderModuleCreateInfo::default().code(spirv::INDICES_COMP);
-        // SAFETY: SPIR-V compiled at build time.
-        let module = unsafe { gpu.device.create_shader_module(&info, None) }?;
-        let stage = vk::PipelineShaderStageCreateInfo::default()
-            .stage(vk::ShaderStageFlags::COMPUTE)
-            .module(module)
-            .name(c"main");
-        let info = [vk::ComputePipelineCreateInfo::default()
-            .stage(stage)
-            .layout(self.layout)];
-        // SAFETY: valid create info; the module is destroyed once the pipeline exists.
-        let pipelines = unsafe {
-            gpu.device
-                .create_compute_pipelines(vk::PipelineCache::null(), &info, None)
-        };
-        // SAFETY: no longer needed either way.
-        unsafe { gpu.device.destroy_shader_module(module, None) };
-        self.pipeline = pipelines.map_err(|(_, e)| VkError::from(e))?[0];
-        gpu.name(self.pipeline, "index build pipeline");
+        self.pipeline = super::pipeline::compute_pipeline(
+            gpu,
+            spirv::INDICES_COMP,
+            self.layout,
+            "index build pipeline",
+        )?;
         self.create_sets(gpu, pool, slots)
     }
 
@@ -284,19 +271,7 @@ impl IndexBuilder {
             | compute;
         let written = vk::AccessFlags::TRANSFER_WRITE | vk::AccessFlags::SHADER_WRITE;
         sync::memory_barrier(gpu, cmd, (earlier, written), (compute, shader));
-        // SAFETY: recording outside rendering; the set's buffers outlive the command buffer.
-        unsafe {
-            gpu.device
-                .cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.pipeline);
-            gpu.device.cmd_bind_descriptor_sets(
-                cmd,
-                vk::PipelineBindPoint::COMPUTE,
-                self.layout,
-                0,
-                &[self.sets[s]],
-                &[],
-            );
-        }
+        sync::bind_compute(gpu, cmd, (self.pipeline, self.layout), self.sets[s], &[]);
         let mut first = 0;
         while first < count {
             if first > 0 {

@@ -11,7 +11,7 @@ use std::ffi::CStr;
 
 use ash::vk;
 
-use super::{Gpu, VkResult};
+use super::{Gpu, VkError, VkResult};
 
 use crate::interface::{MorphFrame, PUSH_CONSTANT_BYTES, RECORDS_OFFSET, RECORD_BYTES};
 
@@ -252,19 +252,12 @@ impl TerrainPipeline {
         let written = vk::AccessFlags::TRANSFER_WRITE | vk::AccessFlags::SHADER_WRITE;
         let shader = vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE;
         super::sync::memory_barrier(gpu, cmd, (earlier, written), (compute, shader));
-        // SAFETY: recording outside rendering; the set's buffers outlive the command buffer.
+        // The set's Tile binding (dynamic) at the first record; the pass reads none.
+        let offsets = [crate::interface::tile_binding_offset(0)];
+        let pipeline = (self.morph_pass, self.morph_layout);
+        super::sync::bind_compute(gpu, cmd, pipeline, set, &offsets);
+        // SAFETY: recording outside rendering; the pipeline and its set are bound.
         unsafe {
-            gpu.device
-                .cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.morph_pass);
-            gpu.device.cmd_bind_descriptor_sets(
-                cmd,
-                vk::PipelineBindPoint::COMPUTE,
-                self.morph_layout,
-                0,
-                &[set],
-                // The set's Tile binding (dynamic) at the first record; the pass reads none.
-                &[crate::interface::tile_binding_offset(0)],
-            );
             gpu.device.cmd_push_constants(
                 cmd,
                 self.morph_layout,
@@ -573,14 +566,24 @@ fn morph_pipeline(
     // SAFETY: valid create info.
     let layout = unsafe { gpu.device.create_pipeline_layout(&layout_info, None) }?;
     gpu.name(layout, "morph pass pipeline layout");
-    let module = match shader(gpu, spirv::MORPH_COMP, "morph.comp") {
-        Ok(m) => m,
+    match compute_pipeline(gpu, spirv::MORPH_COMP, layout, "morph pass") {
+        Ok(p) => Ok((layout, p)),
         Err(e) => {
             // SAFETY: unused.
             unsafe { gpu.device.destroy_pipeline_layout(layout, None) };
-            return Err(e);
+            Err(e)
         }
-    };
+    }
+}
+
+/// A compute pipeline of `words` (SPIR-V compiled at build time) with `layout`, named `name`.
+pub(crate) fn compute_pipeline(
+    gpu: &Gpu,
+    words: &[u32],
+    layout: vk::PipelineLayout,
+    name: &str,
+) -> VkResult<vk::Pipeline> {
+    let module = shader(gpu, words, name)?;
     let stage = vk::PipelineShaderStageCreateInfo::default()
         .stage(vk::ShaderStageFlags::COMPUTE)
         .module(module)
@@ -595,15 +598,7 @@ fn morph_pipeline(
     };
     // SAFETY: no longer needed either way.
     unsafe { gpu.device.destroy_shader_module(module, None) };
-    match pipelines {
-        Ok(p) => {
-            gpu.name(p[0], "morph pass");
-            Ok((layout, p[0]))
-        }
-        Err((_, e)) => {
-            // SAFETY: unused.
-            unsafe { gpu.device.destroy_pipeline_layout(layout, None) };
-            Err(e.into())
-        }
-    }
+    let pipeline = pipelines.map_err(|(_, e)| VkError::from(e))?[0];
+    gpu.name(pipeline, name);
+    Ok(pipeline)
 }

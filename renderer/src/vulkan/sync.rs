@@ -267,3 +267,27 @@ pub fn layout_barrier(
         );
     }
 }
+
+/// Binds a compute pipeline and its set 0 (with `dynamic_offsets` for its dynamic bindings).
+pub fn bind_compute(
+    gpu: &Gpu,
+    cmd: vk::CommandBuffer,
+    (pipeline, layout): (vk::Pipeline, vk::PipelineLayout),
+    set: vk::DescriptorSet,
+    dynamic_offsets: &[u32],
+) {
+    // SAFETY: recording outside rendering; the caller keeps the set's buffers alive for the
+    // command buffer.
+    unsafe {
+        gpu.device
+            .cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, pipeline);
+        gpu.device.cmd_bind_descriptor_sets(
+            cmd,
+            vk::PipelineBindPoint::COMPUTE,
+            layout,
+            0,
+            &[set],
+            dynamic_offsets,
+        );
+    }
+}
