@@ -187,5 +187,8 @@ void main() {
             memoryBarrierBuffer();
             barrier();
         }
+        // Every invocation is done with this tile's counts before the next resets them (the
+        // scales skipped above skipped their barriers too).
+        barrier();
     }
 }
