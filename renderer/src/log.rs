@@ -399,6 +399,9 @@ pub struct Summary {
     pub heights_max_diff_m: Option<f64>,
     /// GPU allocations after the first frame (the pool is allocated once: 0).
     pub gpu_allocations_after_first_frame: u64,
+    /// Frames drawn unmorphed while morphing: their draws needed more morphed heights than
+    /// the morph pass's share of the budget holds (`tiles_unmorphed`).
+    pub frames_unmorphed: u64,
     pub hits: u64,
     pub misses: u64,
     pub evictions: u64,
@@ -528,6 +531,7 @@ impl Summary {
                 .skip(1)
                 .map(|r| r.gpu_allocations)
                 .sum(),
+            frames_unmorphed: records.iter().filter(|r| r.tiles_unmorphed > 0).count() as u64,
             hits: sum(|r| r.hits),
             misses: sum(|r| r.misses),
             evictions: sum(|r| r.evictions),

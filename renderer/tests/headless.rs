@@ -245,6 +245,9 @@ fn a_348_mb_tile_set_flies_in_64_mb() {
     // view at tau 1 fits in 64 MB; the flight as a whole does not, so tiles are evicted).
     let s = tight(&set, (64, 16), "1024x768", 12, 0.5);
     assert_eq!(s["index_arrays"], "built", "{s}");
+    // The morph pass's share of 64 MB (a mebibyte of heights a slot) holds fewer vertices
+    // than these frames draw: they are drawn unmorphed, counted, and crack-free (above).
+    assert!(s["frames_unmorphed"].as_u64() > Some(0), "{s}");
 }
 
 #[test]
@@ -1149,6 +1152,11 @@ fn the_morph_shaders_draw_the_same_terrain() {
     let (two, two_tris) = run("two", &["--morph-shader", "two-levels"]);
     let (fd, fd_tris) = run("fd", &["--morph-shader", "forward-differences"]);
     let (discrete, _) = run("discrete", &["--no-geomorph"]);
+    // The default budget's share holds every frame's heights: the pass morphed them all.
+    let summary = dir.path().join("pass").join("frames.json");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(summary).expect("summary")).expect("json");
+    assert_eq!(summary["frames_unmorphed"], 0, "{summary}");
     assert_eq!(two_tris, fd_tris);
     assert_eq!(pass_tris, two_tris);
     let differing = |a: &image::RgbaImage, b: &image::RgbaImage| {
