@@ -91,7 +91,9 @@ fn main() {
         PathBuf::from(std::env::var("CARGO_MANIFEST_DIR").expect("cargo sets it")).join("shaders");
     let compiler = shaderc::Compiler::new().expect("shaderc initialises");
     let mut out = String::new();
-    println!("cargo:rerun-if-changed={}", dir.join(INTERFACE).display());
+    for include in [INTERFACE, "parts.glsl"] {
+        println!("cargo:rerun-if-changed={}", dir.join(include).display());
+    }
     let mut layout = None;
     for (name, file, kind, define) in SHADERS {
         let mut options = shaderc::CompileOptions::new().expect("shaderc options");

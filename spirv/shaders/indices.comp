@@ -87,23 +87,16 @@ bool is_vertex(uint x, uint y) {
     return (present[i / 32] & (1u << (i % 32))) != 0;
 }
 
+#include "parts.glsl"
+
 // The level of part (i, j) of a mixed build.
 uint part_level(uint i, uint j) {
-    uint k = j * 4 + i;
-    return (b.parts[k / 8] >> (4 * (k % 8))) & 15u;
+    return packed_part_level(uvec2(b.parts[0], b.parts[1]), i, j);
 }
 
-// The level whose blocks give lattice point (x, y) of a mixed build its vertices: the part's
-// inside a part, the finest of the parts that meet at a line, the top level on the border.
+// The level whose blocks give lattice point (x, y) of a mixed build its vertices.
 uint presence_level(uint x, uint y, uint top) {
-    if (x == 0 || y == 0 || x >= SIDE - 1 || y >= SIDE - 1) {
-        return top;
-    }
-    uint i1 = x / PART, j1 = y / PART;
-    uint i0 = x % PART == 0 ? i1 - 1 : i1;
-    uint j0 = y % PART == 0 ? j1 - 1 : j1;
-    return max(max(part_level(i0, j0), part_level(i1, j0)),
-               max(part_level(i0, j1), part_level(i1, j1)));
+    return packed_presence_level(uvec2(b.parts[0], b.parts[1]), x, y, top);
 }
 
 // The block vertex v belongs to.

@@ -40,40 +40,17 @@ const uint REGION = 2u * GRID;
 layout(std430, set = 0, binding = 7) coherent buffer Scratch { uvec2 cells[]; } scratch;
 layout(std430, set = 0, binding = 6) writeonly buffer Morphed { float values[]; } morphed;
 
-// The level whose blocks the draw's mesh takes at tile-local (x, y) (indices.comp and
-// tiles::parts::presence_level): the part's inside a part, the finest of the parts that meet
-// at a line, the finest of all on the tile's border.
-uint presence_level(uint x, uint y, uint parts_lo, uint parts_hi, uint top) {
-    if (x == 0u || y == 0u || x >= SIDE - 1u || y >= SIDE - 1u) {
-        return top;
-    }
-    uint i1 = x / 64u, j1 = y / 64u;
-    uint i0 = x % 64u == 0u ? i1 - 1u : i1;
-    uint j0 = y % 64u == 0u ? j1 - 1u : j1;
-    uint best = 0u;
-    for (uint c = 0u; c < 4u; ++c) {
-        uint k = ((c & 2u) != 0u ? j1 : j0) * 4u + ((c & 1u) != 0u ? i1 : i0);
-        uint word = k < 8u ? parts_lo : parts_hi;
-        best = max(best, (word >> (4u * (k % 8u))) & 15u);
-    }
-    return best;
-}
+// The level whose blocks the draw's mesh takes at a point (the index builder's rule).
+#include "parts.glsl"
 
 // Vertices listed per scale index (scale 2^k at k) for the tile being placed.
 shared uint listed[8];
 
 // Where the list of scale index k starts in a region: after the grid and the lists of the
 // coarser scales, each as long as the grid's points of its scale, (256/s + 1)^2 - (128/s + 1)^2
-// for s = 2^k < 256 (the first of which, s = 128, has 5: the tile's centre and edge midpoints).
-uint list_start(uint k) {
-    uint start = GRID;
-    for (uint c = 7u; c > k; --c) {
-        uint a = (256u >> c) + 1u;
-        uint b = (128u >> c) + 1u;
-        start += a * a - b * b;
-    }
-    return start;
-}
+// for s = 2^k < 256 (the first of which, s = 128, has 5: the tile's centre and edge midpoints;
+// the last, s = 1, ends at 132,094, within REGION).
+const uint LIST_START[8] = uint[](82686u, 70270u, 67134u, 66334u, 66126u, 66070u, 66054u, 66049u);
 
 // The scale index of tile-local grid point (x, y): log2 of the largest power of two dividing
 // both (8 or more for the tile's corners, which have no parents and stay at their own height).
@@ -101,8 +78,7 @@ void main() {
         uvec4 starts_hi = records.tiles[r].starts_hi;
         // The interior's level table, which most vertices take, read once for the tile.
         LevelCoefficients interior = records.tiles[r].tables[0];
-        uint parts_lo = records.tiles[r].parts_lo;
-        uint parts_hi = records.tiles[r].parts_hi;
+        uvec2 parts = uvec2(records.tiles[r].parts_lo, records.tiles[r].parts_hi);
         uvec4 last = records.tiles[r].blocks[min(level, 8u)];
         uint count = last.x + last.y;
         if (lane < 8u) {
@@ -122,17 +98,17 @@ void main() {
             uint j = passed.x + passed.y + passed.z + passed.w;
             if (i < starts_lo.x || k > 7u) {
                 morphed.values[out_at + i] = own;
-            } else if (j <= presence_level(x, y, parts_lo, parts_hi, level)) {
+            } else if (j <= packed_presence_level(parts, x, y, level)) {
                 // (A vertex the mesh does not hold is neither placed nor drawn.)
                 uint slot = atomicAdd(listed[k], 1u);
-                scratch.cells[region + list_start(k) + slot] = uvec2(i, v);
+                scratch.cells[region + LIST_START[k] + slot] = uvec2(i, v);
             }
         }
         memoryBarrierBuffer();
         barrier();
         for (int k = 7; k >= 0; --k) {
             uint s = 1u << uint(k);
-            uint start = region + list_start(uint(k));
+            uint start = region + LIST_START[k];
             uint n = listed[k];
             if (n == 0u) {
                 continue;   // the same for the whole workgroup: no barrier is skipped by part

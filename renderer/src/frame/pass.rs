@@ -318,15 +318,6 @@ pub(super) fn pass_constants(
     (constants, morph)
 }
 
-/// Bytes of the morphed heights of `plan`'s draws: a float per vertex of each drawn level (the
-/// records' `heights` offsets count the same).
-pub(super) fn morphed_bytes(terrain: &Terrain, plan: &Plan) -> u64 {
-    plan.draws
-        .iter()
-        .map(|d| 4 * u64::from(terrain.tiles[d.tile].levels[d.level as usize].vertex_count()))
-        .sum()
-}
-
 /// The frame's push constants: the camera, the spacing, the flags for `settings`.
 fn frame_constants(
     terrain: &Terrain,

@@ -70,12 +70,7 @@ pub(super) fn write_records(
     let (cam_tile, _) = terrain.camera_tile(camera.position);
     let mut drawn = Vec::with_capacity(plan.draws.len());
     let mut heights = 0usize;
-    let needed: usize = plan
-        .draws
-        .iter()
-        .map(|d| terrain.tiles[d.tile].levels[d.level as usize].vertex_count() as usize)
-        .sum();
-    let placed = needed <= capacity;
+    let placed = drawn_vertices(terrain, plan) <= capacity;
     let unmorphed = if placed { 0 } else { plan.draws.len() as u64 };
     let records: Vec<TileRecord> = plan
         .draws
@@ -98,14 +93,7 @@ pub(super) fn write_records(
             r.cap = d.level as f32;
             r.heights = if placed { heights as u32 } else { u32::MAX };
             let levels = d.key.map_or([d.level as u8; 16], |k| k.levels);
-            for (k, &l) in levels.iter().enumerate() {
-                let word = if k < 8 {
-                    &mut r.parts_lo
-                } else {
-                    &mut r.parts_hi
-                };
-                *word |= u32::from(l & 15) << (4 * (k % 8));
-            }
+            [r.parts_lo, r.parts_hi] = tiles::parts::packed_levels(&levels);
             let mut starts = [u32::MAX; 8];
             let (mut start, mut rows) = (0u32, d.morph_offset as u32);
             for (j, l) in info.levels.iter().enumerate().take(MAX_LEVELS) {
@@ -158,6 +146,15 @@ pub(super) fn write_records(
         });
     }
     Ok((drawn, unmorphed))
+}
+
+/// The vertices of `plan`'s drawn levels, all of each (the morphed heights a frame needs: the
+/// records' `heights` offsets count the same).
+pub(super) fn drawn_vertices(terrain: &Terrain, plan: &Plan) -> usize {
+    plan.draws
+        .iter()
+        .map(|d| terrain.tiles[d.tile].levels[d.level as usize].vertex_count() as usize)
+        .sum()
 }
 
 /// The halves of an eight-element array (a record's `_lo` and `_hi` vectors).

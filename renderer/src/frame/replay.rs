@@ -4,7 +4,7 @@
 
 use ash::vk;
 
-use super::pass::{morphed_bytes, pass_constants, Bindings, DrawCounts, Scene};
+use super::pass::{pass_constants, Bindings, DrawCounts, Scene};
 use super::records::{self, frame_record};
 use super::Renderer;
 use crate::camera::Camera;
@@ -137,7 +137,7 @@ impl Renderer {
                 .heights
                 .insert(Buffer::new(gpu, desc, "static frame heights (unused)")?);
         let desc = BufferDesc {
-            size: morphed_bytes(terrain, plan).max(4),
+            size: 4 * records::drawn_vertices(terrain, plan).max(1) as u64,
             usage: vk::BufferUsageFlags::STORAGE_BUFFER,
             location: gpu_allocator::MemoryLocation::GpuOnly,
         };

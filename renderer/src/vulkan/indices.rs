@@ -49,10 +49,7 @@ impl Build {
     /// Makes the build draw `key` part by part; `ends` are the ends of the tile's blocks.
     pub fn part_by_part(&mut self, key: &tiles::parts::PartKey, ends: impl Iterator<Item = u32>) {
         self.mixed = 1;
-        self.parts = [0, 0];
-        for (k, &l) in key.levels.iter().enumerate() {
-            self.parts[k / 8] |= u32::from(l & 15) << (4 * (k % 8));
-        }
+        self.parts = tiles::parts::packed_levels(&key.levels);
         for (slot, end) in self.ends.iter_mut().zip(ends) {
             *slot = end;
         }

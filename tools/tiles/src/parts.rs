@@ -530,6 +530,16 @@ fn toward(a: u32, b: u32, t: u32) -> u32 {
     }
 }
 
+/// The parts' levels as the shaders read them: 4 bits each, part `k` at bits `4 (k % 8)` of
+/// word `k / 8` (`indices.comp`'s build, the terrain records' `parts_lo`, `parts_hi`).
+pub fn packed_levels(levels: &PartLevels) -> [u32; 2] {
+    let mut words = [0u32; 2];
+    for (k, &l) in levels.iter().enumerate() {
+        words[k / 8] |= u32::from(l & 15) << (4 * (k % 8));
+    }
+    words
+}
+
 /// The level a lattice point of the mixed mesh takes (module header).
 pub fn presence_level(key: &PartKey, x: u32, y: u32) -> u8 {
     let edge = TILE_SIZE as u32 - 1;
