@@ -78,7 +78,7 @@ pub struct Wishes {
     pub morph: Option<MorphCost>,
 }
 
-/// The morph pass's GPU memory (`renderer/src/vulkan/pipeline.rs`): a scratch region per
+/// The morph pass's GPU memory (`renderer/src/vulkan/morph_pass.rs`): a scratch region per
 /// workgroup, and per frame slot the morphed heights of the frame's drawn vertices.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct MorphCost {
@@ -400,7 +400,7 @@ mod tests {
         }
     }
 
-    /// The morph pass's constants in `renderer/src/vulkan/pipeline.rs`, for a set of
+    /// The morph pass's constants in `renderer/src/vulkan/morph_pass.rs`, for a set of
     /// `max_vertices` vertices at its finest.
     fn morph(max_vertices: u64) -> MorphCost {
         MorphCost {

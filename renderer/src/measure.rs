@@ -115,6 +115,27 @@ impl ErrorMeter {
         self.frame(terrain, camera, extent, &draws)
     }
 
+    /// Rasterises and keeps the unmorphed (tile, level) surfaces of `needed` not kept yet, in
+    /// parallel.
+    fn rasterise(&mut self, terrain: &Terrain, needed: impl Iterator<Item = (usize, u32)>) {
+        let mut needed: Vec<(usize, u32)> =
+            needed.filter(|k| !self.surfaces.contains_key(k)).collect();
+        needed.sort_unstable();
+        needed.dedup();
+        let made: Vec<_> = needed
+            .into_par_iter()
+            .map(|(tile, level)| {
+                let state = State {
+                    level,
+                    morph: None,
+                    parts: None,
+                };
+                ((tile, level), surface(terrain, tile, state))
+            })
+            .collect();
+        self.surfaces.extend(made);
+    }
+
     /// Measures a frame that drew `draws` (tile, state) seen by `camera` at `extent`; the
     /// previous call's draws are the previous frame's (call it on consecutive frames for
     /// `pop_px` to mean what it says). Tiles are measured in parallel: the frame's value is
@@ -132,32 +153,15 @@ impl ErrorMeter {
         let before = |tile: usize, state: State| previous.get(&tile).filter(|(s, _)| *s != state);
         let unmorphed = |s: &State| s.morph.is_none() && s.parts.is_none();
         // Unmorphed levels are rasterised once and kept: those this frame needs first.
-        let mut needed: Vec<(usize, u32)> = draws
-            .iter()
-            .flat_map(|&(tile, state)| {
-                let then = before(tile, state).map(|(s, _)| *s);
-                [Some(state), then]
-                    .into_iter()
-                    .flatten()
-                    .filter(unmorphed)
-                    .map(move |s| (tile, s.level))
-            })
-            .filter(|k| !self.surfaces.contains_key(k))
-            .collect();
-        needed.sort_unstable();
-        needed.dedup();
-        let made: Vec<_> = needed
-            .into_par_iter()
-            .map(|(tile, level)| {
-                let state = State {
-                    level,
-                    morph: None,
-                    parts: None,
-                };
-                ((tile, level), surface(terrain, tile, state))
-            })
-            .collect();
-        self.surfaces.extend(made);
+        let needed = draws.iter().flat_map(|&(tile, state)| {
+            let then = before(tile, state).map(|(s, _)| *s);
+            [Some(state), then]
+                .into_iter()
+                .flatten()
+                .filter(unmorphed)
+                .map(move |s| (tile, s.level))
+        });
+        self.rasterise(terrain, needed);
         let (surfaces, samples) = (&self.surfaces, &self.samples);
         let view = camera.view(extent.0, extent.1);
         let (w, h) = (f64::from(extent.0), f64::from(extent.1));
@@ -165,9 +169,6 @@ impl ErrorMeter {
             view.project(p - camera.position)
                 .filter(|&(u, v)| (0.0..=w).contains(&u) && (0.0..=h).contains(&v))
         };
-        let (sx, sy) = terrain.spacing;
-        let distance =
-            |a: (f64, f64), b: (f64, f64)| ((a.0 - b.0).powi(2) + (a.1 - b.1).powi(2)).sqrt();
         let measured: Vec<(usize, Drawn, f64, f64)> = draws
             .par_iter()
             .map(|&(tile, state)| {
@@ -182,38 +183,7 @@ impl ErrorMeter {
                         grid.as_ref()
                     }
                 });
-                let info = &terrain.tiles[tile];
-                let (c0, r0) = (
-                    f64::from(info.tx * TILE_CELLS),
-                    f64::from(info.ty * TILE_CELLS),
-                );
-                let (source, max_x, max_y) = &samples[tile];
-                let (mut error, mut pop) = (0.0f64, 0.0f64);
-                for y in 0..=*max_y as usize {
-                    for x in 0..=*max_x as usize {
-                        let k = y * TILE_SIZE + x;
-                        let z = now[k];
-                        if z.is_nan() {
-                            continue;
-                        }
-                        let at = |z: f32| {
-                            on_image(DVec3::new(
-                                (c0 + x as f64) * sx,
-                                -(r0 + y as f64) * sy,
-                                f64::from(z),
-                            ))
-                        };
-                        let Some(drawn) = at(z) else { continue };
-                        if let Some(truth) = at(source[k]) {
-                            error = error.max(distance(drawn, truth));
-                        }
-                        if let Some(then) = then {
-                            if let Some(old) = Some(then[k]).filter(|z| !z.is_nan()).and_then(at) {
-                                pop = pop.max(distance(drawn, old));
-                            }
-                        }
-                    }
-                }
+                let (error, pop) = compare(terrain, tile, &samples[tile], now, then, &on_image);
                 (tile, (state, morphed_now), error, pop)
             })
             .collect();
@@ -230,6 +200,52 @@ impl ErrorMeter {
             pop_px: if had_previous { pop } else { f64::NAN },
         }
     }
+}
+
+/// The largest distance on the image (pixels) between where `now` draws the tile's samples and
+/// where the source has them (the error), and where `then` drew them (the pop); samples off
+/// the image, or not drawn, count for neither.
+fn compare(
+    terrain: &Terrain,
+    tile: usize,
+    (source, max_x, max_y): &(Vec<f32>, u32, u32),
+    now: &[f32],
+    then: Option<&Vec<f32>>,
+    on_image: &(impl Fn(DVec3) -> Option<(f64, f64)> + Sync),
+) -> (f64, f64) {
+    let info = &terrain.tiles[tile];
+    let (c0, r0) = (
+        f64::from(info.tx * TILE_CELLS),
+        f64::from(info.ty * TILE_CELLS),
+    );
+    let (sx, sy) = terrain.spacing;
+    let distance =
+        |a: (f64, f64), b: (f64, f64)| ((a.0 - b.0).powi(2) + (a.1 - b.1).powi(2)).sqrt();
+    let (mut error, mut pop) = (0.0f64, 0.0f64);
+    for y in 0..=*max_y as usize {
+        for x in 0..=*max_x as usize {
+            let k = y * TILE_SIZE + x;
+            let z = now[k];
+            if z.is_nan() {
+                continue;
+            }
+            let at = |z: f32| {
+                on_image(DVec3::new(
+                    (c0 + x as f64) * sx,
+                    -(r0 + y as f64) * sy,
+                    f64::from(z),
+                ))
+            };
+            let Some(drawn) = at(z) else { continue };
+            if let Some(truth) = at(source[k]) {
+                error = error.max(distance(drawn, truth));
+            }
+            if let Some(old) = then.map(|t| t[k]).filter(|z| !z.is_nan()).and_then(at) {
+                pop = pop.max(distance(drawn, old));
+            }
+        }
+    }
+    (error, pop)
 }
 
 /// The heights one tile draws at its samples in `state` (NaN where none): the level's

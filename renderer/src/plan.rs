@@ -133,24 +133,7 @@ pub fn plan(
 
     // A tile is checked before its first upload; one that fails is never drawn.
     let t = Instant::now();
-    let unchecked: Vec<usize> = visible
-        .iter()
-        .copied()
-        .filter(|&i| terrain.tiles[i].usable().is_none())
-        .collect();
-    terrain.check_all(&unchecked);
-    visible.retain(|&i| terrain.tiles[i].usable() == Some(true));
-    let prefetch: Vec<Request> = prefetch
-        .iter()
-        .copied()
-        .filter(|r| match terrain.tiles[r.tile as usize].usable() {
-            Some(usable) => usable,
-            None => {
-                terrain.check_soon(r.tile as usize);
-                false
-            }
-        })
-        .collect();
+    let (prefetch, tiles_checked) = check_visible(terrain, &mut visible, prefetch);
     let cpu_check_ms = ms(t);
 
     let t = Instant::now();
@@ -171,23 +154,7 @@ pub fn plan(
     let draws: Vec<Draw> = residency
         .grants
         .iter()
-        .filter_map(|g| {
-            let level = g.level?;
-            Some(Draw {
-                tile: g.tile as usize,
-                wanted: g.wanted,
-                level,
-                vertex_offset: g.vertex_offset,
-                morph_offset: g.morph_offset,
-                index_offset: g.index_offset,
-                index_width: g.index_width,
-                index_count: terrain.tiles[g.tile as usize].levels[level as usize].index_count,
-                triangle_count: terrain.tiles[g.tile as usize].levels[level as usize]
-                    .triangle_count,
-                parts: parts.get(&g.tile).copied(),
-                key: None,
-            })
-        })
+        .filter_map(|g| draw_of(terrain, g, parts.get(&g.tile).copied()))
         .collect();
     // The prefetch step is counted with the prediction (`--prefetch-ms` bounds the two).
     let cpu_residency_ms = ms(t) - cpu_prefetch_ms;
@@ -212,8 +179,61 @@ pub fn plan(
         cpu_prefetch_ms,
         cpu_stitch_ms,
         cpu_check_ms,
-        tiles_checked: unchecked.len() as u64,
+        tiles_checked,
         tiles_failed: terrain.failed_count() as u64,
+    })
+}
+
+/// Checks the visible tiles not checked yet (before their first upload) and keeps in `visible`
+/// those that pass; of the `prefetch` requests, keeps the checked tiles that passed and queues
+/// the unchecked ones for a check off the frame. Returns the prefetch requests kept and how
+/// many tiles were checked.
+fn check_visible(
+    terrain: &Terrain,
+    visible: &mut Vec<usize>,
+    prefetch: &[Request],
+) -> (Vec<Request>, u64) {
+    let unchecked: Vec<usize> = visible
+        .iter()
+        .copied()
+        .filter(|&i| terrain.tiles[i].usable().is_none())
+        .collect();
+    terrain.check_all(&unchecked);
+    visible.retain(|&i| terrain.tiles[i].usable() == Some(true));
+    let prefetch = prefetch
+        .iter()
+        .copied()
+        .filter(|r| match terrain.tiles[r.tile as usize].usable() {
+            Some(usable) => usable,
+            None => {
+                terrain.check_soon(r.tile as usize);
+                false
+            }
+        })
+        .collect();
+    (prefetch, unchecked.len() as u64)
+}
+
+/// The draw of a granted tile (None: nothing of it resident).
+fn draw_of(
+    terrain: &Terrain,
+    g: &memory::Grant,
+    parts: Option<tiles::parts::PartLevels>,
+) -> Option<Draw> {
+    let level = g.level?;
+    let stored = &terrain.tiles[g.tile as usize].levels[level as usize];
+    Some(Draw {
+        tile: g.tile as usize,
+        wanted: g.wanted,
+        level,
+        vertex_offset: g.vertex_offset,
+        morph_offset: g.morph_offset,
+        index_offset: g.index_offset,
+        index_width: g.index_width,
+        index_count: stored.index_count,
+        triangle_count: stored.triangle_count,
+        parts,
+        key: None,
     })
 }
 

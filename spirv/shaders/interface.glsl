@@ -23,7 +23,7 @@ layout(push_constant) uniform FrameConstants {
 } frame;
 
 #if defined(TERRAIN_VERTEX) || defined(MORPH_PASS)
-// The frame's constants of the vertex level rule (renderer/src/morph.rs): a vertex whose
+// The frame's constants of the vertex level rule (renderer/src/morph/mod.rs): a vertex whose
 // unmorphed position relative to the camera is at clip position c has |J z| =
 // |jacobian.xy * c.w + jacobian.zw * c.xy| / c.w^2 pixels per vertical metre, and level
 // l = sum_k clamp(a_k - r * b_k, 0, 1) for r = tau / |J z| (the finest behind `near`), with
@@ -106,7 +106,7 @@ uint table_of(uint x, uint y) {
 }
 
 // l(v) for a vertex whose unmorphed position is at `clip`, with level table `c`: the finest
-// level behind the near plane (r = 0). renderer/src/morph.rs has the rule and its CPU mirror.
+// level behind the near plane (r = 0). renderer/src/morph/mod.rs has the rule and its CPU mirror.
 float vertex_level(vec4 clip, LevelCoefficients c) {
     float d = clip.w;
     MorphFrame m = frame_morph.morph;

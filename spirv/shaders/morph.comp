@@ -1,6 +1,6 @@
 #version 450
 // The morph pass: places every vertex a frame draws at its morphed height, once a frame,
-// before the draws (renderer/src/morph.rs has the rule, its error bound and the CPU mirror of
+// before the draws (renderer/src/morph/mod.rs has the rule, its error bound and the CPU mirror of
 // this arithmetic; renderer/src/vulkan/morph_pass.rs records the dispatch).
 //
 // The vertices of a tile's meshes form a hierarchy: every vertex but the tile's corners lies

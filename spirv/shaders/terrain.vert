@@ -21,7 +21,7 @@
 // column/row relative to the camera's tile is the same integer, and its height the same
 // integer code on the tile set's height lattice.
 //
-// Geomorphing (renderer/src/morph.rs has the rule, its bound, and the CPU mirror of this
+// Geomorphing (renderer/src/morph/mod.rs has the rule, its bound, and the CPU mirror of this
 // arithmetic): every drawn vertex's morphed height is placed once a frame by the morph pass
 // (morph.comp), coarse to fine, each vertex from its two parents' morphed heights, so that a
 // vertex a finer level adds starts on the surface drawn before it. The vertex shader reads

@@ -21,9 +21,8 @@ use crate::terrain::Terrain;
 use crate::tile::Side;
 use crate::vulkan::buffer::BufferDesc;
 use crate::vulkan::indices::{self, IndexBuilder};
-use crate::vulkan::pipeline::{
-    SetBuffers, TerrainPipeline, TerrainSets, MORPH_GROUPS, MORPH_REGION_BYTES,
-};
+use crate::vulkan::morph_pass::{MORPH_GROUPS, MORPH_REGION_BYTES};
+use crate::vulkan::pipeline::{SetBuffers, TerrainPipeline, TerrainSets};
 use crate::vulkan::pool::TilePool;
 use crate::vulkan::sync::Commands;
 use crate::vulkan::texture::{TextureArray, TextureDesc};

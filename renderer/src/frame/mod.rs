@@ -144,7 +144,7 @@ impl Renderer {
     /// The morph pass's workgroups: one per scratch region the budget gave it (0: none, and
     /// frames are drawn unmorphed).
     pub(super) fn morph_groups(&self) -> u32 {
-        (self.morph_scratch.size / crate::vulkan::pipeline::MORPH_REGION_BYTES) as u32
+        (self.morph_scratch.size / crate::vulkan::morph_pass::MORPH_REGION_BYTES) as u32
     }
 
     /// Whether index arrays are built on the GPU (else sent from the file).

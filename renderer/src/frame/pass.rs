@@ -105,7 +105,8 @@ impl Renderer {
             .as_ref()
             .map_or(vk::DescriptorSet::null(), |t| t.sets[s]);
         self.pipeline
-            .record_morph_pass(gpu, cmd, (set, self.morph_groups()), scene.constants);
+            .morph
+            .record(gpu, cmd, (set, self.morph_groups()), scene.constants);
         if self.fault == Some(Fault::Validation) && self.frame == 0 {
             // SAFETY: deliberately invalid (offset 1 for 16-bit indices), for the tests of
             // the validation path; the pass rebinds a valid index buffer before any draw.

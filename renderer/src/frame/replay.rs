@@ -163,7 +163,8 @@ impl Renderer {
         sync::begin(gpu, cmd, false)?;
         slot.timestamps.begin(gpu, cmd);
         self.pipeline
-            .record_morph_pass(gpu, cmd, (set, self.morph_groups()), &constants);
+            .morph
+            .record(gpu, cmd, (set, self.morph_groups()), &constants);
         let at = Bindings {
             target: &slot.target,
             timestamps: &slot.timestamps,

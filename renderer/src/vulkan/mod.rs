@@ -5,6 +5,7 @@ pub mod buffer;
 pub mod context;
 pub mod image;
 pub mod indices;
+pub mod morph_pass;
 pub mod pipeline;
 pub mod pool;
 pub mod swapchain;

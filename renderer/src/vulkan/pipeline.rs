@@ -11,6 +11,7 @@ use std::ffi::CStr;
 
 use ash::vk;
 
+use super::morph_pass::MorphPass;
 use super::{Gpu, VkError, VkResult};
 
 use crate::interface::{MorphFrame, PUSH_CONSTANT_BYTES, RECORDS_OFFSET, RECORD_BYTES};
@@ -29,10 +30,8 @@ pub struct TerrainPipeline {
     pub two_levels: Pair,
     /// The same rule with the paper's forward differences (`--morph-shader forward-differences`).
     pub all_rows: Pair,
-    /// The morph pass (`morph.comp`) and its layout: the set layout above, the frame's push
-    /// constants for the compute stage.
-    pub morph_layout: vk::PipelineLayout,
-    pub morph_pass: vk::Pipeline,
+    /// The morph pass (`morph.comp`) over the set layout above.
+    pub morph: MorphPass,
     /// The default writing each vertex's height (`--read-back-heights`; needs
     /// `vertexPipelineStoresAndAtomics`).
     pub read_back: Option<Pair>,
@@ -74,13 +73,6 @@ const VERTEX_AND_MORPH: vk::ShaderStageFlags = vk::ShaderStageFlags::from_raw(
     vk::ShaderStageFlags::VERTEX.as_raw() | vk::ShaderStageFlags::COMPUTE.as_raw(),
 );
 
-/// Workgroups of the morph pass at most: each places one tile at a time in a scratch region of
-/// its own (`memory::budget` decides how many the budget holds).
-pub const MORPH_GROUPS: u32 = 16;
-/// Bytes of one workgroup's scratch region: a grid of 257 x 257 pairs of floats and its lists
-/// of vertices by scale (as many 8-byte entries again at most).
-pub const MORPH_REGION_BYTES: u64 = 2 * 257 * 257 * 8;
-
 /// What one terrain set points at beside the pool, the textures and the morph scratch: its
 /// frame's records, read-back heights and morphed heights.
 #[derive(Clone, Copy)]
@@ -96,6 +88,51 @@ pub struct SetBuffers<'a> {
 pub struct Pair {
     pub tiles: vk::Pipeline,
     pub stitches: vk::Pipeline,
+}
+
+impl Pair {
+    fn destroy(self, gpu: &Gpu) {
+        // SAFETY: no command buffer in flight uses them.
+        unsafe {
+            gpu.device.destroy_pipeline(self.tiles, None);
+            gpu.device.destroy_pipeline(self.stitches, None);
+        }
+    }
+}
+
+/// The terrain set layout ([`BINDINGS`]) and the pipeline layout of the draws: that set and the
+/// frame's push constants for the vertex and fragment stages.
+fn layouts(gpu: &Gpu) -> VkResult<(vk::DescriptorSetLayout, vk::PipelineLayout)> {
+    let ranges = [vk::PushConstantRange::default()
+        .stage_flags(vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT)
+        .size(PUSH_CONSTANT_BYTES)];
+    let bindings = BINDINGS.map(|(b, ty, stage)| {
+        vk::DescriptorSetLayoutBinding::default()
+            .binding(b)
+            .descriptor_type(ty)
+            .descriptor_count(1)
+            .stage_flags(stage)
+    });
+    let set_info = vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings);
+    // SAFETY: valid create info.
+    let set_layout = unsafe { gpu.device.create_descriptor_set_layout(&set_info, None) }?;
+    gpu.name(set_layout, "terrain descriptor set layout");
+    let set_layouts = [set_layout];
+    let layout_info = vk::PipelineLayoutCreateInfo::default()
+        .set_layouts(&set_layouts)
+        .push_constant_ranges(&ranges);
+    // SAFETY: valid create info.
+    match unsafe { gpu.device.create_pipeline_layout(&layout_info, None) } {
+        Ok(layout) => {
+            gpu.name(layout, "terrain pipeline layout");
+            Ok((set_layout, layout))
+        }
+        Err(e) => {
+            // SAFETY: unused.
+            unsafe { gpu.device.destroy_descriptor_set_layout(set_layout, None) };
+            Err(e.into())
+        }
+    }
 }
 
 fn shader(gpu: &Gpu, words: &[u32], name: &str) -> VkResult<vk::ShaderModule> {
@@ -115,34 +152,7 @@ impl TerrainPipeline {
         depth: vk::Format,
         read_back: bool,
     ) -> VkResult<TerrainPipeline> {
-        let ranges = [vk::PushConstantRange::default()
-            .stage_flags(vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT)
-            .size(PUSH_CONSTANT_BYTES)];
-        let bindings = BINDINGS.map(|(b, ty, stage)| {
-            vk::DescriptorSetLayoutBinding::default()
-                .binding(b)
-                .descriptor_type(ty)
-                .descriptor_count(1)
-                .stage_flags(stage)
-        });
-        let set_info = vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings);
-        // SAFETY: valid create info.
-        let set_layout = unsafe { gpu.device.create_descriptor_set_layout(&set_info, None) }?;
-        gpu.name(set_layout, "terrain descriptor set layout");
-        let set_layouts = [set_layout];
-        let layout_info = vk::PipelineLayoutCreateInfo::default()
-            .set_layouts(&set_layouts)
-            .push_constant_ranges(&ranges);
-        // SAFETY: valid create info.
-        let layout = match unsafe { gpu.device.create_pipeline_layout(&layout_info, None) } {
-            Ok(l) => l,
-            Err(e) => {
-                // SAFETY: unused.
-                unsafe { gpu.device.destroy_descriptor_set_layout(set_layout, None) };
-                return Err(e.into());
-            }
-        };
-        gpu.name(layout, "terrain pipeline layout");
+        let (set_layout, layout) = layouts(gpu)?;
         let vert = shader(gpu, spirv::TERRAIN_VERT, "terrain.vert")?;
         let vert_all_rows = shader(gpu, spirv::TERRAIN_VERT_ALL_ROWS, "terrain.vert (all rows)")?;
         let vert_two_levels = shader(
@@ -160,31 +170,8 @@ impl TerrainPipeline {
         } else {
             shader(gpu, spirv::TERRAIN_FRAG, "terrain.frag")?
         };
-        let pair = |vert, mode, name: &str| -> VkResult<Pair> {
-            let build = |stitch: bool, name: String| {
-                let value = u32::from(stitch).to_ne_bytes();
-                let entries = [vk::SpecializationMapEntry::default()
-                    .constant_id(0)
-                    .offset(0)
-                    .size(4)];
-                let spec = vk::SpecializationInfo::default()
-                    .map_entries(&entries)
-                    .data(&value);
-                Self::build(
-                    gpu,
-                    layout,
-                    (vert, Some(&spec)),
-                    frag,
-                    color,
-                    depth,
-                    mode,
-                    &name,
-                )
-            };
-            Ok(Pair {
-                tiles: build(false, name.to_string())?,
-                stitches: build(true, format!("{name}, stitches"))?,
-            })
+        let pair = |vert, mode, name: &str| {
+            Self::pair(gpu, layout, (vert, frag), (color, depth), mode, name)
         };
         let fill = pair(vert, vk::PolygonMode::FILL, "terrain (fill)");
         let two_levels = pair(
@@ -209,74 +196,55 @@ impl TerrainPipeline {
             .then(|| pair(vert, vk::PolygonMode::LINE, "terrain (wireframe)"));
         // SAFETY: modules are only needed during pipeline creation.
         unsafe {
-            gpu.device.destroy_shader_module(vert, None);
-            gpu.device.destroy_shader_module(vert_all_rows, None);
-            gpu.device.destroy_shader_module(vert_two_levels, None);
-            gpu.device.destroy_shader_module(vert_read_back, None);
-            gpu.device.destroy_shader_module(frag, None);
+            for module in [vert, vert_all_rows, vert_two_levels, vert_read_back, frag] {
+                gpu.device.destroy_shader_module(module, None);
+            }
         }
-        let fill = fill?;
-        let two_levels = two_levels?;
-        let all_rows = all_rows?;
-        let read_back = read_back.transpose()?;
-        let wireframe = wireframe.transpose()?;
-        let (morph_layout, morph_pass) = morph_pipeline(gpu, set_layout)?;
         Ok(TerrainPipeline {
             set_layout,
             layout,
-            fill,
-            two_levels,
-            all_rows,
-            morph_layout,
-            morph_pass,
-            read_back,
-            wireframe,
+            fill: fill?,
+            two_levels: two_levels?,
+            all_rows: all_rows?,
+            morph: MorphPass::new(gpu, set_layout)?,
+            read_back: read_back.transpose()?,
+            wireframe: wireframe.transpose()?,
         })
     }
 
-    /// Records the morph pass over the frame's `constants.draws` records, with `set` (its
-    /// records, morphed heights and the scratch): after the frame's copies and index builds
-    /// (and the previous frames' passes, which share the scratch), before its draws.
-    pub fn record_morph_pass(
-        &self,
+    /// One vertex shader's pair of pipelines (tiles, stitches) with `frag`.
+    fn pair(
         gpu: &Gpu,
-        cmd: vk::CommandBuffer,
-        (set, groups): (vk::DescriptorSet, u32),
-        constants: &crate::interface::FrameConstants,
-    ) {
-        if constants.draws == 0 || groups == 0 {
-            return;
-        }
-        let compute = vk::PipelineStageFlags::COMPUTE_SHADER;
-        let earlier = vk::PipelineStageFlags::TRANSFER | compute;
-        let written = vk::AccessFlags::TRANSFER_WRITE | vk::AccessFlags::SHADER_WRITE;
-        let shader = vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE;
-        super::sync::memory_barrier(gpu, cmd, (earlier, written), (compute, shader));
-        // The set's Tile binding (dynamic) at the first record; the pass reads none.
-        let offsets = [crate::interface::tile_binding_offset(0)];
-        let pipeline = (self.morph_pass, self.morph_layout);
-        super::sync::bind_compute(gpu, cmd, pipeline, set, &offsets);
-        // SAFETY: recording outside rendering; the pipeline and its set are bound.
-        unsafe {
-            gpu.device.cmd_push_constants(
-                cmd,
-                self.morph_layout,
-                vk::ShaderStageFlags::COMPUTE,
-                0,
-                bytemuck::bytes_of(constants),
-            );
-            gpu.device
-                .cmd_dispatch(cmd, constants.draws.min(groups), 1, 1);
-        }
-        super::sync::memory_barrier(
-            gpu,
-            cmd,
-            (compute, vk::AccessFlags::SHADER_WRITE),
-            (
-                vk::PipelineStageFlags::VERTEX_SHADER,
-                vk::AccessFlags::SHADER_READ,
-            ),
-        );
+        layout: vk::PipelineLayout,
+        (vert, frag): (vk::ShaderModule, vk::ShaderModule),
+        (color, depth): (vk::Format, vk::Format),
+        mode: vk::PolygonMode,
+        name: &str,
+    ) -> VkResult<Pair> {
+        let build = |stitch: bool, name: String| {
+            let value = u32::from(stitch).to_ne_bytes();
+            let entries = [vk::SpecializationMapEntry::default()
+                .constant_id(0)
+                .offset(0)
+                .size(4)];
+            let spec = vk::SpecializationInfo::default()
+                .map_entries(&entries)
+                .data(&value);
+            Self::build(
+                gpu,
+                layout,
+                (vert, Some(&spec)),
+                frag,
+                color,
+                depth,
+                mode,
+                &name,
+            )
+        };
+        Ok(Pair {
+            tiles: build(false, name.to_string())?,
+            stitches: build(true, format!("{name}, stitches"))?,
+        })
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -361,10 +329,9 @@ impl TerrainPipeline {
     }
 
     pub fn destroy(self, gpu: &Gpu) {
+        self.morph.destroy(gpu);
         // SAFETY: no command buffer in flight uses them.
         unsafe {
-            gpu.device.destroy_pipeline(self.morph_pass, None);
-            gpu.device.destroy_pipeline_layout(self.morph_layout, None);
             let pairs = [
                 Some(self.fill),
                 Some(self.two_levels),
@@ -373,8 +340,7 @@ impl TerrainPipeline {
                 self.wireframe,
             ];
             for p in pairs.into_iter().flatten() {
-                gpu.device.destroy_pipeline(p.tiles, None);
-                gpu.device.destroy_pipeline(p.stitches, None);
+                p.destroy(gpu);
             }
             gpu.device.destroy_pipeline_layout(self.layout, None);
             gpu.device
@@ -548,31 +514,6 @@ impl TerrainSets {
     pub fn destroy(self, gpu: &Gpu) {
         // SAFETY: no command buffer in flight uses the sets.
         unsafe { gpu.device.destroy_descriptor_pool(self.pool, None) };
-    }
-}
-
-/// The morph pass's pipeline and layout over the terrain set layout.
-fn morph_pipeline(
-    gpu: &Gpu,
-    set_layout: vk::DescriptorSetLayout,
-) -> VkResult<(vk::PipelineLayout, vk::Pipeline)> {
-    let ranges = [vk::PushConstantRange::default()
-        .stage_flags(vk::ShaderStageFlags::COMPUTE)
-        .size(PUSH_CONSTANT_BYTES)];
-    let set_layouts = [set_layout];
-    let layout_info = vk::PipelineLayoutCreateInfo::default()
-        .set_layouts(&set_layouts)
-        .push_constant_ranges(&ranges);
-    // SAFETY: valid create info.
-    let layout = unsafe { gpu.device.create_pipeline_layout(&layout_info, None) }?;
-    gpu.name(layout, "morph pass pipeline layout");
-    match compute_pipeline(gpu, spirv::MORPH_COMP, layout, "morph pass") {
-        Ok(p) => Ok((layout, p)),
-        Err(e) => {
-            // SAFETY: unused.
-            unsafe { gpu.device.destroy_pipeline_layout(layout, None) };
-            Err(e)
-        }
     }
 }
 

@@ -163,6 +163,11 @@ use crate::interface::{LevelCoefficients, MorphFrame};
 pub use crate::levels::{LevelTable, MAX_LEVELS};
 use crate::terrain::Terrain;
 
+mod hierarchy;
+
+use hierarchy::hierarchical;
+pub use hierarchy::{block_points, orphan, parents, scale_of};
+
 /// The share of `tau` the vertex rule and the drawn level aim at: the excess over the blend's
 /// bound where the levels of a point's vertices differ (module header, "The morph") is not
 /// bounded by the rule, and measured at up to 2.5% of the aim on the test flights; 3% is
@@ -420,135 +425,6 @@ pub fn tile_heights(
         start += n;
     }
     vertices
-}
-
-/// Samples per tile side.
-const SIDE: usize = 257;
-
-/// The scale of tile-local grid point `(x, y)`: the largest power of two dividing both (512 at
-/// the origin, which has no parents; the tile's other corners have 256 and none either).
-pub fn scale_of(x: u32, y: u32) -> u32 {
-    let m = x | y;
-    if m == 0 {
-        512
-    } else {
-        1 << m.trailing_zeros()
-    }
-}
-
-/// The two parents of tile-local grid point `(x, y)` (module header, "The morph"): an edge's
-/// midpoint has the edge's ends, a cell's centre the diagonal through its parent cell's centre
-/// (the tile's centre, whose cell has no parent, the north-west to south-east one); the tile's
-/// corners have none. As `morph.comp` computes them.
-pub fn parents(x: u32, y: u32) -> Option<[(u32, u32); 2]> {
-    let s = scale_of(x, y);
-    if s >= 256 {
-        return None;
-    }
-    let odd = |c: u32| (c / s) & 1 == 1;
-    Some(match (odd(x), odd(y)) {
-        (true, true) => {
-            let toward = |c: u32| s == 128 || ((c + s) / (2 * s)) & 1 == 1;
-            let (dx, dy) = (toward(x), toward(y));
-            let near = |c: u32, d: bool| if d { c + s } else { c - s };
-            let far = |c: u32, d: bool| if d { c - s } else { c + s };
-            [(near(x, dx), near(y, dy)), (far(x, dx), far(y, dy))]
-        }
-        (true, false) => [(x - s, y), (x + s, y)],
-        (false, true) => [(x, y - s), (x, y + s)],
-        (false, false) => {
-            unreachable!("a point of scale s has a coordinate that is an odd multiple")
-        }
-    })
-}
-
-/// The vertices of blocks `0..=level` of `tile`: `(x, y, block)` in index order.
-pub fn block_points(tile: &tiles::format::Tile, level: u32) -> Vec<(u32, u32, usize)> {
-    (0..=level)
-        .map_while(|j| tile.level(j))
-        .enumerate()
-        .flat_map(|(j, b)| {
-            b.positions.iter().map(move |&p| {
-                let (x, y, _) = tiles::pack::unpack(p);
-                (x, y, j)
-            })
-        })
-        .collect()
-}
-
-/// The first of `points` (`(x, y, block)`, a tile's vertices) of block 1 or later whose
-/// parents are not both among them in its block or an earlier one, if any (block 0 is at its
-/// own height and needs none). The morph reads every placed vertex's parents; the meshes
-/// guarantee them (a leaf's fan holds its corners, a cell straddling the mesh's extent is
-/// split in block 0), and the tests check it on real tile sets.
-pub fn orphan(points: &[(u32, u32, usize)]) -> Option<(u32, u32, usize)> {
-    let mut block = vec![usize::MAX; SIDE * SIDE];
-    for &(x, y, j) in points {
-        block[y as usize * SIDE + x as usize] = j;
-    }
-    points.iter().copied().find(|&(x, y, j)| {
-        let before = |(px, py): (u32, u32)| block[py as usize * SIDE + px as usize] <= j;
-        j > 0 && !parents(x, y).is_some_and(|[a, b]| before(a) && before(b))
-    })
-}
-
-/// The morph pass's placement of blocks `0..=level` (module header), as `morph.comp` computes
-/// it, into `vertices` (index order): heights and their slopes. Drawn part by part, only the
-/// vertices the mix holds are placed (the others stay at their own heights, undrawn); a mesh
-/// holds every vertex's parents (they are corners of its cell, or the ends of its cell's
-/// edge), so no placed vertex reads an unplaced one.
-fn hierarchical(
-    tile: &tiles::format::Tile,
-    level: u32,
-    morph: &TileMorph,
-    (units, bias): (&[f32], i8),
-    vertices: &mut [(u32, u32, f32, f32)],
-) {
-    // Per grid point: own height, morphed height, slope.
-    let mut grid = vec![(f32::NAN, f32::NAN, 0.0f32); SIDE * SIDE];
-    // Per vertex of blocks 1..: its index, block and level; by scale, coarsest first.
-    let mut by_scale: [Vec<(usize, usize, f32)>; 9] = Default::default();
-    let base = tile.header.height_base;
-    let mut start = 0usize;
-    for (j, block) in (0..=level).map_while(|j| tile.level(j)).enumerate() {
-        for (i, &p) in block.positions.iter().enumerate() {
-            let (x, y, code) = tiles::pack::unpack(p);
-            let own = (base + code as i32) as f32 * morph.height_step;
-            grid[y as usize * SIDE + x as usize] = (own, own, 0.0);
-            vertices[start + i].2 = own;
-            let held = morph
-                .parts
-                .is_none_or(|key| j <= usize::from(tiles::parts::presence_level(&key, x, y)));
-            if j > 0 && held {
-                let (_, l) = morph.vertex(x, y, own);
-                let s = scale_of(x, y).trailing_zeros().min(8) as usize;
-                by_scale[s].push((start + i, j, l));
-            }
-        }
-        start += block.positions.len();
-    }
-    for bucket in by_scale.iter().rev() {
-        for &(index, j, l) in bucket {
-            let (x, y, _, _) = vertices[index];
-            let at = y as usize * SIDE + x as usize;
-            let own = grid[at].0;
-            let Some([p, q]) = parents(x, y) else {
-                continue;
-            };
-            let (a, b) = (
-                grid[p.1 as usize * SIDE + p.0 as usize],
-                grid[q.1 as usize * SIDE + q.0 as usize],
-            );
-            let unit = units.get(j - 1).copied().unwrap_or(0.0);
-            let detail = own - 0.5 * (a.0 + b.0) + f32::from(bias) * unit;
-            let w = (l - j as f32 + 1.0).clamp(0.0, 1.0);
-            let m = 0.5 * (a.1 + b.1) + w * detail;
-            let slope = detail.abs() + 0.5 * (a.2 + b.2);
-            grid[at] = (own, m, slope);
-            vertices[index].2 = m;
-            vertices[index].3 = slope;
-        }
-    }
 }
 
 #[cfg(test)]

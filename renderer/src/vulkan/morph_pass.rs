@@ -1,0 +1,99 @@
+//! The morph pass's Vulkan side: its compute pipeline over the terrain set layout and the
+//! dispatch a frame records before its draws. What the pass computes is `morph.comp`'s header
+//! and `crate::morph`; how much memory it gets is `memory::budget`'s decision.
+
+use ash::vk;
+
+use super::pipeline::compute_pipeline;
+use super::{Gpu, VkResult};
+use crate::interface::{FrameConstants, PUSH_CONSTANT_BYTES};
+
+/// Workgroups of the morph pass at most: each places one tile at a time in a scratch region of
+/// its own (`memory::budget` decides how many the budget holds).
+pub const MORPH_GROUPS: u32 = 16;
+/// Bytes of one workgroup's scratch region: a grid of 257 x 257 pairs of floats and its lists
+/// of vertices by scale (as many 8-byte entries again at most).
+pub const MORPH_REGION_BYTES: u64 = 2 * 257 * 257 * 8;
+
+/// The pass's pipeline and its layout: the terrain set layout, the frame's push constants for
+/// the compute stage.
+pub struct MorphPass {
+    layout: vk::PipelineLayout,
+    pipeline: vk::Pipeline,
+}
+
+impl MorphPass {
+    pub fn new(gpu: &Gpu, set_layout: vk::DescriptorSetLayout) -> VkResult<MorphPass> {
+        let ranges = [vk::PushConstantRange::default()
+            .stage_flags(vk::ShaderStageFlags::COMPUTE)
+            .size(PUSH_CONSTANT_BYTES)];
+        let set_layouts = [set_layout];
+        let layout_info = vk::PipelineLayoutCreateInfo::default()
+            .set_layouts(&set_layouts)
+            .push_constant_ranges(&ranges);
+        // SAFETY: valid create info.
+        let layout = unsafe { gpu.device.create_pipeline_layout(&layout_info, None) }?;
+        gpu.name(layout, "morph pass pipeline layout");
+        match compute_pipeline(gpu, spirv::MORPH_COMP, layout, "morph pass") {
+            Ok(pipeline) => Ok(MorphPass { layout, pipeline }),
+            Err(e) => {
+                // SAFETY: unused.
+                unsafe { gpu.device.destroy_pipeline_layout(layout, None) };
+                Err(e)
+            }
+        }
+    }
+
+    /// Records the pass over the frame's `constants.draws` records, with `set` (its records,
+    /// morphed heights and the scratch) and at most `groups` workgroups: after the frame's
+    /// copies and index builds (and the previous frames' passes, which share the scratch),
+    /// before its draws.
+    pub fn record(
+        &self,
+        gpu: &Gpu,
+        cmd: vk::CommandBuffer,
+        (set, groups): (vk::DescriptorSet, u32),
+        constants: &FrameConstants,
+    ) {
+        if constants.draws == 0 || groups == 0 {
+            return;
+        }
+        let compute = vk::PipelineStageFlags::COMPUTE_SHADER;
+        let earlier = vk::PipelineStageFlags::TRANSFER | compute;
+        let written = vk::AccessFlags::TRANSFER_WRITE | vk::AccessFlags::SHADER_WRITE;
+        let shader = vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE;
+        super::sync::memory_barrier(gpu, cmd, (earlier, written), (compute, shader));
+        // The set's Tile binding (dynamic) at the first record; the pass reads none.
+        let offsets = [crate::interface::tile_binding_offset(0)];
+        super::sync::bind_compute(gpu, cmd, (self.pipeline, self.layout), set, &offsets);
+        // SAFETY: recording outside rendering; the pipeline and its set are bound.
+        unsafe {
+            gpu.device.cmd_push_constants(
+                cmd,
+                self.layout,
+                vk::ShaderStageFlags::COMPUTE,
+                0,
+                bytemuck::bytes_of(constants),
+            );
+            gpu.device
+                .cmd_dispatch(cmd, constants.draws.min(groups), 1, 1);
+        }
+        super::sync::memory_barrier(
+            gpu,
+            cmd,
+            (compute, vk::AccessFlags::SHADER_WRITE),
+            (
+                vk::PipelineStageFlags::VERTEX_SHADER,
+                vk::AccessFlags::SHADER_READ,
+            ),
+        );
+    }
+
+    pub fn destroy(self, gpu: &Gpu) {
+        // SAFETY: no command buffer in flight uses them.
+        unsafe {
+            gpu.device.destroy_pipeline(self.pipeline, None);
+            gpu.device.destroy_pipeline_layout(self.layout, None);
+        }
+    }
+}
