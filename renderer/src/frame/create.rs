@@ -44,7 +44,43 @@ struct Parts {
     sets: Option<TerrainSets>,
 }
 
+/// [`Parts`] once every step made its part: what the frame loop holds.
+struct Made {
+    textures: TextureArray,
+    commands: Commands,
+    pipeline: TerrainPipeline,
+    slots: Vec<Slot>,
+    builder: Option<IndexBuilder>,
+    morph_scratch: Buffer,
+    sets: Option<TerrainSets>,
+}
+
 impl Parts {
+    /// The parts as the loop holds them, or the parts to destroy if a step returned without
+    /// making its part.
+    fn complete(self) -> Result<Made, Box<Parts>> {
+        match self {
+            Parts {
+                textures: Some(textures),
+                commands: Some(commands),
+                pipeline: Some(pipeline),
+                slots,
+                builder,
+                morph_scratch: Some(morph_scratch),
+                sets,
+            } => Ok(Made {
+                textures,
+                commands,
+                pipeline,
+                slots,
+                builder,
+                morph_scratch,
+                sets,
+            }),
+            incomplete => Err(Box::new(incomplete)),
+        }
+    }
+
     fn destroy(self, gpu: &Gpu) {
         gpu.wait_idle();
         if let Some(s) = self.sets {
@@ -103,36 +139,35 @@ impl Renderer {
             &split,
             extent,
         );
-        let made = made.and_then(|()| {
-            match (
-                parts.pipeline.take(),
-                parts.commands.take(),
-                parts.textures.take(),
-            ) {
-                (Some(p), Some(c), Some(t)) if parts.morph_scratch.is_some() => Ok((p, c, t)),
-                (p, c, t) => {
-                    (parts.pipeline, parts.commands, parts.textures) = (p, c, t);
-                    Err(VkError::Unsupported(
-                        "the frame loop's objects were not all made".into(),
-                    ))
-                }
-            }
-        });
-        let (pipeline, commands, textures) = match made {
+        let made = match made {
+            Ok(()) => parts.complete().map_err(|parts| {
+                let e = VkError::Unsupported("the frame loop's objects were not all made".into());
+                (e, *parts)
+            }),
+            Err(e) => Err((e, parts)),
+        };
+        let Made {
+            textures,
+            commands,
+            pipeline,
+            slots,
+            builder,
+            morph_scratch,
+            sets,
+        } = match made {
             Ok(made) => made,
-            Err(e) => {
+            Err((e, parts)) => {
                 parts.destroy(gpu);
                 pool.destroy(gpu);
                 return Err(e);
             }
         };
-        let morph_scratch = parts.morph_scratch.take().expect("checked above");
         Ok(Renderer {
             pipeline,
             morph_scratch,
-            sets: parts.sets,
+            sets,
             commands,
-            slots: parts.slots,
+            slots,
             pool,
             manager,
             textures,
@@ -146,7 +181,7 @@ impl Renderer {
             fault,
             collected: Vec::new(),
             prefetcher: Prefetcher::new(options.prefetch, terrain.tiles.len()),
-            builder: parts.builder,
+            builder,
             parts: PartDraws::default(),
         })
     }
