@@ -146,15 +146,7 @@ impl Renderer {
             }),
             Err(e) => Err((e, parts)),
         };
-        let Made {
-            textures,
-            commands,
-            pipeline,
-            slots,
-            builder,
-            morph_scratch,
-            sets,
-        } = match made {
+        let made = match made {
             Ok(made) => made,
             Err((e, parts)) => {
                 parts.destroy(gpu);
@@ -163,14 +155,14 @@ impl Renderer {
             }
         };
         Ok(Renderer {
-            pipeline,
-            morph_scratch,
-            sets,
-            commands,
-            slots,
+            pipeline: made.pipeline,
+            morph_scratch: made.morph_scratch,
+            sets: made.sets,
+            commands: made.commands,
+            slots: made.slots,
             pool,
             manager,
-            textures,
+            textures: made.textures,
             texture_slots: split.textures.config().cloned().map(TextureSlots::new),
             options,
             frame: 0,
@@ -181,7 +173,7 @@ impl Renderer {
             fault,
             collected: Vec::new(),
             prefetcher: Prefetcher::new(options.prefetch, terrain.tiles.len()),
-            builder,
+            builder: made.builder,
             parts: PartDraws::default(),
         })
     }
