@@ -30,6 +30,10 @@ pub enum Fault {
     /// `mirror-bias`: the CPU mirror the read-back heights are checked against adds one unit
     /// to every stored morph offset (the read-back test's control).
     MirrorBias,
+    /// `unsynchronised`: the first frame rewrites a morphed height between the morph pass and
+    /// the draws with no barrier, a hazard only synchronisation validation reports (the
+    /// barrier test's control).
+    Unsynchronised,
 }
 
 impl Fault {
@@ -40,6 +44,7 @@ impl Fault {
             "texture-seam" => Some(Fault::TextureSeam),
             "texture-no-clamp" => Some(Fault::TextureNoClamp),
             "mirror-bias" => Some(Fault::MirrorBias),
+            "unsynchronised" => Some(Fault::Unsynchronised),
             _ => {
                 let number = |prefix: &str| v.strip_prefix(prefix).and_then(|n| n.parse().ok());
                 number("device-lost-at-")

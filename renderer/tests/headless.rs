@@ -575,6 +575,53 @@ fn exit_codes_follow_the_table() {
     assert_eq!(summary["validation_messages"], 1);
 }
 
+/// The frame's barriers, checked by the validation layer's synchronisation validation (turned
+/// on through `VK_LAYER_ENABLES`) over flights that copy blocks, build index arrays (levels and
+/// part-by-part mixes), move chunks and run the morph pass, and one that builds with no pass
+/// after it (discrete levels): no hazard. The builder's last barrier is left to the morph pass
+/// when one follows, so both orders are flown. The control: a transfer recorded between the
+/// pass and the draws with no barrier (`VKTERRAIN_FAULT=unsynchronised`) is reported, so the
+/// layer did check.
+#[test]
+fn the_frames_barriers_leave_no_hazard() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = puget(dir.path());
+    let run = |extra: &[&str], fault: Option<&str>| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_vkterrain"));
+        c.args([s(&set), "--headless", "--path", "flyover", "--frames", "30"])
+            .args(["--size", "480x360", "--validation"])
+            .args(extra)
+            .env(
+                "VK_LAYER_ENABLES",
+                "VK_VALIDATION_FEATURE_ENABLE_SYNCHRONIZATION_VALIDATION_EXT",
+            );
+        if let Some(f) = fault {
+            c.env("VKTERRAIN_FAULT", f);
+        }
+        c.output().expect("vkterrain runs")
+    };
+    let flights: [&[&str]; 3] = [
+        &["--tau", "1"],
+        &["--tau", "1", "--gpu-budget-mb", "48"],
+        &["--tau", "1", "--no-geomorph"],
+    ];
+    for extra in flights {
+        let o = run(extra, None);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{extra:?}: {err}");
+        let summary: serde_json::Value = serde_json::from_slice(&o.stdout).expect("summary");
+        assert_eq!(summary["validation_messages"], 0, "{extra:?}: {err}");
+        assert!(summary["index_builds"].as_u64() > Some(0), "{summary}");
+        if extra.contains(&"48") {
+            assert!(summary["chunk_moves"].as_u64() > Some(0), "{summary}");
+        }
+    }
+    let o = run(&["--tau", "1"], Some("unsynchronised"));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(3), "{err}");
+    assert!(err.contains("SYNC-HAZARD"), "{err}");
+}
+
 /// Fans `tiletool verify` refuses, with checksums recomputed (so only the semantic checks can
 /// see them): a ring walked the wrong way, an index array of restarts only. The set opens (only
 /// its header, directory and tile outlines are read); the broken tile is checked when the

@@ -119,7 +119,7 @@ impl Bench {
         assert!(self.builder.write(0, &builds));
         let (gpu, builder) = (&self.gpu, &self.builder);
         sync::run_once(gpu, "index builds", |cmd| {
-            builder.record(gpu, cmd, 0, builds.len() as u32)
+            builder.record(gpu, cmd, (0, builds.len() as u32), false)
         })
         .expect("builds run");
         let failure = self.builder.take_failure(0);

@@ -21,6 +21,7 @@ use crate::stitch::pulled;
 use crate::target::Target;
 use crate::terrain::Terrain;
 use crate::textures::TexturePlan;
+use crate::vulkan::morph_pass::MorphPass;
 use crate::vulkan::pipeline::TerrainPipeline;
 use crate::vulkan::pool;
 use crate::vulkan::sync;
@@ -97,8 +98,10 @@ impl Renderer {
         );
         let copies = &uploads.texture_copies;
         texture::record_uploads(gpu, cmd, &self.textures, staging.raw(), copies);
+        let groups = self.morph_groups();
         if let Some(b) = &self.builder {
-            b.record(gpu, cmd, s, uploads.builds);
+            let pass_follows = MorphPass::records(scene.constants, groups);
+            b.record(gpu, cmd, (s, uploads.builds), pass_follows);
         }
         let set = self
             .sets
@@ -106,7 +109,7 @@ impl Renderer {
             .map_or(vk::DescriptorSet::null(), |t| t.sets[s]);
         self.pipeline
             .morph
-            .record(gpu, cmd, (set, self.morph_groups()), scene.constants);
+            .record(gpu, cmd, (set, groups), scene.constants);
         if self.fault == Some(Fault::Validation) && self.frame == 0 {
             // SAFETY: deliberately invalid (offset 1 for 16-bit indices), for the tests of
             // the validation path; the pass rebinds a valid index buffer before any draw.
@@ -114,6 +117,15 @@ impl Renderer {
                 let pool = self.pool.buffer.raw;
                 gpu.device
                     .cmd_bind_index_buffer(cmd, pool, 1, vk::IndexType::UINT16);
+            }
+        }
+        if self.fault == Some(Fault::Unsynchronised) && self.frame == 0 {
+            // SAFETY: valid, but unordered on purpose: a transfer rewrites the first morphed
+            // height after the pass wrote it and before the draws read it, with no barrier
+            // (a hazard only synchronisation validation reports; one vertex of the first
+            // frame is misplaced).
+            unsafe {
+                gpu.device.cmd_fill_buffer(cmd, slot.morphed.raw, 0, 4, 0);
             }
         }
         let at = Bindings {

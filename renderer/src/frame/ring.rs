@@ -16,13 +16,13 @@ use crate::vulkan::timestamps::Timestamps;
 use crate::vulkan::{Buffer, Gpu, VkError, VkResult};
 
 /// A slot's morphed heights (device memory, written by the morph pass, read by the vertex
-/// shader).
+/// shader; a transfer destination for `Fault::Unsynchronised` alone).
 fn morphed_buffer(gpu: &Gpu, slot: usize, size: u64) -> VkResult<Buffer> {
     Buffer::new(
         gpu,
         BufferDesc {
             size,
-            usage: vk::BufferUsageFlags::STORAGE_BUFFER,
+            usage: vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_DST,
             location: gpu_allocator::MemoryLocation::GpuOnly,
         },
         &format!("frame slot {slot} morphed heights"),

@@ -254,9 +254,33 @@ impl IndexBuilder {
         builds.len() <= self.capacity && self.builds[s].write(0, bytemuck::cast_slice(builds))
     }
 
+    /// Who reads what the builds write: the draws' index reads, the copies (a chunk moved) and
+    /// the host (the build status).
+    pub const READERS: (vk::PipelineStageFlags, vk::AccessFlags) = (
+        vk::PipelineStageFlags::from_raw(
+            vk::PipelineStageFlags::VERTEX_INPUT.as_raw()
+                | vk::PipelineStageFlags::TRANSFER.as_raw()
+                | vk::PipelineStageFlags::HOST.as_raw(),
+        ),
+        vk::AccessFlags::from_raw(
+            vk::AccessFlags::INDEX_READ.as_raw()
+                | vk::AccessFlags::TRANSFER_READ.as_raw()
+                | vk::AccessFlags::HOST_READ.as_raw(),
+        ),
+    );
+
     /// Records slot `s`'s first `count` builds: after the frame's copies (and earlier frames'
-    /// draws of the regions they rewrite), before its draws.
-    pub fn record(&self, gpu: &Gpu, cmd: vk::CommandBuffer, s: usize, count: u32) {
+    /// draws of the regions they rewrite), before its draws. With `pass_follows` the morph
+    /// pass is recorded next, and its barriers order the builds before it and make them
+    /// visible to their readers ([`crate::vulkan::morph_pass::MorphPass::record`]): one
+    /// barrier between the two dispatches instead of two.
+    pub fn record(
+        &self,
+        gpu: &Gpu,
+        cmd: vk::CommandBuffer,
+        (s, count): (usize, u32),
+        pass_follows: bool,
+    ) {
         if count == 0 {
             return;
         }
@@ -289,12 +313,10 @@ impl IndexBuilder {
             }
             first += n;
         }
-        let readers = vk::PipelineStageFlags::VERTEX_INPUT
-            | vk::PipelineStageFlags::TRANSFER
-            | vk::PipelineStageFlags::HOST;
-        let reads = vk::AccessFlags::INDEX_READ
-            | vk::AccessFlags::TRANSFER_READ
-            | vk::AccessFlags::HOST_READ;
+        if pass_follows {
+            return;
+        }
+        let (readers, reads) = Self::READERS;
         sync::memory_barrier(
             gpu,
             cmd,

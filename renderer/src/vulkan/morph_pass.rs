@@ -44,10 +44,18 @@ impl MorphPass {
         }
     }
 
+    /// Whether [`MorphPass::record`] records anything for a frame of `constants` with
+    /// `groups` workgroups (a frame drawn unmorphed, or with no draws, has no pass).
+    pub fn records(constants: &FrameConstants, groups: u32) -> bool {
+        constants.draws > 0 && groups > 0
+    }
+
     /// Records the pass over the frame's `constants.draws` records, with `set` (its records,
     /// morphed heights and the scratch) and at most `groups` workgroups: after the frame's
     /// copies and index builds (and the previous frames' passes, which share the scratch),
-    /// before its draws.
+    /// before its draws. Its last barrier also makes the frame's index builds visible to the
+    /// draws' index reads, the copies and the host, so a builder followed by the pass leaves
+    /// out its own ([`super::indices::IndexBuilder::record`]).
     pub fn record(
         &self,
         gpu: &Gpu,
@@ -55,7 +63,7 @@ impl MorphPass {
         (set, groups): (vk::DescriptorSet, u32),
         constants: &FrameConstants,
     ) {
-        if constants.draws == 0 || groups == 0 {
+        if !Self::records(constants, groups) {
             return;
         }
         let compute = vk::PipelineStageFlags::COMPUTE_SHADER;
@@ -78,13 +86,16 @@ impl MorphPass {
             gpu.device
                 .cmd_dispatch(cmd, constants.draws.min(groups), 1, 1);
         }
+        // Every compute write so far (the pass's, and the index builder's before it) to the
+        // vertex shader's reads, and to the index builder's readers.
+        let (readers, reads) = super::indices::IndexBuilder::READERS;
         super::sync::memory_barrier(
             gpu,
             cmd,
             (compute, vk::AccessFlags::SHADER_WRITE),
             (
-                vk::PipelineStageFlags::VERTEX_SHADER,
-                vk::AccessFlags::SHADER_READ,
+                vk::PipelineStageFlags::VERTEX_SHADER | readers,
+                vk::AccessFlags::SHADER_READ | reads,
             ),
         );
     }
