@@ -67,7 +67,7 @@ impl Renderer {
         )?;
         Ok(PassInputs {
             constants,
-            unmorphed: if constants.draws > 0 { unmorphed } else { 0 },
+            unmorphed,
             drawn,
             stitch_ranges,
         })

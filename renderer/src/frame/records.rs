@@ -47,8 +47,8 @@ pub type DrawnTile = (usize, u32, usize, Option<TileMorph>, Option<PartKey>);
 
 /// Writes the frame's morph constants and tile records, one per draw in order (a draw's record
 /// is its index); returns each draw as written, with how it morphs only when `describe` (for
-/// the error meter and the read-back), and how many draws are unmorphed because the morphed
-/// heights (`capacity` of them) cannot hold the frame's vertices. Then every draw is: their
+/// the error meter and the read-back), and how many draws are unmorphed because the morph
+/// pass's heights (`capacity` of them) cannot hold the frame's vertices. Then every draw is: their
 /// records say `heights` = `u32::MAX`, the morph pass skips them and the vertex shader draws
 /// their own heights, so the frame is drawn as discrete levels are, crack-free (a morphed
 /// tile beside an unmorphed one would open a seam).
@@ -70,7 +70,10 @@ pub(super) fn write_records(
     let (cam_tile, _) = terrain.camera_tile(camera.position);
     let mut drawn = Vec::with_capacity(plan.draws.len());
     let mut heights = 0usize;
-    let placed = drawn_vertices(terrain, plan) <= capacity;
+    // Only the morph pass needs room (its frames count their draws); other frames' offsets
+    // serve the read-back alone.
+    let pass = morph.is_some_and(|(_, c)| c.draws > 0);
+    let placed = !pass || drawn_vertices(terrain, plan) <= capacity;
     let unmorphed = if placed { 0 } else { plan.draws.len() as u64 };
     let records: Vec<TileRecord> = plan
         .draws

@@ -6,6 +6,7 @@ use ash::vk;
 
 use super::pass::{pass_constants, Bindings, DrawCounts, Scene};
 use super::records::{self, frame_record};
+use super::ring;
 use super::Renderer;
 use crate::camera::Camera;
 use crate::error::FrameError;
@@ -136,14 +137,12 @@ impl Renderer {
             frame
                 .heights
                 .insert(Buffer::new(gpu, desc, "static frame heights (unused)")?);
-        let desc = BufferDesc {
-            size: 4 * records::drawn_vertices(terrain, plan).max(1) as u64,
-            usage: vk::BufferUsageFlags::STORAGE_BUFFER,
-            location: gpu_allocator::MemoryLocation::GpuOnly,
-        };
-        let morphed = frame
-            .morphed
-            .insert(Buffer::new(gpu, desc, "static frame morphed heights")?);
+        let size = 4 * records::drawn_vertices(terrain, plan).max(1) as u64;
+        let morphed = frame.morphed.insert(ring::morphed_buffer(
+            gpu,
+            size,
+            "static frame morphed heights",
+        )?);
         let sets = frame.sets.insert(TerrainSets::new(
             gpu,
             &self.pipeline,

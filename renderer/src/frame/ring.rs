@@ -15,9 +15,9 @@ use crate::vulkan::sync::{self, Commands};
 use crate::vulkan::timestamps::Timestamps;
 use crate::vulkan::{Buffer, Gpu, VkError, VkResult};
 
-/// A slot's morphed heights (device memory, written by the morph pass, read by the vertex
-/// shader; a transfer destination for `Fault::Unsynchronised` alone).
-fn morphed_buffer(gpu: &Gpu, slot: usize, size: u64) -> VkResult<Buffer> {
+/// Morphed heights (device memory, written by the morph pass, read by the vertex shader; a
+/// transfer destination for `Fault::Unsynchronised` alone), for a slot or a replayed frame.
+pub(super) fn morphed_buffer(gpu: &Gpu, size: u64, name: &str) -> VkResult<Buffer> {
     Buffer::new(
         gpu,
         BufferDesc {
@@ -25,7 +25,7 @@ fn morphed_buffer(gpu: &Gpu, slot: usize, size: u64) -> VkResult<Buffer> {
             usage: vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_DST,
             location: gpu_allocator::MemoryLocation::GpuOnly,
         },
-        &format!("frame slot {slot} morphed heights"),
+        name,
     )
 }
 
@@ -101,7 +101,11 @@ impl Slot {
                 BufferDesc::readback_storage(sizes.heights),
                 &format!("frame slot {i} heights read back"),
             )?,
-            morphed: morphed_buffer(gpu, i, sizes.morphed)?,
+            morphed: morphed_buffer(
+                gpu,
+                sizes.morphed,
+                &format!("frame slot {i} morphed heights"),
+            )?,
             staging: Staging::new(gpu, sizes.staging, &format!("frame slot {i} staging"))?,
             target: Target::new(gpu, sizes.extent.0, sizes.extent.1)?,
             pending: None,
