@@ -272,32 +272,44 @@ pub fn morph_parts(
     let interior = &tile.tables[0];
     // Parts run east with i and south with j (rows from the tile's first, northern, row), 64
     // cells each; the box's x and y span the mesh (fewer cells in a partial tile).
-    let cells = (
-        f64::from(tile.header.mesh_max_x.max(1)),
-        f64::from(tile.header.mesh_max_y.max(1)),
-    );
+    let cells = (tile.header.mesh_max_x.max(1), tile.header.mesh_max_y.max(1));
     let part = (
-        (thi.x - tlo.x) / cells.0 * f64::from(PART_CELLS),
-        (thi.y - tlo.y) / cells.1 * f64::from(PART_CELLS),
+        (thi.x - tlo.x) / f64::from(cells.0) * f64::from(PART_CELLS),
+        (thi.y - tlo.y) / f64::from(cells.1) * f64::from(PART_CELLS),
     );
     std::array::from_fn(|q| {
-        let (i, j) = ((q % PARTS) as f64, (q / PARTS) as f64);
-        let lo = DVec3::new(
-            tlo.x + part.0 * i,
-            (thi.y - part.1 * (j + 1.0)).max(tlo.y),
-            tlo.z,
-        );
-        let hi = DVec3::new((lo.x + part.0).min(thi.x), thi.y - part.1 * j, thi.z);
-        if lo.x >= thi.x || hi.y <= tlo.y {
+        let (i, j) = ((q % PARTS) as u32, (q / PARTS) as u32);
+        if i * PART_CELLS >= cells.0 || j * PART_CELLS >= cells.1 {
             return 0;
         }
+        // The part's stretch of the N, E, S and W sides, where it has one (decided on the
+        // cells: a box's end computed in metres can miss the tile's by a rounding).
+        let touches = [
+            j == 0,
+            (i + 1) * PART_CELLS >= cells.0,
+            (j + 1) * PART_CELLS >= cells.1,
+            i == 0,
+        ];
+        let (fi, fj) = (f64::from(i), f64::from(j));
+        let lo = DVec3::new(
+            tlo.x + part.0 * fi,
+            if touches[2] {
+                tlo.y
+            } else {
+                thi.y - part.1 * (fj + 1.0)
+            },
+            tlo.z,
+        );
+        let hi = DVec3::new(
+            if touches[1] { thi.x } else { lo.x + part.0 },
+            thi.y - part.1 * fj,
+            thi.z,
+        );
         let s = pieces_bound(view, &planes, lo, hi, (2, 2));
         if s == 0.0 {
             return 0;
         }
         let mut level = within(interior, error_for(s, tau));
-        // The part's stretch of the N, E, S and W sides, where it has one.
-        let touches = [hi.y == thi.y, hi.x == thi.x, lo.y == tlo.y, lo.x == tlo.x];
         for (side, (a, b)) in sides(lo, hi).into_iter().enumerate() {
             let table = &tile.tables[side + 1];
             if !touches[side] || level == finest || table == interior {
