@@ -47,7 +47,10 @@ pub struct MorphFrame {
     pub jacobian: [f32; 4],
     pub tau: f32,
     pub near: f32,
-    pub pad: [f32; 2],
+    /// How far inside the image (a share of its half-width, in clip coordinates) a point of a
+    /// vertex's star counts fully towards the vertex's level ([`crate::morph::STAR_RAMP`]).
+    pub ramp: f32,
+    pub pad: f32,
 }
 
 /// One level table's coefficients (`LevelCoefficients`): `Λ(r) = Σ_k clamp(a_k - r b_k, 0, 1)`,
@@ -110,8 +113,10 @@ pub struct TileRecord {
     /// The level tables of the tile's vertices: inside, the N, E, S, W sides, the NW, NE, SW,
     /// SE corners ([`crate::tile::TileInfo::tables`]).
     pub tables: [LevelCoefficients; 9],
+    /// `[x, y, _, _]`: the mesh's last column and row (256 but in a partial tile).
+    pub extent: [u32; 4],
     /// To [`RECORD_ALIGNMENT`] and beyond.
-    pub pad2: [[u32; 4]; 12],
+    pub pad2: [[u32; 4]; 11],
 }
 
 /// Bytes of one record.
@@ -145,11 +150,11 @@ macro_rules! fields {
 pub fn host_layout() -> Vec<(&'static str, &'static str, u32)> {
     let frame = fields!(FrameConstants: view_proj, camera, spacing_y, height_step, flags, draws,
         texture_map);
-    let morph = fields!(MorphFrame: jacobian, tau, near, pad);
+    let morph = fields!(MorphFrame: jacobian, tau, near, ramp, pad);
     let coefficients = fields!(LevelCoefficients: a_lo, a_hi, b_lo, b_hi);
     let record = fields!(TileRecord: tile_offset, height_base, positions, starts_lo, starts_hi,
         blocks, units, level, cap, heights, texture_layer, texture_finest, texture_shift,
-        parts_lo, parts_hi, tables, pad2);
+        parts_lo, parts_hi, tables, extent, pad2);
     let named = |name: &'static str, fields: Vec<(&'static str, u32)>| {
         fields.into_iter().map(move |(f, o)| (name, f, o))
     };

@@ -32,7 +32,8 @@ struct MorphFrame {
     vec4 jacobian;
     float tau;               // pixels
     float near;              // the near plane's depth (m)
-    vec2 pad;
+    float ramp;              // how far inside the image a star's point counts fully (clip units)
+    float pad;
 };
 
 // The coefficients of one level table: a_k and b_k for levels 0..3 and 4..7.
@@ -64,9 +65,10 @@ struct TileRecord {
     // larger errors of the tile and that neighbour) and the NW, NE, SW, SE corners (of the
     // tiles there), so that every tile holding a vertex gives it the same table.
     LevelCoefficients tables[9];
+    uvec4 extent;            // xy: the mesh's last column and row (256 but in a partial tile)
     // To 1024 bytes: a record's offset in the buffer is then a multiple of any device's
     // minUniformBufferOffsetAlignment (at most 256), as the Tile binding's dynamic offset must be.
-    uvec4 pad2[12];
+    uvec4 pad2[11];
 };
 
 layout(std430, set = 0, binding = 0) readonly buffer Pool { uint words[]; } pool;
@@ -105,15 +107,24 @@ uint table_of(uint x, uint y) {
     return tables[row * 3u + column];
 }
 
-// l(v) for a vertex whose unmorphed position is at `clip`, with level table `c`: the finest
-// level behind the near plane (r = 0). renderer/src/morph/mod.rs has the rule and its CPU mirror.
-float vertex_level(vec4 clip, LevelCoefficients c) {
+// The vertical error (m) that projects to tau pixels at clip position `clip`: 0 behind the near
+// plane (the finest level). renderer/src/morph/mod.rs has the rule and its CPU mirror.
+float allowed_error(vec4 clip) {
     float d = clip.w;
     MorphFrame m = frame_morph.morph;
     vec2 g = m.jacobian.xy * d + m.jacobian.zw * clip.xy;
-    float e = d < m.near ? 0.0 : m.tau * d * d * inversesqrt(max(dot(g, g), 1e-30));
+    return d < m.near ? 0.0 : m.tau * d * d * inversesqrt(max(dot(g, g), 1e-30));
+}
+
+// The level whose error is `e` under level table `c` (Λ).
+float level_for(float e, LevelCoefficients c) {
     vec4 lo = clamp(c.a_lo - e * c.b_lo, 0.0, 1.0);
     vec4 hi = clamp(c.a_hi - e * c.b_hi, 0.0, 1.0);
     return dot(lo + hi, vec4(1.0));
+}
+
+// l(v) for a vertex whose unmorphed position is at `clip`, with level table `c`.
+float vertex_level(vec4 clip, LevelCoefficients c) {
+    return level_for(allowed_error(clip), c);
 }
 #endif

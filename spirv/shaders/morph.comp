@@ -12,6 +12,8 @@
 //     m(v) = (m(p) + m(q)) / 2 + w (own(v) - (own(p) + own(q)) / 2),   w = clamp(l - j + 1, 0, 1),
 //
 // its parents' mean plus its share w of its own detail; block 0 is always at its own height.
+// Its level l is the one its position and the camera give it, raised towards the levels at the
+// corners of its star's box within its part as far as they are seen (star_error below).
 // Where every vertex is at w = 1 that is the level's surface; where a vertex has w = 0 it lies
 // on the surface drawn without it, so a finer level arriving moves nothing at first.
 //
@@ -59,6 +61,30 @@ uint scale_index(uint x, uint y) {
     return m == 0u ? 9u : uint(findLSB(m));
 }
 
+// How far a point at clip position `q` is inside the image, as a weight: 0 off it (or behind
+// the near plane), rising to 1 where it is `ramp` of the half-width inside every edge (and
+// twice the near plane's depth away): continuous in the camera.
+float seen(vec4 q) {
+    MorphFrame m = frame_morph.morph;
+    float inside = min(q.w - abs(q.x), q.w - abs(q.y));
+    float near = clamp((q.w - m.near) / m.near, 0.0, 1.0);
+    return q.w > m.near ? clamp(inside / (m.ramp * q.w), 0.0, 1.0) * near : 0.0;
+}
+
+// The error allowed at a vertex whose own allowed error is `e`, lowered towards that of the
+// corners of its star's box within its part (x +- reach.x, y +- reach.y at its height) as far
+// as each is seen (renderer/src/morph/mod.rs, "Over the star").
+float star_error(vec4 clip, float e, vec2 reach) {
+    vec4 east = frame.view_proj[0] * (reach.x * frame.camera.w);
+    vec4 south = frame.view_proj[1] * (-reach.y * frame.spacing_y);
+    float lift = 0.0;
+    for (int k = 0; k < 4; ++k) {
+        vec4 q = (clip + ((k & 1) == 0 ? -east : east)) + ((k & 2) == 0 ? -south : south);
+        lift = max(lift, seen(q) * (e - allowed_error(q)));
+    }
+    return e - lift;
+}
+
 void main() {
     uint g = gl_WorkGroupID.x;
     uint groups = gl_NumWorkGroups.x;
@@ -78,6 +104,7 @@ void main() {
         uvec4 starts_hi = records.tiles[r].starts_hi;
         // The interior's level table, which most vertices take, read once for the tile.
         LevelCoefficients interior = records.tiles[r].tables[0];
+        uvec2 extent = records.tiles[r].extent.xy;
         uvec2 parts = uvec2(records.tiles[r].parts_lo, records.tiles[r].parts_hi);
         uvec4 last = records.tiles[r].blocks[min(level, 8u)];
         uint count = last.x + last.y;
@@ -151,7 +178,15 @@ void main() {
                 } else {
                     c = records.tiles[r].tables[t];
                 }
-                float l = min(vertex_level(clip, c), cap);
+                // The star's reach within the part grid: none across a line between parts or
+                // past the mesh's last column or row.
+                vec2 reach = float(s) * vec2(bvec2((x & 63u) != 0u && x + s <= extent.x,
+                                                   (y & 63u) != 0u && y + s <= extent.y));
+                float allowed = allowed_error(clip);
+                if (reach != vec2(0.0)) {
+                    allowed = star_error(clip, allowed, reach);
+                }
+                float l = min(level_for(allowed, c), cap);
                 uvec4 passed = uvec4(greaterThanEqual(uvec4(i), starts_lo))
                              + uvec4(greaterThanEqual(uvec4(i), starts_hi));
                 uint j = passed.x + passed.y + passed.z + passed.w;

@@ -113,6 +113,7 @@ pub(super) fn write_records(
             (r.starts_lo, r.starts_hi) = split(starts);
             if morph.is_some() {
                 r.tables = info.tables.map(|t| LevelCoefficients::of(&t));
+                r.extent = [info.header.mesh_max_x, info.header.mesh_max_y, 0, 0];
             }
             let tile_morph = morph
                 .filter(|_| describe && placed)
@@ -125,6 +126,7 @@ pub(super) fn write_records(
                     tile_offset: r.tile_offset,
                     cap: r.cap,
                     tables: r.tables,
+                    extent: [r.extent[0], r.extent[1]],
                     parts: d.key,
                     // The morph pass runs exactly when the frame's constants count its draws.
                     rule: if c.draws > 0 {

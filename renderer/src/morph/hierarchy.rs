@@ -102,7 +102,7 @@ pub(super) fn hierarchical(
                 .parts
                 .is_none_or(|key| j <= usize::from(tiles::parts::presence_level(&key, x, y)));
             if j > 0 && held {
-                let (_, l) = morph.vertex(x, y, own);
+                let l = morph.placed(x, y, own);
                 let s = scale_of(x, y).trailing_zeros().min(8) as usize;
                 by_scale[s].push((start + i, j, l));
             }
