@@ -9,11 +9,13 @@
 //! target/release/tilebench memory       # residency: traces replayed against Belady, cold
 //!                                       # start, upload budget, manager CPU, frames in flight
 //! target/release/tilebench cut SET.vkt [FRAMES]  # the tile pyramid's cut vs the base grid
+//! target/release/tilebench compact SET.vkt...     # issue 28's compact levels, weighed
 //! target/release/tilebench all
 //! ```
 //!
 //! Each prints Markdown tables. Ratios are measured side by side in one run.
 
+mod compact_bench;
 mod cut_bench;
 mod limit_bench;
 mod martini;
@@ -59,6 +61,7 @@ fn run() -> Result<()> {
         "frames" => frames(),
         "memory" => memory_bench::memory(),
         "cut" => cut_bench::cut(),
+        "compact" => compact_bench::compact(),
         "limit" => limit_bench::limit_table(ALL_EXTRAS),
         "flights" => limit_bench::limit_table(limit_bench::Extras {
             flights: true,
