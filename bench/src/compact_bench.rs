@@ -12,6 +12,10 @@
 //!   or entropy-coded with one table per level for the set (the bits its empirical entropy
 //!   gives; a real coder adds its table and a little).
 //!
+//! Every tile's fans and block orders are rebuilt from its vertex sets
+//! (`tiles::build::fans_from_vertices`) and compared with the stored ones: the encoding above
+//! would not hold them, so they must follow.
+//!
 //! Against that, what each base tile's blob holds today, by kind. Only the base grid is
 //! counted (a pyramid's layers would add in proportion); textures are not geometry.
 
@@ -150,6 +154,27 @@ fn weigh_tile(tile: &tiles::format::Tile, w: &mut Weights) -> Result<()> {
         }
         w.vertices += n;
         blocks.push(points);
+    }
+    // The fans and each block's order must follow from the vertex sets (issue 28), as
+    // `tiles`' test shows on SRTM3 crops: checked here on every tile weighed.
+    let samples = tiles::mesh::TileSamples {
+        heights: vec![0.0; SIDE * SIDE],
+        data_max_x: tile.header.data_max_x,
+        data_max_y: tile.header.data_max_y,
+    };
+    for (j, (block, indices)) in tiles::build::fans_from_vertices(&samples, &blocks)
+        .iter()
+        .enumerate()
+    {
+        let level = tile.level(j as u32).context("level")?;
+        let stored: Vec<u32> = level
+            .indices
+            .iter()
+            .map(|i| i.unwrap_or(u32::MAX))
+            .collect();
+        if block != &blocks[j] || indices != &stored {
+            bail!("level {j}: its fans do not follow from its vertices");
+        }
     }
     let present = |at: usize, j: usize| block[at] <= j;
     // What a decoder knows so far: the points of the levels decoded.

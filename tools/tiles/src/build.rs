@@ -13,7 +13,9 @@ use crate::format::{
     TileSetWriter, FLAG_SHARED_SIDES, MAX_LEVELS, TILE_MAGIC,
 };
 use crate::grid::{tile_samples, Grid};
-use crate::mesh::{lattice, plane, triangle_spans, Mesher, Quad, TILE_CELLS, TILE_SIZE};
+use crate::mesh::{
+    lattice, plane, triangle_spans, Mesher, Quad, TileSamples, TILE_CELLS, TILE_SIZE,
+};
 use crate::pack::{morph_offset, morph_unit, pack};
 use crate::pyramid::{base_errors, decimation_errors, level_floor, Decimated, Surfaces};
 use crate::quantise::{lattice_step, Quantiser};
@@ -405,6 +407,41 @@ fn emit_fans(
     }
     indices.pop();
     (indices, triangles)
+}
+
+/// One level rebuilt by [`fans_from_vertices`]: its block (its new vertices, `(x, y)` in
+/// first-use order) and its index array (fans joined by `u32::MAX` restarts).
+pub type RebuiltLevel = (Vec<(u32, u32)>, Vec<u32>);
+
+/// Each level's block (its new vertices, `(x, y)` in first-use order) and index array, from
+/// the levels' vertex sets alone (`sets[j]`: the vertices level `j` adds, in any order), as
+/// [`build_tile`] emits them: the decoding half of issue 28's compact levels, where the fans
+/// and the vertices' order are not stored but follow from which vertices each level has
+/// ([`Mesher::from_vertices`]). `samples` gives the tile's data extent.
+pub fn fans_from_vertices(samples: &TileSamples, sets: &[Vec<(u32, u32)>]) -> Vec<RebuiltLevel> {
+    let quantiser = Quantiser::for_tile(0.0, 1.0);
+    let mut vertex = vec![false; TILE_SIZE * TILE_SIZE];
+    let mut vertices = VertexOrder {
+        index_of: vec![NO_VERTEX; TILE_SIZE * TILE_SIZE],
+        lattice_of: Vec::new(),
+    };
+    let mut cache = FifoCache::new(TILE_SIZE * TILE_SIZE);
+    sets.iter()
+        .map(|set| {
+            for &(x, y) in set {
+                vertex[lattice(x, y)] = true;
+            }
+            let mesher = Mesher::from_vertices(samples, &quantiser, |(x, y)| vertex[lattice(x, y)]);
+            let leaves = p_order(mesher.leaves());
+            let start = vertices.lattice_of.len();
+            let (indices, _) = emit_fans(&mesher, &leaves, &mut vertices, &mut cache);
+            let block = vertices.lattice_of[start..]
+                .iter()
+                .map(|&l| xy(l))
+                .collect();
+            (block, indices)
+        })
+        .collect()
 }
 
 /// What [`measure_level`] finds of a level.

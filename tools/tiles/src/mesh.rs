@@ -225,6 +225,50 @@ impl<'a> Mesher<'a> {
         mesher
     }
 
+    /// The mesher whose mesh has exactly the vertices `is_vertex` says, of a level built by
+    /// [`Self::refine`] and [`Self::insert_side_vertex`] (issue 28's compact levels: the fans
+    /// follow from the vertex set). Every cell of such a mesh, leaf or split, has its centre
+    /// as a vertex (a leaf's fan centre, or its children's shared corner), so a cell is split
+    /// exactly where one of its children's centres is a vertex; and a leaf's edge midpoint is
+    /// on its fan exactly where it is a vertex (split neighbours and activations both make it
+    /// one). Only the topology is rebuilt: `samples` gives the data's extent (and heights for
+    /// the errors, which a decoder does not ask for).
+    pub fn from_vertices(
+        samples: &'a TileSamples,
+        quantiser: &Quantiser,
+        is_vertex: impl Fn((u32, u32)) -> bool,
+    ) -> Self {
+        let mut mesher = Mesher::new(samples, quantiser, 1.0);
+        let mut changed = Vec::new();
+        // Until no leaf has a child centre among the vertices (a split's 2:1 cascade can
+        // split cells a pass has passed).
+        loop {
+            let mut split = false;
+            for q in mesher.leaves() {
+                let wants = q.size() >= 4
+                    && q.children()
+                        .into_iter()
+                        .any(|c| !mesher.outside(c) && is_vertex(c.centre()));
+                if wants && mesher.state(q) == Node::Leaf {
+                    mesher.split(q, &mut changed);
+                    split = true;
+                }
+            }
+            if !split {
+                break;
+            }
+        }
+        for q in mesher.leaves() {
+            for k in 0..4 {
+                let p = q.midpoint(k);
+                if is_vertex(p) {
+                    mesher.present[lattice(p.0, p.1)] = true;
+                }
+            }
+        }
+        mesher
+    }
+
     pub fn quantised_heights(&self) -> &[f32] {
         &self.mesh_heights
     }

@@ -1,0 +1,123 @@
+//! Issue 28's compact levels store only which vertices each level adds and their heights: the
+//! fans and the order of each block's vertices must follow from the vertex sets. Here they do,
+//! on every level of every tile of real SRTM3 data (shared sides, so with the agreement's forced
+//! vertices; and a partial crop whose tiles end inside their cells): `fans_from_vertices`
+//! gives each stored block and index array back exactly. The control: a level missing one of
+//! its vertices gives other fans.
+
+use testdata::data;
+use tiles::build::{fans_from_vertices, RebuiltLevel};
+use tiles::mesh::TileSamples;
+use tiles::{build_tileset, BuildParams, Grid, TileSet, TileSetMeta};
+
+/// A crop of the `n x n` SRTM tile `name` (of the shared data) in metres.
+fn hgt_crop(name: &str, n: usize, (x0, y0): (usize, usize), (w, h): (usize, usize)) -> Vec<f32> {
+    let bytes = std::fs::read(data(name)).expect("readable hgt");
+    let mut out = Vec::with_capacity(w * h);
+    for y in y0..y0 + h {
+        for x in x0..x0 + w {
+            let i = 2 * (y * n + x);
+            out.push(f32::from(i16::from_be_bytes([bytes[i], bytes[i + 1]])).max(0.0));
+        }
+    }
+    out
+}
+
+/// Every tile of the set built from `heights` (`w x h`), level by level: the stored block
+/// and index array, and what `fans_from_vertices` makes of the vertex sets (with `drop`
+/// removing the last vertex of level 1's set first, for the control). Returns the levels
+/// compared and how many differed.
+fn compare(heights: &[f32], (w, h): (usize, usize), spacing: (f64, f64), drop: bool) -> (u32, u32) {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("set.vkt");
+    let grid = Grid {
+        width: w,
+        height: h,
+        first_row: 0,
+        heights,
+        spacing_x: spacing.0,
+        spacing_y: spacing.1,
+    };
+    build_tileset(
+        &grid,
+        &BuildParams::default(),
+        &TileSetMeta::default(),
+        &path,
+        &|| {},
+    )
+    .expect("built");
+    let set = TileSet::open(&path).expect("opened");
+    let header = *set.header();
+    let (mut levels, mut differing) = (0, 0);
+    for ty in 0..header.tiles_y {
+        for tx in 0..header.tiles_x {
+            let tile = set.tile(tx, ty).expect("tile");
+            let samples = TileSamples {
+                heights: vec![0.0; 257 * 257],
+                data_max_x: tile.header.data_max_x,
+                data_max_y: tile.header.data_max_y,
+            };
+            let stored: Vec<RebuiltLevel> = (0..header.levels)
+                .map(|j| {
+                    let level = tile.level(j).expect("level");
+                    let block = level
+                        .positions
+                        .iter()
+                        .map(|&p| {
+                            let (x, y, _) = tiles::pack::unpack(p);
+                            (x, y)
+                        })
+                        .collect();
+                    let indices = level
+                        .indices
+                        .iter()
+                        .map(|i| i.unwrap_or(u32::MAX))
+                        .collect();
+                    (block, indices)
+                })
+                .collect();
+            let mut sets: Vec<Vec<(u32, u32)>> = stored.iter().map(|(b, _)| b.clone()).collect();
+            // Any order will do: the decoder gets sets, not orders.
+            for set in &mut sets {
+                set.sort_unstable_by_key(|&(x, y)| (y, x));
+            }
+            if drop {
+                sets[1].pop();
+            }
+            let made = fans_from_vertices(&samples, &sets);
+            for (j, (made, stored)) in made.iter().zip(&stored).enumerate() {
+                levels += 1;
+                if made != stored {
+                    differing += 1;
+                    assert!(
+                        drop,
+                        "tile {tx},{ty} level {j}: the fans do not follow from the vertices"
+                    );
+                }
+            }
+        }
+    }
+    (levels, differing)
+}
+
+#[test]
+fn every_levels_fans_and_block_order_follow_from_its_vertex_set() {
+    // SRTM3 N55W003 (rugged, no voids), 4 x 4 tiles.
+    let side = 4 * 256 + 1;
+    let srtm3 = hgt_crop("srtm/N55W003.hgt", 1201, (100, 100), (side, side));
+    let (levels, differing) = compare(&srtm3, (side, side), (53.2, 92.6), false);
+    assert_eq!((levels, differing), (16 * 9, 0));
+    // SRTM3 N43E007 (the Alps by the sea), a partial crop: the last tiles end inside their
+    // cells.
+    let (w, h) = (600, 390);
+    let alps = hgt_crop("srtm/N43E007.hgt", 1201, (300, 400), (w, h));
+    let (levels, differing) = compare(&alps, (w, h), (67.7, 92.6), false);
+    assert_eq!((levels, differing), (6 * 9, 0));
+    // The control: level 1 without one of its vertices.
+    let (_, differing) = compare(&srtm3, (side, side), (53.2, 92.6), true);
+    assert!(
+        differing >= 16,
+        "a missing vertex went unnoticed in {} of 16 tiles",
+        16 - differing
+    );
+}
