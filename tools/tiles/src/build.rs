@@ -444,6 +444,55 @@ pub fn fans_from_vertices(samples: &TileSamples, sets: &[Vec<(u32, u32)>]) -> Ve
         .collect()
 }
 
+/// The decoding half of issue 28's compact levels: a tile's blob rebuilt from what that
+/// encoding keeps, as [`build_tile`] made it, byte for byte: each level's new vertices with
+/// their height codes (`(x, y, code)`, in any order), and the stored header and level entries
+/// (for their measured figures and morph units, which need the source to compute). The fans,
+/// the vertices' order, the border lists, the height ranges and the morph offsets follow
+/// ([`Mesher::from_vertices`], and the same assembly as the build's).
+pub fn rebuild_tile(
+    header: &TileHeader,
+    entries: &[LevelEntry],
+    sets: &[Vec<(u32, u32, u16)>],
+) -> Vec<u8> {
+    let quantiser = Quantiser {
+        base: header.height_base,
+        step: header.height_step,
+    };
+    let mut samples = TileSamples {
+        heights: vec![quantiser.min(); TILE_SIZE * TILE_SIZE],
+        data_max_x: header.data_max_x,
+        data_max_y: header.data_max_y,
+    };
+    let mut code = vec![0u16; TILE_SIZE * TILE_SIZE];
+    for &(x, y, c) in sets.iter().flatten() {
+        samples.heights[lattice(x, y)] = quantiser.height(c);
+        code[lattice(x, y)] = c;
+    }
+    let mut mesher = Mesher::new(&samples, &quantiser, 1.0);
+    let mut assembly = Assembly::new(sets.len(), samples.mesh_max(), Output::Tile);
+    let mut vertex = vec![false; TILE_SIZE * TILE_SIZE];
+    for (set, stored) in sets.iter().zip(entries) {
+        for &(x, y, _) in set {
+            vertex[lattice(x, y)] = true;
+        }
+        mesher.extend_to_vertices(|(x, y)| vertex[lattice(x, y)]);
+        let leaves = p_order(mesher.leaves());
+        let errors = LevelEntry {
+            error_bound: stored.error_bound,
+            max_error: stored.max_error,
+            side_errors: stored.side_errors,
+            limited_excess: stored.limited_excess,
+            limited_triangles: stored.limited_triangles,
+            ..LevelEntry::default()
+        };
+        assembly.add_level(&mesher, &leaves, errors, &|l| code[l]);
+    }
+    let units: Vec<f64> = entries.iter().map(|e| f64::from(e.morph_unit)).collect();
+    let (blob, _) = assembly.seal(header, mesher.quantised_heights(), &units);
+    blob
+}
+
 /// What [`measure_level`] finds of a level.
 struct Measured {
     max_error: f64,
@@ -564,9 +613,6 @@ fn mesh_tile(
     agreement: &Agreement,
     output: Output,
 ) -> Result<BuiltTile, BuildError> {
-    let full = output != Output::Sides;
-    let keep_surfaces = output == Output::LayerTile;
-    let mut finest_surface = Vec::new();
     let samples = tile_samples(grid, tx, ty);
     let lo = samples
         .heights
@@ -576,19 +622,8 @@ fn mesh_tile(
     let mut mesher = Mesher::new(&samples, &quantiser, grid.spacing_x.min(grid.spacing_y));
     let mesh_max = samples.mesh_max();
     let n = params.levels as usize;
-    let mut vertices = VertexOrder {
-        index_of: vec![NO_VERTEX; TILE_SIZE * TILE_SIZE],
-        lattice_of: Vec::new(),
-    };
-    let mut levels: Vec<LevelOut> = Vec::with_capacity(n);
-    // Each level's surface at every lattice point (none for the finest: nothing morphs to it).
-    let mut surfaces: Vec<Vec<f32>> = Vec::with_capacity(n);
-    let mut cache = FifoCache::new(TILE_SIZE * TILE_SIZE);
-    // Border lists and height range grow with each block.
-    let mut sides: [Vec<(u32, u32)>; 4] = Default::default();
-    let (mut z_min, mut z_max) = (f32::INFINITY, f32::NEG_INFINITY);
-
-    let mut positions: Sides = Vec::with_capacity(n);
+    let mut assembly = Assembly::new(n, mesh_max, output);
+    let code_of = |l: usize| quantiser.quantise(samples.heights[l]);
     for level in 0..n {
         let e = params.level_error(level as u32).max(agreement.floor);
         mesher.refine(e);
@@ -604,65 +639,13 @@ fn mesh_tile(
         // In P-order either way: the surfaces below are written leaf by leaf, and points on
         // shared edges take the last leaf's rounding.
         let leaves = p_order(mesher.leaves());
-        let block_start = vertices.lattice_of.len();
-        let (indices, triangles) = if full {
-            emit_fans(&mesher, &leaves, &mut vertices, &mut cache)
-        } else {
-            let mut fan = Vec::with_capacity(10);
-            for &q in &leaves {
-                fan.clear();
-                mesher.fan(q, &mut fan);
-                for &(x, y) in &fan {
-                    vertices.index(lattice(x, y));
-                }
-            }
-            (Vec::new(), 0)
-        };
         let measured = measure_level(&mut mesher, &leaves, e, mesh_max).map_err(|q| {
             BuildError::Internal(format!(
                 "tile {tx},{ty} level {level}: a triangle of cell {q:?} exceeds {e} m"
             ))
         })?;
-        let heights = mesher.quantised_heights();
-        let new = &vertices.lattice_of[block_start..];
-        let block: Vec<u32> = if full {
-            new.iter()
-                .map(|&l| {
-                    let (x, y) = xy(l);
-                    pack(x, y, quantiser.quantise(samples.heights[l as usize]))
-                })
-                .collect()
-        } else {
-            Vec::new()
-        };
-        for (i, &l) in new.iter().enumerate() {
-            let (x, y) = xy(l);
-            let v = (block_start + i) as u32;
-            z_min = z_min.min(heights[l as usize]);
-            z_max = z_max.max(heights[l as usize]);
-            for (k, on) in on_sides((x, y), mesh_max).into_iter().enumerate() {
-                if on {
-                    sides[k].push((if k % 2 == 0 { x } else { y }, v));
-                }
-            }
-        }
-        let border = [0, 1, 2, 3].map(|k| {
-            sides[k].sort_unstable();
-            sides[k].iter().map(|&(_, v)| v).collect::<Vec<u32>>()
-        });
-        positions.push([0, 1, 2, 3].map(|k| sides[k].iter().map(|&(at, _)| at as u16).collect()));
-        if level + 1 < n || keep_surfaces {
-            let mut surface = rasterise_surface(&mesher, &leaves, mesh_max);
-            along_sides(&mut surface, &positions[level], heights, mesh_max);
-            if level + 1 < n {
-                surfaces.push(surface);
-            } else {
-                finest_surface = surface;
-            }
-        }
-        let vertex_count = vertices.lattice_of.len() as u32;
         let max_error = round_up_f32(measured.max_error);
-        let entry = LevelEntry {
+        let errors = LevelEntry {
             error_bound: e as f32,
             // Rounded up so the stored figures are never below the measured ones.
             max_error,
@@ -671,38 +654,25 @@ fn mesh_tile(
                 .map(|side| side_error_code(max_error, side)),
             limited_excess: round_up_f32(measured.limited_excess),
             limited_triangles: measured.limited_triangles,
-            z_min,
-            z_max,
-            block_start: block_start as u32,
-            block_len: vertex_count - block_start as u32,
-            index_count: indices.len() as u32,
-            index_width: if vertex_count <= u32::from(u16::MAX) {
-                2
-            } else {
-                4
-            },
-            triangle_count: triangles,
-            fan_count: leaves.len() as u32,
-            border_len: [0, 1, 2, 3].map(|k| border[k].len() as u32),
             ..LevelEntry::default()
         };
-        levels.push(LevelOut {
-            entry,
-            block,
-            indices,
-            border,
-        });
+        assembly.add_level(&mesher, &leaves, errors, &code_of);
     }
 
     let heights = mesher.quantised_heights();
-    let deviation = deviations(&levels, &surfaces, &vertices.lattice_of, heights);
-    if !full {
+    let deviation = deviations(
+        &assembly.levels,
+        &assembly.surfaces,
+        &assembly.vertices.lattice_of,
+        heights,
+    );
+    if output == Output::Sides {
         return Ok(BuiltTile {
             tx,
             ty,
             blob: Vec::new(),
             levels: Vec::new(),
-            sides: positions,
+            sides: assembly.positions,
             deviation,
             surfaces: Vec::new(),
             data_max: (samples.data_max_x, samples.data_max_y),
@@ -720,16 +690,9 @@ fn mesh_tile(
             units.clone()
         }
         None => (0..n)
-            .map(|k| morph_unit(levels[k].entry.error_bound.into(), deviation[k]))
+            .map(|k| morph_unit(assembly.levels[k].entry.error_bound.into(), deviation[k]))
             .collect(),
     };
-    let morph = morph_offsets(
-        &mut levels,
-        &surfaces,
-        &vertices.lattice_of,
-        heights,
-        &units,
-    );
     let header = TileHeader {
         magic: TILE_MAGIC,
         tx,
@@ -741,33 +704,189 @@ fn mesh_tile(
         mesh_max_y: mesh_max.1,
         height_min: quantiser.min(),
         height_step: quantiser.step,
-        vertex_count: vertices.lattice_of.len() as u32,
+        vertex_count: assembly.vertices.lattice_of.len() as u32,
         height_base: quantiser.base,
     };
-    let (blob, stats) = serialise(&header, &mut levels, &morph);
-    let surfaces = if keep_surfaces {
-        // Interleaved by level: a lattice point's levels side by side.
-        surfaces.push(finest_surface);
-        let mut all = vec![f32::NAN; TILE_SIZE * TILE_SIZE * n];
-        for (k, surface) in surfaces.iter().enumerate() {
-            for (l, &z) in surface.iter().enumerate() {
-                all[l * n + k] = z;
-            }
-        }
-        all
-    } else {
-        Vec::new()
-    };
+    let surfaces = assembly.interleaved_surfaces();
+    let (blob, stats) = assembly.seal(&header, heights, &units);
     Ok(BuiltTile {
         tx,
         ty,
         blob,
         levels: stats,
-        sides: positions,
+        sides: assembly.positions,
         deviation,
         surfaces,
         data_max: (samples.data_max_x, samples.data_max_y),
     })
+}
+
+/// A tile's levels assembled one after another from a mesher's mesh of each: the vertex order,
+/// each level's block, index array, border lists and entry, and the surfaces the coarser
+/// levels draw (for the morph offsets). The build drives it from a mesher it refines; the
+/// compact levels' decoder ([`rebuild_tile`]) from a mesher rebuilt from each level's vertex
+/// set, so that the two make the same bytes by construction.
+struct Assembly {
+    output: Output,
+    levels_wanted: usize,
+    mesh_max: (u32, u32),
+    vertices: VertexOrder,
+    levels: Vec<LevelOut>,
+    /// Each level's surface at every lattice point (none for the finest: nothing morphs to
+    /// it), and the finest's where a layer tile keeps it.
+    surfaces: Vec<Vec<f32>>,
+    finest_surface: Vec<f32>,
+    cache: FifoCache,
+    /// Border lists and height range grow with each block.
+    sides: [Vec<(u32, u32)>; 4],
+    z: (f32, f32),
+    positions: Sides,
+}
+
+impl Assembly {
+    fn new(levels: usize, mesh_max: (u32, u32), output: Output) -> Self {
+        Assembly {
+            output,
+            levels_wanted: levels,
+            mesh_max,
+            vertices: VertexOrder {
+                index_of: vec![NO_VERTEX; TILE_SIZE * TILE_SIZE],
+                lattice_of: Vec::new(),
+            },
+            levels: Vec::with_capacity(levels),
+            surfaces: Vec::with_capacity(levels),
+            finest_surface: Vec::new(),
+            cache: FifoCache::new(TILE_SIZE * TILE_SIZE),
+            sides: Default::default(),
+            z: (f32::INFINITY, f32::NEG_INFINITY),
+            positions: Vec::with_capacity(levels),
+        }
+    }
+
+    /// Adds the mesher's mesh as the next level: `leaves` its leaves in P-order, `errors` the
+    /// entry's measured figures (the rest of the entry is filled here), `code_of` the height
+    /// code of a lattice point.
+    fn add_level(
+        &mut self,
+        mesher: &Mesher,
+        leaves: &[Quad],
+        errors: LevelEntry,
+        code_of: &dyn Fn(usize) -> u16,
+    ) {
+        let full = self.output != Output::Sides;
+        let (level, n, mesh_max) = (self.levels.len(), self.levels_wanted, self.mesh_max);
+        let vertices = &mut self.vertices;
+        let block_start = vertices.lattice_of.len();
+        let (indices, triangles) = if full {
+            emit_fans(mesher, leaves, vertices, &mut self.cache)
+        } else {
+            let mut fan = Vec::with_capacity(10);
+            for &q in leaves {
+                fan.clear();
+                mesher.fan(q, &mut fan);
+                for &(x, y) in &fan {
+                    vertices.index(lattice(x, y));
+                }
+            }
+            (Vec::new(), 0)
+        };
+        let heights = mesher.quantised_heights();
+        let new = &vertices.lattice_of[block_start..];
+        let block: Vec<u32> = if full {
+            new.iter()
+                .map(|&l| {
+                    let (x, y) = xy(l);
+                    pack(x, y, code_of(l as usize))
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let sides = &mut self.sides;
+        for (i, &l) in new.iter().enumerate() {
+            let (x, y) = xy(l);
+            let v = (block_start + i) as u32;
+            self.z.0 = self.z.0.min(heights[l as usize]);
+            self.z.1 = self.z.1.max(heights[l as usize]);
+            for (k, on) in on_sides((x, y), mesh_max).into_iter().enumerate() {
+                if on {
+                    sides[k].push((if k % 2 == 0 { x } else { y }, v));
+                }
+            }
+        }
+        let border = [0, 1, 2, 3].map(|k| {
+            sides[k].sort_unstable();
+            sides[k].iter().map(|&(_, v)| v).collect::<Vec<u32>>()
+        });
+        self.positions
+            .push([0, 1, 2, 3].map(|k| sides[k].iter().map(|&(at, _)| at as u16).collect()));
+        if level + 1 < n || self.output == Output::LayerTile {
+            let mut surface = rasterise_surface(mesher, leaves, mesh_max);
+            along_sides(&mut surface, &self.positions[level], heights, mesh_max);
+            if level + 1 < n {
+                self.surfaces.push(surface);
+            } else {
+                self.finest_surface = surface;
+            }
+        }
+        let vertex_count = vertices.lattice_of.len() as u32;
+        let entry = LevelEntry {
+            z_min: self.z.0,
+            z_max: self.z.1,
+            block_start: block_start as u32,
+            block_len: vertex_count - block_start as u32,
+            index_count: indices.len() as u32,
+            index_width: if vertex_count <= u32::from(u16::MAX) {
+                2
+            } else {
+                4
+            },
+            triangle_count: triangles,
+            fan_count: leaves.len() as u32,
+            border_len: [0, 1, 2, 3].map(|k| border[k].len() as u32),
+            ..errors
+        };
+        self.levels.push(LevelOut {
+            entry,
+            block,
+            indices,
+            border,
+        });
+    }
+
+    /// A layer tile's surfaces, interleaved by level (a lattice point's levels side by side);
+    /// empty for other tiles.
+    fn interleaved_surfaces(&mut self) -> Vec<f32> {
+        if self.output != Output::LayerTile {
+            return Vec::new();
+        }
+        let n = self.levels_wanted;
+        let mut all = vec![f32::NAN; TILE_SIZE * TILE_SIZE * n];
+        let finest = std::mem::take(&mut self.finest_surface);
+        for (k, surface) in self.surfaces.iter().chain([&finest]).enumerate() {
+            for (l, &z) in surface.iter().enumerate() {
+                all[l * n + k] = z;
+            }
+        }
+        all
+    }
+
+    /// The morph offsets at `units` metres a step and the tile's blob under `header`.
+    fn seal(
+        &mut self,
+        header: &TileHeader,
+        heights: &[f32],
+        units: &[f64],
+    ) -> (Vec<u8>, Vec<LevelStats>) {
+        let morph = morph_offsets(
+            &mut self.levels,
+            &self.surfaces,
+            &self.vertices.lattice_of,
+            heights,
+            units,
+        );
+        serialise(header, &mut self.levels, &morph)
+    }
 }
 
 /// Whether lattice point `(x, y)` lies on the N, E, S and W sides of a mesh extent whose last

@@ -239,18 +239,25 @@ impl<'a> Mesher<'a> {
         is_vertex: impl Fn((u32, u32)) -> bool,
     ) -> Self {
         let mut mesher = Mesher::new(samples, quantiser, 1.0);
+        mesher.extend_to_vertices(is_vertex);
+        mesher
+    }
+
+    /// [`Self::from_vertices`] from the current mesh, whose vertices `is_vertex` must hold (a
+    /// finer level's set holds a coarser one's): splits and activations only add.
+    pub fn extend_to_vertices(&mut self, is_vertex: impl Fn((u32, u32)) -> bool) {
         let mut changed = Vec::new();
         // Until no leaf has a child centre among the vertices (a split's 2:1 cascade can
         // split cells a pass has passed).
         loop {
             let mut split = false;
-            for q in mesher.leaves() {
+            for q in self.leaves() {
                 let wants = q.size() >= 4
                     && q.children()
                         .into_iter()
-                        .any(|c| !mesher.outside(c) && is_vertex(c.centre()));
-                if wants && mesher.state(q) == Node::Leaf {
-                    mesher.split(q, &mut changed);
+                        .any(|c| !self.outside(c) && is_vertex(c.centre()));
+                if wants && self.state(q) == Node::Leaf {
+                    self.split(q, &mut changed);
                     split = true;
                 }
             }
@@ -258,15 +265,14 @@ impl<'a> Mesher<'a> {
                 break;
             }
         }
-        for q in mesher.leaves() {
+        for q in self.leaves() {
             for k in 0..4 {
                 let p = q.midpoint(k);
                 if is_vertex(p) {
-                    mesher.present[lattice(p.0, p.1)] = true;
+                    self.present[lattice(p.0, p.1)] = true;
                 }
             }
         }
-        mesher
     }
 
     pub fn quantised_heights(&self) -> &[f32] {

@@ -1,12 +1,13 @@
 //! Issue 28's compact levels store only which vertices each level adds and their heights: the
-//! fans and the order of each block's vertices must follow from the vertex sets. Here they do,
-//! on every level of every tile of real SRTM3 data (shared sides, so with the agreement's forced
-//! vertices; and a partial crop whose tiles end inside their cells): `fans_from_vertices`
-//! gives each stored block and index array back exactly. The control: a level missing one of
-//! its vertices gives other fans.
+//! rest of a tile must follow from them. Here it does, on every tile of real SRTM3 data (shared
+//! sides, so with the agreement's forced vertices; and a partial crop whose tiles end inside
+//! their cells): `fans_from_vertices` gives each stored block and index array back from the
+//! vertex sets, and `rebuild_tile` the whole blob, byte for byte, from the sets with their
+//! height codes and the stored header and entries. The control: a level missing one of its
+//! vertices gives other fans and another blob in every tile.
 
 use testdata::data;
-use tiles::build::{fans_from_vertices, RebuiltLevel};
+use tiles::build::{fans_from_vertices, rebuild_tile, RebuiltLevel};
 use tiles::mesh::TileSamples;
 use tiles::{build_tileset, BuildParams, Grid, TileSet, TileSetMeta};
 
@@ -25,9 +26,15 @@ fn hgt_crop(name: &str, n: usize, (x0, y0): (usize, usize), (w, h): (usize, usiz
 
 /// Every tile of the set built from `heights` (`w x h`), level by level: the stored block
 /// and index array, and what `fans_from_vertices` makes of the vertex sets (with `drop`
-/// removing the last vertex of level 1's set first, for the control). Returns the levels
-/// compared and how many differed.
-fn compare(heights: &[f32], (w, h): (usize, usize), spacing: (f64, f64), drop: bool) -> (u32, u32) {
+/// removing the last vertex of level 1's set first, for the control); and the whole blob,
+/// against `rebuild_tile` of the sets with their height codes. Returns the levels compared
+/// and how many differed, and the tiles whose blob differed.
+fn compare(
+    heights: &[f32],
+    (w, h): (usize, usize),
+    spacing: (f64, f64),
+    drop: bool,
+) -> (u32, u32, u32) {
     let dir = tempfile::tempdir().expect("temp dir");
     let path = dir.path().join("set.vkt");
     let grid = Grid {
@@ -48,7 +55,8 @@ fn compare(heights: &[f32], (w, h): (usize, usize), spacing: (f64, f64), drop: b
     .expect("built");
     let set = TileSet::open(&path).expect("opened");
     let header = *set.header();
-    let (mut levels, mut differing) = (0, 0);
+    let file = std::fs::read(&path).expect("read");
+    let (mut levels, mut differing, mut blobs_differing) = (0, 0, 0);
     for ty in 0..header.tiles_y {
         for tx in 0..header.tiles_x {
             let tile = set.tile(tx, ty).expect("tile");
@@ -81,8 +89,31 @@ fn compare(heights: &[f32], (w, h): (usize, usize), spacing: (f64, f64), drop: b
             for set in &mut sets {
                 set.sort_unstable_by_key(|&(x, y)| (y, x));
             }
+            let mut coded: Vec<Vec<(u32, u32, u16)>> = (0..header.levels)
+                .map(|j| {
+                    let level = tile.level(j).expect("level");
+                    let mut set: Vec<_> = level
+                        .positions
+                        .iter()
+                        .map(|&p| tiles::pack::unpack(p))
+                        .collect();
+                    set.sort_unstable_by_key(|&(x, y, _)| (y, x));
+                    set
+                })
+                .collect();
             if drop {
                 sets[1].pop();
+                coded[1].pop();
+            }
+            let entry = set.dir_entry(tx, ty).expect("entry");
+            let stored_blob = &file[entry.offset as usize..(entry.offset + entry.len) as usize];
+            let rebuilt = rebuild_tile(&tile.header, tile.levels(), &coded);
+            if rebuilt != stored_blob {
+                blobs_differing += 1;
+                assert!(
+                    drop,
+                    "tile {tx},{ty}: the blob does not follow from the vertices and heights"
+                );
             }
             let made = fans_from_vertices(&samples, &sets);
             for (j, (made, stored)) in made.iter().zip(&stored).enumerate() {
@@ -97,27 +128,28 @@ fn compare(heights: &[f32], (w, h): (usize, usize), spacing: (f64, f64), drop: b
             }
         }
     }
-    (levels, differing)
+    (levels, differing, blobs_differing)
 }
 
 #[test]
-fn every_levels_fans_and_block_order_follow_from_its_vertex_set() {
+fn every_tiles_blob_follows_from_its_vertex_sets_and_heights() {
     // SRTM3 N55W003 (rugged, no voids), 4 x 4 tiles.
     let side = 4 * 256 + 1;
     let srtm3 = hgt_crop("srtm/N55W003.hgt", 1201, (100, 100), (side, side));
-    let (levels, differing) = compare(&srtm3, (side, side), (53.2, 92.6), false);
+    let (levels, differing, _) = compare(&srtm3, (side, side), (53.2, 92.6), false);
     assert_eq!((levels, differing), (16 * 9, 0));
     // SRTM3 N43E007 (the Alps by the sea), a partial crop: the last tiles end inside their
     // cells.
     let (w, h) = (600, 390);
     let alps = hgt_crop("srtm/N43E007.hgt", 1201, (300, 400), (w, h));
-    let (levels, differing) = compare(&alps, (w, h), (67.7, 92.6), false);
+    let (levels, differing, _) = compare(&alps, (w, h), (67.7, 92.6), false);
     assert_eq!((levels, differing), (6 * 9, 0));
     // The control: level 1 without one of its vertices.
-    let (_, differing) = compare(&srtm3, (side, side), (53.2, 92.6), true);
+    let (_, differing, blobs) = compare(&srtm3, (side, side), (53.2, 92.6), true);
     assert!(
         differing >= 16,
         "a missing vertex went unnoticed in {} of 16 tiles",
         16 - differing
     );
+    assert_eq!(blobs, 16, "a missing vertex left some blob as stored");
 }
