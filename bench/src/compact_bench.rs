@@ -23,7 +23,7 @@ use std::collections::HashMap;
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
-use renderer::morph::{parents, scale_of};
+use tiles::compact::{parents, scale_of};
 use tiles::TileSet;
 
 const SIDE: usize = 257;
@@ -44,6 +44,9 @@ struct Weights {
     packed_bytes: u64,
     /// CPU time of rebuilding the tiles' blobs from the vertex sets and heights.
     rebuild_seconds: f64,
+    /// `tiles::compact`'s bit streams, and the headers and level entries kept beside them.
+    encoded: u64,
+    tables: u64,
     /// Per level, how often each residual occurs (for the entropy).
     residuals: Vec<HashMap<i32, u64>>,
 }
@@ -56,9 +59,10 @@ pub fn compact() -> Result<()> {
     println!(
         "| set | samples | vertices | today B/sample (positions, morph, indices, other) | \
          tree bits/vertex, plain | entropy | residual bits/vertex, packed | entropy | compact \
-         B/sample, plain and packed | both entropy-coded | rebuilt on the CPU, ms a tile |"
+         B/sample, plain and packed | both entropy-coded | `tiles::compact`, B/sample: levels + \
+         header and entries | rebuilt on the CPU, ms a tile |"
     );
-    println!("|---|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|");
+    println!("|---|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|");
     for set in &sets {
         let ts = TileSet::open(set).with_context(|| set.display().to_string())?;
         let file = std::fs::read(set).with_context(|| set.display().to_string())?;
@@ -73,7 +77,7 @@ pub fn compact() -> Result<()> {
         let tree_entropy = tree_entropy_bits(&w.tree);
         println!(
             "| {} | {:.2} M | {:.2} M | **{:.2}** ({:.2}, {:.2}, {:.2}, {:.2}) | {:.2} | {:.2} | \
-             {:.2} | {:.2} | **{:.3}** | **{:.3}** | {:.1} |",
+             {:.2} | {:.2} | **{:.3}** | **{:.3}** | **{:.3}** + {:.3} | {:.1} |",
             set.file_name().and_then(|n| n.to_str()).unwrap_or("?"),
             samples / 1e6,
             vertices / 1e6,
@@ -88,6 +92,8 @@ pub fn compact() -> Result<()> {
             entropy_bits / vertices,
             per((fixed + residual_packed) / 8.0),
             per((tree_entropy + w.raw_bits as f64 + entropy_bits) / 8.0),
+            per(w.encoded as f64),
+            per(w.tables as f64),
             w.rebuild_seconds * 1e3 / w.tiles as f64,
         );
     }
@@ -178,6 +184,14 @@ fn weigh_tile(tile: &tiles::format::Tile, blob: &[u8], w: &mut Weights) -> Resul
     w.rebuild_seconds += started.elapsed().as_secs_f64();
     if rebuilt != blob {
         bail!("its blob does not follow from its vertices and heights");
+    }
+    // And the bit stream itself: its bytes, and the same blob from them.
+    let stream = tiles::compact::encode(tile);
+    w.encoded += stream.len() as u64;
+    w.tables += (std::mem::size_of::<tiles::format::TileHeader>()
+        + blocks.len() * std::mem::size_of::<tiles::format::LevelEntry>()) as u64;
+    if tiles::compact::rebuild(&tile.header, tile.levels(), &stream).as_deref() != Ok(blob) {
+        bail!("its compact bit stream does not rebuild its blob");
     }
     let present = |at: usize, j: usize| block[at] <= j;
     // What a decoder knows so far: the points of the levels decoded.

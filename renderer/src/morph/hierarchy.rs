@@ -7,42 +7,7 @@ use super::TileMorph;
 /// Samples per tile side.
 const SIDE: usize = 257;
 
-/// The scale of tile-local grid point `(x, y)`: the largest power of two dividing both (512 at
-/// the origin, which has no parents; the tile's other corners have 256 and none either).
-pub fn scale_of(x: u32, y: u32) -> u32 {
-    let m = x | y;
-    if m == 0 {
-        512
-    } else {
-        1 << m.trailing_zeros()
-    }
-}
-
-/// The two parents of tile-local grid point `(x, y)` (module header, "The morph"): an edge's
-/// midpoint has the edge's ends, a cell's centre the diagonal through its parent cell's centre
-/// (the tile's centre, whose cell has no parent, the north-west to south-east one); the tile's
-/// corners have none. As `morph.comp` computes them.
-pub fn parents(x: u32, y: u32) -> Option<[(u32, u32); 2]> {
-    let s = scale_of(x, y);
-    if s >= 256 {
-        return None;
-    }
-    let odd = |c: u32| (c / s) & 1 == 1;
-    Some(match (odd(x), odd(y)) {
-        (true, true) => {
-            let toward = |c: u32| s == 128 || ((c + s) / (2 * s)) & 1 == 1;
-            let (dx, dy) = (toward(x), toward(y));
-            let near = |c: u32, d: bool| if d { c + s } else { c - s };
-            let far = |c: u32, d: bool| if d { c - s } else { c + s };
-            [(near(x, dx), near(y, dy)), (far(x, dx), far(y, dy))]
-        }
-        (true, false) => [(x - s, y), (x + s, y)],
-        (false, true) => [(x, y - s), (x, y + s)],
-        (false, false) => {
-            unreachable!("a point of scale s has a coordinate that is an odd multiple")
-        }
-    })
-}
+pub use tiles::compact::{parents, scale_of};
 
 /// The vertices of blocks `0..=level` of `tile`: `(x, y, block)` in index order.
 pub fn block_points(tile: &tiles::format::Tile, level: u32) -> Vec<(u32, u32, usize)> {

@@ -15,6 +15,7 @@
 //! ```
 
 pub mod build;
+pub mod compact;
 pub mod format;
 pub mod grid;
 pub mod mesh;

@@ -3,11 +3,13 @@
 //! sides, so with the agreement's forced vertices; and a partial crop whose tiles end inside
 //! their cells): `fans_from_vertices` gives each stored block and index array back from the
 //! vertex sets, and `rebuild_tile` the whole blob, byte for byte, from the sets with their
-//! height codes and the stored header and entries. The control: a level missing one of its
-//! vertices gives other fans and another blob in every tile.
+//! height codes and the stored header and entries; and `tiles::compact`'s bit stream holds
+//! exactly those sets, rebuilds the same blob, and is refused when cut short. The control: a
+//! level missing one of its vertices gives other fans and another blob in every tile.
 
 use testdata::data;
 use tiles::build::{fans_from_vertices, rebuild_tile, RebuiltLevel};
+use tiles::compact;
 use tiles::mesh::TileSamples;
 use tiles::{build_tileset, BuildParams, Grid, TileSet, TileSetMeta};
 
@@ -57,6 +59,7 @@ fn compare(
     let header = *set.header();
     let file = std::fs::read(&path).expect("read");
     let (mut levels, mut differing, mut blobs_differing) = (0, 0, 0);
+    let mut compact_bytes = 0usize;
     for ty in 0..header.tiles_y {
         for tx in 0..header.tiles_x {
             let tile = set.tile(tx, ty).expect("tile");
@@ -107,6 +110,30 @@ fn compare(
             }
             let entry = set.dir_entry(tx, ty).expect("entry");
             let stored_blob = &file[entry.offset as usize..(entry.offset + entry.len) as usize];
+            if !drop {
+                // The compact bit stream holds exactly the sets, and rebuilds the blob.
+                let bytes = compact::encode(&tile);
+                let decoded = compact::decode(&bytes, header.levels).expect("decoded");
+                let sorted = |sets: compact::LevelSets| -> compact::LevelSets {
+                    sets.into_iter()
+                        .map(|mut s| {
+                            s.sort_unstable_by_key(|&(x, y, _)| (y, x));
+                            s
+                        })
+                        .collect()
+                };
+                assert_eq!(
+                    sorted(decoded),
+                    coded,
+                    "tile {tx},{ty}: the stream's vertices"
+                );
+                let from_stream = compact::rebuild(&tile.header, tile.levels(), &bytes);
+                assert_eq!(from_stream.as_deref(), Ok(stored_blob), "tile {tx},{ty}");
+                // Cut short, it is refused.
+                let cut = compact::decode(&bytes[..bytes.len() - 1], header.levels);
+                assert!(cut.is_err(), "tile {tx},{ty}: a truncated stream decoded");
+                compact_bytes += bytes.len();
+            }
             let rebuilt = rebuild_tile(&tile.header, tile.levels(), &coded);
             if rebuilt != stored_blob {
                 blobs_differing += 1;
@@ -127,6 +154,12 @@ fn compare(
                 }
             }
         }
+    }
+    if !drop {
+        eprintln!(
+            "{w} x {h}: {compact_bytes} bytes of compact levels, {:.2} B a sample",
+            compact_bytes as f64 / (w * h) as f64
+        );
     }
     (levels, differing, blobs_differing)
 }

@@ -1,0 +1,322 @@
+//! Issue 28's compact levels: a tile's levels kept as which vertices each level adds and their
+//! heights, everything else rebuilt ([`crate::build::rebuild_tile`]).
+//!
+//! Per level, in one bit stream (least significant bit first), each level starting on a byte:
+//!
+//! - the level's vertices that have no parents known yet (the tile's corners, and where the
+//!   data's edge cuts cells): a count (16 bits), then each as `x` (9 bits), `y` (9 bits) and
+//!   its height code (14 bits);
+//! - **where the others are**: a walk over the grid points of scale 128 down to 1, each scale
+//!   in row-major order, with one bit for every point not known yet whose two parents
+//!   (`parents` below: the morph's hierarchy) are: 1 if the level adds it. A decoder repeats
+//!   the walk, so the bits say which points and nothing else;
+//! - **their heights**: the width `w` of the level's residuals (5 bits), then, in the walk's
+//!   order, each residual in `w` bits, zigzagged: a vertex's height code minus the mean
+//!   (rounded down) of its parents' codes, which the walk has decoded before it.
+//!
+//! The tile's header and level entries stay as they are (their measured errors and morph
+//! units need the source). `tilebench compact` weighs this against today's blobs and against
+//! entropy coding.
+
+use crate::format::{LevelEntry, Tile, TileHeader};
+use crate::mesh::TILE_SIZE;
+use crate::quantise::HEIGHT_MAX_CODE;
+
+/// The scale of tile-local grid point `(x, y)`: the largest power of two dividing both (512 at
+/// the origin, which has no parents; the tile's other corners have 256 and none either).
+pub fn scale_of(x: u32, y: u32) -> u32 {
+    let m = x | y;
+    if m == 0 {
+        512
+    } else {
+        1 << m.trailing_zeros()
+    }
+}
+
+/// The two parents of tile-local grid point `(x, y)`: an edge's midpoint has the edge's ends,
+/// a cell's centre the diagonal through its parent cell's centre (the tile's centre, whose
+/// cell has no parent, the north-west to south-east one); the tile's corners have none. The
+/// renderer's morph pass places each vertex from these two (`renderer::morph`, "The morph";
+/// `morph.comp` computes them the same way), and the compact levels predict its height from
+/// them.
+pub fn parents(x: u32, y: u32) -> Option<[(u32, u32); 2]> {
+    let s = scale_of(x, y);
+    if s >= 256 {
+        return None;
+    }
+    let odd = |c: u32| (c / s) & 1 == 1;
+    match (odd(x), odd(y)) {
+        (true, true) => {
+            let toward = |c: u32| s == 128 || ((c + s) / (2 * s)) & 1 == 1;
+            let (dx, dy) = (toward(x), toward(y));
+            let near = |c: u32, d: bool| if d { c + s } else { c - s };
+            let far = |c: u32, d: bool| if d { c - s } else { c + s };
+            Some([(near(x, dx), near(y, dy)), (far(x, dx), far(y, dy))])
+        }
+        (true, false) => Some([(x - s, y), (x + s, y)]),
+        (false, true) => Some([(x, y - s), (x, y + s)]),
+        (false, false) => None,
+    }
+}
+
+/// Each level's new vertices, `(x, y, height code)`.
+pub type LevelSets = Vec<Vec<(u32, u32, u16)>>;
+
+/// A vertex the walk adds, with its two parents.
+type Walked = ((u32, u32), (u32, u32), (u32, u32));
+
+fn at((x, y): (u32, u32)) -> usize {
+    y as usize * TILE_SIZE + x as usize
+}
+
+/// Grid points of scale `s` in the walk's order.
+fn points_of_scale(s: u32) -> impl Iterator<Item = (u32, u32)> {
+    let side = TILE_SIZE as u32;
+    (0..side)
+        .step_by(s as usize)
+        .flat_map(move |y| (0..side).step_by(s as usize).map(move |x| (x, y)))
+        .filter(move |&(x, y)| scale_of(x, y) == s)
+}
+
+/// The mean of two codes, rounded down: what a vertex's residual is taken against.
+fn predicted(a: u16, b: u16) -> i32 {
+    (i32::from(a) + i32::from(b)).div_euclid(2)
+}
+
+struct Bits {
+    bytes: Vec<u8>,
+    len: usize,
+}
+
+impl Bits {
+    fn push(&mut self, value: u32, width: u32) {
+        for i in 0..width {
+            if self.len.is_multiple_of(8) {
+                self.bytes.push(0);
+            }
+            if (value >> i) & 1 == 1 {
+                self.bytes[self.len / 8] |= 1 << (self.len % 8);
+            }
+            self.len += 1;
+        }
+    }
+
+    fn align(&mut self) {
+        self.len = self.len.next_multiple_of(8);
+    }
+}
+
+struct Reader<'a> {
+    bytes: &'a [u8],
+    at: usize,
+}
+
+impl Reader<'_> {
+    fn read(&mut self, width: u32) -> Result<u32, String> {
+        let mut value = 0u32;
+        for i in 0..width {
+            let byte = self
+                .bytes
+                .get(self.at / 8)
+                .ok_or("the compact levels end early")?;
+            value |= u32::from((byte >> (self.at % 8)) & 1) << i;
+            self.at += 1;
+        }
+        Ok(value)
+    }
+
+    fn align(&mut self) {
+        self.at = self.at.next_multiple_of(8);
+    }
+}
+
+/// A tile's levels as the compact bit stream (module header).
+pub fn encode(tile: &Tile) -> Vec<u8> {
+    let mut bits = Bits {
+        bytes: Vec::new(),
+        len: 0,
+    };
+    let mut code = vec![0u16; TILE_SIZE * TILE_SIZE];
+    let mut block = vec![u32::MAX; TILE_SIZE * TILE_SIZE];
+    let levels: Vec<_> = (0..tile.header.levels)
+        .map_while(|j| tile.level(j))
+        .collect();
+    for (j, level) in levels.iter().enumerate() {
+        for &p in level.positions {
+            let (x, y, c) = crate::pack::unpack(p);
+            code[at((x, y))] = c;
+            block[at((x, y))] = j as u32;
+        }
+    }
+    let mut known = vec![false; TILE_SIZE * TILE_SIZE];
+    for (j, level) in levels.iter().enumerate() {
+        let j = j as u32;
+        // Sent as they are: the vertices without both parents in this level (the walk meets
+        // every other one, after its parents, which are coarser).
+        let raw: Vec<(u32, u32)> = level
+            .positions
+            .iter()
+            .map(|&p| {
+                let (x, y, _) = crate::pack::unpack(p);
+                (x, y)
+            })
+            .filter(|&(x, y)| {
+                parents(x, y).is_none_or(|[a, b]| block[at(a)] > j || block[at(b)] > j)
+            })
+            .collect();
+        bits.push(raw.len() as u32, 16);
+        for &(x, y) in &raw {
+            bits.push(x, 9);
+            bits.push(y, 9);
+            bits.push(u32::from(code[at((x, y))]), 14);
+            known[at((x, y))] = true;
+        }
+        let mut added = Vec::new();
+        for s in (0..8).rev().map(|k| 1u32 << k) {
+            for p in points_of_scale(s) {
+                let Some([a, b]) = parents(p.0, p.1).filter(|_| !known[at(p)]) else {
+                    continue;
+                };
+                if known[at(a)] && known[at(b)] {
+                    let adds = block[at(p)] == j;
+                    bits.push(u32::from(adds), 1);
+                    if adds {
+                        known[at(p)] = true;
+                        added.push((p, a, b));
+                    }
+                }
+            }
+        }
+        let residual = |&(p, a, b): &Walked| {
+            let r = i32::from(code[at(p)]) - predicted(code[at(a)], code[at(b)]);
+            ((r << 1) ^ (r >> 31)) as u32
+        };
+        let width = added
+            .iter()
+            .map(residual)
+            .max()
+            .map_or(0, |z| 32 - z.leading_zeros());
+        bits.push(width, 5);
+        for v in &added {
+            bits.push(residual(v), width);
+        }
+        bits.align();
+    }
+    bits.bytes
+}
+
+/// Each level's new vertices `(x, y, code)` from the compact bit stream of a tile with
+/// `levels` levels, or why the stream is not one: it ends early, a vertex is out of the grid
+/// or sent twice, or a height comes out of the code range.
+pub fn decode(bytes: &[u8], levels: u32) -> Result<LevelSets, String> {
+    let mut reader = Reader { bytes, at: 0 };
+    let mut code = vec![0u16; TILE_SIZE * TILE_SIZE];
+    let mut known = vec![false; TILE_SIZE * TILE_SIZE];
+    let mut sets = Vec::with_capacity(levels as usize);
+    for j in 0..levels {
+        let mut set = Vec::new();
+        let raw = reader.read(16)?;
+        for _ in 0..raw {
+            let (x, y) = (reader.read(9)?, reader.read(9)?);
+            let c = reader.read(14)? as u16;
+            if x >= TILE_SIZE as u32 || y >= TILE_SIZE as u32 || known[at((x, y))] {
+                return Err(format!(
+                    "level {j}: vertex ({x}, {y}) outside the tile or twice"
+                ));
+            }
+            known[at((x, y))] = true;
+            code[at((x, y))] = c;
+            set.push((x, y, c));
+        }
+        let mut added: Vec<Walked> = Vec::new();
+        for s in (0..8).rev().map(|k| 1u32 << k) {
+            for p in points_of_scale(s) {
+                let Some([a, b]) = parents(p.0, p.1).filter(|_| !known[at(p)]) else {
+                    continue;
+                };
+                if known[at(a)] && known[at(b)] && reader.read(1)? == 1 {
+                    known[at(p)] = true;
+                    added.push((p, a, b));
+                }
+            }
+        }
+        let width = reader.read(5)?;
+        for (p, a, b) in added {
+            let z = reader.read(width)?;
+            let r = (z >> 1) as i32 ^ -((z & 1) as i32);
+            let c = predicted(code[at(a)], code[at(b)]) + r;
+            if !(0..=i32::from(HEIGHT_MAX_CODE)).contains(&c) {
+                return Err(format!(
+                    "level {j}: vertex {p:?} has height code {c}, out of range"
+                ));
+            }
+            code[at(p)] = c as u16;
+            set.push((p.0, p.1, c as u16));
+        }
+        reader.align();
+        sets.push(set);
+    }
+    if reader.at / 8 != bytes.len() {
+        return Err(format!(
+            "{} bytes after the compact levels",
+            bytes.len() - reader.at / 8
+        ));
+    }
+    Ok(sets)
+}
+
+/// A tile's blob from its header, its level entries and its compact levels: [`decode`], then
+/// [`crate::build::rebuild_tile`].
+pub fn rebuild(
+    header: &TileHeader,
+    entries: &[LevelEntry],
+    bytes: &[u8],
+) -> Result<Vec<u8>, String> {
+    let sets = decode(bytes, header.levels)?;
+    Ok(crate::build::rebuild_tile(header, entries, &sets))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bits_read_back_as_written_and_refuse_to_run_past_the_end() {
+        let mut bits = Bits {
+            bytes: Vec::new(),
+            len: 0,
+        };
+        let values = [(5u32, 3u32), (0, 0), (16383, 14), (1, 1), (300, 9)];
+        for &(v, w) in &values {
+            bits.push(v, w);
+        }
+        bits.align();
+        let mut reader = Reader {
+            bytes: &bits.bytes,
+            at: 0,
+        };
+        for &(v, w) in &values {
+            assert_eq!(reader.read(w), Ok(v));
+        }
+        reader.align();
+        assert!(reader.read(1).is_err());
+    }
+
+    /// Every point but the tile's corners has parents of a coarser scale, and the walk visits
+    /// every scale's points once.
+    #[test]
+    fn parents_are_coarser_and_the_walk_covers_the_grid() {
+        let mut visited = 0;
+        for s in (0..8).rev().map(|k| 1u32 << k) {
+            for (x, y) in points_of_scale(s) {
+                visited += 1;
+                let [a, b] = parents(x, y).expect("parents");
+                assert!(
+                    scale_of(a.0, a.1) > s && scale_of(b.0, b.1) > s,
+                    "({x}, {y})"
+                );
+            }
+        }
+        assert_eq!(visited, TILE_SIZE * TILE_SIZE - 4);
+    }
+}
