@@ -24,6 +24,7 @@ fn build_and_verify(files: &[&str], opts: ReadOptions, params: BuildParams) {
     let meta = TileSetMeta {
         description: grid.description.clone(),
         voids_filled: grid.voids_filled,
+        compact: false,
     };
     let summary = build_tileset(&view, &params, &meta, &out, &|| {})
         .unwrap_or_else(|e| panic!("{files:?}: {e}"));

@@ -1048,6 +1048,9 @@ fn serialise(
 pub struct TileSetMeta {
     pub description: String,
     pub voids_filled: u64,
+    /// Write the tiles' levels compact (format version 4, [`crate::compact`]): each rebuilt
+    /// as built before it is written.
+    pub compact: bool,
 }
 
 /// Totals of a finished build.
@@ -1217,6 +1220,10 @@ pub fn build_tileset_from(
     let header = FileHeader {
         flags: if params.shared_sides {
             FLAG_SHARED_SIDES
+        } else {
+            0
+        } | if meta.compact {
+            crate::format::FLAG_COMPACT_LEVELS
         } else {
             0
         },

@@ -24,6 +24,10 @@
 //!                             (see [`crate::texture`] for the layout and the texel mapping)
 //! ```
 //!
+//! Version 4 ([`FLAG_COMPACT_LEVELS`]) keeps each tile's header and level table, then the
+//! crc32 of the version 3 blob and the levels as [`crate::compact`]'s bit stream, from which a
+//! reader rebuilds the version 3 blob; everything else is as in version 3.
+//!
 //! Version 1 files (no texture fields) are still read, as tile sets without textures; version 2
 //! files (no pyramid: the field was reserved and zero) as tile sets without a pyramid.
 //!
@@ -72,6 +76,9 @@ use crate::texture;
 pub const MAGIC: [u8; 8] = *b"VKTILES\0";
 pub const TILE_MAGIC: [u8; 4] = *b"TILE";
 pub const VERSION: u32 = 3;
+/// The version of files whose tiles hold compact levels ([`FLAG_COMPACT_LEVELS`]); other files
+/// are still written as [`VERSION`], which readers of version 3 read.
+pub const COMPACT_VERSION: u32 = 4;
 /// The oldest version this reader reads: version 1 had no textures and zeros in their fields.
 pub const OLDEST_VERSION: u32 = 1;
 
@@ -81,11 +88,54 @@ pub const OLDEST_VERSION: u32 = 1;
 /// tiles, bit for bit. Files without it (built with `--independent-sides`, or by older
 /// builders) are read the same way; the renderer closes their morphing seams with slivers.
 pub const FLAG_SHARED_SIDES: u32 = 1;
+/// `FileHeader::flags` (version 4, and only there): each tile's blob holds its header and level
+/// table as version 3 does, the crc32 of its version 3 blob, then its levels as
+/// [`crate::compact`]'s bit stream in place of the sections; a reader rebuilds the version 3
+/// blob from them ([`crate::compact::rebuild`], once per tile, kept), checks it against that
+/// crc, and reads it.
+pub const FLAG_COMPACT_LEVELS: u32 = 2;
 /// The most levels a tile set may have (one morph byte per coarser level per vertex).
 pub const MAX_LEVELS: u32 = 16;
 /// Index value that restarts a fan (all ones at the index width).
 pub const RESTART_U16: u16 = u16::MAX;
 pub const RESTART_U32: u32 = u32::MAX;
+
+/// Bytes of a tile's header and level table.
+fn table_len(levels: u32) -> usize {
+    size_of::<TileHeader>() + levels as usize * size_of::<LevelEntry>()
+}
+
+/// The version 3 blob of a compact tile's stored bytes (its header and level table, the crc32
+/// of the version 3 blob, then its levels' bit stream), or what is wrong with them: the header
+/// as [`Tile::parse`] checks it, the stream as [`crate::compact::decode`] does, and the blob
+/// rebuilt must have the stored table and checksum (the file's own checksum covers the stored
+/// bytes; this one, what a decoder made of them).
+fn rebuilt(stored: &[u8], tx: u32, ty: u32, levels: u32, step: f32) -> Result<Vec<u8>, String> {
+    let table = table_len(levels);
+    if stored.len() < table + 4 {
+        return Err(format!(
+            "{} bytes is too short for a tile's table",
+            stored.len()
+        ));
+    }
+    let header: TileHeader = bytemuck::pod_read_unaligned(&stored[..size_of::<TileHeader>()]);
+    check_tile_header(&header, tx, ty, levels, step)?;
+    let entries: Vec<LevelEntry> = (0..levels as usize)
+        .map(|i| {
+            let at = size_of::<TileHeader>() + i * size_of::<LevelEntry>();
+            bytemuck::pod_read_unaligned(&stored[at..at + size_of::<LevelEntry>()])
+        })
+        .collect();
+    let crc = u32::from_le_bytes(stored[table..table + 4].try_into().expect("4 bytes"));
+    let blob = crate::compact::rebuild(&header, &entries, &stored[table + 4..])?;
+    if blob.get(..table) != Some(&stored[..table]) {
+        return Err("its compact levels do not rebuild its level table".into());
+    }
+    if crc32fast::hash(&blob) != crc {
+        return Err("its compact levels rebuild a tile that fails its checksum".into());
+    }
+    Ok(blob)
+}
 
 #[cfg(target_endian = "big")]
 compile_error!("the .vkt reader casts little-endian sections in place");
@@ -445,7 +495,11 @@ pub struct TileSetWriter {
 impl TileSetWriter {
     pub fn create(path: &Path, header: FileHeader) -> Result<Self, FormatError> {
         let header = FileHeader {
-            version: VERSION,
+            version: if header.flags & FLAG_COMPACT_LEVELS != 0 {
+                COMPACT_VERSION
+            } else {
+                VERSION
+            },
             ..header
         };
         let (layers, dir_end) = layer_layout(&header).map_err(|what| FormatError::Invalid {
@@ -536,6 +590,13 @@ impl TileSetWriter {
         decimation_error: f32,
         base_errors: &[f32],
     ) -> Result<(), FormatError> {
+        let compacted;
+        let blob = if self.header.flags & FLAG_COMPACT_LEVELS != 0 {
+            compacted = self.compacted(layer, tx, ty, blob)?;
+            &compacted[..]
+        } else {
+            blob
+        };
         let slot = self.slot(layer, tx, ty);
         if layer > 0 {
             let n = self.header.levels as usize;
@@ -561,6 +622,29 @@ impl TileSetWriter {
         self.write(blob)?;
         self.pos += blob.len() as u64;
         Ok(())
+    }
+
+    /// A version 3 tile blob as a compact one: its header and level table, then its levels'
+    /// bit stream; rebuilt once here and compared, so that a file never holds a tile that does
+    /// not read back as built.
+    fn compacted(&self, layer: u32, tx: u32, ty: u32, blob: &[u8]) -> Result<Vec<u8>, FormatError> {
+        let step = match layer {
+            0 => self.header.height_step,
+            p => self.layers[p as usize - 1].height_step,
+        };
+        let internal = |what: String| FormatError::Invalid {
+            path: self.path.clone(),
+            what: format!("internal: tile {tx},{ty} of layer {layer}: {what}"),
+        };
+        let tile = Tile::parse(blob, tx, ty, self.header.levels, step).map_err(internal)?;
+        let table = table_len(self.header.levels);
+        let mut out = blob[..table].to_vec();
+        out.extend(crc32fast::hash(blob).to_le_bytes());
+        out.extend(crate::compact::encode(&tile));
+        if rebuilt(&out, tx, ty, self.header.levels, step).map_err(internal)? != blob {
+            return Err(internal("its compact levels do not rebuild it".into()));
+        }
+        Ok(out)
     }
 
     /// Appends tile `(tx, ty)`'s texture blob (after its tile, in any order).
@@ -783,6 +867,22 @@ pub struct TileSet {
     /// Which pyramid layer this is (0: the base grid), and the file's layers above the base.
     layer: u32,
     layers: std::sync::Arc<Vec<LayerHeader>>,
+    /// With compact levels ([`FLAG_COMPACT_LEVELS`]): each of this view's tiles' version 3
+    /// blob, rebuilt the first time the tile is read and kept (or why it could not be).
+    rebuilt: std::sync::Arc<RebuiltTiles>,
+}
+
+/// Per tile of a view, its rebuilt version 3 blob or why there is none, once asked for.
+type RebuiltTiles = Vec<std::sync::OnceLock<Result<Box<[u8]>, String>>>;
+
+/// The cache of rebuilt tiles for a view of `tiles` tiles (empty without compact levels).
+fn rebuilt_cache(header: &FileHeader, tiles: u64) -> std::sync::Arc<RebuiltTiles> {
+    let n = if header.flags & FLAG_COMPACT_LEVELS != 0 {
+        tiles as usize
+    } else {
+        0
+    };
+    std::sync::Arc::new((0..n).map(|_| std::sync::OnceLock::new()).collect())
 }
 
 /// The texture layout a header declares (None: no textures); what is wrong with it, if
@@ -845,10 +945,16 @@ impl TileSet {
         if header.magic != MAGIC {
             return Err(invalid("not a vkterrain tile set (bad magic)".into()));
         }
-        if !(OLDEST_VERSION..=VERSION).contains(&header.version) {
+        if !(OLDEST_VERSION..=COMPACT_VERSION).contains(&header.version) {
             return Err(invalid(format!(
-                "format version {} is not supported (this reader reads {OLDEST_VERSION}..={VERSION})",
+                "format version {} is not supported (this reader reads {OLDEST_VERSION}..={COMPACT_VERSION})",
                 header.version
+            )));
+        }
+        if (header.version == COMPACT_VERSION) != (header.flags & FLAG_COMPACT_LEVELS != 0) {
+            return Err(invalid(format!(
+                "format version {} with flags {:#x}: compact levels are version {COMPACT_VERSION}'s alone",
+                header.version, header.flags
             )));
         }
         if header.header_len as usize != size_of::<FileHeader>()
@@ -949,6 +1055,10 @@ impl TileSet {
             texture,
             layer: 0,
             layers: std::sync::Arc::new(layers),
+            rebuilt: rebuilt_cache(
+                &header,
+                u64::from(header.tiles_x) * u64::from(header.tiles_y),
+            ),
         };
         set.check_entries(dir_end)?;
         for p in 1..=set.pyramid_layers() {
@@ -1059,6 +1169,14 @@ impl TileSet {
             texture: self.texture,
             layer: p,
             layers: self.layers.clone(),
+            rebuilt: if p == 0 {
+                self.rebuilt.clone()
+            } else {
+                rebuilt_cache(
+                    &header,
+                    u64::from(header.tiles_x) * u64::from(header.tiles_y),
+                )
+            },
         })
     }
 
@@ -1296,6 +1414,9 @@ impl TileSet {
     /// Tile `(tx, ty)`'s stored bytes, not re-checked: for readers that validated the tile once
     /// with [`tile`](Self::tile) and then fetch parts of it often (the renderer's uploads).
     pub fn blob(&self, tx: u32, ty: u32) -> Option<&[u8]> {
+        if self.compact() {
+            return self.rebuilt_blob(tx, ty, true).ok();
+        }
         let e = self.dir_entry(tx, ty)?;
         self.bytes_at(e.offset, e.len)
     }
@@ -1318,14 +1439,23 @@ impl TileSet {
     /// values. One page of the file per tile, for a reader that learns every tile's box and
     /// errors at open and validates a tile fully ([`tile`](Self::tile)) only when it needs the
     /// tile's data. The level data it hands out may be nonsense (in range, but unchecked).
+    ///
+    /// With compact levels the outline is the tile rebuilt (checksum first: the bit stream is
+    /// decoded), and costs what [`tile`](Self::tile) does.
     pub fn tile_outline(&self, tx: u32, ty: u32) -> Result<Tile<'_>, FormatError> {
         let invalid = |what: String| self.tile_error(tx, ty, what);
         let e = self.checked_entry(tx, ty)?;
         let blob = &self.map[e.offset as usize..(e.offset + e.len) as usize];
+        if self.compact() {
+            let blob = self.rebuilt_blob(tx, ty, true).map_err(invalid)?;
+            return Tile::outline(blob, tx, ty, self.header.levels, self.header.height_step)
+                .map_err(invalid);
+        }
         Tile::outline(blob, tx, ty, self.header.levels, self.header.height_step).map_err(invalid)
     }
 
-    /// Tile `(tx, ty)`, checksum and structure validated.
+    /// Tile `(tx, ty)`, checksum and structure validated (with compact levels, the checksum of
+    /// the stored bytes, and the structure of the blob rebuilt from them).
     pub fn tile(&self, tx: u32, ty: u32) -> Result<Tile<'_>, FormatError> {
         let invalid = |what: String| self.tile_error(tx, ty, what);
         let e = self.checked_entry(tx, ty)?;
@@ -1333,7 +1463,36 @@ impl TileSet {
         if crc32fast::hash(blob) != e.crc {
             return Err(invalid("checksum mismatch (corrupted file)".into()));
         }
+        let blob = if self.compact() {
+            self.rebuilt_blob(tx, ty, false).map_err(invalid)?
+        } else {
+            blob
+        };
         Tile::parse(blob, tx, ty, self.header.levels, self.header.height_step).map_err(invalid)
+    }
+
+    /// Whether the tiles hold compact levels ([`FLAG_COMPACT_LEVELS`]).
+    pub fn compact(&self) -> bool {
+        self.header.flags & FLAG_COMPACT_LEVELS != 0
+    }
+
+    /// A compact tile's version 3 blob, rebuilt once and kept; `check` first compares the
+    /// stored bytes with their checksum (a decoder is not handed bytes nothing vouches for).
+    fn rebuilt_blob(&self, tx: u32, ty: u32, check: bool) -> Result<&[u8], String> {
+        let e = self.dir_entry(tx, ty).ok_or("outside the tile set")?;
+        let slot = ty as usize * self.header.tiles_x as usize + tx as usize;
+        let cell = self.rebuilt.get(slot).ok_or("outside the tile set")?;
+        let made = cell.get_or_init(|| {
+            let stored = self
+                .bytes_at(e.offset, e.len)
+                .ok_or("the tile runs past the end of the file")?;
+            if check && crc32fast::hash(stored) != e.crc {
+                return Err("checksum mismatch (corrupted file)".into());
+            }
+            rebuilt(stored, tx, ty, self.header.levels, self.header.height_step)
+                .map(Vec::into_boxed_slice)
+        });
+        made.as_deref().map_err(Clone::clone)
     }
 }
 
@@ -1437,6 +1596,48 @@ fn section<'a, T: Pod>(
     bytemuck::try_cast_slice(s).map_err(|_| format!("{what} at {offset} is misaligned"))
 }
 
+/// A tile header's own checks: magic, place, level count, extents and height step.
+fn check_tile_header(
+    header: &TileHeader,
+    tx: u32,
+    ty: u32,
+    levels: u32,
+    step: f32,
+) -> Result<(), String> {
+    if header.magic != TILE_MAGIC {
+        return Err("bad tile magic".into());
+    }
+    if (header.tx, header.ty) != (tx, ty) {
+        return Err(format!(
+            "directory points at tile {},{}",
+            header.tx, header.ty
+        ));
+    }
+    if header.levels != levels {
+        return Err(format!("{} levels (the file says {levels})", header.levels));
+    }
+    let (dx, dy, mx, my) = (
+        header.data_max_x,
+        header.data_max_y,
+        header.mesh_max_x,
+        header.mesh_max_y,
+    );
+    if !(1..=TILE_CELLS).contains(&dx)
+        || !(1..=TILE_CELLS).contains(&dy)
+        || mx != (dx + 1) & !1
+        || my != (dy + 1) & !1
+    {
+        return Err(format!("bad data extent {dx}x{dy} / mesh extent {mx}x{my}"));
+    }
+    if header.height_step.to_bits() != step.to_bits() {
+        return Err(format!(
+            "height step {} differs from the tile set's {step}",
+            header.height_step
+        ));
+    }
+    Ok(())
+}
+
 impl<'a> Tile<'a> {
     /// The header and level table, and every section's place inside the blob.
     fn outline(
@@ -1449,37 +1650,7 @@ impl<'a> Tile<'a> {
         let header: TileHeader = *section::<TileHeader>(blob, 0, 1, "tile header")?
             .first()
             .ok_or("empty tile")?;
-        if header.magic != TILE_MAGIC {
-            return Err("bad tile magic".into());
-        }
-        if (header.tx, header.ty) != (tx, ty) {
-            return Err(format!(
-                "directory points at tile {},{}",
-                header.tx, header.ty
-            ));
-        }
-        if header.levels != levels {
-            return Err(format!("{} levels (the file says {levels})", header.levels));
-        }
-        let (dx, dy, mx, my) = (
-            header.data_max_x,
-            header.data_max_y,
-            header.mesh_max_x,
-            header.mesh_max_y,
-        );
-        if !(1..=TILE_CELLS).contains(&dx)
-            || !(1..=TILE_CELLS).contains(&dy)
-            || mx != (dx + 1) & !1
-            || my != (dy + 1) & !1
-        {
-            return Err(format!("bad data extent {dx}x{dy} / mesh extent {mx}x{my}"));
-        }
-        if header.height_step.to_bits() != step.to_bits() {
-            return Err(format!(
-                "height step {} differs from the tile set's {step}",
-                header.height_step
-            ));
-        }
+        check_tile_header(&header, tx, ty, levels, step)?;
         let entries = section::<LevelEntry>(
             blob,
             size_of::<TileHeader>() as u32,

@@ -56,6 +56,7 @@ fn a_banded_build_is_the_whole_builds_bytes() {
     let meta = TileSetMeta {
         description: dem.description.clone(),
         voids_filled: dem.voids_filled,
+        compact: false,
     };
     let texturing = Texturing {
         source: Source::Relief(Relief::default()),
