@@ -4,6 +4,8 @@
 
 mod common;
 
+use std::path::Path;
+
 use glam::DVec3;
 use memory::{Config, Manager};
 use renderer::camera::Camera;
@@ -384,6 +386,36 @@ fn shared_side_vertices_morph_to_one_height_from_both_tiles() {
     }
 }
 
+/// The Puget and SRTM N48W125 terrains of the level-cover tests (N48W125: smooth filled voids
+/// beside rough coast, so neighbouring tiles' tables differ), built into `dirs`.
+fn cover_terrains(dirs: (&Path, &Path)) -> [Terrain; 2] {
+    let puget = Terrain::open(&common::puget(dirs.0)).expect("open");
+    let n48 = common::tileset(
+        dirs.1,
+        &common::data("srtm/N48W125.hgt"),
+        Default::default(),
+    );
+    [puget, Terrain::open(&n48).expect("open")]
+}
+
+/// The level-cover tests' views of `terrain`: every third camera of its paths and four low
+/// random ones.
+fn cover_views(terrain: &Terrain, rng: &mut splitmix::Rng) -> Vec<Camera> {
+    let (lo, hi) = terrain.bounds();
+    let mut views: Vec<Camera> = cameras(terrain).into_iter().step_by(3).collect();
+    views.extend((0..4).map(|_| Camera {
+        position: DVec3::new(
+            lo.x + (hi.x - lo.x) * rng.unit(),
+            lo.y + (hi.y - lo.y) * rng.unit(),
+            hi.z + 100.0 + 2000.0 * rng.unit(),
+        ),
+        yaw: rng.unit() * std::f64::consts::TAU,
+        pitch: -0.05 - 0.4 * rng.unit(),
+        fov_y: 1.0,
+    }));
+    views
+}
+
 /// The drawn level of a morphing tile covers the level of every vertex of it on screen that a
 /// level moves (`renderer::morph`, "The level a tile is drawn at"): over Puget and SRTM
 /// N48W125 (smooth filled voids beside rough coast, so neighbouring tiles' tables differ),
@@ -398,34 +430,18 @@ fn shared_side_vertices_morph_to_one_height_from_both_tiles() {
 fn the_drawn_level_covers_every_vertex_on_screen() {
     use renderer::lod::{self, Bound};
     use renderer::morph::{table_of, TileMorph, TAU_MARGIN};
-    let dir = tempfile::tempdir().expect("tempdir");
-    let puget = Terrain::open(&common::puget(dir.path())).expect("open");
-    let srtm_dir = tempfile::tempdir().expect("tempdir");
-    let n48 = common::tileset(
-        srtm_dir.path(),
-        &common::data("srtm/N48W125.hgt"),
-        Default::default(),
+    let (dir, srtm_dir) = (
+        tempfile::tempdir().expect("tempdir"),
+        tempfile::tempdir().expect("tempdir"),
     );
-    let n48 = Terrain::open(&n48).expect("open");
+    let terrains = cover_terrains((dir.path(), srtm_dir.path()));
     let mut rng = splitmix::Rng(0x6d6f_7270_685f_6c76);
     let (mut checked, mut interior_misses, mut coarser, mut tiles) = (0usize, 0usize, 0usize, 0);
     let mut corners_above = 0usize;
-    for terrain in [&puget, &n48] {
+    for terrain in &terrains {
         let finest = terrain.levels - 1;
-        let (lo, hi) = terrain.bounds();
         // Every third camera of the paths (the test's cost is in its vertices).
-        let mut views: Vec<Camera> = cameras(terrain).into_iter().step_by(3).collect();
-        views.extend((0..4).map(|_| Camera {
-            position: DVec3::new(
-                lo.x + (hi.x - lo.x) * rng.unit(),
-                lo.y + (hi.y - lo.y) * rng.unit(),
-                hi.z + 100.0 + 2000.0 * rng.unit(),
-            ),
-            yaw: rng.unit() * std::f64::consts::TAU,
-            pitch: -0.05 - 0.4 * rng.unit(),
-            fov_y: 1.0,
-        }));
-        for camera in views {
+        for camera in cover_views(terrain, &mut rng) {
             let view = camera.view(EXTENT.0, EXTENT.1);
             for tau in [1.0, 3.0] {
                 for i in visible_tiles(terrain, &view, camera.position) {
@@ -511,33 +527,17 @@ fn the_drawn_level_covers_every_vertex_on_screen() {
 fn the_placed_level_stays_within_every_part_that_draws_the_vertex() {
     use renderer::lod::{self, Bound};
     use renderer::morph::TileMorph;
-    let dir = tempfile::tempdir().expect("tempdir");
-    let puget = Terrain::open(&common::puget(dir.path())).expect("open");
-    let srtm_dir = tempfile::tempdir().expect("tempdir");
-    let n48 = common::tileset(
-        srtm_dir.path(),
-        &common::data("srtm/N48W125.hgt"),
-        Default::default(),
+    let (dir, srtm_dir) = (
+        tempfile::tempdir().expect("tempdir"),
+        tempfile::tempdir().expect("tempdir"),
     );
-    let n48 = Terrain::open(&n48).expect("open");
+    let terrains = cover_terrains((dir.path(), srtm_dir.path()));
     let mut rng = splitmix::Rng(0x7374_6172_5f6c_766c);
     let (mut checked, mut raised, mut across) = (0usize, 0usize, 0usize);
     // The parts whose closed box holds tile-local coordinate c (one, or two on a line).
     let span = |c: u32| (c.saturating_sub(1) / 64).min(3)..=(c / 64).min(3);
-    for terrain in [&puget, &n48] {
-        let (lo, hi) = terrain.bounds();
-        let mut views: Vec<Camera> = cameras(terrain).into_iter().step_by(3).collect();
-        views.extend((0..4).map(|_| Camera {
-            position: DVec3::new(
-                lo.x + (hi.x - lo.x) * rng.unit(),
-                lo.y + (hi.y - lo.y) * rng.unit(),
-                hi.z + 100.0 + 2000.0 * rng.unit(),
-            ),
-            yaw: rng.unit() * std::f64::consts::TAU,
-            pitch: -0.05 - 0.4 * rng.unit(),
-            fov_y: 1.0,
-        }));
-        for camera in views {
+    for terrain in &terrains {
+        for camera in cover_views(terrain, &mut rng) {
             let view = camera.view(EXTENT.0, EXTENT.1);
             for tau in [1.0, 3.0] {
                 for i in visible_tiles(terrain, &view, camera.position) {

@@ -4,21 +4,14 @@
 //! damaged (checksums resealed, so that only the decoder can tell) is refused with one line,
 //! not drawn from and not a panic; its neighbours read on.
 
-use testdata::data;
+mod common;
+
 use tiles::format::{reseal, COMPACT_VERSION, FLAG_COMPACT_LEVELS, VERSION};
-use tiles::{build_tileset, verify::verify, BuildParams, Grid, TileSet, TileSetMeta};
+use tiles::{build_tileset, verify::verify, BuildParams, TileSet, TileSetMeta};
 
 /// A crop of the SRTM3 tile N55W003 in metres (no voids).
 fn srtm3_crop(x0: usize, y0: usize, w: usize, h: usize) -> Vec<f32> {
-    let bytes = std::fs::read(data("srtm/N55W003.hgt")).expect("readable hgt");
-    let mut out = Vec::with_capacity(w * h);
-    for y in y0..y0 + h {
-        for x in x0..x0 + w {
-            let i = 2 * (y * 1201 + x);
-            out.push(f32::from(i16::from_be_bytes([bytes[i], bytes[i + 1]])));
-        }
-    }
-    out
+    common::hgt_crop("srtm/N55W003.hgt", 1201, (x0, y0), (w, h))
 }
 
 #[test]
@@ -26,14 +19,7 @@ fn compact_sets_read_back_as_built_and_refuse_a_damaged_stream() {
     // 2 x 2 tiles and a partial third column, with the pyramid: two layers of tiles.
     let (w, h) = (600, 513);
     let heights = srtm3_crop(100, 100, w, h);
-    let grid = Grid {
-        width: w,
-        height: h,
-        first_row: 0,
-        heights: &heights,
-        spacing_x: 53.2,
-        spacing_y: 92.6,
-    };
+    let grid = common::srtm3_grid(&heights, (w, h));
     let params = BuildParams {
         pyramid: true,
         ..BuildParams::default()

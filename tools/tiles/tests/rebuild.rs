@@ -7,23 +7,17 @@
 //! exactly those sets, rebuilds the same blob, and is refused when cut short. The control: a
 //! level missing one of its vertices gives other fans and another blob in every tile.
 
-use testdata::data;
+mod common;
+
 use tiles::build::{fans_from_vertices, rebuild_tile, RebuiltLevel};
 use tiles::compact;
 use tiles::mesh::TileSamples;
 use tiles::{build_tileset, BuildParams, Grid, TileSet, TileSetMeta};
 
-/// A crop of the `n x n` SRTM tile `name` (of the shared data) in metres.
-fn hgt_crop(name: &str, n: usize, (x0, y0): (usize, usize), (w, h): (usize, usize)) -> Vec<f32> {
-    let bytes = std::fs::read(data(name)).expect("readable hgt");
-    let mut out = Vec::with_capacity(w * h);
-    for y in y0..y0 + h {
-        for x in x0..x0 + w {
-            let i = 2 * (y * n + x);
-            out.push(f32::from(i16::from_be_bytes([bytes[i], bytes[i + 1]])).max(0.0));
-        }
-    }
-    out
+/// A crop of the `n x n` SRTM tile `name` in metres, voids at 0.
+fn hgt_crop(name: &str, n: usize, origin: (usize, usize), size: (usize, usize)) -> Vec<f32> {
+    let heights = common::hgt_crop(name, n, origin, size);
+    heights.into_iter().map(|h| h.max(0.0)).collect()
 }
 
 /// Every tile of the set built from `heights` (`w x h`), level by level: the stored block

@@ -3,8 +3,9 @@
 
 use std::mem::size_of;
 
-use testdata::data;
+mod common;
 
+use common::hgt_crop;
 use tiles::{build_tileset, verify::verify, BuildParams, Grid, TileSet, TileSetMeta};
 
 /// A crop of an SRTM3 tile in metres (N55W003 has no voids).
@@ -12,32 +13,12 @@ fn srtm_crop(x0: usize, y0: usize, w: usize, h: usize) -> Vec<f32> {
     hgt_crop("srtm/N55W003.hgt", 1201, (x0, y0), (w, h))
 }
 
-/// A crop of the `n x n` SRTM tile `name` (of the shared data) in metres.
-fn hgt_crop(name: &str, n: usize, (x0, y0): (usize, usize), (w, h): (usize, usize)) -> Vec<f32> {
-    let bytes = std::fs::read(data(name)).expect("readable hgt");
-    let mut out = Vec::with_capacity(w * h);
-    for y in y0..y0 + h {
-        for x in x0..x0 + w {
-            let i = 2 * (y * n + x);
-            out.push(f32::from(i16::from_be_bytes([bytes[i], bytes[i + 1]])));
-        }
-    }
-    out
-}
-
 #[test]
 fn odd_sized_crop_builds_and_verifies_against_its_source() {
     // 300 x 190: two tiles across (the second 43 samples wide, odd), one down, partial.
     let (w, h) = (300, 190);
     let heights = srtm_crop(100, 200, w, h);
-    let grid = Grid {
-        width: w,
-        height: h,
-        first_row: 0,
-        heights: &heights,
-        spacing_x: 53.2,
-        spacing_y: 92.6,
-    };
+    let grid = common::srtm3_grid(&heights, (w, h));
     let dir = tempfile::tempdir().expect("temp dir");
     let out = dir.path().join("crop.vkt");
     let params = BuildParams {
