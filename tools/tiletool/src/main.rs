@@ -89,6 +89,10 @@ enum Command {
         /// The DEM the set was built from (same flags as build).
         #[arg(long, num_args = 1..)]
         source: Vec<PathBuf>,
+        /// Another tile set of the same input (e.g. the version 3 build of a `--compact` set):
+        /// every tile of every layer must read back the same, byte for byte.
+        #[arg(long)]
+        against: Option<PathBuf>,
         #[command(flatten)]
         read: ReadArgs,
     },
@@ -300,7 +304,12 @@ fn main() -> ExitCode {
             )
         }),
         Command::Info { file, json } => info::run(&file, json),
-        Command::Verify { file, source, read } => verify(&file, &source, &read),
+        Command::Verify {
+            file,
+            source,
+            against,
+            read,
+        } => verify(&file, &source, against.as_deref(), &read),
         Command::Export {
             file,
             tile,
@@ -684,25 +693,40 @@ fn peak_memory() -> Option<u64> {
     Some(kb * 1024)
 }
 
-fn verify(file: &Path, source: &[PathBuf], read: &ReadArgs) -> Result<ExitCode> {
+fn verify(
+    file: &Path,
+    source: &[PathBuf],
+    against: Option<&Path>,
+    read: &ReadArgs,
+) -> Result<ExitCode> {
     let set = tiles::TileSet::open(file)?;
+    let other = against.map(tiles::TileSet::open).transpose()?;
     let grid = if source.is_empty() {
         None
     } else {
         Some(read_dem(source, read)?)
     };
     let view = grid.as_ref().map(view);
-    let report = tiles::verify::verify(&set, view.as_ref());
+    let mut report = tiles::verify::verify(&set, view.as_ref());
+    if let Some(other) = &other {
+        report
+            .problems
+            .extend(tiles::verify::same_tiles(&set, other));
+    }
     for p in report.problems.iter().take(50) {
         eprintln!("{p}");
     }
     if report.problems.len() > 50 {
         eprintln!("... and {} more problems", report.problems.len() - 50);
     }
-    let what = if grid.is_some() {
-        "structure and errors against the source"
-    } else {
-        "structure"
+    let what = match (grid.is_some(), &other) {
+        (true, None) => "structure and errors against the source".to_string(),
+        (false, None) => "structure".to_string(),
+        (g, Some(o)) => format!(
+            "structure{}, every tile the same as {}'s",
+            if g { ", errors against the source" } else { "" },
+            o.path().display()
+        ),
     };
     if report.ok() {
         println!(

@@ -197,6 +197,48 @@ fn verify_against_the_wrong_source_fails() {
     assert!(stderr(&o).contains("FAILED"), "{}", stderr(&o));
 }
 
+/// `--compact` builds the same tiles as the version 3 build (`verify --against`, every tile
+/// read back byte for byte, and its errors against the source), in a version 4 file a tenth
+/// the size; `--against` a set of other tiles fails, naming both files.
+#[test]
+fn a_compact_build_verifies_against_the_plain_one() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let (plain, _) = build_sample(dir.path(), "plain.vkt", &["--no-texture"]);
+    let (compact, info) = build_sample(dir.path(), "compact.vkt", &["--no-texture", "--compact"]);
+    assert_eq!(info["format_version"], 4, "{info}");
+    let size = |p: &Path| std::fs::metadata(p).expect("size").len();
+    assert!(
+        size(&compact) * 10 < size(&plain),
+        "{} against {}",
+        size(&compact),
+        size(&plain)
+    );
+    let o = tiletool(&[
+        "verify",
+        s(&compact),
+        "--against",
+        s(&plain),
+        "--source",
+        s(&sample()),
+        "--spacing",
+        "160",
+        "--vertical-scale",
+        "0.1",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout).to_string();
+    assert!(out.contains("every tile the same as"), "{out}");
+    // The control: other tiles (fewer levels) are told apart.
+    let (fewer, _) = build_sample(dir.path(), "fewer.vkt", &["--no-texture", "--levels", "5"]);
+    let o = tiletool(&["verify", s(&compact), "--against", s(&fewer)]);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert!(
+        err.contains("compact.vkt") && err.contains("fewer.vkt"),
+        "{err}"
+    );
+}
+
 fn write(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
     let p = dir.join(name);
     std::fs::write(&p, bytes).expect("write");
