@@ -13,7 +13,7 @@ use std::sync::{Condvar, Mutex, OnceLock};
 use std::time::Duration;
 
 use glam::DVec3;
-use tiles::format::{LevelEntry, TileSet};
+use tiles::format::TileSet;
 use tiles::mesh::TILE_CELLS;
 
 use crate::levels::LevelTable;
@@ -493,9 +493,7 @@ impl Terrain {
 fn tile_info(set: &TileSet, tx: u32, ty: u32) -> Result<TileInfo, tiles::FormatError> {
     let h = *set.header();
     let (sx, sy) = (h.spacing_x, h.spacing_y);
-    let tile = set.tile_outline(tx, ty)?;
-    let th = tile.header;
-    let mut levels: Vec<LevelEntry> = tile.levels().to_vec();
+    let (th, mut levels) = set.tile_table(tx, ty)?;
     // A pyramid layer's tile: its levels' errors against the base grid's samples under it,
     // not its own subsampled grid's, so that it is chosen by the ground it stands for.
     if let Some(errors) = set.base_errors(tx, ty) {

@@ -100,6 +100,16 @@ pub const MAX_LEVELS: u32 = 16;
 pub const RESTART_U16: u16 = u16::MAX;
 pub const RESTART_U32: u32 = u32::MAX;
 
+/// The level table after a tile's header in `stored` (which holds it).
+fn stored_entries(stored: &[u8], levels: u32) -> Vec<LevelEntry> {
+    (0..levels as usize)
+        .map(|i| {
+            let at = size_of::<TileHeader>() + i * size_of::<LevelEntry>();
+            bytemuck::pod_read_unaligned(&stored[at..at + size_of::<LevelEntry>()])
+        })
+        .collect()
+}
+
 /// Bytes of a tile's header and level table.
 fn table_len(levels: u32) -> usize {
     size_of::<TileHeader>() + levels as usize * size_of::<LevelEntry>()
@@ -120,12 +130,8 @@ fn rebuilt(stored: &[u8], tx: u32, ty: u32, levels: u32, step: f32) -> Result<Ve
     }
     let header: TileHeader = bytemuck::pod_read_unaligned(&stored[..size_of::<TileHeader>()]);
     check_tile_header(&header, tx, ty, levels, step)?;
-    let entries: Vec<LevelEntry> = (0..levels as usize)
-        .map(|i| {
-            let at = size_of::<TileHeader>() + i * size_of::<LevelEntry>();
-            bytemuck::pod_read_unaligned(&stored[at..at + size_of::<LevelEntry>()])
-        })
-        .collect();
+    let entries = stored_entries(stored, levels);
+    check_table(&header, &entries)?;
     let crc = u32::from_le_bytes(stored[table..table + 4].try_into().expect("4 bytes"));
     let blob = crate::compact::rebuild(&header, &entries, &stored[table + 4..])?;
     if blob.get(..table) != Some(&stored[..table]) {
@@ -1454,6 +1460,38 @@ impl TileSet {
         Tile::outline(blob, tx, ty, self.header.levels, self.header.height_step).map_err(invalid)
     }
 
+    /// Tile `(tx, ty)`'s header and level table, checked as [`tile_outline`](Self::tile_outline)
+    /// checks them (with compact levels, without the sections, which are not there until the
+    /// tile is rebuilt): what a reader plans with before it reads the tile, one page of the
+    /// file, in either version.
+    pub fn tile_table(
+        &self,
+        tx: u32,
+        ty: u32,
+    ) -> Result<(TileHeader, Vec<LevelEntry>), FormatError> {
+        if !self.compact() {
+            let tile = self.tile_outline(tx, ty)?;
+            return Ok((tile.header, tile.levels().to_vec()));
+        }
+        let invalid = |what: String| self.tile_error(tx, ty, what);
+        let e = self.checked_entry(tx, ty)?;
+        let stored = self
+            .bytes_at(e.offset, e.len)
+            .ok_or_else(|| invalid("the tile runs past the end of the file".into()))?;
+        let levels = self.header.levels;
+        if stored.len() < table_len(levels) {
+            return Err(invalid(format!(
+                "{} bytes is too short for a tile's table",
+                stored.len()
+            )));
+        }
+        let header: TileHeader = bytemuck::pod_read_unaligned(&stored[..size_of::<TileHeader>()]);
+        check_tile_header(&header, tx, ty, levels, self.header.height_step).map_err(invalid)?;
+        let entries = stored_entries(stored, levels);
+        check_table(&header, &entries).map_err(invalid)?;
+        Ok((header, entries))
+    }
+
     /// Tile `(tx, ty)`, checksum and structure validated (with compact levels, the checksum of
     /// the stored bytes, and the structure of the blob rebuilt from them).
     pub fn tile(&self, tx: u32, ty: u32) -> Result<Tile<'_>, FormatError> {
@@ -1596,6 +1634,43 @@ fn section<'a, T: Pod>(
     bytemuck::try_cast_slice(s).map_err(|_| format!("{what} at {offset} is misaligned"))
 }
 
+/// A level table's own checks: each block following the previous one, index widths that
+/// address the blocks, sane numbers, and the blocks adding up to the header's vertex count
+/// (not where the sections lie).
+fn check_table(header: &TileHeader, entries: &[LevelEntry]) -> Result<(), String> {
+    let mut start = 0u32;
+    for (i, e) in entries.iter().enumerate() {
+        let err = |what: String| format!("level {i}: {what}");
+        if e.block_start != start {
+            return Err(err(format!(
+                "block starts at vertex {} instead of {start}",
+                e.block_start
+            )));
+        }
+        start = start
+            .checked_add(e.block_len)
+            .ok_or_else(|| err("vertex count overflows".into()))?;
+        if e.index_width == 2 && start > u32::from(RESTART_U16) {
+            return Err(err(format!(
+                "{start} vertices cannot be addressed with 16-bit indices"
+            )));
+        }
+        if e.index_width != 2 && e.index_width != 4 {
+            return Err(err(format!("index width {}", e.index_width)));
+        }
+        if let Some(problem) = level_numbers(e) {
+            return Err(err(problem));
+        }
+    }
+    if start != header.vertex_count {
+        return Err(format!(
+            "blocks hold {start} vertices, header says {}",
+            header.vertex_count
+        ));
+    }
+    Ok(())
+}
+
 /// A tile header's own checks: magic, place, level count, extents and height step.
 fn check_tile_header(
     header: &TileHeader,
@@ -1662,36 +1737,10 @@ impl<'a> Tile<'a> {
             header,
             levels: entries,
         };
-        let mut start = 0u32;
-        for (i, e) in entries.iter().enumerate() {
+        check_table(&header, entries)?;
+        for i in 0..entries.len() {
             let err = |what: String| format!("level {i}: {what}");
-            if e.block_start != start {
-                return Err(err(format!(
-                    "block starts at vertex {} instead of {start}",
-                    e.block_start
-                )));
-            }
-            start = start
-                .checked_add(e.block_len)
-                .ok_or_else(|| err("vertex count overflows".into()))?;
-            if e.index_width == 2 && start > u32::from(RESTART_U16) {
-                return Err(err(format!(
-                    "{start} vertices cannot be addressed with 16-bit indices"
-                )));
-            }
-            if e.index_width != 2 && e.index_width != 4 {
-                return Err(err(format!("index width {}", e.index_width)));
-            }
-            if let Some(problem) = level_numbers(e) {
-                return Err(err(problem));
-            }
             tile.level_unchecked(i as u32).map_err(err)?;
-        }
-        if start != header.vertex_count {
-            return Err(format!(
-                "blocks hold {start} vertices, header says {}",
-                header.vertex_count
-            ));
         }
         Ok(tile)
     }

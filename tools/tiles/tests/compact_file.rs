@@ -2,7 +2,8 @@
 //! tile of every pyramid layer reads back as the version 3 build's, byte for byte; the set
 //! passes `verify` against its source; it is smaller. A compact tile whose bit stream is
 //! damaged (checksums resealed, so that only the decoder can tell) is refused with one line,
-//! not drawn from and not a panic; its neighbours read on.
+//! not drawn from and not a panic; its neighbours read on, and so does its level table, which
+//! needs no decoding.
 
 mod common;
 
@@ -98,6 +99,12 @@ fn compact_sets_read_back_as_built_and_refuse_a_damaged_stream() {
         "{error}"
     );
     assert!(d.blob(1, 0).is_none());
+    // Its table, which readers plan with before they read the tile, reads without the stream
+    // (nothing is decoded), and equals the plain build's.
+    let (header, entries) = d.tile_table(1, 0).expect("the table reads");
+    let plain_tile = p.tile(1, 0).expect("plain");
+    assert!(bytemuck::bytes_of(&header) == bytemuck::bytes_of(&plain_tile.header));
+    assert!(bytemuck::cast_slice::<_, u8>(&entries) == bytemuck::cast_slice(plain_tile.levels()));
     assert!(
         d.tile(0, 0).is_ok() && d.tile(2, 1).is_ok(),
         "its neighbours read on"
