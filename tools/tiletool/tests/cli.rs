@@ -666,6 +666,85 @@ fn resealed_nonsense_numbers_are_refused() {
 }
 
 /// Exit codes of the README's table: 0 success, 1 bad input or a failed check, 2 usage.
+/// A compact set (format version 4) whose header, directory or tiles say what cannot be, with
+/// every checksum resealed: `info` refuses it with one line naming the file and the problem,
+/// `verify` fails without a panic. The version and the compact flag must go together; a tile
+/// whose stream is cut short, or whose level table does not add up, is refused (its inner
+/// checksum, or its table's checks, where the file's own checksums were resealed).
+#[test]
+fn resealed_compact_mutations_are_refused() {
+    use tiles::format::{FileHeader, LevelEntry, TileHeader};
+    let dir = tempfile::tempdir().expect("temp dir");
+    let good = dir.path().join("good.vkt");
+    let o = tiletool(&[
+        "build",
+        s(&data("srtm/N55W003.hgt")),
+        "-o",
+        s(&good),
+        "--levels",
+        "3",
+        "--no-texture",
+        "--compact",
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let bytes = std::fs::read(&good).expect("read");
+    let set = tiles::TileSet::open(&good).expect("open");
+    assert!(set.compact());
+    let entry_at =
+        set.header().directory_offset as usize + 3 * size_of::<tiles::format::DirEntry>();
+    let tile = set.dir_entry(3, 0).expect("entry");
+    drop(set);
+    let u32_at = |at: usize, v: u32| -> Vec<u8> {
+        let mut b = bytes.clone();
+        b[at..at + 4].copy_from_slice(&v.to_le_bytes());
+        reseal(&mut b);
+        b
+    };
+    let version = std::mem::offset_of!(FileHeader, version);
+    let flags = std::mem::offset_of!(FileHeader, flags);
+    let flag_bits = u32::from_le_bytes(bytes[flags..flags + 4].try_into().expect("4"));
+    let len_at = entry_at + std::mem::offset_of!(tiles::format::DirEntry, len);
+    let block_len = tile.offset as usize
+        + size_of::<TileHeader>()
+        + size_of::<LevelEntry>()
+        + std::mem::offset_of!(LevelEntry, block_len);
+    let cases = [
+        ("v3_compact.vkt", u32_at(version, 3), "compact levels"),
+        (
+            "v4_plain.vkt",
+            u32_at(flags, flag_bits & !tiles::format::FLAG_COMPACT_LEVELS),
+            "compact levels",
+        ),
+        (
+            "cut_stream.vkt",
+            u32_at(len_at, tile.len as u32 - 1),
+            "tile 3,0",
+        ),
+        ("bad_table.vkt", u32_at(block_len, 1_000_000), "tile 3,0"),
+    ];
+    for (name, content, what) in cases {
+        let p = write(dir.path(), name, &content);
+        let o = tiletool(&["info", s(&p)]);
+        let err = assert_one_line_error(&o, name);
+        eprintln!("info {name}: {}", err.trim_end());
+        assert!(err.contains(what), "info {name}: want {what:?} in {err}");
+        let o = tiletool(&["verify", s(&p)]);
+        let err = stderr(&o);
+        assert!(
+            !o.status.success() && !err.contains("panicked"),
+            "verify {name}: {err}"
+        );
+        assert!(err.contains(what), "verify {name}: want {what:?} in {err}");
+    }
+    // The control: the good file, resealed alike, is read.
+    let mut same = bytes.clone();
+    reseal(&mut same);
+    let p = write(dir.path(), "same.vkt", &same);
+    let o = tiletool(&["verify", s(&p)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
 #[test]
 fn exit_codes_follow_the_table() {
     let dir = tempfile::tempdir().expect("temp dir");
