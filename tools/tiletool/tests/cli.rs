@@ -578,6 +578,47 @@ fn info_escapes_control_characters_in_the_description() {
     assert!(out.contains("\\u{1b}[2Jcleared"), "{out}");
 }
 
+/// Builds N55W003 at 3 levels into `dir` (with `extra` options) and returns the file and its
+/// bytes: the starting point of the resealed-mutation tests.
+fn small_srtm_set(dir: &Path, extra: &[&str]) -> (PathBuf, Vec<u8>) {
+    let good = dir.join("good.vkt");
+    let source = data("srtm/N55W003.hgt");
+    let mut args = vec![
+        "build",
+        s(&source),
+        "-o",
+        s(&good),
+        "--levels",
+        "3",
+        "--quiet",
+    ];
+    args.extend(extra);
+    let o = tiletool(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let bytes = std::fs::read(&good).expect("read");
+    (good, bytes)
+}
+
+/// Each case (file name, bytes, what the error must say), written into `dir`: `info` refuses
+/// it with one line naming the file and saying `what`; `verify` fails without a panic, saying
+/// it too.
+fn refused_by_every_reader(dir: &Path, cases: Vec<(&str, Vec<u8>, &str)>) {
+    for (name, content, what) in cases {
+        let p = write(dir, name, &content);
+        let o = tiletool(&["info", s(&p)]);
+        let err = assert_one_line_error(&o, name);
+        eprintln!("info {name}: {}", err.trim_end());
+        assert!(err.contains(what), "info {name}: want {what:?} in {err}");
+        let o = tiletool(&["verify", s(&p)]);
+        let err = stderr(&o);
+        assert!(
+            !o.status.success() && !err.contains("panicked"),
+            "verify {name}: {err}"
+        );
+        assert!(err.contains(what), "verify {name}: want {what:?} in {err}");
+    }
+}
+
 /// Numbers that make no sense, checksums recomputed: NaN or negative spacing, a zero base
 /// error, an inverted height range, a negative measured error, a NaN z range. Every reader
 /// refuses them with one line naming the problem.
@@ -585,18 +626,7 @@ fn info_escapes_control_characters_in_the_description() {
 fn resealed_nonsense_numbers_are_refused() {
     use tiles::format::{FileHeader, LevelEntry, TileHeader};
     let dir = tempfile::tempdir().expect("temp dir");
-    let good = dir.path().join("good.vkt");
-    let o = tiletool(&[
-        "build",
-        s(&data("srtm/N55W003.hgt")),
-        "-o",
-        s(&good),
-        "--levels",
-        "3",
-        "--quiet",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let bytes = std::fs::read(&good).expect("read");
+    let (good, bytes) = small_srtm_set(dir.path(), &[]);
     let set = tiles::TileSet::open(&good).expect("open");
     let tile_at = set.dir_entry(0, 0).expect("entry").offset as usize;
     drop(set);
@@ -650,19 +680,7 @@ fn resealed_nonsense_numbers_are_refused() {
             "z range",
         ),
     ];
-    for (name, content, what) in cases {
-        let p = write(dir.path(), name, &content);
-        let o = tiletool(&["info", s(&p)]);
-        let err = assert_one_line_error(&o, name);
-        assert!(err.contains(what), "info {name}: want {what:?} in {err}");
-        let o = tiletool(&["verify", s(&p)]);
-        let err = stderr(&o);
-        assert!(
-            !o.status.success() && !err.contains("panicked"),
-            "verify {name}: {err}"
-        );
-        assert!(err.contains(what), "verify {name}: want {what:?} in {err}");
-    }
+    refused_by_every_reader(dir.path(), Vec::from(cases));
 }
 
 /// Exit codes of the README's table: 0 success, 1 bad input or a failed check, 2 usage.
@@ -675,20 +693,7 @@ fn resealed_nonsense_numbers_are_refused() {
 fn resealed_compact_mutations_are_refused() {
     use tiles::format::{FileHeader, LevelEntry, TileHeader};
     let dir = tempfile::tempdir().expect("temp dir");
-    let good = dir.path().join("good.vkt");
-    let o = tiletool(&[
-        "build",
-        s(&data("srtm/N55W003.hgt")),
-        "-o",
-        s(&good),
-        "--levels",
-        "3",
-        "--no-texture",
-        "--compact",
-        "--quiet",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let bytes = std::fs::read(&good).expect("read");
+    let (good, bytes) = small_srtm_set(dir.path(), &["--no-texture", "--compact"]);
     let set = tiles::TileSet::open(&good).expect("open");
     assert!(set.compact());
     let entry_at =
@@ -723,20 +728,7 @@ fn resealed_compact_mutations_are_refused() {
         ),
         ("bad_table.vkt", u32_at(block_len, 1_000_000), "tile 3,0"),
     ];
-    for (name, content, what) in cases {
-        let p = write(dir.path(), name, &content);
-        let o = tiletool(&["info", s(&p)]);
-        let err = assert_one_line_error(&o, name);
-        eprintln!("info {name}: {}", err.trim_end());
-        assert!(err.contains(what), "info {name}: want {what:?} in {err}");
-        let o = tiletool(&["verify", s(&p)]);
-        let err = stderr(&o);
-        assert!(
-            !o.status.success() && !err.contains("panicked"),
-            "verify {name}: {err}"
-        );
-        assert!(err.contains(what), "verify {name}: want {what:?} in {err}");
-    }
+    refused_by_every_reader(dir.path(), Vec::from(cases));
     // The control: the good file, resealed alike, is read.
     let mut same = bytes.clone();
     reseal(&mut same);
