@@ -426,12 +426,15 @@ pub fn fans_from_vertices(samples: &TileSamples, sets: &[Vec<(u32, u32)>]) -> Ve
         lattice_of: Vec::new(),
     };
     let mut cache = FifoCache::new(TILE_SIZE * TILE_SIZE);
+    // One mesher for all levels: a finer level's set holds a coarser one's, so each level only
+    // adds splits and activations to the last (as rebuild_tile does).
+    let mut mesher = Mesher::new(samples, &quantiser, 1.0);
     sets.iter()
         .map(|set| {
             for &(x, y) in set {
                 vertex[lattice(x, y)] = true;
             }
-            let mesher = Mesher::from_vertices(samples, &quantiser, |(x, y)| vertex[lattice(x, y)]);
+            mesher.extend_to_vertices(|(x, y)| vertex[lattice(x, y)]);
             let leaves = p_order(mesher.leaves());
             let start = vertices.lattice_of.len();
             let (indices, _) = emit_fans(&mesher, &leaves, &mut vertices, &mut cache);
