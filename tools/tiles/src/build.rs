@@ -140,7 +140,7 @@ impl Heights for Grid<'_> {
 }
 
 /// A grid cut into bands of whole tile rows, each read when a step of the build needs it.
-struct Bands<'a> {
+pub(crate) struct Bands<'a> {
     source: &'a dyn Heights,
     shape: Grid<'a>,
     tiles: (u32, u32),
@@ -161,7 +161,7 @@ struct Band<'a> {
 }
 
 impl<'a> Bands<'a> {
-    fn new(source: &'a dyn Heights, tiles: (u32, u32)) -> Bands<'a> {
+    pub(crate) fn new(source: &'a dyn Heights, tiles: (u32, u32)) -> Bands<'a> {
         Bands {
             source,
             shape: source.shape(),
@@ -1138,15 +1138,15 @@ pub fn build_tileset_textured(
 }
 
 /// What a first pass over the heights finds: the range, and the height lattice's step.
-struct Scanned {
-    lo: f32,
-    hi: f32,
-    step: f32,
+pub(crate) struct Scanned {
+    pub lo: f32,
+    pub hi: f32,
+    pub step: f32,
 }
 
 /// One pass over the grid, band by band: refuses a non-finite height and finds the range of
 /// heights and the lattice step ([`height_step`]'s, over the bands' tiles).
-fn scan(bands: &Bands) -> Result<Scanned, BuildError> {
+pub(crate) fn scan(bands: &Bands) -> Result<Scanned, BuildError> {
     let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
     let (mut max_range, mut max_abs) = (0.0f32, 0.0f32);
     for b in 0..bands.count() {
@@ -1172,30 +1172,15 @@ fn scan(bands: &Bands) -> Result<Scanned, BuildError> {
     })
 }
 
-/// [`build_tileset_textured`] from any [`Heights`]: a grid held whole is one band; a grid
-/// read in bands is read once to scan it, once per agreement pass for the bands with tiles to
-/// mesh again, and once to build, a band at a time, so that memory holds one band (and its
-/// texture margin), not the grid. The bytes are the same either way.
-pub fn build_tileset_from(
-    heights: &dyn Heights,
+/// The set's header, as the writer is given it: the grid, the options and what the scan found.
+pub(crate) fn set_header(
+    shape: &Grid,
     params: &BuildParams,
     texturing: Option<&Texturing>,
     meta: &TileSetMeta,
-    out: &Path,
-    progress: &(dyn Fn() + Sync),
-) -> Result<BuildSummary, BuildError> {
-    params.validate()?;
-    if let Some(Texturing {
-        source: Source::Relief(r),
-        ..
-    }) = texturing
-    {
-        r.validate().map_err(BuildError::Params)?;
-    }
-    let shape = heights.shape();
+    &Scanned { lo, hi, step }: &Scanned,
+) -> Result<FileHeader, BuildError> {
     let (tiles_x, tiles_y) = tile_count(shape.width, shape.height).map_err(BuildError::Params)?;
-    let bands = Bands::new(heights, (tiles_x, tiles_y));
-    let Scanned { lo, hi, step } = scan(&bands)?;
     let mut description = [0u8; 128];
     let text = meta.description.as_bytes();
     let mut cut = text.len().min(description.len());
@@ -1248,6 +1233,35 @@ pub fn build_tileset_from(
         },
         None => header,
     };
+    Ok(header)
+}
+
+/// [`build_tileset_textured`] from any [`Heights`]: a grid held whole is one band; a grid
+/// read in bands is read once to scan it, once per agreement pass for the bands with tiles to
+/// mesh again, and once to build, a band at a time, so that memory holds one band (and its
+/// texture margin), not the grid. The bytes are the same either way.
+pub fn build_tileset_from(
+    heights: &dyn Heights,
+    params: &BuildParams,
+    texturing: Option<&Texturing>,
+    meta: &TileSetMeta,
+    out: &Path,
+    progress: &(dyn Fn() + Sync),
+) -> Result<BuildSummary, BuildError> {
+    params.validate()?;
+    if let Some(Texturing {
+        source: Source::Relief(r),
+        ..
+    }) = texturing
+    {
+        r.validate().map_err(BuildError::Params)?;
+    }
+    let shape = heights.shape();
+    let (tiles_x, tiles_y) = tile_count(shape.width, shape.height).map_err(BuildError::Params)?;
+    let bands = Bands::new(heights, (tiles_x, tiles_y));
+    let scanned = scan(&bands)?;
+    let Scanned { lo, hi, step } = scanned;
+    let header = set_header(&shape, params, texturing, meta, &scanned)?;
     // The relief's tint spans the base grid's heights in every layer, so that colours match.
     let prepared = texturing.map(|t| (Prepared::new((lo, hi), &t.source), t.layout));
     let mut writer = TileSetWriter::create(out, header)?;
@@ -1327,16 +1341,16 @@ pub fn build_tileset_from(
 }
 
 /// One layer of a build: the base grid (`index` 0) or a pyramid layer, read in bands.
-struct Layer<'a> {
-    index: u32,
-    bands: &'a Bands<'a>,
+pub(crate) struct Layer<'a> {
+    pub index: u32,
+    pub bands: &'a Bands<'a>,
     /// The layer's height lattice step.
-    step: f32,
+    pub step: f32,
     /// Per tile (row-major), its decimation error (None: the base grid, all 0).
-    decimation: Option<&'a [f32]>,
-    prepared: Option<(Prepared<'a>, texture::Layout)>,
+    pub decimation: Option<&'a [f32]>,
+    pub prepared: Option<(Prepared<'a>, texture::Layout)>,
     /// Above the base: the base grid, which the layer's levels are measured against.
-    base: Option<&'a dyn Heights>,
+    pub base: Option<&'a dyn Heights>,
 }
 
 /// Builds one layer's tiles, shared sides agreed first where the build asks for them, and
@@ -1349,16 +1363,47 @@ fn build_layer(
     progress: &(dyn Fn() + Sync),
     summary: &mut BuildSummary,
 ) -> Result<(), BuildError> {
-    let bands = layer.bands;
-    let (tiles_x, step) = (bands.tiles.0, layer.step);
     let agreements = if params.shared_sides {
-        let agreed = agree_sides(bands, params, step, layer.decimation, Remesh::Changed)?;
+        let agreed = agree_sides(
+            layer.bands,
+            params,
+            layer.step,
+            layer.decimation,
+            Remesh::Changed,
+        )?;
         summary.agreement_passes = agreed.passes;
         summary.agreement_meshes = agreed.meshes;
         Some(agreed)
     } else {
         None
     };
+    let rows = 0..layer.bands.tiles.1;
+    build_tiles(
+        layer,
+        params,
+        agreements.as_ref(),
+        rows,
+        &mut |t, made, errors| write_tile(writer, layer, summary, t, made, errors, progress),
+    )
+}
+
+/// Where [`build_tiles`] hands each tile: its index in the layer (row-major), the tile and
+/// its texture, and above the base its levels' errors against the base grid.
+pub(crate) type TileSink<'s> =
+    dyn FnMut(usize, (BuiltTile, Option<MadeTexture>), &[f32]) -> Result<(), BuildError> + 's;
+
+/// Builds the tiles of tile rows `rows` of a layer, with the agreement settled for them (its
+/// window holds `rows`) or on their own, and hands them to `sink` in row-major order.
+pub(crate) fn build_tiles(
+    layer: &Layer,
+    params: &BuildParams,
+    agreements: Option<&Agreed>,
+    rows: std::ops::Range<u32>,
+    sink: &mut TileSink,
+) -> Result<(), BuildError> {
+    let bands = layer.bands;
+    let (tiles_x, step) = (bands.tiles.0, layer.step);
+
     let margin = layer
         .prepared
         .as_ref()
@@ -1367,10 +1412,15 @@ fn build_layer(
     let in_flight = 2 * rayon::current_num_threads();
     let floor = |t: usize| layer.decimation.map_or(0.0, |d| level_floor(d[t]));
     for b in 0..bands.count() {
+        let band_rows = bands.tile_rows(b);
+        let (r0, r1) = (band_rows.start.max(rows.start), band_rows.end.min(rows.end));
+        if r0 >= r1 {
+            continue;
+        }
         let band = bands.load(b, margin)?;
         let grid = band.grid(&bands.shape);
-        let first = (band.tile_rows.start * tiles_x) as usize;
-        let count = (band.tile_rows.len() as u32 * tiles_x) as usize;
+        let first = (r0 * tiles_x) as usize;
+        let count = ((r1 - r0) * tiles_x) as usize;
         let layer_tile = layer.base.is_some();
         let make = |i: usize| {
             let t = first + i;
@@ -1383,15 +1433,15 @@ fn build_layer(
             };
             let mesh =
                 |agreement: &Agreement| mesh_tile(&grid, (tx, ty), params, step, agreement, output);
-            let built = match &agreements {
+            let built = match agreements {
                 Some(a) => {
                     let agreement = Agreement {
-                        forced: expand(&a.forced[t]),
+                        forced: expand(&a.forced[t - a.first]),
                         units: Some(a.units.clone()),
                         floor: floor(t),
                     };
                     mesh(&agreement).and_then(|b| {
-                        if compact(&b.sides) == a.sides[t] {
+                        if compact(&b.sides) == a.sides[t - a.first] {
                             Ok(b)
                         } else {
                             Err(BuildError::Internal(format!(
@@ -1417,9 +1467,7 @@ fn build_layer(
         // A layer's tiles wait for the band (one tile row) to be measured against the base
         // grid; the base grid's are written as they come.
         let mut held = Vec::new();
-        let mut write = |i: usize, made, errors: &[f32]| {
-            write_tile(writer, layer, summary, first + i, made, errors, progress)
-        };
+        let mut write = |i: usize, made, errors: &[f32]| sink(first + i, made, errors);
         crate::ordered::in_order(count, in_flight, make, |i, built| {
             let (built, texture) = built?;
             if layer_tile {
@@ -1453,7 +1501,7 @@ fn build_layer(
 }
 
 /// A tile's texture blob, its mips' figures and the thread-seconds it took.
-type MadeTexture = (Vec<u8>, Vec<texture::MipEntry>, f64);
+pub(crate) type MadeTexture = (Vec<u8>, Vec<texture::MipEntry>, f64);
 
 /// A built tile (of `layer`, directory slot `t`) and its texture into the file and the summary.
 fn write_tile(
@@ -1503,6 +1551,11 @@ fn write_tile(
 /// (the rule before meshed every tile next to a change: a third more meshes, the same
 /// result). The morph units are then the largest any tile needs per level, so a side
 /// vertex's offsets (same surface, same height) are the same bytes in both tiles.
+///
+/// The sides settled are the least fixed point of "a tile's sides are those of its mesh with
+/// its own and its neighbours' sides forced": the passes climb to it from nothing, and reach
+/// the same point from any state below it ([`settle`], which a distributed build's merge
+/// resumes from its shards' states; `crate::shard` argues it).
 fn agree_sides(
     bands: &Bands,
     params: &BuildParams,
@@ -1510,11 +1563,59 @@ fn agree_sides(
     floors: Option<&[f32]>,
     remesh: Remesh,
 ) -> Result<Agreed, BuildError> {
-    let (tiles_x, tiles_y) = bands.tiles;
+    let mut agreed = settle(bands, params, step, floors, remesh, 0..bands.tiles.1, None)?;
+    agreed.units = units_of(params, &agreed.deviation);
+    Ok(agreed)
+}
+
+/// Per level, the morph unit of a set whose tiles' deviations are `deviation` (per tile, per
+/// level): the largest any tile needs, so that a shared vertex's offsets are the same bytes
+/// in both its tiles.
+pub(crate) fn units_of<'d>(
+    params: &BuildParams,
+    deviation: impl IntoIterator<Item = &'d Vec<f64>> + Clone,
+) -> Vec<f64> {
+    (0..params.levels as usize)
+        .map(|k| {
+            let widest = deviation
+                .clone()
+                .into_iter()
+                .map(|d| d[k])
+                .fold(0.0, f64::max);
+            morph_unit(params.level_error(k as u32), widest)
+        })
+        .collect()
+}
+
+/// Where [`settle`] starts from: each tile's sides, the forced sides it was last meshed with
+/// and that mesh's deviations (a shard's state, or the tiles meshed by several shards).
+pub(crate) struct Start {
+    pub sides: Vec<CompactSides>,
+    pub forced: Vec<CompactSides>,
+    pub deviation: Vec<Vec<f64>>,
+}
+
+/// The agreement's passes over tile rows `rows` of the layer, tiles beyond them taken as
+/// absent (a shard's window; the whole layer for a build). From nothing, or from `start`
+/// (one entry per tile of `rows`, row-major): then only the tiles whose forced sides are not
+/// what they were last meshed with are meshed first. `units` is left empty.
+pub(crate) fn settle(
+    bands: &Bands,
+    params: &BuildParams,
+    step: f32,
+    floors: Option<&[f32]>,
+    remesh: Remesh,
+    rows: std::ops::Range<u32>,
+    start: Option<Start>,
+) -> Result<Agreed, BuildError> {
+    let tiles_x = bands.tiles.0;
+    let first = rows.start as usize * tiles_x as usize;
     /// Far more than any data needs (a change spreads one tile per pass).
     const MAX_PASSES: u32 = 1000;
-    let count = (tiles_x * tiles_y) as usize;
+    let count = (rows.len() as u32 * tiles_x) as usize;
+    let height = rows.len() as i64;
     let levels = params.levels as usize;
+    // Tiles are numbered from the window's first: `t` is tile `first + t` of the layer.
     let neighbour = |t: usize, k: usize| -> Option<usize> {
         let (tx, ty) = ((t as u32 % tiles_x) as i64, (t as u32 / tiles_x) as i64);
         let (nx, ny) = match k {
@@ -1523,7 +1624,7 @@ fn agree_sides(
             2 => (tx, ty + 1),
             _ => (tx - 1, ty),
         };
-        ((0..i64::from(tiles_x)).contains(&nx) && (0..i64::from(tiles_y)).contains(&ny))
+        ((0..i64::from(tiles_x)).contains(&nx) && (0..height).contains(&ny))
             .then(|| (ny * i64::from(tiles_x) + nx) as usize)
     };
     let forced = |t: usize, sides: &[CompactSides]| -> CompactSides {
@@ -1542,13 +1643,30 @@ fn agree_sides(
     };
     // The state is per tile, so it grows with the set: side vertices are held as bitmaps
     // (1.4 KB a tile and copy at 9 levels; lists of u16 took about 40 KB a tile in all).
-    let mut sides: Vec<CompactSides> = vec![Vec::new(); count];
-    // What each tile was last meshed with: a build is a function of its forced sides, so a
-    // tile whose forced sides are what they were needs no new mesh.
-    let mut meshed_with: Vec<Option<CompactSides>> = vec![None; count];
-    let mut deviation = vec![vec![0.0f64; levels]; count];
-    let mut dirty: Vec<(usize, CompactSides)> =
-        (0..count).map(|t| (t, forced(t, &sides))).collect();
+    // `meshed_with` is what each tile was last meshed with: a build is a function of its
+    // forced sides, so a tile whose forced sides are what they were needs no new mesh.
+    let (mut sides, mut meshed_with, mut deviation) = match start {
+        Some(s) => (
+            s.sides,
+            s.forced.into_iter().map(Some).collect(),
+            s.deviation,
+        ),
+        None => (
+            vec![Vec::new(); count],
+            vec![None; count],
+            vec![vec![0.0f64; levels]; count],
+        ),
+    };
+    if sides.len() != count || meshed_with.len() != count || deviation.len() != count {
+        return Err(BuildError::Internal(format!(
+            "the agreement's start holds {} tiles, not {count}",
+            sides.len()
+        )));
+    }
+    let mut dirty: Vec<(usize, CompactSides)> = (0..count)
+        .map(|t| (t, forced(t, &sides)))
+        .filter(|(t, f)| meshed_with[*t].as_ref() != Some(f))
+        .collect();
     let (mut passes, mut rebuilt) = (0u32, 0u64);
     while !dirty.is_empty() {
         passes += 1;
@@ -1562,10 +1680,10 @@ fn agree_sides(
         // its tiles is to be meshed again.
         let mut built: Vec<(usize, CompactSides, Vec<f64>)> = Vec::with_capacity(dirty.len());
         for b in 0..bands.count() {
-            let rows = bands.tile_rows(b);
+            let band_rows = bands.tile_rows(b);
             let here: Vec<&(usize, CompactSides)> = dirty
                 .iter()
-                .filter(|(t, _)| rows.contains(&(*t as u32 / tiles_x)))
+                .filter(|(t, _)| band_rows.contains(&((first + *t) as u32 / tiles_x)))
                 .collect();
             if here.is_empty() {
                 continue;
@@ -1575,11 +1693,12 @@ fn agree_sides(
             let meshed: Vec<(usize, CompactSides, Vec<f64>)> = here
                 .par_iter()
                 .map(|(t, forced)| {
-                    let (tx, ty) = (*t as u32 % tiles_x, *t as u32 / tiles_x);
+                    let g = first + *t;
+                    let (tx, ty) = (g as u32 % tiles_x, g as u32 / tiles_x);
                     let agreement = Agreement {
                         forced: expand(forced),
                         units: None,
-                        floor: floors.map_or(0.0, |d| level_floor(d[*t])),
+                        floor: floors.map_or(0.0, |d| level_floor(d[g])),
                     };
                     mesh_tile(&grid, (tx, ty), params, step, &agreement, Output::Sides)
                         .map(|b| (*t, compact(&b.sides), b.deviation))
@@ -1608,19 +1727,15 @@ fn agree_sides(
             .filter(|(t, f)| remesh == Remesh::NextToChange || meshed_with[*t].as_ref() != Some(f))
             .collect();
     }
-    let units: Vec<f64> = (0..levels)
-        .map(|k| {
-            let widest = deviation.iter().map(|d| d[k]).fold(0.0, f64::max);
-            morph_unit(params.level_error(k as u32), widest)
-        })
-        .collect();
     // Each tile now holds its neighbour's side and the neighbour holds its: they are equal.
     for t in 0..count {
         for k in [1, 2] {
             let Some(n) = neighbour(t, k) else { continue };
             if (0..levels).any(|l| sides[t][l][k] != sides[n][l][(k + 2) % 4]) {
                 return Err(BuildError::Internal(format!(
-                    "tiles {t} and {n} still disagree on their side after {passes} passes"
+                    "tiles {} and {} still disagree on their side after {passes} passes",
+                    first + t,
+                    first + n
                 )));
             }
         }
@@ -1631,12 +1746,16 @@ fn agree_sides(
     let forced = meshed_with
         .into_iter()
         .enumerate()
-        .map(|(t, f)| f.ok_or_else(|| BuildError::Internal(format!("tile {t} was never meshed"))))
+        .map(|(t, f)| {
+            f.ok_or_else(|| BuildError::Internal(format!("tile {} was never meshed", first + t)))
+        })
         .collect::<Result<Vec<_>, _>>()?;
     Ok(Agreed {
+        first,
         forced,
         sides,
-        units,
+        deviation,
+        units: Vec::new(),
         passes,
         meshes: rebuilt,
     })
@@ -1644,7 +1763,7 @@ fn agree_sides(
 
 /// Which tiles a pass of [`agree_sides`] meshes again.
 #[derive(Clone, Copy, Debug, PartialEq)]
-enum Remesh {
+pub(crate) enum Remesh {
     /// Those next to a change whose forced sides changed (the build's).
     Changed,
     /// Every tile next to a change (the rule before; the tests' reference).
@@ -1653,13 +1772,13 @@ enum Remesh {
 }
 
 /// One side's vertices at one level: bit `i` for position `i` (0..=256).
-type SideBits = [u64; 5];
+pub(crate) type SideBits = [u64; 5];
 
 const NO_SIDE: SideBits = [0; 5];
 
 /// A tile's side vertices per level and side (north, east, south, west), as bitmaps: the
 /// agreement's state, a [`Sides`] in 40 bytes a side and level.
-type CompactSides = Vec<[SideBits; 4]>;
+pub(crate) type CompactSides = Vec<[SideBits; 4]>;
 
 fn compact(sides: &Sides) -> CompactSides {
     sides
@@ -1690,17 +1809,20 @@ fn expand(sides: &CompactSides) -> Sides {
         .collect()
 }
 
-/// What [`agree_sides`] settled.
-struct Agreed {
-    /// Per tile (row-major): the side vertices to build it with (its [`Agreement::forced`])
-    /// and the sides it will then have.
-    forced: Vec<CompactSides>,
-    sides: Vec<CompactSides>,
-    /// Per level, the morph unit of every tile.
-    units: Vec<f64>,
-    passes: u32,
+/// What [`agree_sides`] or [`settle`] settled.
+pub(crate) struct Agreed {
+    /// The layer's index of the first tile below (0 but for a shard's window).
+    pub first: usize,
+    /// Per tile (row-major from `first`): the side vertices to build it with (its
+    /// [`Agreement::forced`]), the sides it will then have, and its deviations per level.
+    pub forced: Vec<CompactSides>,
+    pub sides: Vec<CompactSides>,
+    pub deviation: Vec<Vec<f64>>,
+    /// Per level, the morph unit of every tile (empty until the caller sets it).
+    pub units: Vec<f64>,
+    pub passes: u32,
     /// Tiles meshed over all passes.
-    meshes: u64,
+    pub meshes: u64,
 }
 
 #[cfg(test)]

@@ -1746,7 +1746,13 @@ impl<'a> Tile<'a> {
     }
 
     /// [`outline`](Self::outline), then every vertex, index and border entry in range.
-    fn parse(blob: &'a [u8], tx: u32, ty: u32, levels: u32, step: f32) -> Result<Tile<'a>, String> {
+    pub(crate) fn parse(
+        blob: &'a [u8],
+        tx: u32,
+        ty: u32,
+        levels: u32,
+        step: f32,
+    ) -> Result<Tile<'a>, String> {
         let tile = Tile::outline(blob, tx, ty, levels, step)?;
         let header = tile.header;
         for (i, e) in tile.levels.iter().enumerate() {

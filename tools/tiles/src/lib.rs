@@ -25,6 +25,7 @@ pub mod parts;
 pub mod pyramid;
 pub mod quantise;
 pub mod rings;
+pub mod shard;
 pub mod texture;
 pub mod verify;
 

@@ -12,6 +12,9 @@
 mod export;
 mod info;
 mod photo;
+mod shards;
+
+use shards::{merge, print_shard, recipe};
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -76,6 +79,31 @@ enum Command {
         band_rows: Option<u32>,
         #[command(flatten)]
         texture: TextureArgs,
+        /// Build only shard K of N (0 <= K < N): the K-th of N bands of tile rows, into a part
+        /// file (OUTPUT), for `tiletool merge` to join into the set that a build without
+        /// --shard makes, byte for byte. Each shard reads the whole input once to scan it,
+        /// and meshes only its band (see the README, "Distributed builds").
+        #[arg(long, value_name = "K/N", conflicts_with = "pyramid")]
+        shard: Option<tiles::shard::Shard>,
+        /// Tile rows beyond its band over which a shard settles the shared sides with its
+        /// neighbours, so that the merge finds the seams settled.
+        #[arg(long, requires = "shard", default_value_t = tiles::shard::DEFAULT_HALO)]
+        halo: u32,
+    },
+    /// Join the part files of a sharded build (`build --shard K/N`) into the tile set.
+    Merge {
+        /// Every part of the build, each shard exactly once.
+        #[arg(required = true)]
+        parts: Vec<PathBuf>,
+        /// Output tile set (.vkt).
+        #[arg(short, long)]
+        output: PathBuf,
+        /// No progress bar or summary.
+        #[arg(long)]
+        quiet: bool,
+        /// Replace the output even if it exists and is not a tile set.
+        #[arg(long)]
+        force: bool,
     },
     /// Print a tile set's grid, levels and measured errors.
     Info {
@@ -287,21 +315,40 @@ fn main() -> ExitCode {
             force,
             band_rows,
             texture,
-        } => check_output(&output, &input.inputs, force).and_then(|()| {
+            shard,
+            halo,
+        } => {
+            // A shard's output is a part file, which a retried shard replaces.
+            let replaces = match shard {
+                Some(_) => tiles::shard::PART_MAGIC,
+                None => tiles::format::MAGIC,
+            };
+            check_output(&output, &input.inputs, force, replaces).and_then(|()| {
+                remove_on_signal(&output)?;
+                build(
+                    &input,
+                    &output,
+                    tiles::BuildParams {
+                        levels,
+                        base_error,
+                        shared_sides: !independent_sides,
+                        pyramid,
+                    },
+                    &texture,
+                    band_rows,
+                    (quiet, compact),
+                    shard.map(|s| (s, halo)),
+                )
+            })
+        }
+        Command::Merge {
+            parts,
+            output,
+            quiet,
+            force,
+        } => check_output(&output, &parts, force, tiles::format::MAGIC).and_then(|()| {
             remove_on_signal(&output)?;
-            build(
-                &input,
-                &output,
-                tiles::BuildParams {
-                    levels,
-                    base_error,
-                    shared_sides: !independent_sides,
-                    pyramid,
-                },
-                &texture,
-                band_rows,
-                (quiet, compact),
-            )
+            merge(&parts, &output, quiet)
         }),
         Command::Info { file, json } => info::run(&file, json),
         Command::Verify {
@@ -434,7 +481,7 @@ fn read_dem(inputs: &[PathBuf], read: &ReadArgs) -> Result<dem::HeightGrid> {
 /// Refuses an output that would destroy data: one of the inputs, anything but a regular file
 /// (a FIFO or device would be replaced by the rename), or an existing file that is not a tile
 /// set (unless `force`).
-fn check_output(output: &Path, inputs: &[PathBuf], force: bool) -> Result<()> {
+fn check_output(output: &Path, inputs: &[PathBuf], force: bool, replaces: [u8; 8]) -> Result<()> {
     use std::os::unix::fs::MetadataExt;
     let Ok(meta) = std::fs::symlink_metadata(output) else {
         return Ok(()); // nothing there yet
@@ -459,12 +506,17 @@ fn check_output(output: &Path, inputs: &[PathBuf], force: bool) -> Result<()> {
     }
     if !force {
         let mut magic = [0u8; 8];
-        let is_tile_set = std::fs::File::open(output)
+        let is_ours = std::fs::File::open(output)
             .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut magic))
             .is_ok()
-            && magic == tiles::format::MAGIC;
-        if !is_tile_set {
-            bail!("{name}: exists and is not a tile set; add --force to replace it");
+            && magic == replaces;
+        if !is_ours {
+            let what = if replaces == tiles::format::MAGIC {
+                "a tile set"
+            } else {
+                "a part file"
+            };
+            bail!("{name}: exists and is not {what}; add --force to replace it");
         }
     }
     Ok(())
@@ -477,6 +529,7 @@ fn build(
     texture: &TextureArgs,
     band_rows: Option<u32>,
     (quiet, compact): (bool, bool),
+    shard: Option<(tiles::shard::Shard, u32)>,
 ) -> Result<ExitCode> {
     params.validate()?;
     if output.is_dir() {
@@ -541,6 +594,27 @@ fn build(
         }
         Dem::Bands(heights) => heights,
     };
+    if let Some(shard) = shard {
+        let recipe = recipe(input, &params, texture, compact)?;
+        let (tiles_x, _) = (tiles_x, tiles_y);
+        let bar_len = u64::from(shard.0.rows(tiles_y).len() as u32) * u64::from(tiles_x);
+        bar.set_length(bar_len);
+        let summary = tiles::shard::build_shard(
+            heights,
+            &params,
+            texturing.as_ref(),
+            &meta,
+            shard,
+            &recipe,
+            output,
+            &progress,
+        )?;
+        bar.finish_and_clear();
+        if !quiet {
+            print_shard(input, output, shard.0, &summary, &about, start.elapsed());
+        }
+        return Ok(ExitCode::SUCCESS);
+    }
     let summary = tiles::build::build_tileset_from(
         heights,
         &params,

@@ -21,6 +21,7 @@ pub fn stderr(o: &Output) -> String {
 }
 
 /// Builds the sample into `dir/name` with `extra` flags; returns the file and `info --json`.
+#[allow(dead_code)] // each test file compiles this module; not all of them build the sample
 pub fn build_sample(dir: &Path, name: &str, extra: &[&str]) -> (PathBuf, serde_json::Value) {
     let out = dir.join(name);
     let src = sample();

@@ -1,0 +1,874 @@
+//! Distributed builds (issue 29): [`build_shard`] builds a share of a set's tiles into a
+//! part file, and [`merge`] joins the parts into the set that [`crate::build`] makes of the
+//! same input and options, byte for byte.
+//!
+//! # What is global, and how each piece of it is settled
+//!
+//! A tile's bytes depend on more than its own samples:
+//!
+//! - **The height range and the height lattice's step**, from a scan of the whole grid. A
+//!   shard scans the whole input, as the build does. Reading is cheap next to meshing (the
+//!   16K set: one read pass against minutes of meshing), but it does not shrink with `N`.
+//! - **The void fill**, which is global (`dem::banded`): the reader's open does it, as for a
+//!   build.
+//! - **The shared sides.** The build's agreement ([`crate::build`]) settles the least fixed
+//!   point of "a tile's sides are those of its mesh with its own and its neighbours' sides
+//!   forced": meshing is monotone in what is forced, and the passes climb to that point from
+//!   nothing. A shard runs the same passes over its tile rows and `halo` rows either side,
+//!   the tiles beyond taken as absent. With fewer neighbours it forces less, so its state is
+//!   below the global fixed point (Knaster-Tarski: the global point, restricted to the
+//!   window, is a pre-fixed point of the shard's operator, and the shard's least fixed point
+//!   lies below every pre-fixed point). The merge puts the owners' states together and checks
+//!   that every tile was meshed with the sides its neighbours now hold. Where that holds
+//!   everywhere, the state is a fixed point below the least one, so it is the least one: the
+//!   build's. Where it does not (a cascade longer than the halo), the merge resumes the passes
+//!   from that state, reading the input again, and climbs to the same point
+//!   ([`crate::build::settle`]); the tiles whose forced sides changed are built again there.
+//! - **The morph units**: per level, the largest any tile needs. A part records its own
+//!   tiles' deviations and the units its blobs were sealed with; where the set's units are
+//!   larger, the merge seals those tiles again from their own vertices
+//!   ([`crate::build::rebuild_tile`], which makes the build's bytes from a tile's vertex
+//!   sets).
+//!
+//! The tile pyramid (`--pyramid`) is not sharded yet: its layers are built from the
+//! subsampled whole grid and measured against the base grid, so they would be built in the
+//! merge, which would then cost as much as the pyramid does in a build (+60-88% at 16K). A
+//! sharded build refuses it.
+//!
+//! # The part file
+//!
+//! Little-endian: `PART_MAGIC`, the part format's version, the shard's index and count and
+//! its halo, the recipe (the inputs and options, as text: parts of one set must hold the
+//! same), the set's header as the writer is given it, the owned tile rows, the units its
+//! blobs were sealed with, the agreement's passes and meshes, then per owned tile (row-major)
+//! its forced sides and sides (bitmaps), its deviations, its blob and its texture; last, the
+//! crc32 of everything before it and `END_MAGIC`. It is written to a temporary file and
+//! renamed when complete, so a shard killed at any point leaves no part that reads as whole.
+
+use std::io::{BufWriter, Write};
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use crate::build::{
+    build_tiles, scan, set_header, settle, units_of, Bands, BuildParams, CompactSides, Heights,
+    Layer, LevelStats, Remesh, SideBits, Start, TileSetMeta,
+};
+use crate::format::{temp_path, tile_count, FileHeader, Tile, TileSetWriter, FLAG_SHARED_SIDES};
+use crate::texture::{Prepared, Source, Texturing};
+use crate::BuildError;
+
+/// The first bytes of a part file.
+pub const PART_MAGIC: [u8; 8] = *b"VKTPART\0";
+/// Its last bytes, after the checksum.
+const END_MAGIC: [u8; 8] = *b"VKTPEND\0";
+/// Where a part's blobs start: a multiple of this many bytes from the file's start.
+const ALIGN: usize = 16;
+/// The part format's version.
+pub const PART_VERSION: u32 = 1;
+/// Tile rows beyond its own that a shard settles the sides over, by default. On the sets
+/// measured (bench/README.md, "Distributed builds") one row already left no seam to settle
+/// again in the merge; two give margin for longer cascades at the cost of about `4 / rows`
+/// more agreement meshes per shard.
+pub const DEFAULT_HALO: u32 = 2;
+
+/// Shard `index` of `count`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Shard {
+    pub index: u32,
+    pub count: u32,
+}
+
+impl std::str::FromStr for Shard {
+    type Err = String;
+
+    /// `K/N`, with `0 <= K < N`.
+    fn from_str(s: &str) -> Result<Shard, String> {
+        let bad = || format!("--shard {s}: expected K/N with 0 <= K < N, e.g. 3/8");
+        let (k, n) = s.split_once('/').ok_or_else(bad)?;
+        let (index, count) = (
+            k.trim().parse().map_err(|_| bad())?,
+            n.trim().parse().map_err(|_| bad())?,
+        );
+        if index >= count {
+            return Err(bad());
+        }
+        Ok(Shard { index, count })
+    }
+}
+
+impl std::fmt::Display for Shard {
+    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        write!(f, "{}/{}", self.index, self.count)
+    }
+}
+
+impl Shard {
+    /// The tile rows this shard builds: `N` bands of whole tile rows, as even as rows allow.
+    pub fn rows(&self, tiles_y: u32) -> Range<u32> {
+        let at = |k: u32| (u64::from(tiles_y) * u64::from(k) / u64::from(self.count)) as u32;
+        at(self.index)..at(self.index + 1)
+    }
+}
+
+/// What a shard built.
+#[derive(Clone, Debug, Default)]
+pub struct ShardSummary {
+    /// The tile rows it built, and those its agreement covered.
+    pub rows: Range<u32>,
+    pub window: Range<u32>,
+    pub tiles_x: u32,
+    pub tiles: u64,
+    pub levels: Vec<LevelStats>,
+    pub agreement_passes: u32,
+    pub agreement_meshes: u64,
+    pub part_bytes: u64,
+}
+
+/// Builds shard `shard`'s tiles of the set that [`crate::build::build_tileset_from`] would
+/// build of `heights`, into the part file `out`. `recipe` names the inputs and options (the
+/// merge refuses parts whose recipes differ).
+#[allow(clippy::too_many_arguments)]
+pub fn build_shard(
+    heights: &dyn Heights,
+    params: &BuildParams,
+    texturing: Option<&Texturing>,
+    meta: &TileSetMeta,
+    (shard, halo): (Shard, u32),
+    recipe: &str,
+    out: &Path,
+    progress: &(dyn Fn() + Sync),
+) -> Result<ShardSummary, BuildError> {
+    params.validate()?;
+    if params.pyramid {
+        return Err(BuildError::Params(
+            "--pyramid cannot be sharded yet: build the pyramid without --shard".into(),
+        ));
+    }
+    if let Some(Texturing {
+        source: Source::Relief(r),
+        ..
+    }) = texturing
+    {
+        r.validate().map_err(BuildError::Params)?;
+    }
+    let shape = heights.shape();
+    let (tiles_x, tiles_y) = tile_count(shape.width, shape.height).map_err(BuildError::Params)?;
+    let rows = shard.rows(tiles_y);
+    if shard.count > tiles_y {
+        return Err(BuildError::Params(format!(
+            "--shard {shard}: the set has {tiles_y} tile rows, so at most {tiles_y} shards"
+        )));
+    }
+    let bands = Bands::new(heights, (tiles_x, tiles_y));
+    let scanned = scan(&bands)?;
+    let header = set_header(&shape, params, texturing, meta, &scanned)?;
+    let window = rows.start.saturating_sub(halo)..(rows.end + halo).min(tiles_y);
+    let agreed = if params.shared_sides {
+        let mut agreed = settle(
+            &bands,
+            params,
+            scanned.step,
+            None,
+            Remesh::Changed,
+            window.clone(),
+            None,
+        )?;
+        // Sealed with the units its own tiles need: the merge seals again where the set's
+        // are larger.
+        let own = (rows.start - window.start) as usize * tiles_x as usize;
+        let count = rows.len() * tiles_x as usize;
+        agreed.units = units_of(params, &agreed.deviation[own..own + count]);
+        Some(agreed)
+    } else {
+        None
+    };
+    let prepared =
+        texturing.map(|t| (Prepared::new((scanned.lo, scanned.hi), &t.source), t.layout));
+    let layer = Layer {
+        index: 0,
+        bands: &bands,
+        step: scanned.step,
+        decimation: None,
+        prepared: prepared.as_ref().map(|(p, l)| (p.for_layer(0), *l)),
+        base: None,
+    };
+    let mut part = PartWriter::create(out)?;
+    part.put(&PART_MAGIC)?;
+    for v in [PART_VERSION, shard.index, shard.count, halo] {
+        part.u32(v)?;
+    }
+    part.u32(recipe.len() as u32)?;
+    part.put(recipe.as_bytes())?;
+    part.put(bytemuck::bytes_of(&header))?;
+    for v in [rows.start, rows.end, tiles_x, params.levels] {
+        part.u32(v)?;
+    }
+    let units = agreed.as_ref().map(|a| a.units.clone()).unwrap_or_default();
+    for level in 0..params.levels as usize {
+        part.f64(units.get(level).copied().unwrap_or(0.0))?;
+    }
+    part.u32(agreed.as_ref().map_or(0, |a| a.passes))?;
+    part.u64(agreed.as_ref().map_or(0, |a| a.meshes))?;
+    let mut summary = ShardSummary {
+        rows: rows.clone(),
+        window,
+        tiles_x,
+        levels: vec![LevelStats::default(); params.levels as usize],
+        agreement_passes: agreed.as_ref().map_or(0, |a| a.passes),
+        agreement_meshes: agreed.as_ref().map_or(0, |a| a.meshes),
+        ..ShardSummary::default()
+    };
+    let none = vec![[[0u64; 5]; 4]; params.levels as usize];
+    build_tiles(
+        &layer,
+        params,
+        agreed.as_ref(),
+        rows,
+        &mut |t, (built, texture), _| {
+            let (forced, sides, deviation) = match &agreed {
+                Some(a) => (
+                    &a.forced[t - a.first],
+                    &a.sides[t - a.first],
+                    &a.deviation[t - a.first],
+                ),
+                None => (&none, &none, &built.deviation),
+            };
+            part.sides(forced)?;
+            part.sides(sides)?;
+            for &d in deviation {
+                part.f64(d)?;
+            }
+            part.u64(built.blob.len() as u64)?;
+            part.align()?;
+            part.put(&built.blob)?;
+            let tex = texture.map(|(blob, _, _)| blob).unwrap_or_default();
+            part.u64(tex.len() as u64)?;
+            part.align()?;
+            part.put(&tex)?;
+            summary.tiles += 1;
+            for (sum, l) in summary.levels.iter_mut().zip(&built.levels) {
+                sum.vertices += l.vertices;
+                sum.triangles += l.triangles;
+                sum.bytes += l.bytes;
+                sum.max_error = sum.max_error.max(l.max_error);
+                sum.limited_triangles += l.limited_triangles;
+                sum.limited_excess = sum.limited_excess.max(l.limited_excess);
+            }
+            progress();
+            Ok(())
+        },
+    )?;
+    summary.part_bytes = part.finish()?;
+    Ok(summary)
+}
+
+/// A part file being written: to its temporary name, checksummed as it goes, renamed when
+/// finished (dropped unfinished, the temporary file is removed).
+struct PartWriter {
+    path: PathBuf,
+    tmp: PathBuf,
+    file: Option<BufWriter<std::fs::File>>,
+    crc: crc32fast::Hasher,
+    len: u64,
+}
+
+impl PartWriter {
+    fn create(path: &Path) -> Result<PartWriter, BuildError> {
+        let tmp = temp_path(path)?;
+        let file = std::fs::File::create(&tmp).map_err(|e| io_error(&tmp, e))?;
+        Ok(PartWriter {
+            path: path.to_path_buf(),
+            tmp,
+            file: Some(BufWriter::with_capacity(1 << 20, file)),
+            crc: crc32fast::Hasher::new(),
+            len: 0,
+        })
+    }
+
+    fn put(&mut self, bytes: &[u8]) -> Result<(), BuildError> {
+        self.crc.update(bytes);
+        self.len += bytes.len() as u64;
+        let file = self.file.as_mut().expect("open until finished");
+        file.write_all(bytes).map_err(|e| io_error(&self.path, e))
+    }
+
+    fn u32(&mut self, v: u32) -> Result<(), BuildError> {
+        self.put(&v.to_le_bytes())
+    }
+
+    /// Zeros up to the next multiple of [`ALIGN`] bytes: blobs lie aligned in the map, as
+    /// their readers need.
+    fn align(&mut self) -> Result<(), BuildError> {
+        let pad = self.len.next_multiple_of(ALIGN as u64) - self.len;
+        self.put(&[0u8; ALIGN][..pad as usize])
+    }
+
+    fn u64(&mut self, v: u64) -> Result<(), BuildError> {
+        self.put(&v.to_le_bytes())
+    }
+
+    fn f64(&mut self, v: f64) -> Result<(), BuildError> {
+        self.put(&v.to_le_bytes())
+    }
+
+    fn sides(&mut self, sides: &CompactSides) -> Result<(), BuildError> {
+        for level in sides {
+            for side in level {
+                for &word in side {
+                    self.u64(word)?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The checksum and end mark, then sync and rename into place. Returns the part's size.
+    fn finish(mut self) -> Result<u64, BuildError> {
+        let crc = self.crc.clone().finalize();
+        let mut file = self.file.take().expect("open until finished");
+        let tail = [&crc.to_le_bytes()[..], &END_MAGIC].concat();
+        let error = |e| io_error(&self.path, e);
+        file.write_all(&tail).map_err(error)?;
+        let file = file.into_inner().map_err(|e| error(e.into_error()))?;
+        file.sync_all().map_err(error)?;
+        std::fs::rename(&self.tmp, &self.path).map_err(error)?;
+        Ok(self.len + tail.len() as u64)
+    }
+}
+
+impl Drop for PartWriter {
+    fn drop(&mut self) {
+        if self.file.is_some() {
+            let _ = std::fs::remove_file(&self.tmp);
+        }
+    }
+}
+
+fn io_error(path: &Path, e: std::io::Error) -> BuildError {
+    BuildError::Input(format!("{}: {e}", path.display()))
+}
+
+/// One part file, mapped and checked: its preamble read, its tiles indexed.
+pub struct Part {
+    pub path: PathBuf,
+    pub shard: Shard,
+    pub halo: u32,
+    pub recipe: String,
+    pub header: FileHeader,
+    pub rows: Range<u32>,
+    pub tiles_x: u32,
+    pub levels: u32,
+    /// The units its blobs were sealed with (0s with independent sides).
+    pub units: Vec<f64>,
+    pub agreement_passes: u32,
+    pub agreement_meshes: u64,
+    map: memmap2::Mmap,
+    /// Per owned tile: where its record starts.
+    tiles: Vec<usize>,
+}
+
+/// A part's fields before its tiles, and where its tiles start.
+struct Preamble {
+    shard: Shard,
+    halo: u32,
+    recipe: String,
+    header: FileHeader,
+    rows: Range<u32>,
+    tiles_x: u32,
+    levels: u32,
+    units: Vec<f64>,
+    passes: u32,
+    meshes: u64,
+    tiles: Vec<usize>,
+}
+
+/// One tile of a part, as recorded.
+pub struct PartTile<'a> {
+    pub forced: CompactSides,
+    pub sides: CompactSides,
+    pub deviation: Vec<f64>,
+    pub blob: &'a [u8],
+    pub texture: &'a [u8],
+}
+
+/// Reads a part's fields in order, refusing to run past its end.
+struct Cursor<'a> {
+    bytes: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Cursor<'a> {
+    fn take(&mut self, n: usize) -> Result<&'a [u8], String> {
+        let end = self.at.checked_add(n).filter(|&e| e <= self.bytes.len());
+        let end = end.ok_or("ends early")?;
+        let out = &self.bytes[self.at..end];
+        self.at = end;
+        Ok(out)
+    }
+
+    fn u32(&mut self) -> Result<u32, String> {
+        Ok(u32::from_le_bytes(
+            self.take(4)?.try_into().expect("4 bytes"),
+        ))
+    }
+
+    /// The bytes of `len` that follow the padding to the next multiple of [`ALIGN`].
+    fn aligned(&mut self, len: usize) -> Result<&'a [u8], String> {
+        self.take(self.at.next_multiple_of(ALIGN) - self.at)?;
+        self.take(len)
+    }
+
+    fn u64(&mut self) -> Result<u64, String> {
+        Ok(u64::from_le_bytes(
+            self.take(8)?.try_into().expect("8 bytes"),
+        ))
+    }
+
+    fn f64(&mut self) -> Result<f64, String> {
+        Ok(f64::from_le_bytes(
+            self.take(8)?.try_into().expect("8 bytes"),
+        ))
+    }
+
+    fn len(&mut self) -> Result<usize, String> {
+        usize::try_from(self.u64()?).map_err(|_| "a length out of range".to_string())
+    }
+
+    fn sides(&mut self, levels: u32) -> Result<CompactSides, String> {
+        (0..levels)
+            .map(|_| {
+                let mut level = [[0u64; 5]; 4];
+                for side in &mut level {
+                    for word in side.iter_mut() {
+                        *word = self.u64()?;
+                    }
+                }
+                Ok(level)
+            })
+            .collect()
+    }
+}
+
+/// Bytes of a tile record's sides and deviations at `levels` levels.
+fn fixed_record_len(levels: u32) -> usize {
+    levels as usize * (2 * 4 * size_of::<SideBits>() + 8)
+}
+
+impl Part {
+    /// Maps and checks `path`: magic, version, checksum, and a structure that adds up.
+    pub fn open(path: &Path) -> Result<Part, BuildError> {
+        let refuse = |what: String| BuildError::Input(format!("{}: {what}", path.display()));
+        let file = std::fs::File::open(path).map_err(|e| refuse(e.to_string()))?;
+        let meta = file.metadata().map_err(|e| refuse(e.to_string()))?;
+        if !meta.is_file() {
+            return Err(refuse("not a regular file".into()));
+        }
+        // SAFETY: the map is read-only; a part is written once to a temporary name and renamed,
+        // so no writer holds the file a merge reads.
+        let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| refuse(e.to_string()))?;
+        if map.len() < PART_MAGIC.len() || map[..PART_MAGIC.len()] != PART_MAGIC {
+            return Err(refuse("not a vkterrain part file (no VKTPART mark)".into()));
+        }
+        let tail = PART_MAGIC.len() + 4 + END_MAGIC.len();
+        if map.len() < tail || map[map.len() - END_MAGIC.len()..] != END_MAGIC {
+            return Err(refuse(
+                "incomplete: it does not end with the part's end mark (a shard cut short?)".into(),
+            ));
+        }
+        let body = map.len() - 4 - END_MAGIC.len();
+        let stored = u32::from_le_bytes(map[body..body + 4].try_into().expect("4 bytes"));
+        if crc32fast::hash(&map[..body]) != stored {
+            return Err(refuse("damaged: its checksum does not match".into()));
+        }
+        let p = Self::parse(&map[..body]).map_err(refuse)?;
+        Ok(Part {
+            path: path.to_path_buf(),
+            shard: p.shard,
+            halo: p.halo,
+            recipe: p.recipe,
+            header: p.header,
+            rows: p.rows,
+            tiles_x: p.tiles_x,
+            levels: p.levels,
+            units: p.units,
+            agreement_passes: p.passes,
+            agreement_meshes: p.meshes,
+            map,
+            tiles: p.tiles,
+        })
+    }
+
+    fn parse(bytes: &[u8]) -> Result<Preamble, String> {
+        let mut c = Cursor {
+            bytes,
+            at: PART_MAGIC.len(),
+        };
+        let version = c.u32()?;
+        if version != PART_VERSION {
+            return Err(format!(
+                "part format version {version}; this tiletool reads version {PART_VERSION}"
+            ));
+        }
+        let (index, count, halo) = (c.u32()?, c.u32()?, c.u32()?);
+        if index >= count {
+            return Err(format!("shard {index} of {count}"));
+        }
+        let recipe_len = c.u32()? as usize;
+        let recipe = std::str::from_utf8(c.take(recipe_len)?)
+            .map_err(|_| "its recipe is not text")?
+            .to_string();
+        let header: FileHeader = bytemuck::pod_read_unaligned(c.take(size_of::<FileHeader>())?);
+        let (r0, r1, tiles_x, levels) = (c.u32()?, c.u32()?, c.u32()?, c.u32()?);
+        let expected = tile_count(header.grid_width as usize, header.grid_height as usize)?;
+        let shard = Shard { index, count };
+        if (tiles_x, levels) != (header.tiles_x, header.levels)
+            || expected != (header.tiles_x, header.tiles_y)
+            || (r0..r1) != shard.rows(header.tiles_y)
+            || levels == 0
+            || levels > crate::format::MAX_LEVELS
+        {
+            return Err(format!(
+                "its tile rows {r0}..{r1} of {tiles_x} x {} tiles at {levels} levels do not add up",
+                header.tiles_y
+            ));
+        }
+        let units = (0..levels).map(|_| c.f64()).collect::<Result<_, _>>()?;
+        let (passes, meshes) = (c.u32()?, c.u64()?);
+        let mut tiles = Vec::new();
+        for _ in 0..(r1 - r0) as usize * tiles_x as usize {
+            tiles.push(c.at);
+            c.take(fixed_record_len(levels))?;
+            let blob = c.len()?;
+            c.aligned(blob)?;
+            let texture = c.len()?;
+            c.aligned(texture)?;
+        }
+        if c.at != bytes.len() {
+            return Err(format!("{} bytes after its last tile", bytes.len() - c.at));
+        }
+        Ok(Preamble {
+            shard,
+            halo,
+            recipe,
+            header,
+            rows: r0..r1,
+            tiles_x,
+            levels,
+            units,
+            passes,
+            meshes,
+            tiles,
+        })
+    }
+
+    /// Tile `t` of the set (row-major), which this part must own.
+    pub fn tile(&self, t: usize) -> PartTile<'_> {
+        let first = self.rows.start as usize * self.tiles_x as usize;
+        let mut c = Cursor {
+            bytes: &self.map,
+            at: self.tiles[t - first],
+        };
+        // The structure was checked when the part was opened.
+        let mut read = || -> Result<PartTile<'_>, String> {
+            let forced = c.sides(self.levels)?;
+            let sides = c.sides(self.levels)?;
+            let deviation = (0..self.levels)
+                .map(|_| c.f64())
+                .collect::<Result<_, _>>()?;
+            let blob = c.len()?;
+            let blob = c.aligned(blob)?;
+            let texture = c.len()?;
+            let texture = c.aligned(texture)?;
+            Ok(PartTile {
+                forced,
+                sides,
+                deviation,
+                blob,
+                texture,
+            })
+        };
+        read().expect("checked at open")
+    }
+}
+
+/// Opens the input that a part's recipe names (for [`merge`]).
+pub type Reopen = dyn Fn(&str) -> Result<Box<dyn Heights>, BuildError>;
+
+/// What a merge did.
+#[derive(Clone, Debug, Default)]
+pub struct MergeSummary {
+    pub parts: u32,
+    pub tiles: u64,
+    /// Tiles whose forced sides the parts had not settled: meshed again by resuming the
+    /// agreement (`remeshed`, all meshes), of which `rebuilt` had their sides changed and
+    /// were built again from the input.
+    pub unsettled: u64,
+    pub remeshed: u64,
+    pub rebuilt: u64,
+    /// Tiles sealed again at the set's morph units.
+    pub resealed: u64,
+    pub file_bytes: u64,
+}
+
+/// Checks that `paths` are the parts of one set, every shard exactly once, and writes the set
+/// to `out` (temporary file, then rename). `reopen` opens the input a part's recipe names,
+/// for the rare seam that the shards' halos did not settle.
+pub fn merge(
+    paths: &[PathBuf],
+    out: &Path,
+    reopen: &Reopen,
+    progress: &(dyn Fn() + Sync),
+) -> Result<MergeSummary, BuildError> {
+    let parts = paths
+        .iter()
+        .map(|p| Part::open(p))
+        .collect::<Result<Vec<_>, _>>()?;
+    let Some(first) = parts.first() else {
+        return Err(BuildError::Params("no parts to merge".into()));
+    };
+    let count = first.shard.count;
+    let mut by_index: Vec<Option<&Part>> = vec![None; count as usize];
+    for part in &parts {
+        let refuse = |what: String| BuildError::Params(format!("{}: {what}", part.path.display()));
+        if part.recipe != first.recipe {
+            let differs = part
+                .recipe
+                .lines()
+                .zip(first.recipe.lines())
+                .find(|(a, b)| a != b)
+                .map_or_else(
+                    || "its inputs or options".to_string(),
+                    |(a, _)| format!("`{a}`"),
+                );
+            return Err(refuse(format!(
+                "built from other inputs or options than {} ({differs} differs)",
+                first.path.display()
+            )));
+        }
+        if part.shard.count != count {
+            return Err(refuse(format!(
+                "is shard {} of a build in {} shards, and {} is of {count}",
+                part.shard,
+                part.shard.count,
+                first.path.display()
+            )));
+        }
+        if bytemuck::bytes_of(&part.header) != bytemuck::bytes_of(&first.header) {
+            return Err(refuse(format!(
+                "its set header differs from {}'s (the input changed between shards?)",
+                first.path.display()
+            )));
+        }
+        let slot = &mut by_index[part.shard.index as usize];
+        if let Some(other) = slot {
+            return Err(refuse(format!(
+                "shard {} is given twice (also {})",
+                part.shard,
+                other.path.display()
+            )));
+        }
+        *slot = Some(part);
+    }
+    if let Some(k) = by_index.iter().position(Option::is_none) {
+        return Err(BuildError::Params(format!(
+            "shard {k}/{count} is missing: merge needs all {count} parts"
+        )));
+    }
+    let by_index: Vec<&Part> = by_index.into_iter().flatten().collect();
+    let header = first.header;
+    let (tiles_x, tiles_y) = (header.tiles_x, header.tiles_y);
+    let count = tiles_x as usize * tiles_y as usize;
+    let owner = |t: usize| -> &Part {
+        let row = (t / tiles_x as usize) as u32;
+        by_index
+            .iter()
+            .find(|p| p.rows.contains(&row))
+            .expect("the shards' rows cover the set")
+    };
+    let params = BuildParams {
+        levels: header.levels,
+        base_error: header.base_error,
+        shared_sides: header.flags & FLAG_SHARED_SIDES != 0,
+        pyramid: false,
+    };
+    let mut summary = MergeSummary {
+        parts: by_index.len() as u32,
+        ..MergeSummary::default()
+    };
+    // The shared sides: the owners' states, checked for a fixed point, resumed where not.
+    let mut rebuilt: std::collections::HashMap<usize, Vec<u8>> = Default::default();
+    let mut units = Vec::new();
+    if params.shared_sides {
+        let mut start = Start {
+            sides: Vec::with_capacity(count),
+            forced: Vec::with_capacity(count),
+            deviation: Vec::with_capacity(count),
+        };
+        for t in 0..count {
+            let tile = owner(t).tile(t);
+            start.sides.push(tile.sides);
+            start.forced.push(tile.forced);
+            start.deviation.push(tile.deviation);
+        }
+        let recorded = start.forced.clone();
+        let unsettled = unsettled_tiles(&start, tiles_x, params.levels);
+        summary.unsettled = unsettled as u64;
+        let deviation;
+        if unsettled == 0 {
+            deviation = start.deviation;
+        } else {
+            let heights = reopen(&first.recipe)?;
+            let bands = Bands::new(heights.as_ref(), (tiles_x, tiles_y));
+            let step = header.height_step;
+            let all = 0..tiles_y;
+            let mut agreed = settle(
+                &bands,
+                &params,
+                step,
+                None,
+                Remesh::Changed,
+                all,
+                Some(start),
+            )?;
+            summary.remeshed = agreed.meshes;
+            agreed.units = units_of(&params, &agreed.deviation);
+            let changed: Vec<usize> = (0..count)
+                .filter(|&t| agreed.forced[t] != recorded[t])
+                .collect();
+            summary.rebuilt = changed.len() as u64;
+            if !changed.is_empty() {
+                let layer = Layer {
+                    index: 0,
+                    bands: &bands,
+                    step,
+                    decimation: None,
+                    prepared: None,
+                    base: None,
+                };
+                // Whole tile rows are built; the changed tiles of each are kept.
+                let mut rows: Vec<u32> = changed
+                    .iter()
+                    .map(|&t| (t / tiles_x as usize) as u32)
+                    .collect();
+                rows.dedup();
+                for row in rows {
+                    build_tiles(
+                        &layer,
+                        &params,
+                        Some(&agreed),
+                        row..row + 1,
+                        &mut |i, (b, _), _| {
+                            if changed.binary_search(&i).is_ok() {
+                                rebuilt.insert(i, b.blob);
+                            }
+                            Ok(())
+                        },
+                    )?;
+                }
+            }
+            deviation = agreed.deviation;
+        }
+        units = units_of(&params, &deviation);
+    }
+    let mut writer = TileSetWriter::create(out, header)?;
+    let step = header.height_step;
+    let xy = |t: usize| ((t % tiles_x as usize) as u32, (t / tiles_x as usize) as u32);
+    // Each tile's blob as the set holds it: rebuilt above, sealed again at the set's units
+    // (on every core: it is most of a merge's work when the units differ), or as the part has
+    // it. Written in row-major order, as the build writes them.
+    let shared = params.shared_sides;
+    let make = |t: usize| -> Result<Option<Vec<u8>>, BuildError> {
+        let part = owner(t);
+        if rebuilt.contains_key(&t) || !shared || part.units == units {
+            return Ok(None);
+        }
+        let (tx, ty) = xy(t);
+        reseal(part.tile(t).blob, (tx, ty), header.levels, step, &units)
+            .map(Some)
+            .map_err(|what| {
+                BuildError::Input(format!("{}: tile {tx},{ty}: {what}", part.path.display()))
+            })
+    };
+    let in_flight = 2 * rayon::current_num_threads();
+    crate::ordered::in_order(count, in_flight, make, |t, made| {
+        let tile = owner(t).tile(t);
+        let (tx, ty) = xy(t);
+        let made = made?;
+        summary.resealed += u64::from(made.is_some());
+        let blob = match (&made, rebuilt.get(&t)) {
+            (_, Some(blob)) | (Some(blob), None) => &blob[..],
+            (None, None) => tile.blob,
+        };
+        writer.add_tile(tx, ty, blob)?;
+        if !tile.texture.is_empty() {
+            writer.add_texture(tx, ty, tile.texture)?;
+        }
+        summary.tiles += 1;
+        progress();
+        Ok::<(), BuildError>(())
+    })?;
+    writer.finish()?;
+    summary.file_bytes = std::fs::metadata(out).map(|m| m.len()).unwrap_or(0);
+    Ok(summary)
+}
+
+/// Tiles whose recorded forced sides are not what their own and their neighbours' recorded
+/// sides force: where the shards' states do not make a fixed point.
+fn unsettled_tiles(start: &Start, tiles_x: u32, levels: u32) -> usize {
+    let count = start.sides.len();
+    let tiles_y = count / tiles_x as usize;
+    let (w, h) = (tiles_x as i64, tiles_y as i64);
+    (0..count)
+        .filter(|&t| {
+            let (tx, ty) = ((t as i64) % w, (t as i64) / w);
+            let forced: CompactSides = (0..levels as usize)
+                .map(|level| {
+                    std::array::from_fn(|k| {
+                        let (nx, ny) = match k {
+                            0 => (tx, ty - 1),
+                            1 => (tx + 1, ty),
+                            2 => (tx, ty + 1),
+                            _ => (tx - 1, ty),
+                        };
+                        if !((0..w).contains(&nx) && (0..h).contains(&ny)) {
+                            return [0; 5];
+                        }
+                        let n = (ny * w + nx) as usize;
+                        let ours = start.sides[t][level][k];
+                        let theirs = start.sides[n][level][(k + 2) % 4];
+                        std::array::from_fn(|i| ours[i] | theirs[i])
+                    })
+                })
+                .collect();
+            forced != start.forced[t]
+        })
+        .count()
+}
+
+/// A version 3 tile blob sealed again with the morph units `units`: its vertex sets and
+/// height codes read back, and the build's assembly run over them
+/// ([`crate::build::rebuild_tile`]), so the bytes are those a build at `units` makes.
+fn reseal(
+    blob: &[u8],
+    (tx, ty): (u32, u32),
+    levels: u32,
+    step: f32,
+    units: &[f64],
+) -> Result<Vec<u8>, String> {
+    let tile = Tile::parse(blob, tx, ty, levels, step)?;
+    let sets: Vec<Vec<(u32, u32, u16)>> = (0..levels)
+        .map(|j| {
+            let level = tile.level(j).ok_or("a level is missing")?;
+            Ok(level
+                .positions
+                .iter()
+                .map(|&p| crate::pack::unpack(p))
+                .collect())
+        })
+        .collect::<Result<_, String>>()?;
+    let mut entries = tile.levels().to_vec();
+    for (e, &u) in entries.iter_mut().zip(units) {
+        e.morph_unit = u as f32;
+    }
+    Ok(crate::build::rebuild_tile(&tile.header, &entries, &sets))
+}

@@ -1,0 +1,245 @@
+//! `tiletool build --shard K/N` and `tiletool merge`: the recipe that ties a build's parts
+//! together, their summaries, and the merge's reopening of the input.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Result};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+use crate::{
+    default_band_rows, peak_memory, About, InputArgs, ReadArgs, StreamHeights, TextureArgs,
+};
+
+/// The recipe's first line: its own version.
+const RECIPE_HEAD: &str = "vkterrain part recipe 1";
+
+/// Bytes read from each end of an input for its fingerprint.
+const FINGERPRINT_BYTES: u64 = 1 << 20;
+
+/// What a part was built from, as text: the inputs (each by path, size and a checksum of its
+/// first and last MiB), every option that changes the set's bytes, and the tool's version.
+/// The parts of one set must hold the same recipe; the merge reads the inputs back from it.
+pub fn recipe(
+    input: &InputArgs,
+    params: &tiles::BuildParams,
+    texture: &TextureArgs,
+    compact: bool,
+) -> Result<String> {
+    let mut lines = vec![
+        RECIPE_HEAD.to_string(),
+        format!("tiletool {}", env!("CARGO_PKG_VERSION")),
+    ];
+    for path in &input.inputs {
+        let canonical =
+            std::fs::canonicalize(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        let (size, crc) = fingerprint(&canonical)?;
+        lines.push(format!("input {}\t{size}\t{crc:08x}", canonical.display()));
+    }
+    let r = &input.read;
+    let opt = |v: Option<String>| v.unwrap_or_else(|| "-".into());
+    lines.push(format!("spacing {}", opt(r.spacing.map(|v| v.to_string()))));
+    lines.push(format!(
+        "vertical-scale {}",
+        opt(r.vertical_scale.map(|v| v.to_string()))
+    ));
+    lines.push(format!(
+        "size {}",
+        opt(r.size.map(|(w, h)| format!("{w}x{h}")))
+    ));
+    lines.push(format!(
+        "encoding {}",
+        opt(r.encoding.map(|e| e.to_string()))
+    ));
+    lines.push(format!("crop {}", opt(r.crop.map(|c| c.to_string()))));
+    lines.push(format!("levels {}", params.levels));
+    lines.push(format!("base-error {}", params.base_error));
+    lines.push(format!(
+        "sides {}",
+        if params.shared_sides {
+            "shared"
+        } else {
+            "independent"
+        }
+    ));
+    lines.push(format!("compact {compact}"));
+    let photo = match &texture.texture {
+        Some(path) => {
+            let canonical = std::fs::canonicalize(path)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+            let (size, crc) = fingerprint(&canonical)?;
+            format!("{}\t{size}\t{crc:08x}", canonical.display())
+        }
+        None => "-".into(),
+    };
+    lines.push(format!(
+        "texture {photo} no-texture={} texels-per-sample={} sun={},{} tint={}",
+        texture.no_texture,
+        opt(texture.texels_per_sample.map(|v| v.to_string())),
+        texture.sun_azimuth,
+        texture.sun_elevation,
+        texture.tint
+    ));
+    Ok(lines.join("\n"))
+}
+
+/// A file's size and the crc32 of its first and last [`FINGERPRINT_BYTES`].
+fn fingerprint(path: &Path) -> Result<(u64, u32)> {
+    use std::io::{Read, Seek, SeekFrom};
+    let fail = |e: std::io::Error| anyhow::anyhow!("{}: {e}", path.display());
+    let mut file = std::fs::File::open(path).map_err(fail)?;
+    let size = file.metadata().map_err(fail)?.len();
+    let mut crc = crc32fast::Hasher::new();
+    let mut buf = vec![0u8; FINGERPRINT_BYTES.min(size) as usize];
+    file.read_exact(&mut buf).map_err(fail)?;
+    crc.update(&buf);
+    file.seek(SeekFrom::Start(size - buf.len() as u64))
+        .map_err(fail)?;
+    file.read_exact(&mut buf).map_err(fail)?;
+    crc.update(&buf);
+    Ok((size, crc.finalize()))
+}
+
+/// The input a recipe names, opened to be read a band at a time, as the shards read it.
+fn reopen(recipe: &str) -> Result<Box<dyn tiles::build::Heights>, tiles::BuildError> {
+    let bad = |what: String| tiles::BuildError::Input(format!("the parts' recipe: {what}"));
+    let mut inputs = Vec::new();
+    let mut read = ReadArgs::default();
+    let value = |v: &str| (v != "-").then(|| v.to_string());
+    for line in recipe.lines() {
+        let (key, rest) = line.split_once(' ').unwrap_or((line, ""));
+        let parsed = match key {
+            "input" => {
+                let path = rest.split('\t').next().unwrap_or_default();
+                inputs.push(PathBuf::from(path));
+                Ok(())
+            }
+            "spacing" => value(rest)
+                .map(|v| v.parse().map(|v| read.spacing = Some(v)))
+                .unwrap_or(Ok(()))
+                .map_err(|e| e.to_string()),
+            "vertical-scale" => value(rest)
+                .map(|v| v.parse().map(|v| read.vertical_scale = Some(v)))
+                .unwrap_or(Ok(()))
+                .map_err(|e| e.to_string()),
+            "size" => value(rest)
+                .map(|v| dem::parse_size::<usize>(&v).map(|v| read.size = Some(v)))
+                .unwrap_or(Ok(()))
+                .map_err(|e| e.to_string()),
+            "encoding" => value(rest)
+                .map(|v| v.parse().map(|v| read.encoding = Some(v)))
+                .unwrap_or(Ok(()))
+                .map_err(|e| format!("{e:?}")),
+            "crop" => value(rest)
+                .map(|v| v.parse().map(|v| read.crop = Some(v)))
+                .unwrap_or(Ok(()))
+                .map_err(|e| format!("{e:?}")),
+            _ => Ok(()),
+        };
+        parsed.map_err(|e| bad(format!("`{line}`: {e}")))?;
+    }
+    if inputs.is_empty() {
+        return Err(bad("names no input".into()));
+    }
+    let stream =
+        dem::open(&inputs, &read.options()).map_err(|e| tiles::BuildError::Input(e.to_string()))?;
+    let per_band = default_band_rows(stream.width);
+    Ok(Box::new(StreamHeights { stream, per_band }))
+}
+
+/// What `build --shard` prints: the share built, its agreement and the part.
+pub fn print_shard(
+    input: &InputArgs,
+    output: &Path,
+    shard: tiles::shard::Shard,
+    summary: &tiles::shard::ShardSummary,
+    about: &About,
+    took: Duration,
+) {
+    let s = summary;
+    println!(
+        "{}  ->  {} (shard {shard})",
+        input
+            .inputs
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(" "),
+        output.display()
+    );
+    println!("  source    {}", about.description);
+    println!(
+        "  share     tile rows {}..{} of the set's, {} tiles of {} x {} samples",
+        s.rows.start, s.rows.end, s.tiles, about.width, about.height
+    );
+    if s.agreement_passes > 0 {
+        println!(
+            "  sides     agreed over tile rows {}..{}: {} passes ({} tile meshes)",
+            s.window.start, s.window.end, s.agreement_passes, s.agreement_meshes
+        );
+    }
+    let triangles: u64 = s.levels.iter().map(|l| l.triangles).sum();
+    let bytes: u64 = s.levels.iter().map(|l| l.bytes).sum();
+    println!("  levels    {triangles} triangles, {bytes} bytes of geometry over all levels");
+    let secs = took.as_secs_f64();
+    let samples = s.tiles as f64 * 256.0 * 256.0;
+    println!(
+        "  part      {:.1} MB; {secs:.2} s, {:.0} M samples/min of its share{}",
+        s.part_bytes as f64 / 1e6,
+        samples / secs * 60.0 / 1e6,
+        peak_memory()
+            .map(|m| format!(", peak memory {:.0} MB", m as f64 / 1e6))
+            .unwrap_or_default()
+    );
+}
+
+/// `tiletool merge`: the parts joined into the set, with a summary.
+pub fn merge(parts: &[PathBuf], output: &Path, quiet: bool) -> Result<ExitCode> {
+    if output.is_dir() {
+        bail!("{}: is a folder, not an output file", output.display());
+    }
+    let start = Instant::now();
+    let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::hidden());
+    bar.set_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos} tiles merged")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    let progress = || {
+        bar.inc(1);
+        if !quiet && bar.is_hidden() && start.elapsed() > Duration::from_secs(1) {
+            bar.set_draw_target(ProgressDrawTarget::stderr());
+        }
+    };
+    let summary = tiles::shard::merge(parts, output, &reopen, &progress)?;
+    bar.finish_and_clear();
+    if !quiet {
+        let s = &summary;
+        println!("{} parts  ->  {}", s.parts, output.display());
+        println!("  tiles     {} from {} parts", s.tiles, s.parts);
+        if s.unsettled == 0 {
+            println!("  seams     settled by the shards' halos");
+        } else {
+            println!(
+                "  seams     {} tiles unsettled: {} meshes to settle them, {} tiles built again from the input",
+                s.unsettled, s.remeshed, s.rebuilt
+            );
+        }
+        if s.resealed > 0 {
+            println!(
+                "  units     {} tiles sealed again at the set's morph units",
+                s.resealed
+            );
+        }
+        println!(
+            "  file      {:.1} MB; {:.2} s{}",
+            s.file_bytes as f64 / 1e6,
+            start.elapsed().as_secs_f64(),
+            peak_memory()
+                .map(|m| format!(", peak memory {:.0} MB", m as f64 / 1e6))
+                .unwrap_or_default()
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,228 @@
+//! Distributed builds end to end (issue 29): `tiletool build --shard K/N` on real data, the
+//! parts merged into the same bytes as a build without shards (seams settled by the halos,
+//! and resumed from the input where a halo of 0 leaves them unsettled), and every part that
+//! does not belong refused with one line, leaving no output behind.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{s, stderr, tiletool};
+use testdata::data;
+
+/// SRTM3 N55W003 (1201 x 1201: 5 x 5 tiles), rugged, no voids.
+fn srtm3() -> PathBuf {
+    data("srtm/N55W003.hgt")
+}
+
+fn build(input: &Path, out: &Path, extra: &[&str]) {
+    let mut args = vec!["build", s(input), "-o", s(out), "--quiet"];
+    args.extend(extra);
+    let o = tiletool(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+/// The parts of an `n`-shard build of `input` in `dir`, named `part-K-of-N`.
+fn shards(input: &Path, dir: &Path, n: u32, extra: &[&str]) -> Vec<PathBuf> {
+    (0..n)
+        .map(|k| {
+            let part = dir.join(format!("part-{k}-of-{n}"));
+            let shard = format!("{k}/{n}");
+            let mut args = vec!["--shard", &shard];
+            args.extend(extra);
+            build(input, &part, &args);
+            part
+        })
+        .collect()
+}
+
+fn merge(parts: &[PathBuf], out: &Path) -> std::process::Output {
+    let mut args = vec!["merge", "-o", s(out)];
+    args.extend(parts.iter().map(|p| s(p)));
+    tiletool(&args)
+}
+
+fn same_bytes(a: &Path, b: &Path) -> bool {
+    std::fs::read(a).expect("read") == std::fs::read(b).expect("read")
+}
+
+/// Merged parts are the build's bytes: at 2 and 5 shards with the default halo, with a halo
+/// of 0 (the seams left for the merge to settle from the input: it must say so), with
+/// independent sides, and with compact levels and a tinted relief. The control: a set built
+/// with other options differs from the merged one, so the comparison can fail.
+#[test]
+fn merged_parts_are_the_builds_bytes() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let input = srtm3();
+    for (case, (n, extra)) in [
+        (2, &[][..]),
+        (5, &[][..]),
+        (3, &["--independent-sides", "--no-texture"][..]),
+        (3, &["--compact", "--tint"][..]),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let whole = dir.path().join(format!("whole-{case}.vkt"));
+        build(&input, &whole, extra);
+        let sub = dir.path().join(format!("case-{case}"));
+        std::fs::create_dir(&sub).expect("dir");
+        let parts = shards(&input, &sub, n, extra);
+        let merged = sub.join("merged.vkt");
+        let o = merge(&parts, &merged);
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(
+            same_bytes(&merged, &whole),
+            "{n} shards {extra:?}: the merged set differs from the build"
+        );
+    }
+    // A halo of 0: the shards see no neighbour across their seams, so the merge must resume
+    // the agreement there and build those tiles again.
+    let whole = dir.path().join("whole-0.vkt");
+    let sub = dir.path().join("halo0");
+    std::fs::create_dir(&sub).expect("dir");
+    let parts = shards(&input, &sub, 3, &["--halo", "0"]);
+    let merged = sub.join("merged.vkt");
+    let o = tiletool(&[
+        "merge",
+        s(&parts[0]),
+        s(&parts[1]),
+        s(&parts[2]),
+        "-o",
+        s(&merged),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        said.contains("tiles unsettled") && said.contains("built again from the input"),
+        "the merge did not settle the seams itself: {said}"
+    );
+    assert!(
+        same_bytes(&merged, &whole),
+        "halo 0: differs from the build"
+    );
+    // The control: other options, other bytes.
+    let other = dir.path().join("other.vkt");
+    build(&input, &other, &["--levels", "8"]);
+    assert!(!same_bytes(&merged, &other), "the comparison cannot fail");
+}
+
+/// Parts that do not make one set are refused with one line naming the part, and nothing is
+/// written: a shard missing, one given twice, a part of other options, one of a build in
+/// other shards, one cut short (as a killed shard cannot leave: it writes a temporary
+/// file), a flipped byte, and a file that is no part. Bad `--shard` values are refused
+/// before any work.
+#[test]
+fn parts_that_do_not_belong_are_refused() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let input = srtm3();
+    let parts = shards(&input, dir.path(), 3, &["--no-texture"]);
+    let out = dir.path().join("set.vkt");
+    let refused = |parts: &[PathBuf], names: &Path, what: &str| {
+        let o = merge(parts, &out);
+        let err = stderr(&o);
+        assert!(!o.status.success(), "{what}: merged");
+        assert_eq!(err.lines().count(), 1, "{what}: not one line: {err}");
+        assert!(
+            err.contains(s(names)) || err.contains(what),
+            "{what}: {err}"
+        );
+        assert!(!err.contains("panicked"), "{what}: {err}");
+        assert!(!out.exists(), "{what}: an output was left");
+        let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+            .expect("dir")
+            .flatten()
+            .filter(|e| e.file_name().to_string_lossy().contains(".tmp."))
+            .collect();
+        assert!(leftovers.is_empty(), "{what}: {leftovers:?}");
+        err
+    };
+    let err = refused(&parts[..2], &parts[0], "shard 2/3 is missing");
+    assert!(err.contains("shard 2/3 is missing"), "{err}");
+    let twice = [parts[0].clone(), parts[1].clone(), parts[1].clone()];
+    let err = refused(&twice, &parts[1], "given twice");
+    assert!(err.contains("given twice"), "{err}");
+    let foreign = dir.path().join("foreign");
+    build(
+        &input,
+        &foreign,
+        &["--shard", "2/3", "--no-texture", "--levels", "8"],
+    );
+    let mixed = [parts[0].clone(), parts[1].clone(), foreign.clone()];
+    let err = refused(&mixed, &foreign, "other inputs or options");
+    assert!(
+        err.contains("levels"),
+        "the differing option is not named: {err}"
+    );
+    let four = dir.path().join("four");
+    build(&input, &four, &["--shard", "3/4", "--no-texture"]);
+    let mixed = [
+        parts[0].clone(),
+        parts[1].clone(),
+        parts[2].clone(),
+        four.clone(),
+    ];
+    refused(&mixed, &four, "shards");
+    let bytes = std::fs::read(&parts[1]).expect("read");
+    let cut = dir.path().join("cut");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).expect("write");
+    let err = refused(
+        &[parts[0].clone(), cut.clone(), parts[2].clone()],
+        &cut,
+        "incomplete",
+    );
+    assert!(err.contains("incomplete"), "{err}");
+    let mut flipped = bytes.clone();
+    flipped[bytes.len() / 2] ^= 0x10;
+    let damaged = dir.path().join("damaged");
+    std::fs::write(&damaged, &flipped).expect("write");
+    let err = refused(
+        &[parts[0].clone(), damaged.clone(), parts[2].clone()],
+        &damaged,
+        "damaged",
+    );
+    assert!(err.contains("checksum"), "{err}");
+    let set = dir.path().join("a-set");
+    build(&input, &set, &["--no-texture"]);
+    refused(
+        &[parts[0].clone(), set.clone(), parts[2].clone()],
+        &set,
+        "not a vkterrain part file",
+    );
+    // The parts, all present, still merge: the refusals above were about the parts given.
+    let o = merge(&parts, &out);
+    assert!(o.status.success(), "{}", stderr(&o));
+    std::fs::remove_file(&out).expect("rm");
+    for (shard, why) in [
+        ("3/3", "expected K/N"),
+        ("x/3", "expected K/N"),
+        ("7/9", "at most 5 shards"),
+    ] {
+        let part = dir.path().join("bad-shard");
+        let o = tiletool(&[
+            "build",
+            s(&input),
+            "--shard",
+            shard,
+            "-o",
+            s(&part),
+            "--quiet",
+        ]);
+        let err = stderr(&o);
+        assert!(
+            !o.status.success() && err.contains(why),
+            "--shard {shard}: {err}"
+        );
+        assert!(!part.exists(), "--shard {shard}: a part was written");
+    }
+    let o = tiletool(&[
+        "build",
+        s(&input),
+        "--shard",
+        "0/2",
+        "--pyramid",
+        "-o",
+        s(&dir.path().join("p")),
+    ]);
+    assert!(!o.status.success(), "--pyramid with --shard was accepted");
+}
