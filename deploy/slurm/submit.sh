@@ -1,0 +1,22 @@
+#!/usr/bin/env bash
+# Submits a distributed tile-set build to Slurm: an array of N shards, and the merge, which
+# runs once every shard has succeeded.
+#
+#   deploy/slurm/submit.sh N WORK_DIR OUTPUT INPUT... [tiletool build options]
+#
+# Prints the array's and the merge's job ids ("ARRAY MERGE"). Extra sbatch options (account,
+# partition, time, CPUs and memory per task) go in SBATCH_ARGS, e.g.
+# SBATCH_ARGS="--partition=batch --cpus-per-task=16 --mem=8G". Logs go to the current folder.
+set -euo pipefail
+here=$(cd "$(dirname "$0")" && pwd)
+[ $# -ge 4 ] || { echo "usage: $0 N WORK_DIR OUTPUT INPUT... [options]" >&2; exit 2; }
+n=$1 work=$2 output=$3
+shift 3
+# shellcheck disable=SC2086 # SBATCH_ARGS is a list of options
+array=$(sbatch --parsable ${SBATCH_ARGS:-} --array="0-$((n - 1))" "$here/build.sbatch" "$n" "$work" "$@")
+array=${array%%;*}
+# If a shard fails, the dependency can never be met: the merge is cancelled rather than left
+# pending, and is submitted again after that shard's rerun (deploy/slurm/README.md).
+merge=$(sbatch --parsable --dependency="afterok:$array" --kill-on-invalid-dep=yes \
+  "$here/merge.sbatch" "$n" "$work" "$output")
+echo "$array ${merge%%;*}"
