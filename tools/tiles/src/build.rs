@@ -144,6 +144,8 @@ pub(crate) struct Bands<'a> {
     source: &'a dyn Heights,
     shape: Grid<'a>,
     tiles: (u32, u32),
+    /// The tile rows the bands cover: all of them, or a shard's.
+    rows: std::ops::Range<u32>,
     per_band: u32,
     /// The rows read last, kept for a read of the same rows (a grid read as one band is read
     /// once) and dropped before any other read (one band in memory, not two).
@@ -166,17 +168,32 @@ impl<'a> Bands<'a> {
             source,
             shape: source.shape(),
             tiles,
+            rows: 0..tiles.1,
             per_band: source.band_tile_rows().clamp(1, tiles.1.max(1)),
             last: Mutex::new(None),
         }
     }
 
+    /// The same grid's bands over tile rows `rows` only (a shard's): a band holds no row
+    /// the shard does not need.
+    pub(crate) fn within(
+        source: &'a dyn Heights,
+        tiles: (u32, u32),
+        rows: std::ops::Range<u32>,
+    ) -> Bands<'a> {
+        Bands {
+            rows,
+            ..Bands::new(source, tiles)
+        }
+    }
+
     fn count(&self) -> u32 {
-        self.tiles.1.div_ceil(self.per_band)
+        (self.rows.len() as u32).div_ceil(self.per_band)
     }
 
     fn tile_rows(&self, b: u32) -> std::ops::Range<u32> {
-        b * self.per_band..((b + 1) * self.per_band).min(self.tiles.1)
+        let start = self.rows.start + b * self.per_band;
+        start..(start + self.per_band).min(self.rows.end)
     }
 
     /// Band `b`: the samples of its tile rows and `margin` more rows either side (within the

@@ -163,9 +163,15 @@ pub fn build_shard(
     let scanned = scan(&bands)?;
     let header = set_header(&shape, params, texturing, meta, &scanned)?;
     let window = rows.start.saturating_sub(halo)..(rows.end + halo).min(tiles_y);
+    // The agreement reads the window's rows, the build the shard's own: no band holds more.
+    let (around, own) = (
+        Bands::within(heights, (tiles_x, tiles_y), window.clone()),
+        Bands::within(heights, (tiles_x, tiles_y), rows.clone()),
+    );
+    drop(bands);
     let agreed = if params.shared_sides {
         let mut agreed = settle(
-            &bands,
+            &around,
             params,
             scanned.step,
             None,
@@ -184,9 +190,10 @@ pub fn build_shard(
     };
     let prepared =
         texturing.map(|t| (Prepared::new((scanned.lo, scanned.hi), &t.source), t.layout));
+    drop(around);
     let layer = Layer {
         index: 0,
-        bands: &bands,
+        bands: &own,
         step: scanned.step,
         decimation: None,
         prepared: prepared.as_ref().map(|(p, l)| (p.for_layer(0), *l)),

@@ -1,0 +1,48 @@
+#!/bin/bash
+# Distributed builds (issue 29): a mirror set built without shards, then through a local
+# single-node Slurm (deploy/slurm/local-cluster.sh) as N = 1, 2 and 4 array tasks and the
+# merge that depends on them. Prints wall times, each shard's peak memory, the merge's time
+# and whether the merged set is the unsharded build's bytes.
+# The set is GENERATED: a mirror tiling of the real SRTM3 tile N55W003 (bench/mirror.py),
+# made under $OUT and never committed (the 16K set's raw file is 537 MB, each set 5.8 GB).
+# Run from the repository root, as root, after `cargo build --release -p tiletool`.
+# usage: bench/shards.sh [SIZE] [SHARDS...]   (default: 16385 1 2 4)
+set -euo pipefail
+root=$(pwd)
+T=${TILETOOL_BIN:-$root/target/release/tiletool}
+out=${OUT:-/tmp/shards-bench}; mkdir -p "$out"
+size=${1:-16385}; shift || true
+counts=${*:-"1 2 4"}
+raw=$out/m$size.r16
+[ -f "$raw" ] || python3 bench/mirror.py ../shared/data/srtm/N55W003.hgt "$size" "$raw"
+opts=(--size "${size}x$size" --spacing 90 --quiet)
+
+/usr/bin/time -f "%e %M" -o "$out/whole.time" "$T" build "$raw" "${opts[@]}" -o "$out/whole.vkt"
+read -r wall kb < "$out/whole.time"
+printf "unsharded build: %.0f s, peak %.0f MB, file %.0f MB\n" "$wall" "$((kb / 1024))" \
+  "$(($(stat -c %s "$out/whole.vkt") / 1000000))"
+
+# Every tiletool run of the array and the merge timed into $out/times.
+cat > "$out/tiletool-timed" <<SH
+#!/bin/bash
+exec /usr/bin/time -f "%e %M" -o "$out/times/\${SLURM_ARRAY_JOB_ID:-\$SLURM_JOB_ID}-\${SLURM_ARRAY_TASK_ID:-merge}" "$T" "\$@"
+SH
+chmod +x "$out/tiletool-timed"
+state=/tmp/vkt-shards-slurm
+deploy/slurm/local-cluster.sh start "$state" >/dev/null
+trap 'deploy/slurm/local-cluster.sh stop "$state" >/dev/null' EXIT
+export SLURM_CONF=$state/slurm.conf TILETOOL=$out/tiletool-timed
+for n in $counts; do
+  rm -rf "$out/parts" "$out/times" "$out/merged.vkt"; mkdir -p "$out/times"
+  start=$(date +%s.%N)
+  read -r array merge < <(cd "$out" && "$root/deploy/slurm/submit.sh" "$n" "$out/parts" "$out/merged.vkt" "$raw" "${opts[@]}")
+  while [ -n "$(squeue -h -j "$array,$merge")" ]; do sleep 1; done
+  end=$(date +%s.%N)
+  same=$(cmp -s "$out/merged.vkt" "$out/whole.vkt" && echo "same bytes" || echo "DIFFERENT")
+  shards=$(for f in "$out/times/$array"-[0-9]*; do read -r w k < "$f"; printf "%.0f s/%.0f MB " "$w" "$((k / 1024))"; done)
+  read -r mw mk < "$out/times/$merge-merge"
+  printf "N=%s: wall %.0f s (submission to merged set); shards (time/peak): %s; merge %.1f s, peak %.0f MB; %s\n" \
+    "$n" "$(echo "$end - $start" | bc)" "$shards" "$mw" "$((mk / 1024))" "$same"
+  grep -h "seams\|units" "$out"/vkt-merge-"$merge".log | sed 's/^/    /'
+done
+rm -rf "$out/parts" "$out/merged.vkt"
