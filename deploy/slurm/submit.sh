@@ -6,14 +6,16 @@
 #
 # Prints the array's and the merge's job ids ("ARRAY MERGE"). Extra sbatch options (account,
 # partition, time, CPUs and memory per task) go in SBATCH_ARGS, e.g.
-# SBATCH_ARGS="--partition=batch --cpus-per-task=16 --mem=8G". Logs go to the current folder.
+# SBATCH_ARGS="--partition=batch --cpus-per-task=16 --mem=8G". THROTTLE=M runs at most M
+# shards at once (`--array=0-(N-1)%M`). Logs go to the current folder.
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 [ $# -ge 4 ] || { echo "usage: $0 N WORK_DIR OUTPUT INPUT... [options]" >&2; exit 2; }
 n=$1 work=$2 output=$3
 shift 3
 # shellcheck disable=SC2086 # SBATCH_ARGS is a list of options
-array=$(sbatch --parsable ${SBATCH_ARGS:-} --array="0-$((n - 1))" "$here/build.sbatch" "$n" "$work" "$@")
+array=$(sbatch --parsable ${SBATCH_ARGS:-} --array="0-$((n - 1))${THROTTLE:+%$THROTTLE}" \
+  "$here/build.sbatch" "$n" "$work" "$@")
 array=${array%%;*}
 # If a shard fails, the dependency can never be met: the merge is cancelled rather than left
 # pending, and is submitted again after that shard's rerun (deploy/slurm/README.md).

@@ -409,7 +409,7 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
 /// Removes temporaries of earlier builds of `path` whose process is provably gone (a build
 /// killed with SIGKILL cannot clean up after itself): `.NAME.tmp.PID` with no `/proc/PID`.
 /// A live process's file, or one that cannot be checked, is left alone.
-fn remove_stale_temporaries(path: &Path) {
+pub(crate) fn remove_stale_temporaries(path: &Path) {
     let (Some(dir), Some(name)) = (path.parent(), path.file_name()) else {
         return;
     };

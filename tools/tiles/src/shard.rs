@@ -282,6 +282,8 @@ struct PartWriter {
 impl PartWriter {
     fn create(path: &Path) -> Result<PartWriter, BuildError> {
         let tmp = temp_path(path)?;
+        // A shard killed with SIGKILL could not remove its temporary file: its rerun does.
+        crate::format::remove_stale_temporaries(path);
         let file = std::fs::File::create(&tmp).map_err(|e| io_error(&tmp, e))?;
         Ok(PartWriter {
             path: path.to_path_buf(),
@@ -487,6 +489,10 @@ impl Part {
         if crc32fast::hash(&map[..body]) != stored {
             return Err(refuse("damaged: its checksum does not match".into()));
         }
+        // The checksum read every page: out of this process's memory until the copy needs
+        // them (see `release`).
+        // SAFETY: as in `release`: a read-only file mapping, no slice of it held yet.
+        let _ = unsafe { map.unchecked_advise(memmap2::UncheckedAdvice::DontNeed) };
         let p = Self::parse(&map[..body]).map_err(refuse)?;
         Ok(Part {
             path: path.to_path_buf(),
@@ -568,6 +574,32 @@ impl Part {
         })
     }
 
+    /// Drops tile `t`'s record from this process's memory once it is copied: the merge maps
+    /// parts as large as the set, and would otherwise hold them all (its pages stay in the
+    /// kernel's cache, and are read again from the file if touched).
+    pub fn release(&self, t: usize) {
+        let first = self.rows.start as usize * self.tiles_x as usize;
+        let start = self.tiles[t - first];
+        let end = self
+            .tiles
+            .get(t - first + 1)
+            .copied()
+            .unwrap_or(self.map.len());
+        let page = 4096;
+        let (start, end) = (start.next_multiple_of(page), end / page * page);
+        if start < end {
+            // SAFETY: a read-only mapping of a file that is not written while merged: dropped
+            // pages lose nothing, and a slice into them reads the same bytes again.
+            let _ = unsafe {
+                self.map.unchecked_advise_range(
+                    memmap2::UncheckedAdvice::DontNeed,
+                    start,
+                    end - start,
+                )
+            };
+        }
+    }
+
     /// Tile `t` of the set (row-major), which this part must own.
     pub fn tile(&self, t: usize) -> PartTile<'_> {
         let first = self.rows.start as usize * self.tiles_x as usize;
@@ -615,6 +647,9 @@ pub struct MergeSummary {
     /// Tiles sealed again at the set's morph units.
     pub resealed: u64,
     pub file_bytes: u64,
+    /// Per level, over the set's tiles: vertices, triangles and the largest measured error
+    /// (the other figures of a build's summary are not kept in the parts).
+    pub levels: Vec<LevelStats>,
 }
 
 /// Checks that `paths` are the parts of one set, every shard exactly once, and writes the set
@@ -700,6 +735,7 @@ pub fn merge(
     };
     let mut summary = MergeSummary {
         parts: by_index.len() as u32,
+        levels: vec![LevelStats::default(); header.levels as usize],
         ..MergeSummary::default()
     };
     // The shared sides: the owners' states, checked for a fixed point, resumed where not.
@@ -807,9 +843,18 @@ pub fn merge(
             (None, None) => tile.blob,
         };
         writer.add_tile(tx, ty, blob)?;
+        let parsed = Tile::parse(blob, tx, ty, header.levels, step).map_err(|what| {
+            BuildError::Internal(format!("tile {tx},{ty} of the merged set: {what}"))
+        })?;
+        for (sum, e) in summary.levels.iter_mut().zip(parsed.levels()) {
+            sum.vertices += u64::from(e.vertex_count());
+            sum.triangles += u64::from(e.triangle_count);
+            sum.max_error = sum.max_error.max(f64::from(e.max_error));
+        }
         if !tile.texture.is_empty() {
             writer.add_texture(tx, ty, tile.texture)?;
         }
+        owner(t).release(t);
         summary.tiles += 1;
         progress();
         Ok::<(), BuildError>(())

@@ -218,6 +218,17 @@ pub fn merge(parts: &[PathBuf], output: &Path, quiet: bool) -> Result<ExitCode> 
         let s = &summary;
         println!("{} parts  ->  {}", s.parts, output.display());
         println!("  tiles     {} from {} parts", s.tiles, s.parts);
+        println!("  level     e_i (m)   max err (m)     vertices    triangles");
+        let set = tiles::TileSet::open(output)?;
+        for (i, l) in s.levels.iter().enumerate() {
+            println!(
+                "  {i:>5} {:>11} {:>13.3} {:>12} {:>12}",
+                set.level_error(i as u32),
+                l.max_error,
+                l.vertices,
+                l.triangles
+            );
+        }
         if s.unsettled == 0 {
             println!("  seams     settled by the shards' halos");
         } else {
