@@ -81,7 +81,7 @@ enum Command {
         texture: TextureArgs,
         /// Build only shard K of N (0 <= K < N): the K-th of N bands of tile rows, into a part
         /// file (OUTPUT), for `tiletool merge` to join into the set that a build without
-        /// --shard makes, byte for byte. Each shard reads the whole input once to scan it,
+        /// --shard makes, byte for byte. Each shard reads the whole input to scan it,
         /// and meshes only its band (see the README, "Distributed builds").
         #[arg(long, value_name = "K/N", conflicts_with = "pyramid")]
         shard: Option<tiles::shard::Shard>,
