@@ -1189,6 +1189,22 @@ pub(crate) fn scan(bands: &Bands) -> Result<Scanned, BuildError> {
     })
 }
 
+/// A build's options checked before any work: the levels and, for a relief, its sun.
+pub(crate) fn validate(
+    params: &BuildParams,
+    texturing: Option<&Texturing>,
+) -> Result<(), BuildError> {
+    params.validate()?;
+    if let Some(Texturing {
+        source: Source::Relief(r),
+        ..
+    }) = texturing
+    {
+        r.validate().map_err(BuildError::Params)?;
+    }
+    Ok(())
+}
+
 /// The set's header, as the writer is given it: the grid, the options and what the scan found.
 pub(crate) fn set_header(
     shape: &Grid,
@@ -1265,14 +1281,7 @@ pub fn build_tileset_from(
     out: &Path,
     progress: &(dyn Fn() + Sync),
 ) -> Result<BuildSummary, BuildError> {
-    params.validate()?;
-    if let Some(Texturing {
-        source: Source::Relief(r),
-        ..
-    }) = texturing
-    {
-        r.validate().map_err(BuildError::Params)?;
-    }
+    validate(params, texturing)?;
     let shape = heights.shape();
     let (tiles_x, tiles_y) = tile_count(shape.width, shape.height).map_err(BuildError::Params)?;
     let bands = Bands::new(heights, (tiles_x, tiles_y));

@@ -50,11 +50,11 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use crate::build::{
-    build_tiles, scan, set_header, settle, units_of, Bands, BuildParams, CompactSides, Heights,
-    Layer, LevelStats, Remesh, SideBits, Start, TileSetMeta,
+    build_tiles, scan, set_header, settle, units_of, validate, Bands, BuildParams, CompactSides,
+    Heights, Layer, LevelStats, Remesh, SideBits, Start, TileSetMeta,
 };
 use crate::format::{temp_path, tile_count, FileHeader, Tile, TileSetWriter, FLAG_SHARED_SIDES};
-use crate::texture::{Prepared, Source, Texturing};
+use crate::texture::{Prepared, Texturing};
 use crate::BuildError;
 
 /// The first bytes of a part file.
@@ -138,18 +138,11 @@ pub fn build_shard(
     out: &Path,
     progress: &(dyn Fn() + Sync),
 ) -> Result<ShardSummary, BuildError> {
-    params.validate()?;
+    validate(params, texturing)?;
     if params.pyramid {
         return Err(BuildError::Params(
             "--pyramid cannot be sharded yet: build the pyramid without --shard".into(),
         ));
-    }
-    if let Some(Texturing {
-        source: Source::Relief(r),
-        ..
-    }) = texturing
-    {
-        r.validate().map_err(BuildError::Params)?;
     }
     let shape = heights.shape();
     let (tiles_x, tiles_y) = tile_count(shape.width, shape.height).map_err(BuildError::Params)?;

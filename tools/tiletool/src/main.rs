@@ -223,6 +223,18 @@ struct InputArgs {
     read: ReadArgs,
 }
 
+impl InputArgs {
+    /// The inputs as a summary names them: their paths, space-separated.
+    fn names(&self) -> String {
+        let names: Vec<_> = self
+            .inputs
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect();
+        names.join(" ")
+    }
+}
+
 #[derive(Args, Clone, Default)]
 struct ReadArgs {
     /// Metres between samples, for formats that do not say (overrides the file).
@@ -629,16 +641,7 @@ fn build(
         let grid = &about;
         let samples = (grid.width * grid.height) as f64;
         let (lo, hi) = grid.min_max;
-        println!(
-            "{}  ->  {}",
-            input
-                .inputs
-                .iter()
-                .map(|p| p.display().to_string())
-                .collect::<Vec<_>>()
-                .join(" "),
-            output.display()
-        );
+        println!("{}  ->  {}", input.names(), output.display());
         println!("  source    {}", grid.description);
         println!(
             "  grid      {} x {} samples, spacing {:.2} x {:.2} m, heights {:.1}..{:.1} m, {} voids filled",

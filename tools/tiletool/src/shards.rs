@@ -160,12 +160,7 @@ pub fn print_shard(
     let s = summary;
     println!(
         "{}  ->  {} (shard {shard})",
-        input
-            .inputs
-            .iter()
-            .map(|p| p.display().to_string())
-            .collect::<Vec<_>>()
-            .join(" "),
+        input.names(),
         output.display()
     );
     println!("  source    {}", about.description);
