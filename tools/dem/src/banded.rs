@@ -161,6 +161,16 @@ impl Scanner {
 }
 
 impl Plan {
+    /// The plan of a `width` x `height` grid known to hold no void: nothing to fill.
+    pub fn no_voids(width: usize, height: usize, stored_at: usize) -> Plan {
+        Plan {
+            dims: Scanner::new(width, height, stored_at).dims,
+            depth: 0,
+            stored: None,
+            voids: 0,
+        }
+    }
+
     /// Rows `y0..y1` of the filled grid. `read(a, b)` gives rows `a..b` of the grid as read
     /// (NaN: void); it is called once, for the band and its margin.
     pub fn fill<E>(

@@ -35,7 +35,7 @@ pub use geotiff::read_placement as read_tiff_placement;
 pub use options::{parse_size, Crop, Encoding, ReadOptions};
 pub use placement::{Crs, Mapping, Placement};
 pub use raster::MAX_SAMPLES;
-pub use stream::{open, Stream, BAND_FORMATS};
+pub use stream::{open, open_unscanned, scan_rows, RowsScan, Stream, BAND_FORMATS};
 
 use error::label;
 use raster::{Georef, Raster};

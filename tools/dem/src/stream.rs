@@ -98,6 +98,73 @@ impl Rows {
 /// Opens `paths` as [`crate::read`] would read them, reading SRTM and raw inputs one band at a
 /// time: the same checks and errors, the same grid, without holding it.
 pub fn open(paths: &[PathBuf], opts: &ReadOptions) -> Result<Stream, DemError> {
+    match laid_out(paths, opts)? {
+        Opened::Whole(stream) => Ok(stream),
+        Opened::Banded(layout) => layout.scanned(opts),
+    }
+}
+
+/// Opens `paths` without reading their rows: for a caller that learnt what the whole grid's
+/// read would say from elsewhere and knows it holds no void (a sharded build's scans, which
+/// each read a band: `tiletool scan`). [`Stream::rows`] then reads the rows as stored, and
+/// `min_max` is `min_max`, as given. Formats read whole ([`BAND_FORMATS`] are not) are
+/// opened as [`open`] does.
+pub fn open_unscanned(
+    paths: &[PathBuf],
+    opts: &ReadOptions,
+    min_max: (f32, f32),
+) -> Result<Stream, DemError> {
+    match laid_out(paths, opts)? {
+        Opened::Whole(stream) => Ok(stream),
+        Opened::Banded(l) => Ok(Stream {
+            width: l.width,
+            height: l.height,
+            spacing_x: l.spacing_x,
+            spacing_y: l.spacing_y,
+            voids_filled: 0,
+            description: l.description(opts),
+            placement: l.placement.map(|p| p.window(l.x0, l.y0)),
+            min_max,
+            source: Source::Bands {
+                plan: Plan::no_voids(l.width, l.height, STORED),
+                rows: Box::new(l.rows),
+                x0: l.x0,
+                y0: l.y0,
+            },
+        }),
+    }
+}
+
+/// What a read of some rows finds: their range of heights (voids aside) and their voids.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RowsScan {
+    pub lo: f32,
+    pub hi: f32,
+    pub voids: u64,
+}
+
+/// A DEM opened for reading in bands, its rows not yet read.
+struct Layout {
+    rows: Rows,
+    file: String,
+    x0: usize,
+    y0: usize,
+    width: usize,
+    height: usize,
+    spacing_x: f64,
+    spacing_y: f64,
+    placement: Option<Placement>,
+    description: String,
+}
+
+enum Opened {
+    /// A picture, decoded whole.
+    Whole(Stream),
+    Banded(Layout),
+}
+
+/// The checks and layout of [`open`], before any row is read.
+fn laid_out(paths: &[PathBuf], opts: &ReadOptions) -> Result<Opened, DemError> {
     let (kind, file) = kind_of(paths, opts)?;
     let (rows, georef, placement, description) = match kind {
         Kind::Hgt => {
@@ -123,7 +190,7 @@ pub fn open(paths: &[PathBuf], opts: &ReadOptions) -> Result<Stream, DemError> {
         _ => {
             let grid = crate::read(paths, opts)?;
             let min_max = grid.min_max();
-            return Ok(Stream {
+            return Ok(Opened::Whole(Stream {
                 width: grid.width,
                 height: grid.height,
                 spacing_x: grid.spacing_x,
@@ -133,21 +200,46 @@ pub fn open(paths: &[PathBuf], opts: &ReadOptions) -> Result<Stream, DemError> {
                 placement: grid.placement,
                 min_max,
                 source: Source::Whole(grid.heights),
-            });
+            }));
         }
     };
     let (x0, y0, width, height) = window(&file, opts, rows.width(), rows.height())?;
     let (spacing_x, spacing_y) = spacing(&file, opts, georef, y0, height)?;
+    Ok(Opened::Banded(Layout {
+        rows,
+        file,
+        x0,
+        y0,
+        width,
+        height,
+        spacing_x,
+        spacing_y,
+        placement,
+        description,
+    }))
+}
 
-    // One pass over the window: checks, range, voids, the fill's plan.
-    let mut scan = Scanner::new(width, height, STORED);
-    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-    let full_width = rows.width();
-    for first in (0..height).step_by(SCAN_ROWS) {
-        let n = SCAN_ROWS.min(height - first);
-        let band = rows.read(y0 + first, y0 + first + n)?;
+impl Layout {
+    fn description(&self, opts: &ReadOptions) -> String {
+        match opts.crop {
+            Some(c) => format!("{}, crop {c}", self.description),
+            None => self.description.clone(),
+        }
+    }
+
+    /// Rows `first..first + n` of the window, as stored, checked: every valid height within
+    /// ±[`MAX_HEIGHT`]. Each row goes to `each` with its range folded into `range`.
+    fn checked_rows(
+        &self,
+        first: usize,
+        n: usize,
+        range: &mut (f32, f32),
+        each: &mut dyn FnMut(&[f32]),
+    ) -> Result<(), DemError> {
+        let full_width = self.rows.width();
+        let band = self.rows.read(self.y0 + first, self.y0 + first + n)?;
         for (r, row) in band.chunks_exact(full_width).enumerate() {
-            let row = &row[x0..x0 + width];
+            let row = &row[self.x0..self.x0 + self.width];
             for (x, &h) in row.iter().enumerate() {
                 if h.is_nan() {
                     continue;
@@ -155,45 +247,92 @@ pub fn open(paths: &[PathBuf], opts: &ReadOptions) -> Result<Stream, DemError> {
                 // A fill blends valid samples, so checking those checks the filled grid.
                 if !(h.is_finite() && f64::from(h.abs()) <= MAX_HEIGHT) {
                     return Err(DemError::Malformed {
-                        file,
+                        file: self.file.clone(),
                         problem: format!(
                             "height {h:.3e} m at column {x}, row {} is beyond ±{MAX_HEIGHT} m (an undeclared nodata value?)",
                             first + r
                         ),
                     });
                 }
-                lo = lo.min(h);
-                hi = hi.max(h);
+                range.0 = range.0.min(h);
+                range.1 = range.1.max(h);
             }
-            scan.row(row);
+            each(row);
+        }
+        Ok(())
+    }
+
+    /// [`open`]'s pass over the window: checks, range, voids, the fill's plan.
+    fn scanned(self, opts: &ReadOptions) -> Result<Stream, DemError> {
+        let mut scan = Scanner::new(self.width, self.height, STORED);
+        let mut range = (f32::INFINITY, f32::NEG_INFINITY);
+        for first in (0..self.height).step_by(SCAN_ROWS) {
+            let n = SCAN_ROWS.min(self.height - first);
+            self.checked_rows(first, n, &mut range, &mut |row| scan.row(row))?;
+        }
+        let plan = scan.finish().ok_or_else(|| DemError::NoValidSamples {
+            file: self.file.clone(),
+            window: opts
+                .crop
+                .map_or_else(String::new, |c| format!(" in crop {c}")),
+        })?;
+        Ok(Stream {
+            width: self.width,
+            height: self.height,
+            spacing_x: self.spacing_x,
+            spacing_y: self.spacing_y,
+            voids_filled: plan.voids,
+            description: self.description(opts),
+            placement: self.placement.map(|p| p.window(self.x0, self.y0)),
+            min_max: range,
+            source: Source::Bands {
+                rows: Box::new(self.rows),
+                x0: self.x0,
+                y0: self.y0,
+                plan,
+            },
+        })
+    }
+}
+
+/// Rows `y0..y1` of `paths`' grid read and checked as [`open`] checks every row, without
+/// reading the others: their range and voids. One shard's share of a scan
+/// (`tiletool scan --shard`); formats read whole are decoded whole.
+pub fn scan_rows(
+    paths: &[PathBuf],
+    opts: &ReadOptions,
+    rows: std::ops::Range<usize>,
+) -> Result<RowsScan, DemError> {
+    let mut out = RowsScan {
+        lo: f32::INFINITY,
+        hi: f32::NEG_INFINITY,
+        voids: 0,
+    };
+    match laid_out(paths, opts)? {
+        Opened::Whole(stream) => {
+            // Decoded and filled whole: its voids are the whole grid's (`voids_filled`), which
+            // tells a sharded build that the scans cannot stand for the whole read.
+            let heights = stream.rows(rows.start, rows.end.min(stream.height))?;
+            for &h in heights.iter() {
+                out.lo = out.lo.min(h);
+                out.hi = out.hi.max(h);
+            }
+            out.voids = stream.voids_filled;
+        }
+        Opened::Banded(l) => {
+            let end = rows.end.min(l.height);
+            let mut range = (f32::INFINITY, f32::NEG_INFINITY);
+            let mut voids = 0u64;
+            for first in (rows.start..end).step_by(SCAN_ROWS) {
+                let n = SCAN_ROWS.min(end - first);
+                l.checked_rows(first, n, &mut range, &mut |row| {
+                    voids += row.iter().filter(|h| h.is_nan()).count() as u64;
+                })?;
+            }
+            (out.lo, out.hi, out.voids) = (range.0, range.1, voids);
         }
     }
-    let plan = scan.finish().ok_or_else(|| DemError::NoValidSamples {
-        file: file.clone(),
-        window: opts
-            .crop
-            .map_or_else(String::new, |c| format!(" in crop {c}")),
-    })?;
-    let mut description = description;
-    if let Some(c) = opts.crop {
-        description.push_str(&format!(", crop {c}"));
-    }
-    Ok(Stream {
-        width,
-        height,
-        spacing_x,
-        spacing_y,
-        voids_filled: plan.voids,
-        description,
-        placement: placement.map(|p| p.window(x0, y0)),
-        min_max: (lo, hi),
-        source: Source::Bands {
-            rows: Box::new(rows),
-            x0,
-            y0,
-            plan,
-        },
-    })
+    Ok(out)
 }
 
 impl Stream {

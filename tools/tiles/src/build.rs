@@ -78,7 +78,7 @@ pub fn height_step(grid: &Grid) -> Result<f32, String> {
 
 /// The largest height range of one tile and the largest absolute height, over the tiles of
 /// tile rows `rows` (which `grid` holds).
-fn tile_ranges(grid: &Grid, tiles_x: u32, rows: std::ops::Range<u32>) -> (f32, f32) {
+pub(crate) fn tile_ranges(grid: &Grid, tiles_x: u32, rows: std::ops::Range<u32>) -> (f32, f32) {
     let cells = TILE_CELLS as usize;
     let (mut max_range, mut max_abs) = (0.0f32, 0.0f32);
     for ty in rows.map(|t| t as usize) {
@@ -156,10 +156,10 @@ pub(crate) struct Bands<'a> {
 type HeldRows<'a> = (std::ops::Range<usize>, Arc<Cow<'a, [f32]>>);
 
 /// One band's rows, and the grid they make.
-struct Band<'a> {
+pub(crate) struct Band<'a> {
     rows: Arc<Cow<'a, [f32]>>,
     first_row: usize,
-    tile_rows: std::ops::Range<u32>,
+    pub tile_rows: std::ops::Range<u32>,
 }
 
 impl<'a> Bands<'a> {
@@ -187,7 +187,7 @@ impl<'a> Bands<'a> {
         }
     }
 
-    fn count(&self) -> u32 {
+    pub(crate) fn count(&self) -> u32 {
         (self.rows.len() as u32).div_ceil(self.per_band)
     }
 
@@ -198,7 +198,7 @@ impl<'a> Bands<'a> {
 
     /// Band `b`: the samples of its tile rows and `margin` more rows either side (within the
     /// grid).
-    fn load(&self, b: u32, margin: usize) -> Result<Band<'a>, BuildError> {
+    pub(crate) fn load(&self, b: u32, margin: usize) -> Result<Band<'a>, BuildError> {
         let rows = self.tile_rows(b);
         let cells = TILE_CELLS as usize;
         let y0 = (rows.start as usize * cells).saturating_sub(margin);
@@ -218,7 +218,7 @@ impl<'a> Bands<'a> {
 }
 
 impl Band<'_> {
-    fn grid<'g>(&'g self, shape: &Grid) -> Grid<'g> {
+    pub(crate) fn grid<'g>(&'g self, shape: &Grid) -> Grid<'g> {
         Grid {
             width: shape.width,
             height: shape.height,

@@ -126,7 +126,9 @@ pub struct ShardSummary {
 
 /// Builds shard `shard`'s tiles of the set that [`crate::build::build_tileset_from`] would
 /// build of `heights`, into the part file `out`. `recipe` names the inputs and options (the
-/// merge refuses parts whose recipes differ).
+/// merge refuses parts whose recipes differ). `known`: the whole grid's range and lattice
+/// step from every shard's scan ([`ShardScan`]), so that the shard reads only its rows; the
+/// caller checked that the grid holds no void. Without it the shard reads the whole grid.
 #[allow(clippy::too_many_arguments)]
 pub fn build_shard(
     heights: &dyn Heights,
@@ -134,6 +136,7 @@ pub fn build_shard(
     texturing: Option<&Texturing>,
     meta: &TileSetMeta,
     (shard, halo): (Shard, u32),
+    known: Option<&Scans>,
     recipe: &str,
     out: &Path,
     progress: &(dyn Fn() + Sync),
@@ -152,8 +155,11 @@ pub fn build_shard(
             "--shard {shard}: the set has {tiles_y} tile rows, so at most {tiles_y} shards"
         )));
     }
-    let bands = Bands::new(heights, (tiles_x, tiles_y));
-    let scanned = scan(&bands)?;
+    // The whole grid's range and lattice step: from the shards' scans, or read here.
+    let scanned = match known {
+        Some(scans) => scans.scanned(),
+        None => scan(&Bands::new(heights, (tiles_x, tiles_y)))?,
+    };
     let header = set_header(&shape, params, texturing, meta, &scanned)?;
     let window = rows.start.saturating_sub(halo)..(rows.end + halo).min(tiles_y);
     // The agreement reads the window's rows, the build the shard's own: no band holds more.
@@ -161,7 +167,6 @@ pub fn build_shard(
         Bands::within(heights, (tiles_x, tiles_y), window.clone()),
         Bands::within(heights, (tiles_x, tiles_y), rows.clone()),
     );
-    drop(bands);
     let agreed = if params.shared_sides {
         let mut agreed = settle(
             &around,
@@ -260,6 +265,156 @@ pub fn build_shard(
     )?;
     summary.part_bytes = part.finish()?;
     Ok(summary)
+}
+
+/// What a shard's scan found of its tile rows (`tiletool build --shard K/N --scan-only`): the range of
+/// heights, what the lattice step depends on ([`crate::quantise::lattice_step`]: the
+/// largest tile range and absolute height) and the voids. Every shard's together stand for
+/// the build's pass over the whole grid, when the grid holds no void.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ShardScan {
+    pub lo: f32,
+    pub hi: f32,
+    pub max_range: f32,
+    pub max_abs: f32,
+    pub voids: u64,
+}
+
+/// The first line of a scan file, with its version; its first bytes are [`SCAN_MAGIC`].
+const SCAN_HEAD: &str = "VKTSCAN1 vkterrain shard scan, version 1";
+/// The first bytes of a scan file.
+pub const SCAN_MAGIC: [u8; 8] = *b"VKTSCAN1";
+
+impl ShardScan {
+    /// The scan file: its figures (heights as their bits, so they read back exact), then the
+    /// input's recipe; a crc32 line guards both.
+    pub fn to_text(&self, shard: Shard, recipe: &str) -> String {
+        let body = format!(
+            "{SCAN_HEAD}\nshard {shard}\nlo {:08x}\nhi {:08x}\nmax-range {:08x}\nmax-abs {:08x}\nvoids {}\n{recipe}\n",
+            self.lo.to_bits(),
+            self.hi.to_bits(),
+            self.max_range.to_bits(),
+            self.max_abs.to_bits(),
+            self.voids
+        );
+        format!("{body}crc {:08x}\n", crc32fast::hash(body.as_bytes()))
+    }
+
+    /// A scan file read back: its shard, figures and recipe.
+    pub fn from_text(text: &str) -> Result<(Shard, ShardScan, String), String> {
+        let (body, crc) = text
+            .trim_end_matches('\n')
+            .rsplit_once("\ncrc ")
+            .ok_or("not a shard scan (no crc line)")?;
+        let body = format!("{body}\n");
+        let stored = u32::from_str_radix(crc.trim(), 16).map_err(|_| "a bad crc line")?;
+        if crc32fast::hash(body.as_bytes()) != stored {
+            return Err("damaged: its checksum does not match".into());
+        }
+        let mut lines = body.lines();
+        if lines.next() != Some(SCAN_HEAD) {
+            return Err(format!("not a shard scan of this version ({SCAN_HEAD})"));
+        }
+        let mut field = |name: &str| -> Result<String, String> {
+            let line = lines.next().unwrap_or_default();
+            line.strip_prefix(name)
+                .and_then(|v| v.strip_prefix(' '))
+                .map(str::to_string)
+                .ok_or_else(|| format!("expected `{name}`, found `{line}`"))
+        };
+        let bits = |v: String| -> Result<f32, String> {
+            u32::from_str_radix(&v, 16)
+                .map(f32::from_bits)
+                .map_err(|_| format!("a bad height `{v}`"))
+        };
+        let shard: Shard = field("shard")?.parse()?;
+        let scan = ShardScan {
+            lo: bits(field("lo")?)?,
+            hi: bits(field("hi")?)?,
+            max_range: bits(field("max-range")?)?,
+            max_abs: bits(field("max-abs")?)?,
+            voids: field("voids")?.parse().map_err(|_| "a bad void count")?,
+        };
+        let recipe: Vec<&str> = lines.collect();
+        Ok((shard, scan, recipe.join("\n")))
+    }
+}
+
+/// Every shard's scan of one input, put together.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Scans {
+    pub lo: f32,
+    pub hi: f32,
+    pub max_range: f32,
+    pub max_abs: f32,
+    pub voids: u64,
+}
+
+impl Scans {
+    /// The scans of shards `0..N`, in any order; `None` for none.
+    pub fn join(scans: &[ShardScan]) -> Option<Scans> {
+        let first = scans.first()?;
+        Some(scans.iter().fold(
+            Scans {
+                lo: first.lo,
+                hi: first.hi,
+                max_range: 0.0,
+                max_abs: 0.0,
+                voids: 0,
+            },
+            |a, s| Scans {
+                lo: a.lo.min(s.lo),
+                hi: a.hi.max(s.hi),
+                max_range: a.max_range.max(s.max_range),
+                max_abs: a.max_abs.max(s.max_abs),
+                voids: a.voids + s.voids,
+            },
+        ))
+    }
+
+    /// What the build's pass over the whole grid finds: the same range, the same step.
+    fn scanned(&self) -> crate::build::Scanned {
+        crate::build::Scanned {
+            lo: self.lo,
+            hi: self.hi,
+            step: crate::quantise::lattice_step(self.max_range, self.max_abs),
+        }
+    }
+}
+
+/// Grid rows a shard's scan reads: its tile rows' samples, up to and with the row its last
+/// tile row shares with the next shard's.
+pub fn scan_rows(
+    shard: Shard,
+    (width, height): (usize, usize),
+) -> Result<Range<usize>, BuildError> {
+    let (_, tiles_y) = tile_count(width, height).map_err(BuildError::Params)?;
+    if shard.count > tiles_y {
+        return Err(BuildError::Params(format!(
+            "--shard {shard}: the set has {tiles_y} tile rows, so at most {tiles_y} shards"
+        )));
+    }
+    let rows = shard.rows(tiles_y);
+    let cells = crate::mesh::TILE_CELLS as usize;
+    Ok(rows.start as usize * cells..(rows.end as usize * cells + 1).min(height))
+}
+
+/// The largest tile range and absolute height over shard `shard`'s tile rows, reading only
+/// their rows of `heights` (as stored: meaningful when they hold no void).
+pub fn tile_ranges(heights: &dyn Heights, shard: Shard) -> Result<(f32, f32), BuildError> {
+    let shape = heights.shape();
+    let tiles = tile_count(shape.width, shape.height).map_err(BuildError::Params)?;
+    let rows = shard.rows(tiles.1);
+    let bands = Bands::within(heights, tiles, rows);
+    let (mut max_range, mut max_abs) = (0.0f32, 0.0f32);
+    for b in 0..bands.count() {
+        let band = bands.load(b, 0)?;
+        let grid = band.grid(&shape);
+        let (range, abs) = crate::build::tile_ranges(&grid, tiles.0, band.tile_rows.clone());
+        max_range = max_range.max(range);
+        max_abs = max_abs.max(abs);
+    }
+    Ok((max_range, max_abs))
 }
 
 /// A part file being written: to its temporary name, checksummed as it goes, renamed when

@@ -14,7 +14,7 @@ mod info;
 mod photo;
 mod shards;
 
-use shards::{merge, print_shard, recipe};
+use shards::{input_recipe, merge, print_shard, recipe, scan, shard_scans};
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -89,7 +89,18 @@ enum Command {
         /// neighbours, so that the merge finds the seams settled.
         #[arg(long, requires = "shard", default_value_t = tiles::shard::DEFAULT_HALO)]
         halo: u32,
+        /// A folder holding every shard's scan (`tiletool scan --shard K/N -o
+        /// DIR/scan-K-of-N.vktscan`): the shard then reads only its rows of the input, not the
+        /// whole of it (inputs with voids are still read whole: their fill is global).
+        #[arg(long, requires = "shard", value_name = "DIR")]
+        scans: Option<PathBuf>,
+        /// Only scan shard K/N's rows of the input (their range of heights, tile ranges and
+        /// voids, reading only those rows) into OUTPUT, by convention
+        /// DIR/scan-K-of-N.vktscan, for the shards' `--scans DIR`.
+        #[arg(long, requires = "shard", conflicts_with = "scans")]
+        scan_only: bool,
     },
+
     /// Join the part files of a sharded build (`build --shard K/N`) into the tile set.
     Merge {
         /// Every part of the build, each shard exactly once.
@@ -329,13 +340,19 @@ fn main() -> ExitCode {
             texture,
             shard,
             halo,
+            scans,
+            scan_only,
         } => {
-            // A shard's output is a part file, which a retried shard replaces.
-            let replaces = match shard {
-                Some(_) => tiles::shard::PART_MAGIC,
-                None => tiles::format::MAGIC,
+            // A shard's output is a part file (or a scan), which a retried shard replaces.
+            let replaces = match (shard, scan_only) {
+                (Some(_), true) => tiles::shard::SCAN_MAGIC,
+                (Some(_), false) => tiles::shard::PART_MAGIC,
+                (None, _) => tiles::format::MAGIC,
             };
             check_output(&output, &input.inputs, force, replaces).and_then(|()| {
+                if let (Some(shard), true) = (shard, scan_only) {
+                    return scan(&input, shard, &output);
+                }
                 remove_on_signal(&output)?;
                 build(
                     &input,
@@ -349,10 +366,11 @@ fn main() -> ExitCode {
                     &texture,
                     band_rows,
                     (quiet, compact),
-                    shard.map(|s| (s, halo)),
+                    shard.map(|s| (s, halo, scans)),
                 )
             })
         }
+
         Command::Merge {
             parts,
             output,
@@ -541,7 +559,7 @@ fn build(
     texture: &TextureArgs,
     band_rows: Option<u32>,
     (quiet, compact): (bool, bool),
-    shard: Option<(tiles::shard::Shard, u32)>,
+    shard: Option<(tiles::shard::Shard, u32, Option<PathBuf>)>,
 ) -> Result<ExitCode> {
     params.validate()?;
     if output.is_dir() {
@@ -550,8 +568,22 @@ fn build(
     let start = Instant::now();
     // A photo is laid on the grid by its georeferencing, which needs the grid whole; otherwise
     // SRTM and raw inputs are read a band at a time (dem::open), the others held whole.
+    // A shard with every shard's scans reads only its own rows, when the input has no void.
+    // What the input is, for a shard's recipe and its scans: its files read once for it.
+    let inputs = shard.as_ref().map(|_| input_recipe(input)).transpose()?;
+    let scans = match (&shard, &inputs) {
+        (Some((s, _, Some(dir))), Some(ours)) if texture.texture.is_none() => {
+            shard_scans(ours, *s, dir)?
+        }
+        _ => None,
+    };
     let dem = if texture.texture.is_some() {
         Dem::Whole(read_dem(&input.inputs, &input.read)?)
+    } else if let Some(scans) = &scans {
+        let stream =
+            dem::open_unscanned(&input.inputs, &input.read.options(), (scans.lo, scans.hi))?;
+        let per_band = band_rows.unwrap_or_else(|| default_band_rows(stream.width));
+        Dem::Bands(StreamHeights { stream, per_band })
     } else {
         let stream = dem::open(&input.inputs, &input.read.options())?;
         let per_band = band_rows.unwrap_or_else(|| default_band_rows(stream.width));
@@ -606,8 +638,14 @@ fn build(
         }
         Dem::Bands(heights) => heights,
     };
-    if let Some(shard) = shard {
-        let recipe = recipe(input, &params, texture, compact)?;
+    if let Some((shard, halo, _)) = shard {
+        let shard = (shard, halo);
+        let recipe = recipe(
+            inputs.as_deref().unwrap_or_default(),
+            &params,
+            texture,
+            compact,
+        )?;
         let (tiles_x, _) = (tiles_x, tiles_y);
         let bar_len = u64::from(shard.0.rows(tiles_y).len() as u32) * u64::from(tiles_x);
         bar.set_length(bar_len);
@@ -617,6 +655,7 @@ fn build(
             texturing.as_ref(),
             &meta,
             shard,
+            scans.as_ref(),
             &recipe,
             output,
             &progress,

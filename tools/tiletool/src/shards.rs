@@ -16,21 +16,16 @@ use crate::{
 const RECIPE_HEAD: &str = "vkterrain part recipe 1";
 
 /// Bytes read from each end of an input for its fingerprint.
-const FINGERPRINT_BYTES: u64 = 1 << 20;
+const FINGERPRINT_BYTES: u64 = 1 << 16;
 
 /// What a part was built from, as text: the inputs (each by path, size and a checksum of its
-/// first and last MiB), every option that changes the set's bytes, and the tool's version.
+/// first and last 64 KiB), every option that changes the set's bytes, and the tool's version.
 /// The parts of one set must hold the same recipe; the merge reads the inputs back from it.
-pub fn recipe(
-    input: &InputArgs,
-    params: &tiles::BuildParams,
-    texture: &TextureArgs,
-    compact: bool,
-) -> Result<String> {
-    let mut lines = vec![
-        RECIPE_HEAD.to_string(),
-        format!("tiletool {}", env!("CARGO_PKG_VERSION")),
-    ];
+/// The recipe's lines that name the input: the tool's version, each input by canonical
+/// path, size and fingerprint, and the options that change how it is read. A shard's scan
+/// holds them too.
+pub fn input_recipe(input: &InputArgs) -> Result<String> {
+    let mut lines = vec![format!("tiletool {}", env!("CARGO_PKG_VERSION"))];
     for path in &input.inputs {
         let canonical =
             std::fs::canonicalize(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
@@ -53,6 +48,17 @@ pub fn recipe(
         opt(r.encoding.map(|e| e.to_string()))
     ));
     lines.push(format!("crop {}", opt(r.crop.map(|c| c.to_string()))));
+    Ok(lines.join("\n"))
+}
+
+pub fn recipe(
+    input: &str,
+    params: &tiles::BuildParams,
+    texture: &TextureArgs,
+    compact: bool,
+) -> Result<String> {
+    let mut lines = vec![RECIPE_HEAD.to_string(), input.to_string()];
+    let opt = |v: Option<String>| v.unwrap_or_else(|| "-".into());
     lines.push(format!("levels {}", params.levels));
     lines.push(format!("base-error {}", params.base_error));
     lines.push(format!(
@@ -180,13 +186,25 @@ pub fn print_shard(
     let secs = took.as_secs_f64();
     let samples = s.tiles as f64 * 256.0 * 256.0;
     println!(
-        "  part      {:.1} MB; {secs:.2} s, {:.0} M samples/min of its share{}",
+        "  part      {:.1} MB; {secs:.2} s, {:.0} M samples/min of its share{}{}",
         s.part_bytes as f64 / 1e6,
         samples / secs * 60.0 / 1e6,
+        bytes_read()
+            .map(|b| format!(", input read {:.1} MB", b as f64 / 1e6))
+            .unwrap_or_default(),
         peak_memory()
             .map(|m| format!(", peak memory {:.0} MB", m as f64 / 1e6))
             .unwrap_or_default()
     );
+}
+
+/// Bytes this process has read with read(2) and its kin (`rchar` of /proc/self/io): the
+/// input, for a shard (it maps nothing of it).
+fn bytes_read() -> Option<u64> {
+    let io = std::fs::read_to_string("/proc/self/io").ok()?;
+    io.lines()
+        .find_map(|l| l.strip_prefix("rchar:"))
+        .and_then(|v| v.trim().parse().ok())
 }
 
 /// `tiletool merge`: the parts joined into the set, with a summary.
@@ -248,4 +266,71 @@ pub fn merge(parts: &[PathBuf], output: &Path, quiet: bool) -> Result<ExitCode> 
         );
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// `tiletool build --shard K/N --scan-only`: shard K's rows of the input read and checked, and what the
+/// build needs of them written to `output` (temporary file, then rename).
+pub fn scan(input: &InputArgs, shard: tiles::shard::Shard, output: &Path) -> Result<ExitCode> {
+    let opts = input.read.options();
+    let stream = dem::open_unscanned(&input.inputs, &opts, (0.0, 0.0))?;
+    let rows = tiles::shard::scan_rows(shard, (stream.width, stream.height))?;
+    let read = dem::scan_rows(&input.inputs, &opts, rows)?;
+    let per_band = default_band_rows(stream.width);
+    let heights = StreamHeights { stream, per_band };
+    let (max_range, max_abs) = tiles::shard::tile_ranges(&heights, shard)?;
+    let found = tiles::shard::ShardScan {
+        lo: read.lo,
+        hi: read.hi,
+        max_range,
+        max_abs,
+        voids: read.voids,
+    };
+    let text = found.to_text(shard, &input_recipe(input)?);
+    tiles::format::write_atomically(output, text.as_bytes())
+        .map_err(|e| anyhow::anyhow!("{}: {e}", output.display()))?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Every shard's scan from `dir` (`scan-K-of-N.vktscan`), checked to be of this input, put
+/// together; `None`, with a note, when the input has voids (their fill is global: the shard
+/// then reads the whole input, as without scans).
+pub fn shard_scans(
+    ours: &str,
+    shard: tiles::shard::Shard,
+    dir: &Path,
+) -> Result<Option<tiles::shard::Scans>> {
+    let mut found = Vec::new();
+    for k in 0..shard.count {
+        let path = dir.join(format!("scan-{k}-of-{}.vktscan", shard.count));
+        let text = std::fs::read_to_string(&path).map_err(|e| {
+            anyhow::anyhow!(
+                "{}: {e} (run `tiletool build ... --shard {k}/{} --scan-only` first)",
+                path.display(),
+                shard.count
+            )
+        })?;
+        let (theirs, scan, recipe) = tiles::shard::ShardScan::from_text(&text)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        if theirs
+            != (tiles::shard::Shard {
+                index: k,
+                count: shard.count,
+            })
+        {
+            bail!("{}: holds the scan of shard {theirs}", path.display());
+        }
+        if recipe != ours {
+            bail!("{}: a scan of other inputs or read options", path.display());
+        }
+        found.push(scan);
+    }
+    let scans = tiles::shard::Scans::join(&found).expect("at least one shard");
+    if scans.voids > 0 {
+        eprintln!(
+            "tiletool: note: the input has {} voids, whose fill is global: reading the whole input",
+            scans.voids
+        );
+        return Ok(None);
+    }
+    Ok(Some(scans))
 }

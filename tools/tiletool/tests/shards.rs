@@ -107,6 +107,157 @@ fn merged_parts_are_the_builds_bytes() {
     assert!(!same_bytes(&merged, &other), "the comparison cannot fail");
 }
 
+/// With every shard's scan (`tiletool build --shard K/N --scan-only`), a shard reads only its
+/// own rows and the merged set is still the build's bytes. N55W003 (void-free) in 5 shards of
+/// one tile row, halo 0 so that a shard's window is its row (the merge settles the seams): a
+/// shard says how much it read, under 0.6 of the file with scans (its row twice, and the
+/// inputs' fingerprints), and over twice the
+/// file without them (the control: it reads the whole input twice to scan it). An input with
+/// voids (N48W125) falls back to reading the whole input, with a note, and merges to the
+/// build's bytes too. A scan of other inputs is refused.
+#[test]
+fn with_scans_a_shard_reads_only_its_rows_and_the_set_is_the_same() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let input = srtm3();
+    let whole = dir.path().join("whole.vkt");
+    build(&input, &whole, &["--no-texture"]);
+    let scans = dir.path().join("scans");
+    std::fs::create_dir(&scans).expect("dir");
+    let n = 5;
+    for k in 0..n {
+        let out = scans.join(format!("scan-{k}-of-{n}.vktscan"));
+        let shard = format!("{k}/{n}");
+        let o = tiletool(&[
+            "build",
+            s(&input),
+            "--no-texture",
+            "--shard",
+            &shard,
+            "--scan-only",
+            "-o",
+            s(&out),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    let read = |o: &std::process::Output| -> f64 {
+        let said = String::from_utf8_lossy(&o.stdout);
+        let line = said
+            .lines()
+            .find(|l| l.contains("input read"))
+            .unwrap_or_else(|| panic!("no input-read figure: {said}"));
+        let mb = line.split("input read ").nth(1).expect("figure");
+        mb.split_whitespace()
+            .next()
+            .expect("MB")
+            .parse()
+            .expect("number")
+    };
+    let shard_args = |k: u32, part: &Path, with_scans: bool| -> std::process::Output {
+        let shard = format!("{k}/{n}");
+        let mut args = vec![
+            "build",
+            s(&input),
+            "--no-texture",
+            "--halo",
+            "0",
+            "--shard",
+            &shard,
+            "-o",
+            s(part),
+        ];
+        if with_scans {
+            args.extend(["--scans", s(&scans)]);
+        }
+        let o = tiletool(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        o
+    };
+    let mut parts = Vec::new();
+    let mut with = Vec::new();
+    for k in 0..n {
+        let part = dir.path().join(format!("part-{k}-of-{n}"));
+        with.push(read(&shard_args(k, &part, true)));
+        parts.push(part);
+    }
+    let merged = dir.path().join("merged.vkt");
+    let o = merge(&parts, &merged);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        same_bytes(&merged, &whole),
+        "with scans: differs from the build"
+    );
+    let without = read(&shard_args(2, &dir.path().join("alone"), false));
+    let file = std::fs::metadata(&input).expect("input").len() as f64 / 1e6;
+    assert!(
+        with[2] < 0.6 * file && without > 2.0 * file,
+        "shard 2/{n} read {} MB with scans and {without} MB without, of a {file} MB input",
+        with[2]
+    );
+    // A scan of another input: refused, naming the scan.
+    let other = data("srtm/N41E001.hgt");
+    let o = tiletool(&[
+        "build",
+        s(&other),
+        "--no-texture",
+        "--shard",
+        "0/5",
+        "--scans",
+        s(&scans),
+        "-o",
+        s(&dir.path().join("x")),
+    ]);
+    assert!(!o.status.success(), "a scan of another input was taken");
+    assert!(stderr(&o).contains("scan-0-of-5.vktscan"), "{}", stderr(&o));
+    // Voids: their fill is global, so the shards read the whole input, and say so.
+    let voids = data("srtm/N48W125.hgt");
+    let whole = dir.path().join("n48.vkt");
+    build(&voids, &whole, &["--no-texture"]);
+    let scans = dir.path().join("n48-scans");
+    std::fs::create_dir(&scans).expect("dir");
+    for k in 0..2 {
+        let shard = format!("{k}/2");
+        let out = scans.join(format!("scan-{k}-of-2.vktscan"));
+        let o = tiletool(&[
+            "build",
+            s(&voids),
+            "--no-texture",
+            "--shard",
+            &shard,
+            "--scan-only",
+            "-o",
+            s(&out),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    let mut parts = Vec::new();
+    for k in 0..2 {
+        let shard = format!("{k}/2");
+        let part = dir.path().join(format!("n48-{k}"));
+        let o = tiletool(&[
+            "build",
+            s(&voids),
+            "--no-texture",
+            "--quiet",
+            "--shard",
+            &shard,
+            "--scans",
+            s(&scans),
+            "-o",
+            s(&part),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(stderr(&o).contains("voids"), "no note: {}", stderr(&o));
+        parts.push(part);
+    }
+    let merged = dir.path().join("n48-merged.vkt");
+    let o = merge(&parts, &merged);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        same_bytes(&merged, &whole),
+        "N48W125 with scans: differs from the build"
+    );
+}
+
 /// Parts that do not make one set are refused with one line naming the part, and nothing is
 /// written: a shard missing, one given twice, a part of other options, one of a build in
 /// other shards, one cut short (as a killed shard cannot leave: it writes a temporary
