@@ -7,10 +7,11 @@
 //! A tile's bytes depend on more than its own samples:
 //!
 //! - **The height range and the height lattice's step**, from a scan of the whole grid. A
-//!   shard scans the whole input, as the build does. Reading is cheap next to meshing (the
-//!   16K set: one read pass against minutes of meshing), but it does not shrink with `N`.
+//!   shard scans the whole input, as the build does, unless it is given every shard's scan
+//!   ([`ShardScan`], `tiletool build --shard K/N --scan-only`, which reads only shard K's
+//!   rows): their extremes are the whole grid's, so the step is the same.
 //! - **The void fill**, which is global (`dem::banded`): the reader's open does it, as for a
-//!   build.
+//!   build. With scans, a grid with no void needs none, and one with voids is read whole.
 //! - **The shared sides.** The build's agreement ([`crate::build`]) settles the least fixed
 //!   point of "a tile's sides are those of its mesh with its own and its neighbours' sides
 //!   forced": meshing is monotone in what is forced, and the passes climb to that point from
