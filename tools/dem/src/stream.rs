@@ -106,7 +106,7 @@ pub fn open(paths: &[PathBuf], opts: &ReadOptions) -> Result<Stream, DemError> {
 
 /// Opens `paths` without reading their rows: for a caller that learnt what the whole grid's
 /// read would say from elsewhere and knows it holds no void (a sharded build's scans, which
-/// each read a band: `tiletool scan`). [`Stream::rows`] then reads the rows as stored, and
+/// each read a band: `tiletool build --scan-only`). [`Stream::rows`] then reads the rows as stored, and
 /// `min_max` is `min_max`, as given. Formats read whole ([`BAND_FORMATS`] are not) are
 /// opened as [`open`] does.
 pub fn open_unscanned(
@@ -297,7 +297,7 @@ impl Layout {
 
 /// Rows `y0..y1` of `paths`' grid read and checked as [`open`] checks every row, without
 /// reading the others: their range and voids. One shard's share of a scan
-/// (`tiletool scan --shard`); formats read whole are decoded whole.
+/// (`tiletool build --shard K/N --scan-only`); formats read whole are decoded whole.
 pub fn scan_rows(
     paths: &[PathBuf],
     opts: &ReadOptions,

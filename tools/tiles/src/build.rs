@@ -1314,6 +1314,33 @@ pub fn build_tileset_from(
         base: None,
     };
     build_layer(&mut writer, &base, params, progress, &mut summary)?;
+    build_pyramid(
+        &mut writer,
+        heights,
+        params,
+        &header,
+        prepared.as_ref(),
+        progress,
+        &mut summary,
+    )?;
+    writer.finish()?;
+    summary.file_bytes = std::fs::metadata(out).map(|m| m.len()).unwrap_or(0);
+    Ok(summary)
+}
+
+/// The pyramid's layers above a base grid already written: each layer from the grid
+/// subsampled, its error bound from the layer below, its tiles measured against the base
+/// grid (a build's last step, and a sharded build's merge's).
+pub(crate) fn build_pyramid(
+    writer: &mut TileSetWriter,
+    heights: &dyn Heights,
+    params: &BuildParams,
+    header: &FileHeader,
+    prepared: Option<&(Prepared, texture::Layout)>,
+    progress: &(dyn Fn() + Sync),
+    summary: &mut BuildSummary,
+) -> Result<(), BuildError> {
+    let (tiles_x, tiles_y) = (header.tiles_x, header.tiles_y);
     // The pyramid: each layer from the grid subsampled, its error bound from the layer below.
     let mut below = vec![0.0f32; (tiles_x * tiles_y) as usize];
     let mut below_tiles_x = tiles_x;
@@ -1345,10 +1372,10 @@ pub fn build_tileset_from(
             bands: &layer_bands,
             step: scanned.step,
             decimation: Some(&decimation),
-            prepared: prepared.as_ref().map(|(s, l)| (s.for_layer(p), *l)),
+            prepared: prepared.map(|(s, l)| (s.for_layer(p), *l)),
             base: Some(heights),
         };
-        build_layer(&mut writer, &layer, params, progress, &mut layer_summary)?;
+        build_layer(writer, &layer, params, progress, &mut layer_summary)?;
         summary.pyramid.push(PyramidLayerSummary {
             tiles: layer_summary.tiles,
             triangles: layer_summary.levels.iter().map(|l| l.triangles).sum(),
@@ -1361,9 +1388,7 @@ pub fn build_tileset_from(
         summary.texture_seconds += layer_summary.texture_seconds;
         (below, below_tiles_x) = (decimation, l.tiles_x);
     }
-    writer.finish()?;
-    summary.file_bytes = std::fs::metadata(out).map(|m| m.len()).unwrap_or(0);
-    Ok(summary)
+    Ok(())
 }
 
 /// One layer of a build: the base grid (`index` 0) or a pyramid layer, read in bands.

@@ -31,10 +31,11 @@
 //!   ([`crate::build::rebuild_tile`], which makes the build's bytes from a tile's vertex
 //!   sets).
 //!
-//! The tile pyramid (`--pyramid`) is not sharded yet: its layers are built from the
-//! subsampled whole grid and measured against the base grid, so they would be built in the
-//! merge, which would then cost as much as the pyramid does in a build (+60-88% at 16K). A
-//! sharded build refuses it.
+//! The tile pyramid (`--pyramid`) is built in the merge: its layers are built from the
+//! subsampled whole grid and measured against the base grid, so the merge reads the input
+//! again and runs the build's last step ([`crate::build::build_pyramid`]) after the base
+//! tiles. Its cost (+60-88% of a build at 16K) is the merge's. A photo-textured pyramid is
+//! refused at the shard: the merge does not read the photo.
 //!
 //! # The part file
 //!
@@ -55,7 +56,7 @@ use crate::build::{
     Heights, Layer, LevelStats, Remesh, SideBits, Start, TileSetMeta,
 };
 use crate::format::{temp_path, tile_count, FileHeader, Tile, TileSetWriter, FLAG_SHARED_SIDES};
-use crate::texture::{Prepared, Texturing};
+use crate::texture::{Prepared, Source, Texturing};
 use crate::BuildError;
 
 /// The first bytes of a part file.
@@ -143,9 +144,18 @@ pub fn build_shard(
     progress: &(dyn Fn() + Sync),
 ) -> Result<ShardSummary, BuildError> {
     validate(params, texturing)?;
-    if params.pyramid {
+    if let (
+        true,
+        Some(Texturing {
+            source: Source::Photo(_),
+            ..
+        }),
+    ) = (params.pyramid, texturing)
+    {
         return Err(BuildError::Params(
-            "--pyramid cannot be sharded yet: build the pyramid without --shard".into(),
+            "--pyramid with a photo texture cannot be sharded yet: the merge builds the \
+             pyramid, and does not read the photo"
+                .into(),
         ));
     }
     let shape = heights.shape();
@@ -779,8 +789,8 @@ impl Part {
     }
 }
 
-/// Opens the input that a part's recipe names (for [`merge`]).
-pub type Reopen = dyn Fn(&str) -> Result<Box<dyn Heights>, BuildError>;
+/// Opens the input that a part's recipe names, and its texturing (for [`merge`]).
+pub type Reopen = dyn Fn(&str) -> Result<(Box<dyn Heights>, Option<Texturing>), BuildError>;
 
 /// What a merge did.
 #[derive(Clone, Debug, Default)]
@@ -799,6 +809,8 @@ pub struct MergeSummary {
     /// Per level, over the set's tiles: vertices, triangles and the largest measured error
     /// (the other figures of a build's summary are not kept in the parts).
     pub levels: Vec<LevelStats>,
+    /// Tiles of the pyramid's layers, which the merge builds (0 without a pyramid).
+    pub pyramid_tiles: u64,
 }
 
 /// Checks that `paths` are the parts of one set, every shard exactly once, and writes the set
@@ -880,7 +892,7 @@ pub fn merge(
         levels: header.levels,
         base_error: header.base_error,
         shared_sides: header.flags & FLAG_SHARED_SIDES != 0,
-        pyramid: false,
+        pyramid: header.pyramid_layers > 0,
     };
     let mut summary = MergeSummary {
         parts: by_index.len() as u32,
@@ -909,7 +921,7 @@ pub fn merge(
         if unsettled == 0 {
             deviation = start.deviation;
         } else {
-            let heights = reopen(&first.recipe)?;
+            let (heights, _) = reopen(&first.recipe)?;
             let bands = Bands::new(heights.as_ref(), (tiles_x, tiles_y));
             let step = header.height_step;
             let all = 0..tiles_y;
@@ -1008,6 +1020,39 @@ pub fn merge(
         progress();
         Ok::<(), BuildError>(())
     })?;
+    if params.pyramid {
+        // The layers above the base are built here, from the input, as a build makes them.
+        let (heights, texturing) = reopen(&first.recipe)?;
+        let prepared = texturing.as_ref().map(|t| {
+            let range = (header.height_min, header.height_max);
+            (Prepared::new(range, &t.source), t.layout)
+        });
+        let mut layers = crate::build::BuildSummary {
+            levels: vec![LevelStats::default(); params.levels as usize],
+            texture_mips: prepared
+                .as_ref()
+                .map(|(_, layout)| {
+                    (0..layout.mips)
+                        .map(|m| crate::build::MipStats {
+                            size: layout.mip_size(m),
+                            ..Default::default()
+                        })
+                        .collect()
+                })
+                .unwrap_or_default(),
+            ..Default::default()
+        };
+        crate::build::build_pyramid(
+            &mut writer,
+            heights.as_ref(),
+            &params,
+            &header,
+            prepared.as_ref(),
+            progress,
+            &mut layers,
+        )?;
+        summary.pyramid_tiles = layers.pyramid.iter().map(|l| l.tiles).sum();
+    }
     writer.finish()?;
     summary.file_bytes = std::fs::metadata(out).map(|m| m.len()).unwrap_or(0);
     Ok(summary)

@@ -83,13 +83,13 @@ enum Command {
         /// file (OUTPUT), for `tiletool merge` to join into the set that a build without
         /// --shard makes, byte for byte. Each shard reads the whole input to scan it,
         /// and meshes only its band (see the README, "Distributed builds").
-        #[arg(long, value_name = "K/N", conflicts_with = "pyramid")]
+        #[arg(long, value_name = "K/N")]
         shard: Option<tiles::shard::Shard>,
         /// Tile rows beyond its band over which a shard settles the shared sides with its
         /// neighbours, so that the merge finds the seams settled.
         #[arg(long, requires = "shard", default_value_t = tiles::shard::DEFAULT_HALO)]
         halo: u32,
-        /// A folder holding every shard's scan (`tiletool scan --shard K/N -o
+        /// A folder holding every shard's scan (`build ... --shard K/N --scan-only -o
         /// DIR/scan-K-of-N.vktscan`): the shard then reads only its rows of the input, not the
         /// whole of it (inputs with voids are still read whole: their fill is global).
         #[arg(long, requires = "shard", value_name = "DIR")]

@@ -107,11 +107,22 @@ fn fingerprint(path: &Path) -> Result<(u64, u32)> {
     Ok((size, crc.finalize()))
 }
 
-/// The input a recipe names, opened to be read a band at a time, as the shards read it.
-fn reopen(recipe: &str) -> Result<Box<dyn tiles::build::Heights>, tiles::BuildError> {
+/// The input a recipe names, opened to be read a band at a time, as the shards read it, and
+/// its texturing (a relief, or none; see [`texture_args`]).
+#[allow(clippy::type_complexity)]
+fn reopen(
+    recipe: &str,
+) -> Result<
+    (
+        Box<dyn tiles::build::Heights>,
+        Option<tiles::texture::Texturing>,
+    ),
+    tiles::BuildError,
+> {
     let bad = |what: String| tiles::BuildError::Input(format!("the parts' recipe: {what}"));
     let mut inputs = Vec::new();
     let mut read = ReadArgs::default();
+    let mut texture = None;
     let value = |v: &str| (v != "-").then(|| v.to_string());
     for line in recipe.lines() {
         let (key, rest) = line.split_once(' ').unwrap_or((line, ""));
@@ -141,6 +152,7 @@ fn reopen(recipe: &str) -> Result<Box<dyn tiles::build::Heights>, tiles::BuildEr
                 .map(|v| v.parse().map(|v| read.crop = Some(v)))
                 .unwrap_or(Ok(()))
                 .map_err(|e| format!("{e:?}")),
+            "texture" => texture_args(rest).map(|t| texture = t),
             _ => Ok(()),
         };
         parsed.map_err(|e| bad(format!("`{line}`: {e}")))?;
@@ -148,10 +160,52 @@ fn reopen(recipe: &str) -> Result<Box<dyn tiles::build::Heights>, tiles::BuildEr
     if inputs.is_empty() {
         return Err(bad("names no input".into()));
     }
+    let texturing = match texture {
+        Some(t) => t
+            .texturing(None)
+            .map_err(|e| bad(e.to_string()))?
+            .map(|(t, _)| t),
+        None => None,
+    };
     let stream =
         dem::open(&inputs, &read.options()).map_err(|e| tiles::BuildError::Input(e.to_string()))?;
     let per_band = default_band_rows(stream.width);
-    Ok(Box::new(StreamHeights { stream, per_band }))
+    Ok((Box::new(StreamHeights { stream, per_band }), texturing))
+}
+
+/// The texture options a recipe's `texture` line holds (as [`recipe`] writes it); `None` for
+/// a photo, which the merge never needs: the shards refuse a photo under a pyramid, and the
+/// seams' tiles are built again without their textures.
+fn texture_args(line: &str) -> Result<Option<TextureArgs>, String> {
+    let mut fields = line.split(' ');
+    if fields.next() != Some("-") {
+        return Ok(None);
+    }
+    let mut t = TextureArgs {
+        texture: None,
+        no_texture: false,
+        texels_per_sample: None,
+        sun_azimuth: 315.0,
+        sun_elevation: 45.0,
+        tint: false,
+    };
+    for field in fields {
+        let bad = || format!("`{field}`");
+        let (key, value) = field.split_once('=').ok_or_else(bad)?;
+        match key {
+            "no-texture" => t.no_texture = value.parse().map_err(|_| bad())?,
+            "texels-per-sample" if value == "-" => {}
+            "texels-per-sample" => t.texels_per_sample = Some(value.parse().map_err(|_| bad())?),
+            "sun" => {
+                let (a, e) = value.split_once(',').ok_or_else(bad)?;
+                t.sun_azimuth = a.parse().map_err(|_| bad())?;
+                t.sun_elevation = e.parse().map_err(|_| bad())?;
+            }
+            "tint" => t.tint = value.parse().map_err(|_| bad())?,
+            _ => return Err(bad()),
+        }
+    }
+    Ok(Some(t))
 }
 
 /// What `build --shard` prints: the share built, its agreement and the part.
@@ -248,6 +302,12 @@ pub fn merge(parts: &[PathBuf], output: &Path, quiet: bool) -> Result<ExitCode> 
             println!(
                 "  seams     {} tiles unsettled: {} meshes to settle them, {} tiles built again from the input",
                 s.unsettled, s.remeshed, s.rebuilt
+            );
+        }
+        if s.pyramid_tiles > 0 {
+            println!(
+                "  pyramid   {} tiles of its layers built here, from the input",
+                s.pyramid_tiles
             );
         }
         if s.resealed > 0 {

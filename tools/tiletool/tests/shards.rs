@@ -48,7 +48,8 @@ fn same_bytes(a: &Path, b: &Path) -> bool {
 
 /// Merged parts are the build's bytes: at 2 and 5 shards with the default halo, with a halo
 /// of 0 (the seams left for the merge to settle from the input: it must say so), with
-/// independent sides, and with compact levels and a tinted relief. The control: a set built
+/// independent sides, with compact levels and a tinted relief, and with a pyramid (whose
+/// layers the merge builds from the input). The control: a set built
 /// with other options differs from the merged one, so the comparison can fail.
 #[test]
 fn merged_parts_are_the_builds_bytes() {
@@ -59,6 +60,7 @@ fn merged_parts_are_the_builds_bytes() {
         (5, &[][..]),
         (3, &["--independent-sides", "--no-texture"][..]),
         (3, &["--compact", "--tint"][..]),
+        (2, &["--pyramid"][..]),
     ]
     .into_iter()
     .enumerate()
@@ -366,14 +368,21 @@ fn parts_that_do_not_belong_are_refused() {
         );
         assert!(!part.exists(), "--shard {shard}: a part was written");
     }
+    // The merge builds a pyramid's layers, and does not read photos: refused at the shard.
+    let photo = data("puget/ps_texture_1k.png");
+    let part = dir.path().join("p");
     let o = tiletool(&[
         "build",
         s(&input),
         "--shard",
         "0/2",
         "--pyramid",
+        "--texture",
+        s(&photo),
         "-o",
-        s(&dir.path().join("p")),
+        s(&part),
     ]);
-    assert!(!o.status.success(), "--pyramid with --shard was accepted");
+    assert!(!o.status.success(), "a photo-textured pyramid was sharded");
+    assert!(stderr(&o).contains("photo"), "{}", stderr(&o));
+    assert!(!part.exists());
 }
