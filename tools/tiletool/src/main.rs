@@ -462,6 +462,38 @@ impl Dem {
     }
 }
 
+/// A progress bar on stderr that appears only for work that takes over a second, and never
+/// with `--quiet`.
+struct Progress {
+    bar: ProgressBar,
+    start: Instant,
+    quiet: bool,
+}
+
+impl Progress {
+    fn new(len: Option<u64>, template: &str, quiet: bool) -> Progress {
+        let bar = ProgressBar::with_draw_target(len, ProgressDrawTarget::hidden());
+        bar.set_style(
+            ProgressStyle::with_template(template)
+                .unwrap_or_else(|_| ProgressStyle::default_bar())
+                .progress_chars("=> "),
+        );
+        Progress {
+            bar,
+            start: Instant::now(),
+            quiet,
+        }
+    }
+
+    /// One more item done.
+    fn tick(&self) {
+        self.bar.inc(1);
+        if !self.quiet && self.bar.is_hidden() && self.start.elapsed() > Duration::from_secs(1) {
+            self.bar.set_draw_target(ProgressDrawTarget::stderr());
+        }
+    }
+}
+
 /// Samples a band holds by default: 256 MB of heights.
 const BAND_SAMPLES: usize = 1 << 26;
 
@@ -612,19 +644,12 @@ fn build(
             tiles::format::tile_count(w, h).map_or(0, |(x, y)| u64::from(x) * u64::from(y))
         })
         .sum();
-    let bar = ProgressBar::with_draw_target(Some(all_tiles), ProgressDrawTarget::hidden());
-    bar.set_style(
-        ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} tiles ({eta} left)")
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
+    let bar = Progress::new(
+        Some(all_tiles),
+        "{elapsed_precise} [{bar:40}] {pos}/{len} tiles ({eta} left)",
+        quiet,
     );
-    // The bar appears only for builds that take over a second.
-    let progress = || {
-        bar.inc(1);
-        if !quiet && bar.is_hidden() && start.elapsed() > Duration::from_secs(1) {
-            bar.set_draw_target(ProgressDrawTarget::stderr());
-        }
-    };
+    let progress = || bar.tick();
     let meta = tiles::TileSetMeta {
         description: about.description.clone(),
         voids_filled: about.voids_filled,
@@ -648,7 +673,7 @@ fn build(
         )?;
         let (tiles_x, _) = (tiles_x, tiles_y);
         let bar_len = u64::from(shard.0.rows(tiles_y).len() as u32) * u64::from(tiles_x);
-        bar.set_length(bar_len);
+        bar.bar.set_length(bar_len);
         let summary = tiles::shard::build_shard(
             heights,
             &params,
@@ -660,7 +685,7 @@ fn build(
             output,
             &progress,
         )?;
-        bar.finish_and_clear();
+        bar.bar.finish_and_clear();
         if !quiet {
             print_shard(input, output, shard.0, &summary, &about, start.elapsed());
         }
@@ -674,7 +699,7 @@ fn build(
         output,
         &progress,
     )?;
-    bar.finish_and_clear();
+    bar.bar.finish_and_clear();
     let total = start.elapsed();
     if !quiet {
         let grid = &about;

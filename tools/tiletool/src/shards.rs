@@ -6,10 +6,10 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Result};
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::{
-    default_band_rows, peak_memory, About, InputArgs, ReadArgs, StreamHeights, TextureArgs,
+    default_band_rows, peak_memory, About, InputArgs, Progress, ReadArgs, StreamHeights,
+    TextureArgs,
 };
 
 /// The recipe's first line: its own version.
@@ -267,20 +267,14 @@ pub fn merge(parts: &[PathBuf], output: &Path, quiet: bool) -> Result<ExitCode> 
         bail!("{}: is a folder, not an output file", output.display());
     }
     let start = Instant::now();
-    let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::hidden());
-    bar.set_style(
-        ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos} tiles merged")
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
+    let bar = Progress::new(
+        None,
+        "{elapsed_precise} [{bar:40}] {pos} tiles merged",
+        quiet,
     );
-    let progress = || {
-        bar.inc(1);
-        if !quiet && bar.is_hidden() && start.elapsed() > Duration::from_secs(1) {
-            bar.set_draw_target(ProgressDrawTarget::stderr());
-        }
-    };
+    let progress = || bar.tick();
     let summary = tiles::shard::merge(parts, output, &reopen, &progress)?;
-    bar.finish_and_clear();
+    bar.bar.finish_and_clear();
     if !quiet {
         let s = &summary;
         println!("{} parts  ->  {}", s.parts, output.display());

@@ -109,6 +109,26 @@ fn merged_parts_are_the_builds_bytes() {
     assert!(!same_bytes(&merged, &other), "the comparison cannot fail");
 }
 
+/// Every shard's scan of `input` (`--scan-only`, no texture) into `dir`, as `--scans` reads
+/// them.
+fn scan_all(input: &Path, dir: &Path, n: u32) {
+    for k in 0..n {
+        let out = dir.join(format!("scan-{k}-of-{n}.vktscan"));
+        let shard = format!("{k}/{n}");
+        let o = tiletool(&[
+            "build",
+            s(input),
+            "--no-texture",
+            "--shard",
+            &shard,
+            "--scan-only",
+            "-o",
+            s(&out),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+}
+
 /// With every shard's scan (`tiletool build --shard K/N --scan-only`), a shard reads only its
 /// own rows and the merged set is still the build's bytes. N55W003 (void-free) in 5 shards of
 /// one tile row, halo 0 so that a shard's window is its row (the merge settles the seams): a
@@ -126,21 +146,7 @@ fn with_scans_a_shard_reads_only_its_rows_and_the_set_is_the_same() {
     let scans = dir.path().join("scans");
     std::fs::create_dir(&scans).expect("dir");
     let n = 5;
-    for k in 0..n {
-        let out = scans.join(format!("scan-{k}-of-{n}.vktscan"));
-        let shard = format!("{k}/{n}");
-        let o = tiletool(&[
-            "build",
-            s(&input),
-            "--no-texture",
-            "--shard",
-            &shard,
-            "--scan-only",
-            "-o",
-            s(&out),
-        ]);
-        assert!(o.status.success(), "{}", stderr(&o));
-    }
+    scan_all(&input, &scans, n);
     let read = |o: &std::process::Output| -> f64 {
         let said = String::from_utf8_lossy(&o.stdout);
         let line = said
@@ -216,21 +222,7 @@ fn with_scans_a_shard_reads_only_its_rows_and_the_set_is_the_same() {
     build(&voids, &whole, &["--no-texture"]);
     let scans = dir.path().join("n48-scans");
     std::fs::create_dir(&scans).expect("dir");
-    for k in 0..2 {
-        let shard = format!("{k}/2");
-        let out = scans.join(format!("scan-{k}-of-2.vktscan"));
-        let o = tiletool(&[
-            "build",
-            s(&voids),
-            "--no-texture",
-            "--shard",
-            &shard,
-            "--scan-only",
-            "-o",
-            s(&out),
-        ]);
-        assert!(o.status.success(), "{}", stderr(&o));
-    }
+    scan_all(&voids, &scans, 2);
     let mut parts = Vec::new();
     for k in 0..2 {
         let shard = format!("{k}/2");
