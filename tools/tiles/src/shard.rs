@@ -696,6 +696,7 @@ impl Part {
         if (tiles_x, levels) != (header.tiles_x, header.levels)
             || expected != (header.tiles_x, header.tiles_y)
             || (r0..r1) != shard.rows(header.tiles_y)
+            || count > header.tiles_y
             || levels == 0
             || levels > crate::format::MAX_LEVELS
         {

@@ -327,6 +327,28 @@ fn parts_that_do_not_belong_are_refused() {
         "damaged",
     );
     assert!(err.contains("checksum"), "{err}");
+    // A part forged and resealed (its checksum made to match): shard 0 of 2^32 - 1, owning
+    // no tile row, so that only the shard count is wrong. Refused for it, not trusted into
+    // an allocation of that many shards.
+    let recipe_len = u32::from_le_bytes(bytes[24..28].try_into().expect("4 bytes")) as usize;
+    let rows_at = 28 + recipe_len + size_of::<tiles::format::FileHeader>();
+    let levels = u32::from_le_bytes(bytes[rows_at + 12..rows_at + 16].try_into().expect("4"));
+    let tiles_at = rows_at + 16 + 8 * levels as usize + 12;
+    let mut forged = bytes[..tiles_at].to_vec();
+    forged[12..16].copy_from_slice(&0u32.to_le_bytes());
+    forged[16..20].copy_from_slice(&u32::MAX.to_le_bytes());
+    forged[rows_at..rows_at + 8].fill(0);
+    let crc = crc32fast::hash(&forged);
+    forged.extend(crc.to_le_bytes());
+    forged.extend(b"VKTPEND\0");
+    let resealed = dir.path().join("resealed");
+    std::fs::write(&resealed, &forged).expect("write");
+    let err = refused(
+        &[resealed.clone(), parts[1].clone()],
+        &resealed,
+        "do not add up",
+    );
+    assert!(err.contains("do not add up"), "{err}");
     let set = dir.path().join("a-set");
     build(&input, &set, &["--no-texture"]);
     refused(
