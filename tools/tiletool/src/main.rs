@@ -81,8 +81,8 @@ enum Command {
         texture: TextureArgs,
         /// Build only shard K of N (0 <= K < N): the K-th of N bands of tile rows, into a part
         /// file (OUTPUT), for `tiletool merge` to join into the set that a build without
-        /// --shard makes, byte for byte. Each shard reads the whole input to scan it,
-        /// and meshes only its band (see the README, "Distributed builds").
+        /// --shard makes, byte for byte. Each shard meshes only its band, and reads the whole
+        /// input to scan it unless given --scans (see the README, "Distributed builds").
         #[arg(long, value_name = "K/N")]
         shard: Option<tiles::shard::Shard>,
         /// Tile rows beyond its band over which a shard settles the shared sides with its
