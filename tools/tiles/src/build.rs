@@ -1664,34 +1664,11 @@ pub(crate) fn settle(
     /// Far more than any data needs (a change spreads one tile per pass).
     const MAX_PASSES: u32 = 1000;
     let count = (rows.len() as u32 * tiles_x) as usize;
-    let height = rows.len() as i64;
     let levels = params.levels as usize;
     // Tiles are numbered from the window's first: `t` is tile `first + t` of the layer.
-    let neighbour = |t: usize, k: usize| -> Option<usize> {
-        let (tx, ty) = ((t as u32 % tiles_x) as i64, (t as u32 / tiles_x) as i64);
-        let (nx, ny) = match k {
-            0 => (tx, ty - 1),
-            1 => (tx + 1, ty),
-            2 => (tx, ty + 1),
-            _ => (tx - 1, ty),
-        };
-        ((0..i64::from(tiles_x)).contains(&nx) && (0..height).contains(&ny))
-            .then(|| (ny * i64::from(tiles_x) + nx) as usize)
-    };
-    let forced = |t: usize, sides: &[CompactSides]| -> CompactSides {
-        (0..levels)
-            .map(|level| {
-                std::array::from_fn(|k| {
-                    let Some(n) = neighbour(t, k) else {
-                        return NO_SIDE;
-                    };
-                    let theirs = sides[n].get(level).map_or(NO_SIDE, |s| s[(k + 2) % 4]);
-                    let ours = sides[t].get(level).map_or(NO_SIDE, |s| s[k]);
-                    std::array::from_fn(|w| ours[w] | theirs[w])
-                })
-            })
-            .collect()
-    };
+    let window = (tiles_x, rows.len() as u32);
+    let neighbour = |t: usize, k: usize| neighbour_of(t, k, window);
+    let forced = |t: usize, sides: &[CompactSides]| forced_sides(t, sides, levels, window);
     // The state is per tile, so it grows with the set: side vertices are held as bitmaps
     // (1.4 KB a tile and copy at 9 levels; lists of u16 took about 40 KB a tile in all).
     // `meshed_with` is what each tile was last meshed with: a build is a function of its
@@ -1810,6 +1787,42 @@ pub(crate) fn settle(
         passes,
         meshes: rebuilt,
     })
+}
+
+/// Tile `t`'s neighbour across side `k` (north, east, south, west) among `tiles_x` x
+/// `tiles_y` tiles numbered row-major; none past the edge.
+fn neighbour_of(t: usize, k: usize, (tiles_x, tiles_y): (u32, u32)) -> Option<usize> {
+    let (tx, ty) = ((t as u32 % tiles_x) as i64, (t as u32 / tiles_x) as i64);
+    let (nx, ny) = match k {
+        0 => (tx, ty - 1),
+        1 => (tx + 1, ty),
+        2 => (tx, ty + 1),
+        _ => (tx - 1, ty),
+    };
+    ((0..i64::from(tiles_x)).contains(&nx) && (0..i64::from(tiles_y)).contains(&ny))
+        .then(|| (ny * i64::from(tiles_x) + nx) as usize)
+}
+
+/// The agreement's rule: what tile `t` is meshed with, on each side and level its own side
+/// vertices and its neighbour's (`sides` per tile of `tiles`, row-major).
+pub(crate) fn forced_sides(
+    t: usize,
+    sides: &[CompactSides],
+    levels: usize,
+    tiles: (u32, u32),
+) -> CompactSides {
+    (0..levels)
+        .map(|level| {
+            std::array::from_fn(|k| {
+                let Some(n) = neighbour_of(t, k, tiles) else {
+                    return NO_SIDE;
+                };
+                let theirs = sides[n].get(level).map_or(NO_SIDE, |s| s[(k + 2) % 4]);
+                let ours = sides[t].get(level).map_or(NO_SIDE, |s| s[k]);
+                std::array::from_fn(|w| ours[w] | theirs[w])
+            })
+        })
+        .collect()
 }
 
 /// Which tiles a pass of [`agree_sides`] meshes again.

@@ -52,8 +52,8 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use crate::build::{
-    build_tiles, scan, set_header, settle, units_of, validate, Bands, BuildParams, CompactSides,
-    Heights, Layer, LevelStats, Remesh, SideBits, Start, TileSetMeta,
+    build_tiles, forced_sides, scan, set_header, settle, units_of, validate, Bands, BuildParams,
+    CompactSides, Heights, Layer, LevelStats, Remesh, SideBits, Start, TileSetMeta,
 };
 use crate::format::{temp_path, tile_count, FileHeader, Tile, TileSetWriter, FLAG_SHARED_SIDES};
 use crate::texture::{Prepared, Source, Texturing};
@@ -110,6 +110,17 @@ impl Shard {
         let at = |k: u32| (u64::from(tiles_y) * u64::from(k) / u64::from(self.count)) as u32;
         at(self.index)..at(self.index + 1)
     }
+
+    /// [`rows`](Self::rows), refused when the set has fewer tile rows than shards (some would
+    /// have none).
+    pub fn rows_of(&self, tiles_y: u32) -> Result<Range<u32>, BuildError> {
+        if self.count > tiles_y {
+            return Err(BuildError::Params(format!(
+                "--shard {self}: the set has {tiles_y} tile rows, so at most {tiles_y} shards"
+            )));
+        }
+        Ok(self.rows(tiles_y))
+    }
 }
 
 /// What a shard built.
@@ -160,12 +171,7 @@ pub fn build_shard(
     }
     let shape = heights.shape();
     let (tiles_x, tiles_y) = tile_count(shape.width, shape.height).map_err(BuildError::Params)?;
-    let rows = shard.rows(tiles_y);
-    if shard.count > tiles_y {
-        return Err(BuildError::Params(format!(
-            "--shard {shard}: the set has {tiles_y} tile rows, so at most {tiles_y} shards"
-        )));
-    }
+    let rows = shard.rows_of(tiles_y)?;
     // The whole grid's range and lattice step: from the shards' scans, or read here.
     let scanned = match known {
         Some(scans) => scans.scanned(),
@@ -400,12 +406,7 @@ pub fn scan_rows(
     (width, height): (usize, usize),
 ) -> Result<Range<usize>, BuildError> {
     let (_, tiles_y) = tile_count(width, height).map_err(BuildError::Params)?;
-    if shard.count > tiles_y {
-        return Err(BuildError::Params(format!(
-            "--shard {shard}: the set has {tiles_y} tile rows, so at most {tiles_y} shards"
-        )));
-    }
-    let rows = shard.rows(tiles_y);
+    let rows = shard.rows_of(tiles_y)?;
     let cells = crate::mesh::TILE_CELLS as usize;
     Ok(rows.start as usize * cells..(rows.end as usize * cells + 1).min(height))
 }
@@ -882,13 +883,17 @@ pub fn merge(
     let header = first.header;
     let (tiles_x, tiles_y) = (header.tiles_x, header.tiles_y);
     let count = tiles_x as usize * tiles_y as usize;
-    let owner = |t: usize| -> &Part {
-        let row = (t / tiles_x as usize) as u32;
-        by_index
-            .iter()
-            .find(|p| p.rows.contains(&row))
-            .expect("the shards' rows cover the set")
-    };
+    // Each tile row's part: the shards' rows cover the set (checked when each was opened).
+    let row_owner: Vec<&Part> = by_index
+        .iter()
+        .flat_map(|p| p.rows.clone().map(move |_| *p))
+        .collect();
+    if row_owner.len() != tiles_y as usize {
+        return Err(BuildError::Internal(
+            "the shards' rows do not cover the set".into(),
+        ));
+    }
+    let owner = |t: usize| -> &Part { row_owner[t / tiles_x as usize] };
     let params = BuildParams {
         levels: header.levels,
         base_error: header.base_error,
@@ -1062,33 +1067,9 @@ pub fn merge(
 /// Tiles whose recorded forced sides are not what their own and their neighbours' recorded
 /// sides force: where the shards' states do not make a fixed point.
 fn unsettled_tiles(start: &Start, tiles_x: u32, levels: u32) -> usize {
-    let count = start.sides.len();
-    let tiles_y = count / tiles_x as usize;
-    let (w, h) = (tiles_x as i64, tiles_y as i64);
-    (0..count)
-        .filter(|&t| {
-            let (tx, ty) = ((t as i64) % w, (t as i64) / w);
-            let forced: CompactSides = (0..levels as usize)
-                .map(|level| {
-                    std::array::from_fn(|k| {
-                        let (nx, ny) = match k {
-                            0 => (tx, ty - 1),
-                            1 => (tx + 1, ty),
-                            2 => (tx, ty + 1),
-                            _ => (tx - 1, ty),
-                        };
-                        if !((0..w).contains(&nx) && (0..h).contains(&ny)) {
-                            return [0; 5];
-                        }
-                        let n = (ny * w + nx) as usize;
-                        let ours = start.sides[t][level][k];
-                        let theirs = start.sides[n][level][(k + 2) % 4];
-                        std::array::from_fn(|i| ours[i] | theirs[i])
-                    })
-                })
-                .collect();
-            forced != start.forced[t]
-        })
+    let tiles = (tiles_x, (start.sides.len() / tiles_x as usize) as u32);
+    (0..start.sides.len())
+        .filter(|&t| forced_sides(t, &start.sides, levels as usize, tiles) != start.forced[t])
         .count()
 }
 
