@@ -11,7 +11,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use renderer::cut::Cut;
 use renderer::path::CameraPath;
-use renderer::pyramid::Pyramid;
+use renderer::terrain::Terrain;
 
 const TAU: f64 = 1.0;
 
@@ -29,28 +29,26 @@ pub fn cut() -> Result<()> {
         None => 60,
     };
     let opened = Instant::now();
-    let pyramid = Pyramid::open(&set).with_context(|| set.display().to_string())?;
+    let pyramid = Terrain::open_pyramid(&set).with_context(|| set.display().to_string())?;
     let open_ms = opened.elapsed().as_secs_f64() * 1e3;
     if pyramid.top() == 0 {
         bail!("{}: no pyramid (build it with --pyramid)", set.display());
     }
-    let tiles: usize = pyramid.layers.iter().map(|l| l.tiles.len()).sum();
+    let tiles = pyramid.tiles.len();
     println!(
         "{}: {} base tiles, {} layers above, {tiles} tiles in all; opened (every layer's outlines) in {open_ms:.0} ms\n",
         set.display(),
-        pyramid.layers[0].tiles.len(),
+        pyramid.base().len(),
         pyramid.top()
     );
-    let base = Pyramid {
-        layers: vec![renderer::terrain::Terrain::open(&set)?],
-    };
+    let base = Terrain::open(&set)?;
     println!(
         "| flight | selection | tiles chosen | looked at | triangles | CPU ms | coarsest layer |"
     );
     println!("|---|---|---:|---:|---:|---:|---:|");
     for (name, path) in [
-        ("orbit", CameraPath::orbit(&pyramid.layers[0])),
-        ("flyover", CameraPath::flyover(&pyramid.layers[0])),
+        ("orbit", CameraPath::orbit(&pyramid)),
+        ("flyover", CameraPath::flyover(&pyramid)),
     ] {
         for (what, p) in [("base grid", &base), ("pyramid", &pyramid)] {
             let mut rows: Vec<Row> = Vec::new();
@@ -95,30 +93,24 @@ fn first_views(set: &std::path::Path) -> Result<()> {
     println!("|---|---|---:|---:|---:|");
     for name in ["orbit", "flyover"] {
         for what in ["base grid", "pyramid"] {
-            let mut p = Pyramid::open(set)?;
-            if what == "base grid" {
-                p.layers.truncate(1);
-            }
-            let path = if name == "orbit" {
-                CameraPath::orbit(&p.layers[0])
+            let p = if what == "base grid" {
+                Terrain::open(set)?
             } else {
-                CameraPath::flyover(&p.layers[0])
+                Terrain::open_pyramid(set)?
+            };
+            let path = if name == "orbit" {
+                CameraPath::orbit(&p)
+            } else {
+                CameraPath::flyover(&p)
             };
             let camera = path.at(path.keys[0].time);
             let view = camera.view(SIZE.0, SIZE.1);
             let c = renderer::cut::cut(&p, &view, camera.position, TAU);
             let start = Instant::now();
-            for (l, layer) in p.layers.iter().enumerate() {
-                let tiles: Vec<usize> = c
-                    .nodes
-                    .iter()
-                    .filter(|n| n.layer as usize == l)
-                    .map(|n| n.tile)
-                    .collect();
-                layer.check_all(&tiles);
-                if layer.failed_count() > 0 {
-                    bail!("{}: tiles failed their checks", set.display());
-                }
+            let tiles: Vec<usize> = c.nodes.iter().map(|n| n.tile).collect();
+            p.check_all(&tiles);
+            if p.failed_count() > 0 {
+                bail!("{}: tiles failed their checks", set.display());
             }
             let s = start.elapsed().as_secs_f64();
             println!(

@@ -211,10 +211,20 @@ pub struct Cli {
     #[arg(long)]
     pub no_slivers: bool,
     /// Diagnostic: fly over pyramid layer N of a set built with `tiletool build --pyramid`
-    /// instead of its base grid (the same ground, 2^N times the spacing). The renderer does not
-    /// yet choose layers by itself.
-    #[arg(long, default_value_t = 0, value_name = "N")]
+    /// instead of its base grid (the same ground, 2^N times the spacing).
+    #[arg(
+        long,
+        default_value_t = 0,
+        value_name = "N",
+        conflicts_with = "pyramid"
+    )]
     pub layer: u32,
+    /// Fly the set's tile pyramid (built with `tiletool build --pyramid`): each frame draws a
+    /// cut through it, base tiles near the camera and coarser layers' tiles far away, each
+    /// within --tau, stitched where layers meet. Discrete levels: geomorphing does not carry
+    /// across layers yet, so --pyramid implies --no-geomorph.
+    #[arg(long, conflicts_with_all = ["brute_force", "level", "measure_error", "read_back_heights"])]
+    pub pyramid: bool,
     /// Write the path flown (CSV keyframes) here.
     #[arg(long)]
     pub record: Option<PathBuf>,
@@ -403,7 +413,7 @@ impl Cli {
                 LodBound::Guaranteed => Bound::Guaranteed,
                 LodBound::Sampled => Bound::Sampled,
             },
-            geomorph: !self.no_geomorph,
+            geomorph: !self.no_geomorph && !self.pyramid,
             // Pre-recorded frames cannot follow a mix that changes from frame to frame.
             // Where the user did not choose, the device does once it is known
             // (`Cli::parts_by_device`).

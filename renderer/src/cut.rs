@@ -1,7 +1,7 @@
 //! Choosing tiles from the tile pyramid (issue 26): a cut through it, coarse tiles far away and
 //! base tiles near the camera, whose cost follows what is on screen rather than how many tiles
-//! the set has. Not yet drawn: this is the selection, measured on its own (`tilebench cut`);
-//! the frame still draws the base grid.
+//! the set has. `vkterrain --pyramid` draws it ([`crate::plan`], discrete levels);
+//! `tilebench cut` measures the choice on its own.
 //!
 //! The walk starts at the top layer and descends only into tiles whose box meets the frustum.
 //! A layer tile's level errors are those against the base grid's samples under it (the
@@ -20,10 +20,10 @@
 //! split as well, until every two neighbours are at most one layer apart, so that a tile's
 //! side meets one tile of its own layer or two of the layer below, never more.
 //!
-//! What the frame will need besides, and this does not do yet: stitching where tiles of two
-//! layers meet (a layer tile's side spans two of the layer below), geomorphing that carries on
-//! across the change from a parent to its children, and the manager and the prefetcher keyed by
-//! (layer, tile).
+//! The frame stitches where tiles of two layers meet (a layer tile's side spans two of the
+//! layer below, [`crate::stitch::stitch_across`]); the memory manager and the prefetcher see
+//! a layer's tiles as any others (one index space, [`Terrain::tiles`]). Not done yet:
+//! geomorphing that carries on across the change from a parent to its children.
 
 use std::collections::HashSet;
 
@@ -31,9 +31,9 @@ use glam::DVec3;
 
 use crate::camera::View;
 use crate::lod::{self, Bound};
-use crate::pyramid::Pyramid;
+use crate::terrain::Terrain;
 
-/// One tile of a cut: its layer, its index in that layer and the level it would be drawn at.
+/// One tile of a cut: its layer, its index in [`Terrain::tiles`] and the level it is drawn at.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Node {
     pub layer: u32,
@@ -51,11 +51,11 @@ pub struct Cut {
 
 impl Cut {
     /// Triangles the cut's tiles have at their levels.
-    pub fn triangles(&self, pyramid: &Pyramid) -> u64 {
+    pub fn triangles(&self, terrain: &Terrain) -> u64 {
         self.nodes
             .iter()
             .map(|n| {
-                let tile = &pyramid.layers[n.layer as usize].tiles[n.tile];
+                let tile = &terrain.tiles[n.tile];
                 u64::from(tile.levels[n.level as usize].triangle_count)
             })
             .sum()
@@ -66,8 +66,8 @@ impl Cut {
 pub const DRAW_TRIANGLES: u64 = 256;
 
 /// The cut for a view: see the module header. Nodes come in no particular order.
-pub fn cut(pyramid: &Pyramid, view: &View, camera: DVec3, tau: f64) -> Cut {
-    cut_with(pyramid, view, camera, tau, Rules::ALL)
+pub fn cut(terrain: &Terrain, view: &View, camera: DVec3, tau: f64) -> Cut {
+    cut_with(terrain, view, camera, tau, Rules::ALL)
 }
 
 /// Which of the cut's rules apply beyond meeting tau: each can be turned off to measure what
@@ -88,19 +88,19 @@ impl Rules {
 }
 
 /// [`cut`] under `rules`.
-pub fn cut_with(pyramid: &Pyramid, view: &View, camera: DVec3, tau: f64, rules: Rules) -> Cut {
+pub fn cut_with(terrain: &Terrain, view: &View, camera: DVec3, tau: f64, rules: Rules) -> Cut {
     let weigh_children = rules.weigh_children;
     let walk = Walk {
-        pyramid,
+        terrain,
         view,
         planes: view.frustum(),
         camera,
         tau,
         weigh_children,
     };
-    let top = pyramid.top();
-    let mut stack: Vec<Pending> = (0..pyramid.layers[top as usize].tiles.len())
-        .map(|i| (top, i, None))
+    let top = terrain.top();
+    let mut stack: Vec<Pending> = (0..terrain.layers[top as usize].len())
+        .map(|i| (terrain.index_in(top, i), None))
         .collect();
     let mut out = Cut::default();
     let mut split = HashSet::new();
@@ -114,7 +114,7 @@ pub fn cut_with(pyramid: &Pyramid, view: &View, camera: DVec3, tau: f64, rules: 
         let mut balance: Vec<usize> = (0..out.nodes.len())
             .filter(|&k| {
                 let n = out.nodes[k];
-                n.layer >= 2 && finer_beside(pyramid, &split, n.layer, n.tile)
+                n.layer >= 2 && finer_beside(terrain, &split, n.tile)
             })
             .collect();
         if balance.is_empty() {
@@ -123,36 +123,32 @@ pub fn cut_with(pyramid: &Pyramid, view: &View, camera: DVec3, tau: f64, rules: 
         balance.sort_unstable();
         for k in balance.into_iter().rev() {
             let n = out.nodes.swap_remove(k);
-            split.insert((n.layer, n.tile));
-            stack.extend(
-                pyramid
-                    .children(n.layer, n.tile)
-                    .map(|c| (n.layer - 1, c, None)),
-            );
+            split.insert(n.tile);
+            stack.extend(terrain.children(n.tile).map(|c| (c, None)));
         }
         walk.run(&mut stack, &mut out, &mut split);
     }
     out
 }
 
-/// Whether tile `i` of layer `p` has, across one of its sides, ground drawn two or more layers
-/// finer: its neighbour in layer `p` was split, and so was one of that neighbour's children
-/// along the shared side (conservative: those children's own children might all be culled).
-fn finer_beside(pyramid: &Pyramid, split: &HashSet<(u32, usize)>, p: u32, i: usize) -> bool {
-    let (layer, below) = (&pyramid.layers[p as usize], &pyramid.layers[p as usize - 1]);
-    let (tx, ty) = (
-        (i as u32 % layer.tiles_x) as i64,
-        (i as u32 / layer.tiles_x) as i64,
-    );
+/// Whether tile `i` (of layer `p >= 1`) has, across one of its sides, ground drawn two or
+/// more layers finer: its neighbour in layer `p` was split, and so was one of that
+/// neighbour's children along the shared side (conservative: those children's own children
+/// might all be culled).
+fn finer_beside(terrain: &Terrain, split: &HashSet<usize>, i: usize) -> bool {
+    let t = &terrain.tiles[i];
+    let p = t.layer;
+    let (tx, ty) = (i64::from(t.tx), i64::from(t.ty));
+    let at = |p: u32, x: i64, y: i64| {
+        (x >= 0 && y >= 0)
+            .then(|| terrain.tile_in(p, x as u32, y as u32))
+            .flatten()
+    };
     [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)]
         .iter()
         .any(|&(dx, dy)| {
             let (nx, ny) = (tx + dx, ty + dy);
-            if nx < 0 || ny < 0 || nx >= i64::from(layer.tiles_x) || ny >= i64::from(layer.tiles_y)
-            {
-                return false;
-            }
-            if !split.contains(&(p, (ny * i64::from(layer.tiles_x) + nx) as usize)) {
+            if !at(p, nx, ny).is_some_and(|n| split.contains(&n)) {
                 return false;
             }
             // The neighbour's two children that touch this tile.
@@ -162,16 +158,15 @@ fn finer_beside(pyramid: &Pyramid, split: &HashSet<(u32, usize)>, p: u32, i: usi
                 (_, 1) => [(2 * nx, 2 * ny), (2 * nx + 1, 2 * ny)],
                 _ => [(2 * nx, 2 * ny + 1), (2 * nx + 1, 2 * ny + 1)],
             };
-            along.iter().any(|&(cx, cy)| {
-                cx < i64::from(below.tiles_x)
-                    && cy < i64::from(below.tiles_y)
-                    && split.contains(&(p - 1, (cy * i64::from(below.tiles_x) + cx) as usize))
-            })
+            along
+                .iter()
+                .any(|&(cx, cy)| at(p - 1, cx, cy).is_some_and(|c| split.contains(&c)))
         })
 }
 
-/// A tile to walk, and its choice when already made ([`Walk::choose`]'s answer).
-type Pending = (u32, usize, Option<Choice>);
+/// A tile to walk (its index in [`Terrain::tiles`]), and its choice when already made
+/// ([`Walk::choose`]'s answer).
+type Pending = (usize, Option<Choice>);
 
 /// A tile's level and its triangles there, if it is on screen and meets tau (None: it needs
 /// its children; Some(None): off screen).
@@ -179,7 +174,7 @@ type Choice = Option<Option<(u32, u64)>>;
 
 /// One view's walk down the pyramid.
 struct Walk<'a> {
-    pyramid: &'a Pyramid,
+    terrain: &'a Terrain,
     view: &'a View,
     planes: [glam::Vec4; 5],
     camera: DVec3,
@@ -189,9 +184,10 @@ struct Walk<'a> {
 
 impl Walk<'_> {
     /// The tile's [`Choice`].
-    fn choose(&self, p: u32, i: usize, visited: &mut usize) -> Choice {
+    fn choose(&self, i: usize, visited: &mut usize) -> Choice {
         *visited += 1;
-        let tile = &self.pyramid.layers[p as usize].tiles[i];
+        let tile = &self.terrain.tiles[i];
+        let p = tile.layer;
         let (lo, hi) = lod::tile_box(tile);
         if crate::cull::box_outside(&self.planes, lo - self.camera, hi - self.camera) {
             return Some(None);
@@ -211,13 +207,14 @@ impl Walk<'_> {
     /// Walks the tiles on `stack` and all they split into, keeping tiles into `out` and
     /// noting the tiles split. A tile on the stack may come with its choice already made (by
     /// its parent's look ahead), so that no tile is weighed twice.
-    fn run(&self, stack: &mut Vec<Pending>, out: &mut Cut, split: &mut HashSet<(u32, usize)>) {
-        let pyramid = self.pyramid;
-        while let Some((p, i, known)) = stack.pop() {
-            let chosen = match known.unwrap_or_else(|| self.choose(p, i, &mut out.visited)) {
+    fn run(&self, stack: &mut Vec<Pending>, out: &mut Cut, split: &mut HashSet<usize>) {
+        let terrain = self.terrain;
+        while let Some((i, known)) = stack.pop() {
+            let p = terrain.tiles[i].layer;
+            let chosen = match known.unwrap_or_else(|| self.choose(i, &mut out.visited)) {
                 None => {
-                    split.insert((p, i));
-                    stack.extend(pyramid.children(p, i).map(|c| (p - 1, c, None)));
+                    split.insert(i);
+                    stack.extend(terrain.children(i).map(|c| (c, None)));
                     continue;
                 }
                 Some(None) => continue,
@@ -229,9 +226,9 @@ impl Walk<'_> {
             if p > 0 && self.weigh_children {
                 let mut children = 0u64;
                 let mut weighed = Vec::with_capacity(4);
-                for c in pyramid.children(p, i) {
-                    let choice = self.choose(p - 1, c, &mut out.visited);
-                    weighed.push((p - 1, c, Some(choice)));
+                for c in terrain.children(i) {
+                    let choice = self.choose(c, &mut out.visited);
+                    weighed.push((c, Some(choice)));
                     match choice {
                         Some(Some((_, t))) => children += t + DRAW_TRIANGLES,
                         Some(None) => {}
@@ -242,7 +239,7 @@ impl Walk<'_> {
                     }
                 }
                 if children < chosen.1 + DRAW_TRIANGLES {
-                    split.insert((p, i));
+                    split.insert(i);
                     stack.extend(weighed);
                     continue;
                 }

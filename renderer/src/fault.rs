@@ -30,6 +30,9 @@ pub enum Fault {
     /// `mirror-bias`: the CPU mirror the read-back heights are checked against adds one unit
     /// to every stored morph offset (the read-back test's control).
     MirrorBias,
+    /// `no-stitch-across`: no stitches where tiles of two pyramid layers meet (the control of
+    /// the pyramid's crack test); stitches within a layer stay.
+    NoStitchAcross,
     /// `unsynchronised`: the first frame rewrites a morphed height between the morph pass and
     /// the draws with no barrier, a hazard only synchronisation validation reports (the
     /// barrier test's control).
@@ -45,6 +48,7 @@ impl Fault {
             "texture-no-clamp" => Some(Fault::TextureNoClamp),
             "mirror-bias" => Some(Fault::MirrorBias),
             "unsynchronised" => Some(Fault::Unsynchronised),
+            "no-stitch-across" => Some(Fault::NoStitchAcross),
             _ => {
                 let number = |prefix: &str| v.strip_prefix(prefix).and_then(|n| n.parse().ok());
                 number("device-lost-at-")

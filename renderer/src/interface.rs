@@ -115,8 +115,14 @@ pub struct TileRecord {
     pub tables: [LevelCoefficients; 9],
     /// `[x, y, _, _]`: the mesh's last column and row (256 but in a partial tile).
     pub extent: [u32; 4],
+    /// The tile's pyramid layer `p` (its samples are `2^p` base samples apart, its vertex
+    /// `(x, y)` at `tile_offset + (x, y) << p`) and its layer's metres per height code (each
+    /// layer has its own lattice).
+    pub layer: u32,
+    pub height_step: f32,
+    pub pad1: [u32; 2],
     /// To [`RECORD_ALIGNMENT`] and beyond.
-    pub pad2: [[u32; 4]; 11],
+    pub pad2: [[u32; 4]; 10],
 }
 
 /// Bytes of one record.
@@ -154,7 +160,7 @@ pub fn host_layout() -> Vec<(&'static str, &'static str, u32)> {
     let coefficients = fields!(LevelCoefficients: a_lo, a_hi, b_lo, b_hi);
     let record = fields!(TileRecord: tile_offset, height_base, positions, starts_lo, starts_hi,
         blocks, units, level, cap, heights, texture_layer, texture_finest, texture_shift,
-        parts_lo, parts_hi, tables, extent, pad2);
+        parts_lo, parts_hi, tables, extent, layer, height_step, pad1, pad2);
     let named = |name: &'static str, fields: Vec<(&'static str, u32)>| {
         fields.into_iter().map(move |(f, o)| (name, f, o))
     };

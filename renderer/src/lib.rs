@@ -7,7 +7,7 @@
 //! tests drive without a GPU; [`vulkan`] is the thin layer that owns every Vulkan object, and
 //! [`frame`] turns one frame's plan into commands.
 
-pub use scene::{camera, levels, path, pyramid, terrain, tile};
+pub use scene::{camera, levels, path, terrain, tile};
 
 pub mod cull;
 pub mod cut;

@@ -91,8 +91,18 @@ fn run(cli: Cli) -> Result<ExitCode> {
         return static_limit(&cli, n);
     }
     let opening = std::time::Instant::now();
-    let mut terrain = Terrain::open_layer(&cli.tileset, cli.layer)?;
+    let mut terrain = if cli.pyramid {
+        Terrain::open_pyramid(&cli.tileset)?
+    } else {
+        Terrain::open_layer(&cli.tileset, cli.layer)?
+    };
     let open_ms = opening.elapsed().as_secs_f64() * 1000.0;
+    if cli.pyramid && terrain.top() == 0 {
+        bail!(
+            "{}: --pyramid: the tile set has no pyramid (build it with tiletool build --pyramid)",
+            cli.tileset.display()
+        );
+    }
     terrain.shared_sides |= cli.no_slivers;
     let path = match cli.path.as_str() {
         "orbit" => CameraPath::orbit(&terrain),

@@ -12,7 +12,7 @@ use memory::{Manager, Request, Stats};
 
 use crate::camera::{Camera, View};
 use crate::log::ms;
-use crate::stitch::{stitch_side, DrawnSide, Stitch};
+use crate::stitch::{stitch_across, stitch_side, DrawnSide, Stitch};
 use crate::terrain::Terrain;
 use crate::tile::Side;
 use crate::{cull, lod};
@@ -127,7 +127,11 @@ pub fn plan(
     let view = camera.view(extent.0, extent.1);
 
     let t = Instant::now();
-    let mut visible = visible_tiles(terrain, &view, camera.position);
+    let cut = cut_tiles(terrain, &view, camera.position, rule);
+    let mut visible = match &cut {
+        Some(cut) => cut.iter().map(|&(i, _)| i).collect(),
+        None => visible_tiles(terrain, &view, camera.position),
+    };
     let cpu_cull_ms = ms(t);
     let tiles_visible = visible.len() as u64;
 
@@ -138,7 +142,10 @@ pub fn plan(
 
     let t = Instant::now();
     let morphing = matches!(rule, LevelRule::Morph(..));
-    let (requests, parts) = wanted(terrain, &view, camera.position, &visible, rule);
+    let (requests, parts) = match &cut {
+        Some(cut) => (cut_requests(cut, &visible), Vec::new()),
+        None => wanted(terrain, &view, camera.position, &visible, rule),
+    };
     let parts: HashMap<u32, tiles::parts::PartLevels> =
         requests.iter().map(|r| r.tile).zip(parts).collect();
     let cpu_lod_ms = ms(t);
@@ -237,18 +244,96 @@ fn draw_of(
     })
 }
 
-/// Checks the tiles `camera` sees at `extent` pixels, on every core ([`Terrain::check`]): the
-/// part of opening a tile set that its first view needs, before the first frame.
-pub fn check_view(terrain: &Terrain, camera: &Camera, extent: (u32, u32)) {
+/// Checks the tiles `camera` sees at `extent` pixels under `rule`, on every core
+/// ([`Terrain::check`]): the part of opening a tile set that its first view needs, before the
+/// first frame. Over a pyramid, the tiles of the cut.
+pub fn check_view(terrain: &Terrain, camera: &Camera, extent: (u32, u32), rule: LevelRule) {
     let view = camera.view(extent.0, extent.1);
-    terrain.check_all(&visible_tiles(terrain, &view, camera.position));
+    terrain.check_all(
+        &requests_for(terrain, &view, camera.position, rule)
+            .iter()
+            .map(|r| r.tile as usize)
+            .collect::<Vec<_>>(),
+    );
 }
 
-/// Tiles whose box touches the frustum, nearest first (by the box point closest to the camera).
+/// Whether frames over `terrain` under `rule` draw a cut through its pyramid: the terrain
+/// holds layers above its base grid ([`Terrain::open_pyramid`]) and levels follow tau.
+pub fn draws_cut(terrain: &Terrain, rule: LevelRule) -> bool {
+    terrain.top() > 0 && matches!(rule, LevelRule::Tau(..))
+}
+
+/// Where frames draw a cut ([`draws_cut`]): its tiles nearest first, each with the level it is
+/// drawn at ([`crate::cut`]: culled and levelled in one walk).
+fn cut_tiles(
+    terrain: &Terrain,
+    view: &View,
+    camera: DVec3,
+    rule: LevelRule,
+) -> Option<Vec<(usize, u32)>> {
+    let LevelRule::Tau(tau, _) = rule else {
+        return None;
+    };
+    if !draws_cut(terrain, rule) {
+        return None;
+    }
+    let cut = crate::cut::cut(terrain, view, camera, tau);
+    let mut nodes: Vec<(f64, usize, u32)> = cut
+        .nodes
+        .iter()
+        .map(|n| {
+            let t = &terrain.tiles[n.tile];
+            (
+                camera.clamp(t.min, t.max).distance_squared(camera),
+                n.tile,
+                n.level,
+            )
+        })
+        .collect();
+    nodes.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    Some(nodes.into_iter().map(|(_, i, l)| (i, l)).collect())
+}
+
+/// The requests of a cut's tiles that are in `visible` (those that passed their checks).
+fn cut_requests(cut: &[(usize, u32)], visible: &[usize]) -> Vec<Request> {
+    let level: HashMap<usize, u32> = cut.iter().copied().collect();
+    visible
+        .iter()
+        .map(|&i| Request {
+            tile: i as u32,
+            wanted: level[&i],
+        })
+        .collect()
+}
+
+/// The tiles a view draws nearest first, with the level each wants under `rule`: the visible
+/// base tiles ([`visible_tiles`], [`wanted_levels`]), or the cut through a pyramid
+/// ([`draws_cut`]). The prefetcher asks it for predicted cameras, so a prediction wants what
+/// the frame will.
+pub fn requests_for(
+    terrain: &Terrain,
+    view: &View,
+    camera: DVec3,
+    rule: LevelRule,
+) -> Vec<Request> {
+    match cut_tiles(terrain, view, camera, rule) {
+        Some(cut) => {
+            let tiles: Vec<usize> = cut.iter().map(|&(i, _)| i).collect();
+            cut_requests(&cut, &tiles)
+        }
+        None => {
+            let visible = visible_tiles(terrain, view, camera);
+            wanted_levels(terrain, view, camera, &visible, rule)
+        }
+    }
+}
+
+/// Base tiles whose box touches the frustum, nearest first (by the box point closest to the
+/// camera).
 pub fn visible_tiles(terrain: &Terrain, view: &View, camera: DVec3) -> Vec<usize> {
     let planes = view.frustum();
     let mut visible: Vec<(f64, usize)> = terrain
-        .tiles
+        .base()
         .iter()
         .enumerate()
         .filter(|(_, tile)| cull::visible(&planes, camera, tile))
@@ -323,6 +408,7 @@ pub fn stitch_granted(
         .map(|(k, d)| (d.tile, (d.level, k as u32)))
         .collect();
     let mut stitches = Vec::new();
+    let across = crate::fault::Fault::from_env() != Some(crate::fault::Fault::NoStitchAcross);
     for (k, d) in draws.iter().enumerate() {
         let a = &terrain.tiles[d.tile];
         let mut s = Stitch::default();
@@ -351,9 +437,59 @@ pub fn stitch_granted(
                 });
             }
         }
+        // Across layers, from the coarser tile: where its neighbour in its own layer is not
+        // drawn, the neighbour's children along the side may be.
+        for side in Side::ALL.into_iter().filter(|_| a.layer > 0 && across) {
+            let Some(j) = terrain.neighbour(a, side) else {
+                continue;
+            };
+            if level_of.contains_key(&j) {
+                continue;
+            }
+            let children = along_side(terrain, j, side.opposite()).map(|c| {
+                let &(level, record) = level_of.get(&c?)?;
+                Some(DrawnSide {
+                    tile: &terrain.tiles[c?],
+                    level,
+                    record,
+                })
+            });
+            let Some(first) = children.iter().flatten().next() else {
+                continue;
+            };
+            let steps = (
+                terrain.height_step_of(a),
+                terrain.height_step_of(first.tile),
+            );
+            let mine = DrawnSide {
+                tile: a,
+                level: d.level,
+                record: k as u32,
+            };
+            if !stitch_across(&mut s, mine, children, side, steps) {
+                return Err(BorderMismatch {
+                    a: (a.tx, a.ty),
+                    b: (first.tile.tx, first.tile.ty),
+                });
+            }
+        }
         if s.triangles > 0 {
             stitches.push((k, s));
         }
     }
     Ok(stitches)
+}
+
+/// The two children of tile `j` (of a layer above the base) along its side `side`, north or
+/// west first (None where the layer below has none there).
+fn along_side(terrain: &Terrain, j: usize, side: Side) -> [Option<usize>; 2] {
+    let t = &terrain.tiles[j];
+    let (x, y) = (2 * t.tx, 2 * t.ty);
+    let cells = match side {
+        Side::North => [(x, y), (x + 1, y)],
+        Side::South => [(x, y + 1), (x + 1, y + 1)],
+        Side::West => [(x, y), (x, y + 1)],
+        Side::East => [(x + 1, y), (x + 1, y + 1)],
+    };
+    cells.map(|(cx, cy)| terrain.tile_in(t.layer - 1, cx, cy))
 }

@@ -122,7 +122,8 @@ pub fn stitch_side(
             .extend(indices.iter().map(|&i| pulled(drawn.record, i)));
     }
     let all: Vec<u32> = mine.iter().chain(&theirs).copied().collect();
-    zip(mine, &theirs, side, |t| {
+    let at = |line: &[u32]| line.iter().map(|&p| along(p, side)).collect::<Vec<u32>>();
+    zip(&at(mine), &at(&theirs), |t| {
         // Two equal vertices make a triangle with no area even in 3D, unless morphing may
         // move the two tiles' copies apart: skip it then.
         if slivers || has_area(t.map(|i| all[i])) {
@@ -139,16 +140,134 @@ fn has_area(p: [u32; 3]) -> bool {
     p[0] != p[1] && p[1] != p[2] && p[0] != p[2]
 }
 
-/// Walks two polylines along `side` that share their first and last vertex, `mine` and
-/// `theirs`, merging them by position along the side, and emits the triangles between them:
-/// each has the next edge of one polyline and the vertex the other has reached. Triangle
-/// corners index `mine` then `theirs` (offset by `mine.len()`), wound as tile A draws them.
-fn zip(mine: &[u32], theirs: &[u32], side: Side, mut emit: impl FnMut([usize; 3])) {
+/// One drawn tile of a seam across layers ([`stitch_across`]): its polyline along the side,
+/// as positions along it in the finer layer's samples and heights in metres, and the pulled
+/// index of each vertex.
+struct Line {
+    along: Vec<u32>,
+    height: Vec<f32>,
+    pulled: Vec<u32>,
+}
+
+impl Line {
+    /// `drawn`'s side `side` at its level: positions along it times `scale`, plus `offset`.
+    fn of(drawn: &DrawnSide, step: f32, side: Side, scale: u32, offset: u32) -> Option<Line> {
+        let paged = drawn.tile.paged()?;
+        let border = &paged.borders[drawn.level as usize][side.index()];
+        let indices = &paged.border_indices[drawn.level as usize][side.index()];
+        let base = drawn.tile.header.height_base;
+        Some(Line {
+            along: border
+                .iter()
+                .map(|&p| along(p, side) * scale + offset)
+                .collect(),
+            height: border
+                .iter()
+                .map(|&p| (base + unpack(p).2 as i32) as f32 * step)
+                .collect(),
+            pulled: indices.iter().map(|&i| pulled(drawn.record, i)).collect(),
+        })
+    }
+
+    /// The vertices whose position is in `range`.
+    fn within(&self, range: std::ops::RangeInclusive<u32>) -> Line {
+        let keep: Vec<usize> = (0..self.along.len())
+            .filter(|&k| range.contains(&self.along[k]))
+            .collect();
+        Line {
+            along: keep.iter().map(|&k| self.along[k]).collect(),
+            height: keep.iter().map(|&k| self.height[k]).collect(),
+            pulled: keep.iter().map(|&k| self.pulled[k]).collect(),
+        }
+    }
+
+    fn extend(&mut self, other: Line) {
+        self.along.extend(other.along);
+        self.height.extend(other.height);
+        self.pulled.extend(other.pulled);
+    }
+}
+
+/// Adds the triangles where tile `a` of a pyramid layer meets, across its side `side`, the
+/// tiles of the layer below: `children[0]` and `children[1]`, the two halves of `a`'s side in
+/// order along it (north or west first), each as drawn or None where it is not. The two
+/// halves' polylines, joined, run the length of `a`'s side; a half whose tile is not drawn
+/// takes `a`'s own vertices there (its triangles then have no area and are left out). Both
+/// lines lie on the side's vertical plane, so the triangles are as zero-area in plan view as
+/// [`stitch_side`]'s: where the two layers' heights differ at a shared point (each layer has
+/// its own height lattice), they close the gap. `steps` are the two layers' metres per height
+/// code (`a`'s, then the children's). Returns false if the borders do not line up.
+pub fn stitch_across(
+    out: &mut Stitch,
+    a: DrawnSide,
+    children: [Option<DrawnSide>; 2],
+    side: Side,
+    steps: (f32, f32),
+) -> bool {
+    let far = side.opposite();
+    let Some(mine) = Line::of(&a, steps.0, side, 2, 0) else {
+        return false;
+    };
+    if mine.along.first() != Some(&0) || mine.along.last() != Some(&512) {
+        return false;
+    }
+    let half = |k: usize| {
+        let (lo, hi) = (256 * k as u32, 256 * (k as u32 + 1));
+        match &children[k] {
+            Some(c) => Line::of(c, steps.1, far, 1, lo)
+                .filter(|l| l.along.first() == Some(&lo) && l.along.last() == Some(&hi)),
+            // The first half ends, and the second begins, where the other's tile takes over.
+            None if k == 0 => Some(mine.within(0..=255)),
+            None => Some(mine.within(257..=512)),
+        }
+    };
+    let (Some(mut theirs), Some(second)) = (half(0), half(1)) else {
+        return false;
+    };
+    if children[0].is_some() && children[1].is_some() {
+        // Both halves hold the side's midpoint: once.
+        theirs.along.pop();
+        theirs.height.pop();
+        theirs.pulled.pop();
+    }
+    theirs.extend(second);
+    let all_along: Vec<u32> = mine.along.iter().chain(&theirs.along).copied().collect();
+    let all_height: Vec<u32> = mine
+        .height
+        .iter()
+        .chain(&theirs.height)
+        .map(|h| h.to_bits())
+        .collect();
+    let base = out.pulled.len() as u32;
+    out.pulled.extend(&mine.pulled);
+    out.pulled.extend(&theirs.pulled);
+    // `vertices` is indexed like `pulled`: the positions along the side stand in for the
+    // packed vertices, which two layers do not share.
+    out.vertices.extend(&all_along);
+    zip(&mine.along, &theirs.along, |t| {
+        let same = |i: usize, j: usize| {
+            all_along[t[i]] == all_along[t[j]] && all_height[t[i]] == all_height[t[j]]
+        };
+        if !(same(0, 1) || same(1, 2) || same(0, 2)) {
+            let [i, j, l] = t.map(|i| base + i as u32);
+            out.indices.extend_from_slice(&[i, j, l, RESTART]);
+            out.triangles += 1;
+        }
+    });
+    true
+}
+
+/// Walks two polylines along a side that share their first and last position, given as
+/// their vertices' positions along it, `mine` and `theirs`, merging them by position, and
+/// emits the triangles between them: each has the next edge of one polyline and the vertex
+/// the other has reached. Triangle corners index `mine` then `theirs` (offset by
+/// `mine.len()`), wound as tile A draws them.
+fn zip(mine: &[u32], theirs: &[u32], mut emit: impl FnMut([usize; 3])) {
     let q0 = mine.len();
     let (mut i, mut j) = (0usize, 0usize);
     while i + 1 < mine.len() || j + 1 < theirs.len() {
-        let advance_theirs = j + 1 < theirs.len()
-            && (i + 1 >= mine.len() || along(theirs[j + 1], side) <= along(mine[i + 1], side));
+        let advance_theirs =
+            j + 1 < theirs.len() && (i + 1 >= mine.len() || theirs[j + 1] <= mine[i + 1]);
         if advance_theirs {
             emit([i, q0 + j, q0 + j + 1]);
             j += 1;
@@ -201,7 +320,12 @@ mod tests {
     fn check(mine: &[u32], theirs: &[u32], k: Side, zipped_along: Side) -> Result<(), String> {
         let all: Vec<u32> = mine.iter().chain(theirs).copied().collect();
         let mut triangles = Vec::new();
-        zip(mine, theirs, zipped_along, |t| triangles.push(t));
+        let at = |line: &[u32]| {
+            line.iter()
+                .map(|&p| along(p, zipped_along))
+                .collect::<Vec<_>>()
+        };
+        zip(&at(mine), &at(theirs), |t| triangles.push(t));
         let segments = mine.len() + theirs.len() - 2;
         if triangles.len() != segments {
             return Err(format!(
@@ -281,14 +405,19 @@ mod tests {
         let mine = border(Side::North, &pa, |_| 5);
         let mut kept = 0;
         let all: Vec<u32> = mine.iter().chain(&mine).copied().collect();
-        zip(&mine, &mine, Side::North, |t| {
+        let at = |line: &[u32]| {
+            line.iter()
+                .map(|&p| along(p, Side::North))
+                .collect::<Vec<_>>()
+        };
+        zip(&at(&mine), &at(&mine), |t| {
             kept += usize::from(has_area(t.map(|i| all[i])))
         });
         assert_eq!(kept, 0);
         let moved = border(Side::North, &pa, |a| if a == 64 { 6 } else { 5 });
         let all: Vec<u32> = mine.iter().chain(&moved).copied().collect();
         let mut slivers = 0;
-        zip(&mine, &moved, Side::North, |t| {
+        zip(&at(&mine), &at(&moved), |t| {
             slivers += usize::from(has_area(t.map(|i| all[i])))
         });
         assert_eq!(slivers, 2, "the two triangles at the moved vertex");

@@ -238,7 +238,12 @@ impl App<'_> {
         if self.options.trace {
             renderer.enable_trace();
         }
-        crate::plan::check_view(self.terrain, &self.camera, (extent.width, extent.height));
+        crate::plan::check_view(
+            self.terrain,
+            &self.camera,
+            (extent.width, extent.height),
+            self.options.settings.rule(),
+        );
         self.renderer = Some(renderer);
         Ok(())
     }

@@ -12,7 +12,6 @@ use glam::DVec3;
 use renderer::camera::Camera;
 use renderer::cut::{cut, cut_with, Cut, Rules};
 use renderer::path::CameraPath;
-use renderer::pyramid::Pyramid;
 use renderer::terrain::Terrain;
 use tiles::BuildParams;
 
@@ -27,7 +26,7 @@ fn with_pyramid() -> BuildParams {
 
 /// The Puget sample and a GENERATED 2049² mirror tiling of SRTM N55W003 (see
 /// `common::mirror`), both with their pyramids, in `dir`.
-fn sets(dir: &std::path::Path) -> Vec<Pyramid> {
+fn sets(dir: &std::path::Path) -> Vec<Terrain> {
     let puget = dir.join("puget");
     let mirror = dir.join("mirror");
     std::fs::create_dir_all(&puget).unwrap();
@@ -41,7 +40,7 @@ fn sets(dir: &std::path::Path) -> Vec<Pyramid> {
     let mirror = common::mirror_with(&mirror, 2049, &with_pyramid());
     [puget, mirror]
         .iter()
-        .map(|p| Pyramid::open(p).unwrap_or_else(|e| panic!("{}: {e}", p.display())))
+        .map(|p| Terrain::open_pyramid(p).unwrap_or_else(|e| panic!("{}: {e}", p.display())))
         .collect()
 }
 
@@ -69,14 +68,13 @@ fn cameras(terrain: &Terrain, rng: &mut splitmix::Rng) -> Vec<Camera> {
 }
 
 /// For each base tile (row-major), how many of the cut's tiles cover it.
-fn cover(pyramid: &Pyramid, c: &Cut) -> Vec<u32> {
-    let base = &pyramid.layers[0];
-    let mut covered = vec![0u32; base.tiles.len()];
+fn cover(pyramid: &Terrain, c: &Cut) -> Vec<u32> {
+    let mut covered = vec![0u32; pyramid.base().len()];
     for n in &c.nodes {
-        let (xs, ys) = pyramid.base_tiles_under(n.layer, n.tile);
+        let (xs, ys) = pyramid.base_tiles_under(n.tile);
         for y in ys {
             for x in xs.clone() {
-                covered[(y * base.tiles_x + x) as usize] += 1;
+                covered[(y * pyramid.tiles_x + x) as usize] += 1;
             }
         }
     }
@@ -90,11 +88,9 @@ fn the_cut_covers_what_the_base_grid_sees_each_tile_once() {
     let (mut views, mut layer_tiles) = (0, 0);
     for pyramid in sets(dir.path()) {
         assert!(pyramid.top() >= 2, "{} layers", pyramid.top());
-        let path = pyramid.layers[0].set.path().to_path_buf();
-        let base = Pyramid {
-            layers: vec![Terrain::open(&path).unwrap()],
-        };
-        for camera in cameras(&pyramid.layers[0], &mut rng) {
+        let path = pyramid.set.path().to_path_buf();
+        let base = Terrain::open(&path).unwrap();
+        for camera in cameras(&pyramid, &mut rng) {
             let view = camera.view(EXTENT.0, EXTENT.1);
             for tau in [1.0, 4.0] {
                 let seen = cut(&base, &view, camera.position, tau);
@@ -122,8 +118,8 @@ fn the_cut_covers_what_the_base_grid_sees_each_tile_once() {
 fn far_views_take_the_top_tile_and_near_views_the_base_grid() {
     let dir = tempfile::tempdir().expect("temp dir");
     let set = common::mirror_with(dir.path(), 2049, &with_pyramid());
-    let pyramid = Pyramid::open(&set).expect("open");
-    let (lo, hi) = pyramid.layers[0].bounds();
+    let pyramid = Terrain::open_pyramid(&set).expect("open");
+    let (lo, hi) = pyramid.bounds();
     let centre = (lo + hi) * 0.5;
     let extent = hi.x - lo.x;
     // High above the middle, looking straight down at all of it: one tile, the top one.
@@ -155,11 +151,9 @@ fn the_pyramid_draws_fewer_tiles_for_about_the_same_triangles() {
     // layer tile that meets tau and draws several times the triangles (the control).
     let dir = tempfile::tempdir().expect("temp dir");
     let set = common::mirror_with(dir.path(), 2049, &with_pyramid());
-    let pyramid = Pyramid::open(&set).expect("open");
-    let base = Pyramid {
-        layers: vec![Terrain::open(&set).expect("open")],
-    };
-    let path = CameraPath::orbit(&pyramid.layers[0]);
+    let pyramid = Terrain::open_pyramid(&set).expect("open");
+    let base = Terrain::open(&set).expect("open");
+    let path = CameraPath::orbit(&pyramid);
     let (mut draws, mut triangles) = ([0usize; 3], [0u64; 3]);
     for k in 0..24 {
         let camera = path.at(path.keys[0].time + k as f64 * path.duration() / 24.0);
@@ -217,8 +211,7 @@ fn neighbouring_tiles_of_the_cut_are_at_most_a_layer_apart() {
         ..Rules::ALL
     };
     for pyramid in sets(dir.path()) {
-        let base = &pyramid.layers[0];
-        for camera in cameras(base, &mut rng) {
+        for camera in cameras(&pyramid, &mut rng) {
             let view = camera.view(EXTENT.0, EXTENT.1);
             for tau in [1.0, 4.0] {
                 let balanced = cut(&pyramid, &view, camera.position, tau);
@@ -238,12 +231,12 @@ fn neighbouring_tiles_of_the_cut_are_at_most_a_layer_apart() {
 }
 
 /// Neighbouring base tiles both under the cut, and the most layers apart their cut tiles are.
-fn layers_apart(pyramid: &Pyramid, c: &Cut) -> (usize, u32) {
-    let base = &pyramid.layers[0];
+fn layers_apart(pyramid: &Terrain, c: &Cut) -> (usize, u32) {
+    let base = pyramid;
     // The layer of the cut's tile over each base tile (None: not covered).
-    let mut layer = vec![None; base.tiles.len()];
+    let mut layer = vec![None; base.base().len()];
     for n in &c.nodes {
-        let (xs, ys) = pyramid.base_tiles_under(n.layer, n.tile);
+        let (xs, ys) = pyramid.base_tiles_under(n.tile);
         for y in ys {
             for x in xs.clone() {
                 layer[(y * base.tiles_x + x) as usize] = Some(n.layer);

@@ -108,6 +108,73 @@ fn independent_sides_crack_while_morphing_without_slivers() {
     );
 }
 
+/// `--pyramid` over a GENERATED 2049² mirror set with its tile pyramid (`common::mirror_with`):
+/// each frame draws the cut, with tiles of the layers above the base grid in most frames;
+/// against brute force over the base grid, no crack and the silhouette within tau + 1 px,
+/// validation silent. The control: without the stitches where two layers meet
+/// (`VKTERRAIN_FAULT=no-stitch-across`, the stitches within a layer kept), the seams show.
+#[test]
+fn the_pyramids_cut_is_drawn_without_cracks() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let params = tiles::BuildParams {
+        pyramid: true,
+        ..tiles::BuildParams::default()
+    };
+    let set = common::mirror_with(dir.path(), 2049, &params);
+    let size = ["--size", "512x384"];
+    let mut open = 0;
+    for path in ["orbit", "flyover"] {
+        let s = compare_with_silhouettes(
+            &set,
+            path,
+            6,
+            1.0,
+            &["--pyramid", WARM, size[0], size[1]],
+            1.0,
+        );
+        assert_eq!(s["tiles_coarser"], 0, "{path}: {s}");
+        let log = tempfile::tempdir().expect("temp dir");
+        let lod = flight(
+            &set,
+            log.path(),
+            path,
+            6,
+            &["--pyramid", WARM, size[0], size[1]],
+        );
+        let above = common::log_column(&log.path().join("frames.csv"), "tiles_above_base");
+        // The flyover ends low over the set, where the cut is the base grid.
+        assert!(
+            above.iter().filter(|&&n| n > 0.0).count() >= 3,
+            "{path}: layer tiles drawn per frame: {above:?}"
+        );
+        let brute = flight(
+            &set,
+            &log.path().join("brute"),
+            path,
+            6,
+            &["--brute-force", size[0], size[1]],
+        );
+        let seams = common::flight_with_fault(
+            &set,
+            &log.path().join("seams"),
+            path,
+            6,
+            &["--pyramid", WARM, size[0], size[1]],
+            Some("no-stitch-across"),
+        );
+        assert!(lod.iter().zip(&brute).all(|(l, b)| cracks(l, b).is_empty()));
+        open += seams
+            .iter()
+            .zip(&brute)
+            .map(|(l, b)| cracks(l, b).len())
+            .sum::<usize>();
+    }
+    assert!(
+        open > 0,
+        "no crack without the stitches across layers: the seams were never tested"
+    );
+}
+
 /// Flies `path` with LOD (and `extra` flags) and with brute force (whole budget); asserts no
 /// crack and a silhouette within tau + 1 px in every frame. Returns the LOD run's summary.
 fn compare_under_budget(

@@ -704,7 +704,8 @@ fn a_mirror_set_is_checked_where_it_is_seen_and_passes_everywhere() {
     assert!(checked(&terrain).is_empty(), "nothing checked at open");
     let path = CameraPath::flyover(&terrain);
     let camera = path.at(path.keys[0].time);
-    renderer::plan::check_view(&terrain, &camera, EXTENT);
+    let rule = renderer::plan::LevelRule::Tau(1.0, renderer::lod::Bound::Guaranteed);
+    renderer::plan::check_view(&terrain, &camera, EXTENT, rule);
     let view = camera.view(EXTENT.0, EXTENT.1);
     let mut visible = visible_tiles(&terrain, &view, camera.position);
     visible.sort_unstable();

@@ -66,9 +66,12 @@ struct TileRecord {
     // tiles there), so that every tile holding a vertex gives it the same table.
     LevelCoefficients tables[9];
     uvec4 extent;            // xy: the mesh's last column and row (256 but in a partial tile)
+    uint layer;              // its pyramid layer p: vertex (x, y) at tile_offset + (x, y) << p
+    float height_step;       // its layer's metres per height code
+    uvec2 pad1;
     // To 1024 bytes: a record's offset in the buffer is then a multiple of any device's
     // minUniformBufferOffsetAlignment (at most 256), as the Tile binding's dynamic offset must be.
-    uvec4 pad2[11];
+    uvec4 pad2[10];
 };
 
 layout(std430, set = 0, binding = 0) readonly buffer Pool { uint words[]; } pool;

@@ -99,6 +99,8 @@ void main() {
         }
         int height_base = records.tiles[r].height_base;
         ivec2 tile_offset = records.tiles[r].tile_offset;
+        uint layer_shift = records.tiles[r].layer;
+        float height_step = records.tiles[r].height_step;
         float cap = records.tiles[r].cap;
         uvec4 starts_lo = records.tiles[r].starts_lo;
         uvec4 starts_hi = records.tiles[r].starts_hi;
@@ -117,7 +119,7 @@ void main() {
             uint v = pool.words[positions + i];
             uint x = v & 511u;
             uint y = (v >> 9) & 511u;
-            float own = float(height_base + int(v >> 18)) * frame.height_step;
+            float own = float(height_base + int(v >> 18)) * height_step;
             scratch.cells[region + y * SIDE + x] = uvec2(floatBitsToUint(own));
             uint k = scale_index(x, y);
             uvec4 passed = uvec4(greaterThanEqual(uvec4(i), starts_lo))
@@ -165,8 +167,8 @@ void main() {
                 }
                 vec2 a = uintBitsToFloat(scratch.cells[region + p.y * SIDE + p.x]);
                 vec2 b = uintBitsToFloat(scratch.cells[region + q.y * SIDE + q.x]);
-                float own = float(height_base + int(v >> 18)) * frame.height_step;
-                ivec2 sample_pos = tile_offset + ivec2(int(x), int(y));
+                float own = float(height_base + int(v >> 18)) * height_step;
+                ivec2 sample_pos = tile_offset + (ivec2(int(x), int(y)) << layer_shift);
                 vec3 relative = vec3(float(sample_pos.x) * frame.camera.w,
                                      -float(sample_pos.y) * frame.spacing_y, own)
                               - frame.camera.xyz;

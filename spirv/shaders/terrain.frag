@@ -28,6 +28,7 @@ layout(location = 2) in float level;
 layout(location = 3) flat in uint flags;
 layout(location = 4) in vec2 sample_xy;
 layout(location = 5) flat in vec4 texture_tile;
+layout(location = 6) in vec2 tile_xy;
 
 layout(location = 0) out vec4 colour;
 
@@ -60,7 +61,7 @@ vec3 level_colour(float l) {
 
 void main() {
     // Derivatives in uniform control flow, before any branch.
-    vec2 uv = frame.texture_map.x + (sample_xy - texture_tile.xy) * frame.texture_map.y;
+    vec2 uv = frame.texture_map.x + (tile_xy + texture_tile.xy) * frame.texture_map.y;
     vec2 du = dFdx(uv);
     vec2 dv = dFdy(uv);
     vec3 n = normalize(cross(dFdx(relative), dFdy(relative)));

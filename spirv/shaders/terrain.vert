@@ -56,6 +56,8 @@ layout(location = 3) flat out uint flags;
 // coordinates relative to the provoking vertex's tile, so they sample one layer consistently.
 layout(location = 4) out vec2 sample_xy;
 layout(location = 5) flat out vec4 texture_tile;
+// The vertex's sample in its tile (its layer's samples): where the tile's texture is.
+layout(location = 6) out vec2 tile_xy;
 
 // Signed byte `byte` of the pool.
 float pool_byte(uint byte) {
@@ -75,8 +77,10 @@ void main() {
     uint x = v & 511u;
     uint y = (v >> 9) & 511u;
     uint code = v >> 18;
-    ivec2 sample_pos = REC(r, tile_offset) + ivec2(int(x), int(y));
-    float own = float(REC(r, height_base) + int(code)) * frame.height_step;
+    // A pyramid layer's samples are 2^layer base samples apart.
+    uint layer_shift = REC(r, layer);
+    ivec2 sample_pos = REC(r, tile_offset) + (ivec2(int(x), int(y)) << layer_shift);
+    float own = float(REC(r, height_base) + int(code)) * REC(r, height_step);
     relative = vec3(float(sample_pos.x) * frame.camera.w, -float(sample_pos.y) * frame.spacing_y, own) - frame.camera.xyz;
 
     float l = float(REC(r, level));
@@ -136,8 +140,9 @@ void main() {
     level = l;
     flags = frame.flags;
     sample_xy = vec2(sample_pos);
+    tile_xy = vec2(x, y);
     uint layer = REC(r, texture_layer);
-    texture_tile = vec4(vec2(REC(r, tile_offset)) + REC(r, texture_shift),
+    texture_tile = vec4(vec2(-REC(r, texture_shift)),
                         layer == 0xffffffffu ? -1.0 : float(layer),
                         REC(r, texture_finest));
     gl_Position = frame.view_proj * vec4(relative, 1.0);

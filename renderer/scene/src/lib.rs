@@ -7,6 +7,5 @@
 pub mod camera;
 pub mod levels;
 pub mod path;
-pub mod pyramid;
 pub mod terrain;
 pub mod tile;

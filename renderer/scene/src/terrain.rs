@@ -24,10 +24,17 @@ use crate::tile::{rebase, Paged, Side, TileInfo, HEIGHT_CELLS};
 const OUTLINE_BYTES: u64 = 4096;
 
 pub struct Terrain {
+    /// The base grid's view of the file.
     pub set: TileSet,
+    /// The base grid's tiles (row-major), then, when opened with its pyramid
+    /// ([`Terrain::open_pyramid`]), each layer's above it ([`Terrain::layers`]).
     pub tiles: Vec<TileInfo>,
+    /// The base grid's tiles per row and column.
     pub tiles_x: u32,
     pub tiles_y: u32,
+    /// Layer 0 (the base grid) and the pyramid layers opened above it: where each layer's
+    /// tiles start in `tiles`, its grid of tiles and its view of the file.
+    pub layers: Vec<Layer>,
     pub levels: u32,
     pub spacing: (f64, f64),
     pub height_step: f32,
@@ -50,6 +57,26 @@ pub struct Terrain {
     /// that wakes the thread checking them.
     ahead: Mutex<VecDeque<usize>>,
     ahead_ready: Condvar,
+}
+
+/// One layer of the tiles a terrain holds.
+pub struct Layer {
+    /// Its first tile's index in [`Terrain::tiles`]; its tiles follow, row-major.
+    pub first: usize,
+    pub tiles_x: u32,
+    pub tiles_y: u32,
+    /// The layer's view of the file (its directory, spacing and height lattice).
+    pub set: TileSet,
+}
+
+impl Layer {
+    pub fn len(&self) -> usize {
+        (self.tiles_x * self.tiles_y) as usize
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
 }
 
 impl Terrain {
@@ -76,34 +103,38 @@ impl Terrain {
         Terrain::of_layer(set)
     }
 
+    /// [`Terrain::open`] with every pyramid layer of the set above the base grid, their tiles
+    /// after the base grid's in one index space (the frame's cut chooses among them,
+    /// `renderer::cut`). A set without a pyramid opens as [`Terrain::open`] does.
+    pub fn open_pyramid(path: &Path) -> Result<Terrain, tiles::FormatError> {
+        let file = TileSet::open(path)?;
+        let mut terrain = Terrain::of_layer(file.clone())?;
+        for p in 1..=file.pyramid_layers() {
+            let Some(set) = file.layer(p) else { break };
+            terrain.add_layer(set)?;
+        }
+        Ok(terrain)
+    }
+
     /// The terrain of a tile set already open (a layer's view, [`TileSet::layer`], or the
     /// base grid): every tile's header and level table.
     pub fn of_layer(set: TileSet) -> Result<Terrain, tiles::FormatError> {
         let h = *set.header();
-        let (sx, sy) = (h.spacing_x, h.spacing_y);
-        let mut tiles = Vec::with_capacity((h.tiles_x * h.tiles_y) as usize);
-        // Ask for every outline's page first: from a cold cache the reads then queue together
-        // instead of one seek at a time (advice only; a kernel that ignores it is just slower).
-        for ty in 0..h.tiles_y {
-            for tx in 0..h.tiles_x {
-                if let Some(r) = set.blob_range(tx, ty) {
-                    let _ = set.will_need(r.start..r.end.min(r.start + OUTLINE_BYTES));
-                }
-            }
-        }
-        for ty in 0..h.tiles_y {
-            for tx in 0..h.tiles_x {
-                tiles.push(tile_info(&set, tx, ty)?);
-            }
-        }
+        let tiles = layer_tiles(&set, 0)?;
         let texture = set.texture_layout();
         let mut terrain = Terrain {
+            layers: vec![Layer {
+                first: 0,
+                tiles_x: h.tiles_x,
+                tiles_y: h.tiles_y,
+                set: set.clone(),
+            }],
             set,
             tiles,
             tiles_x: h.tiles_x,
             tiles_y: h.tiles_y,
             levels: h.levels,
-            spacing: (sx, sy),
+            spacing: (h.spacing_x, h.spacing_y),
             height_step: h.height_step,
             // A file that claims shared sides but whose borders differ (tampered with) loses
             // the tiles whose sides differ, when they are checked.
@@ -116,8 +147,77 @@ impl Terrain {
             ahead: Mutex::new(VecDeque::new()),
             ahead_ready: Condvar::new(),
         };
-        terrain.share_tables();
+        terrain.share_tables(0);
         Ok(terrain)
+    }
+
+    /// Appends the next pyramid layer's tiles (the layer's view of the same file).
+    fn add_layer(&mut self, set: TileSet) -> Result<(), tiles::FormatError> {
+        let p = self.layers.len() as u32;
+        let h = *set.header();
+        let first = self.tiles.len();
+        self.tiles.extend(layer_tiles(&set, p)?);
+        self.layers.push(Layer {
+            first,
+            tiles_x: h.tiles_x,
+            tiles_y: h.tiles_y,
+            set,
+        });
+        self.share_tables(p);
+        Ok(())
+    }
+
+    /// The index of the top layer opened (0: the base grid alone).
+    pub fn top(&self) -> u32 {
+        self.layers.len() as u32 - 1
+    }
+
+    /// The base grid's tiles: the first of [`Terrain::tiles`].
+    pub fn base(&self) -> &[TileInfo] {
+        &self.tiles[..self.layers[0].len()]
+    }
+
+    /// Tile `i` of layer `p`'s index in [`Terrain::tiles`].
+    pub fn index_in(&self, p: u32, i: usize) -> usize {
+        self.layers[p as usize].first + i
+    }
+
+    /// The tile at column `tx`, row `ty` of layer `p`, if the layer has one.
+    pub fn tile_in(&self, p: u32, tx: u32, ty: u32) -> Option<usize> {
+        let l = self.layers.get(p as usize)?;
+        (tx < l.tiles_x && ty < l.tiles_y).then(|| l.first + (ty * l.tiles_x + tx) as usize)
+    }
+
+    /// The file's view that holds `tile`'s data: its layer's.
+    pub fn set_of(&self, tile: &TileInfo) -> &TileSet {
+        &self.layers[tile.layer as usize].set
+    }
+
+    /// Metres per height code of `tile`'s layer (each layer has its own lattice).
+    pub fn height_step_of(&self, tile: &TileInfo) -> f32 {
+        self.set_of(tile).header().height_step
+    }
+
+    /// Tiles (indices in [`Terrain::tiles`]) of layer `p - 1` under tile `i` (an index in
+    /// [`Terrain::tiles`]) of layer `p >= 1`: up to 2 x 2.
+    pub fn children(&self, i: usize) -> impl Iterator<Item = usize> + '_ {
+        let t = &self.tiles[i];
+        let p = t.layer;
+        let (tx, ty) = (t.tx, t.ty);
+        (0..4u32)
+            .filter(move |_| p >= 1)
+            .filter_map(move |k| self.tile_in(p - 1, 2 * tx + k % 2, 2 * ty + k / 2))
+    }
+
+    /// The base grid's tiles under tile `i` (an index in [`Terrain::tiles`]): columns and
+    /// rows.
+    pub fn base_tiles_under(&self, i: usize) -> (std::ops::Range<u32>, std::ops::Range<u32>) {
+        let t = &self.tiles[i];
+        let f = 1u32 << t.layer;
+        (
+            (t.tx * f).min(self.tiles_x)..((t.tx + 1) * f).min(self.tiles_x),
+            (t.ty * f).min(self.tiles_y)..((t.ty + 1) * f).min(self.tiles_y),
+        )
     }
 
     /// Checks tile `i` the first time it is asked (later calls return the first answer; a
@@ -238,7 +338,7 @@ impl Terrain {
     /// The tile's own check (see [`Terrain::check`]), made once.
     fn own<'a>(&self, tile: &'a TileInfo) -> &'a Result<Paged, String> {
         tile.own.get_or_init(|| {
-            paged(&self.set, tile).map_err(|what| {
+            paged(self.set_of(tile), tile).map_err(|what| {
                 // verify's problems start with the file's name, a FormatError too.
                 let prefix = format!("{}: ", self.set.path().display());
                 format!("{prefix}{}", what.strip_prefix(&prefix).unwrap_or(&what))
@@ -287,11 +387,14 @@ impl Terrain {
 
     /// Gives every tile its side and corner level tables: the larger errors of the tiles that
     /// hold the side or corner, the same table in each of them.
-    fn share_tables(&mut self) {
+    fn share_tables(&mut self, p: u32) {
+        let layer = &self.layers[p as usize];
+        let range = layer.first..layer.first + layer.len();
         let own: Vec<LevelTable> = self.tiles.iter().map(|t| t.tables[0]).collect();
+        let index = |tx: u32, ty: u32| self.tile_in(p, tx, ty);
         let at = |tx: i64, ty: i64| {
             (tx >= 0 && ty >= 0)
-                .then(|| self.tile_index(tx as u32, ty as u32))
+                .then(|| index(tx as u32, ty as u32))
                 .flatten()
                 .map(|i| own[i])
         };
@@ -299,16 +402,13 @@ impl Terrain {
             cells
                 .iter()
                 .filter_map(|&(dx, dy)| at(i64::from(t.tx) + dx, i64::from(t.ty) + dy))
-                .fold(own[self.tile_index(t.tx, t.ty).unwrap_or(0)], |a, b| {
-                    a.max(&b)
-                })
+                .fold(own[index(t.tx, t.ty).unwrap_or(0)], |a, b| a.max(&b))
         };
-        let tables: Vec<[LevelTable; 9]> = self
-            .tiles
+        let tables: Vec<[LevelTable; 9]> = self.tiles[range.clone()]
             .iter()
             .map(|t| {
                 [
-                    own[self.tile_index(t.tx, t.ty).unwrap_or(0)],
+                    own[index(t.tx, t.ty).unwrap_or(0)],
                     around(t, &[Side::North.step()]),
                     around(t, &[Side::East.step()]),
                     around(t, &[Side::South.step()]),
@@ -320,7 +420,7 @@ impl Terrain {
                 ]
             })
             .collect();
-        for (t, tables) in self.tiles.iter_mut().zip(tables) {
+        for (t, tables) in self.tiles[range].iter_mut().zip(tables) {
             t.drawn_table = tables[1..].iter().fold(tables[0], |a, b| a.max(b));
             t.tables = tables;
         }
@@ -332,7 +432,7 @@ impl Terrain {
         let (x, y) = (i64::from(tile.tx) + dx, i64::from(tile.ty) + dy);
         let x = u32::try_from(x).ok()?;
         let y = u32::try_from(y).ok()?;
-        self.tile_index(x, y)
+        self.tile_in(tile.layer, x, y)
     }
 
     /// What each tile costs in GPU memory, level by level (the memory manager's view).
@@ -362,7 +462,7 @@ impl Terrain {
         if info.usable() != Some(true) {
             return None;
         }
-        let blob = self.set.blob(info.tx, info.ty)?;
+        let blob = self.set_of(info).blob(info.tx, info.ty)?;
         let (offset, len) = match part {
             memory::Part::Positions(j) => {
                 let l = info.levels.get(j as usize)?;
@@ -391,7 +491,7 @@ impl Terrain {
             return None;
         }
         let range = info.paged()?.texture_mips.get(mip as usize)?.clone();
-        self.set.texture_blob(info.tx, info.ty)?.get(range)
+        self.set_of(info).texture_blob(info.tx, info.ty)?.get(range)
     }
 
     /// Where the camera at `p` is for the shader: its tile (column, row of tiles) and its
@@ -406,23 +506,26 @@ impl Terrain {
         (tile, relative)
     }
 
-    /// A tile's first sample relative to the camera's tile `camera_tile` (columns, rows): its
-    /// record's `tile_offset`.
+    /// A tile's first sample relative to the camera's tile `camera_tile` (columns, rows of
+    /// base samples): its record's `tile_offset`. A layer tile's first sample is its column
+    /// and row of layer tiles times `2^layer` base tiles.
     pub fn tile_offset(camera_tile: (f64, f64), tile: &TileInfo) -> [i32; 2] {
         let cells = f64::from(TILE_CELLS);
+        let f = f64::from(1u32 << tile.layer);
         [
-            ((f64::from(tile.tx) - camera_tile.0) * cells) as i32,
-            ((f64::from(tile.ty) - camera_tile.1) * cells) as i32,
+            ((f64::from(tile.tx) * f - camera_tile.0) * cells) as i32,
+            ((f64::from(tile.ty) * f - camera_tile.1) * cells) as i32,
         ]
     }
 
+    /// The base grid's tile at column `tx`, row `ty`.
     pub fn tile_index(&self, tx: u32, ty: u32) -> Option<usize> {
         (tx < self.tiles_x && ty < self.tiles_y).then(|| (ty * self.tiles_x + tx) as usize)
     }
 
     /// World bounds of the whole dataset.
     pub fn bounds(&self) -> (DVec3, DVec3) {
-        self.tiles
+        self.base()
             .iter()
             .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), t| {
                 (lo.min(t.min), hi.max(t.max))
@@ -488,9 +591,30 @@ impl Terrain {
     }
 }
 
+/// Every tile of `set`'s layer `p` (row-major), from their outlines.
+fn layer_tiles(set: &TileSet, p: u32) -> Result<Vec<TileInfo>, tiles::FormatError> {
+    let h = *set.header();
+    let mut tiles = Vec::with_capacity((h.tiles_x * h.tiles_y) as usize);
+    // Ask for every outline's page first: from a cold cache the reads then queue together
+    // instead of one seek at a time (advice only; a kernel that ignores it is just slower).
+    for ty in 0..h.tiles_y {
+        for tx in 0..h.tiles_x {
+            if let Some(r) = set.blob_range(tx, ty) {
+                let _ = set.will_need(r.start..r.end.min(r.start + OUTLINE_BYTES));
+            }
+        }
+    }
+    for ty in 0..h.tiles_y {
+        for tx in 0..h.tiles_x {
+            tiles.push(tile_info(set, tx, ty, p)?);
+        }
+    }
+    Ok(tiles)
+}
+
 /// One tile's header, level table, box and own level table, from its outline (no checksum:
 /// the tile's check comes when it is first needed).
-fn tile_info(set: &TileSet, tx: u32, ty: u32) -> Result<TileInfo, tiles::FormatError> {
+fn tile_info(set: &TileSet, tx: u32, ty: u32, layer: u32) -> Result<TileInfo, tiles::FormatError> {
     let h = *set.header();
     let (sx, sy) = (h.spacing_x, h.spacing_y);
     let (th, mut levels) = set.tile_table(tx, ty)?;
@@ -527,6 +651,7 @@ fn tile_info(set: &TileSet, tx: u32, ty: u32) -> Result<TileInfo, tiles::FormatE
     Ok(TileInfo {
         tx,
         ty,
+        layer,
         header: th,
         levels,
         min,

@@ -19,8 +19,11 @@ pub(crate) const HEIGHT_CELLS: usize = 8;
 /// its level tables. What needs the tile's data, its borders and texture mips, comes with its
 /// check ([`Paged`]), the first time the tile is needed ([`crate::terrain::Terrain::check`]).
 pub struct TileInfo {
+    /// Its column and row in its layer's grid of tiles.
     pub tx: u32,
     pub ty: u32,
+    /// Its pyramid layer (0: the base grid); its samples are `2^layer` base samples apart.
+    pub layer: u32,
     pub header: TileHeader,
     pub levels: Vec<LevelEntry>,
     /// World box over all levels: x east, y north, z up (metres).

@@ -454,6 +454,15 @@ fn stitch_bound(terrain: &Terrain) -> u64 {
                 bytes += 16 * (longest(i, side) + longest(j, side.opposite()));
             }
         }
+        // A pyramid layer's tile may meet the two tiles of the layer below on any side
+        // instead (`stitch::stitch_across`), each side of them at most a vertex per sample.
+        if a.layer > 0 {
+            let finer = 2 * (u64::from(tiles::mesh::TILE_CELLS) + 1);
+            bytes += Side::ALL
+                .iter()
+                .map(|&side| 16 * (longest(i, side) + finer))
+                .sum::<u64>();
+        }
     }
     bytes.max(4)
 }

@@ -285,6 +285,11 @@ impl Renderer {
         record.part_builds = u64::from(uploads.part_builds);
         record.tiles_part_by_part = plan.draws.iter().filter(|d| d.key.is_some()).count() as u64;
         record.tiles_unmorphed = written.unmorphed;
+        record.tiles_above_base = plan
+            .draws
+            .iter()
+            .filter(|d| terrain.tiles[d.tile].layer > 0)
+            .count() as u64;
         record.gpu_allocations = gpu.allocations() - allocations;
         record.prediction_error_m = prepared.prediction_error_m;
         record.cpu_prefetch_ms = prepared.cpu_prefetch_ms;

@@ -91,6 +91,8 @@ pub(super) fn write_records(
             }
             r.tile_offset = Terrain::tile_offset(cam_tile, info);
             r.height_base = info.header.height_base;
+            r.layer = info.layer;
+            r.height_step = terrain.height_step_of(info);
             r.positions = (d.vertex_offset / 4) as u32;
             r.level = d.level;
             r.cap = d.level as f32;
@@ -121,7 +123,7 @@ pub(super) fn write_records(
                     view_proj: glam::Mat4::from_cols_array(&c.view_proj),
                     camera: glam::Vec4::from_array(c.camera),
                     spacing_y: c.spacing_y,
-                    height_step: c.height_step,
+                    height_step: r.height_step,
                     frame: *frame,
                     tile_offset: r.tile_offset,
                     cap: r.cap,

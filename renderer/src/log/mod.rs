@@ -14,7 +14,8 @@
 //! built on the GPU `index_builds, index_build_bytes`, the heights read back from the vertex
 //! shader `heights_read_back, heights_max_diff_m`, the tiles' checks when first needed
 //! `cpu_check_ms, tiles_checked, tiles_failed`, drawing part by part
-//! `tiles_part_by_part, part_builds`, the morph pass's `tiles_unmorphed`,
+//! `tiles_part_by_part, part_builds`, the morph pass's `tiles_unmorphed`, the tiles drawn from
+//! the pyramid's layers above the base grid `tiles_above_base` (`--pyramid`),
 //! and last `tiles_level_0 .. tiles_level_{n-1}`.
 
 use std::path::Path;
@@ -123,10 +124,12 @@ pub struct FrameRecord {
     /// Morphing tiles the morph pass skipped, drawn at their own heights: the frame's morphed
     /// heights (a share of the GPU budget) could not hold its vertices, so none was morphed.
     pub tiles_unmorphed: u64,
+    /// Drawn tiles of the pyramid's layers above the base grid (`--pyramid`; 0 otherwise).
+    pub tiles_above_base: u64,
     pub tiles_per_level: Vec<u64>,
 }
 
-pub const BASE_COLUMNS: [&str; 56] = [
+pub const BASE_COLUMNS: [&str; 57] = [
     "frame",
     "time_s",
     "frame_ms",
@@ -183,6 +186,7 @@ pub const BASE_COLUMNS: [&str; 56] = [
     "tiles_part_by_part",
     "part_builds",
     "tiles_unmorphed",
+    "tiles_above_base",
 ];
 
 pub fn header(levels: u32) -> String {
@@ -270,6 +274,7 @@ impl FrameRecord {
             n(self.tiles_part_by_part),
             n(self.part_builds),
             n(self.tiles_unmorphed),
+            n(self.tiles_above_base),
         ];
         let levels = self.tiles_per_level.iter().map(|&v| n(v));
         cells

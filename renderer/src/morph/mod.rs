@@ -365,7 +365,7 @@ impl TileMorph {
                 terrain.spacing.0 as f32,
             ),
             spacing_y: terrain.spacing.1 as f32,
-            height_step: terrain.height_step,
+            height_step: terrain.height_step_of(&terrain.tiles[tile]),
             frame: frame_constants(&view, tau),
             tile_offset: Terrain::tile_offset(cam_tile, &terrain.tiles[tile]),
             cap: terrain.levels.saturating_sub(1) as f32,

@@ -116,8 +116,7 @@ impl Prefetcher {
             };
             out.horizons += 1;
             let view = predicted.view(extent.0, extent.1);
-            let visible = plan::visible_tiles(terrain, &view, predicted.position);
-            let wanted = plan::wanted_levels(terrain, &view, predicted.position, &visible, rule);
+            let wanted = plan::requests_for(terrain, &view, predicted.position, rule);
             for r in wanted {
                 let i = r.tile as usize;
                 if listed[i].is_some_and(|l| l >= r.wanted) {
@@ -162,7 +161,7 @@ impl Prefetcher {
             return 0;
         }
         let t = &terrain.tiles[tile];
-        let Some(range) = terrain.set.blob_range(t.tx, t.ty) else {
+        let Some(range) = terrain.set_of(t).blob_range(t.tx, t.ty) else {
             return 0;
         };
         // Advice only: a kernel that refuses it costs nothing but the read-ahead.
@@ -202,7 +201,7 @@ impl Prefetcher {
                 break;
             }
             let t = &terrain.tiles[i];
-            if let Some(range) = terrain.set.blob_range(t.tx, t.ty) {
+            if let Some(range) = terrain.set_of(t).blob_range(t.tx, t.ty) {
                 let _ = terrain.set.dont_need(range);
             }
             let len = blob_len(terrain, i);
@@ -217,7 +216,7 @@ impl Prefetcher {
 fn blob_len(terrain: &Terrain, tile: usize) -> u64 {
     let t = &terrain.tiles[tile];
     terrain
-        .set
+        .set_of(t)
         .blob_range(t.tx, t.ty)
         .map_or(0, |r| r.end - r.start)
 }

@@ -861,7 +861,9 @@ pub fn tile_count(width: usize, height: usize) -> Result<(u32, u32), String> {
     Ok((tx as u32, ty as u32))
 }
 
-/// A memory-mapped, validated tile set.
+/// A memory-mapped, validated tile set. A clone is another view of the same mapping (and of
+/// the same rebuilt tiles).
+#[derive(Clone)]
 pub struct TileSet {
     path: PathBuf,
     map: std::sync::Arc<memmap2::Mmap>,
