@@ -45,6 +45,19 @@ pub(super) fn write_stitches(
 /// drawn part by part (None: at its level throughout).
 pub type DrawnTile = (usize, u32, usize, Option<TileMorph>, Option<PartKey>);
 
+/// Where a record's vertices go: the tile's first sample relative to the camera's tile, its
+/// layer (its samples `2^layer` base samples apart) and its layer's height lattice.
+fn place(
+    r: &mut TileRecord,
+    terrain: &Terrain,
+    info: &crate::tile::TileInfo,
+    cam_tile: (f64, f64),
+) {
+    r.tile_offset = Terrain::tile_offset(cam_tile, info);
+    (r.height_base, r.height_step) = (info.header.height_base, terrain.height_step_of(info));
+    r.layer = info.layer;
+}
+
 /// Writes the frame's morph constants and tile records, one per draw in order (a draw's record
 /// is its index); returns each draw as written, with how it morphs only when `describe` (for
 /// the error meter and the read-back), and how many draws are unmorphed because the morph
@@ -89,13 +102,9 @@ pub(super) fn write_records(
             if let Some(fault) = fault {
                 fault.spoil_record(&mut r, info);
             }
-            r.tile_offset = Terrain::tile_offset(cam_tile, info);
-            r.height_base = info.header.height_base;
-            r.layer = info.layer;
-            r.height_step = terrain.height_step_of(info);
+            place(&mut r, terrain, info, cam_tile);
             r.positions = (d.vertex_offset / 4) as u32;
-            r.level = d.level;
-            r.cap = d.level as f32;
+            (r.level, r.cap) = (d.level, d.level as f32);
             r.heights = if placed { heights as u32 } else { u32::MAX };
             let levels = d.key.map_or([d.level as u8; 16], |k| k.levels);
             [r.parts_lo, r.parts_hi] = tiles::parts::packed_levels(&levels);
