@@ -40,6 +40,12 @@ pub enum Fault {
 }
 
 impl Fault {
+    /// [`Fault::from_env`], read once a process (for what asks every frame).
+    pub fn of_process() -> Option<Fault> {
+        static FAULT: std::sync::OnceLock<Option<Fault>> = std::sync::OnceLock::new();
+        *FAULT.get_or_init(Fault::from_env)
+    }
+
     pub fn from_env() -> Option<Fault> {
         let v = std::env::var("VKTERRAIN_FAULT").ok()?;
         match v.as_str() {

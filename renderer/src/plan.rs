@@ -408,7 +408,7 @@ pub fn stitch_granted(
         .map(|(k, d)| (d.tile, (d.level, k as u32)))
         .collect();
     let mut stitches = Vec::new();
-    let across = crate::fault::Fault::from_env() != Some(crate::fault::Fault::NoStitchAcross);
+    let across = crate::fault::Fault::of_process() != Some(crate::fault::Fault::NoStitchAcross);
     for (k, d) in draws.iter().enumerate() {
         let a = &terrain.tiles[d.tile];
         let mut s = Stitch::default();

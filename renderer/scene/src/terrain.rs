@@ -535,7 +535,7 @@ impl Terrain {
 
     /// The base grid's tile at column `tx`, row `ty`.
     pub fn tile_index(&self, tx: u32, ty: u32) -> Option<usize> {
-        (tx < self.tiles_x && ty < self.tiles_y).then(|| (ty * self.tiles_x + tx) as usize)
+        self.tile_in(0, tx, ty)
     }
 
     /// World bounds of the whole dataset.
