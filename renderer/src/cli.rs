@@ -8,6 +8,7 @@ use anyhow::{bail, Context, Result};
 use clap::Parser;
 use renderer::lod::Bound;
 use renderer::parts::BuildCost;
+use renderer::plan::CheckPolicy;
 use renderer::prefetch::PrefetchOptions;
 use renderer::settings::{MemoryOptions, MorphShader, Settings, Shading};
 use renderer::terrain::Terrain;
@@ -225,6 +226,14 @@ pub struct Cli {
     /// across layers yet, so --pyramid implies --no-geomorph.
     #[arg(long, conflicts_with_all = ["brute_force", "level", "measure_error", "read_back_heights"])]
     pub pyramid: bool,
+    /// With --pyramid, when the cut's tiles get their checks (checksum and verify's semantic
+    /// checks, made before a tile's first upload): `behind` checks them off the frame, nearest
+    /// first, and draws each one's nearest checked ancestor until it passes (no frame waits
+    /// for more than the top of the pyramid); `on-frame` waits for every check on the frame
+    /// that first needs the tile; a number N checks at most N a frame on the frame and stands
+    /// in for the rest (deterministic, for tests). A base grid is always checked on the frame.
+    #[arg(long, default_value = "behind", value_name = "behind|on-frame|N", value_parser = parse_checks)]
+    pub checks: CheckPolicy,
     /// Write the path flown (CSV keyframes) here.
     #[arg(long)]
     pub record: Option<PathBuf>,
@@ -254,6 +263,17 @@ pub struct Cli {
     /// tiles from disk as a first run would.
     #[arg(long)]
     pub cold_file_cache: bool,
+}
+
+fn parse_checks(s: &str) -> Result<CheckPolicy, String> {
+    match s {
+        "behind" => Ok(CheckPolicy::Behind),
+        "on-frame" => Ok(CheckPolicy::OnFrame),
+        n => n
+            .parse()
+            .map(CheckPolicy::PerFrame)
+            .map_err(|_| format!("expected behind, on-frame or a number of tiles, got {s:?}")),
+    }
 }
 
 /// `--part-build-cost`'s default, measured on lavapipe (bench/README.md, "A build's worth").
@@ -419,6 +439,7 @@ impl Cli {
             // (`Cli::parts_by_device`).
             part_by_part: !self.whole_tiles && !self.draw_only,
             part_build_cost: self.part_build_cost,
+            checks: self.checks,
             morph_shader: match self.morph_shader {
                 MorphShaderArg::Hierarchical => MorphShader::Hierarchical,
                 MorphShaderArg::TwoLevels => MorphShader::TwoLevels,

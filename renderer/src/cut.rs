@@ -252,3 +252,149 @@ impl Walk<'_> {
         }
     }
 }
+
+/// The level tile `i` is drawn at when it stands in for tiles of its cut
+/// ([`stand_in`]): the coarsest that meets tau on screen, or its finest.
+pub fn level_at(terrain: &Terrain, view: &View, camera: DVec3, tau: f64, i: usize) -> u32 {
+    let tile = &terrain.tiles[i];
+    lod::level_for(
+        tile,
+        lod::tolerable_error(view, camera, tile, tau, Bound::Guaranteed),
+    )
+}
+
+/// Where a cut's tiles stand in their checks: the frame asks, and the answer is its policy
+/// (`vkterrain --checks`).
+pub trait Checks {
+    /// Whether tile `i` may be drawn: Some(true) it passed its check, Some(false) it failed
+    /// (never drawn), None not checked yet.
+    fn state(&self, i: usize) -> Option<bool>;
+    /// Tile `i`, not checked yet, is wanted or would stand in for a wanted tile: to be
+    /// checked later.
+    fn later(&mut self, i: usize);
+    /// Nothing over tile `i` can be drawn: check it now, whatever the policy; true if it
+    /// passed.
+    fn now(&mut self, i: usize) -> bool;
+}
+
+/// What a frame draws of a cut.
+#[derive(Clone, Debug, Default)]
+pub struct Drawn {
+    /// Its tiles (indices in [`Terrain::tiles`]), in no particular order.
+    pub tiles: Vec<usize>,
+    /// Tiles of the cut not drawn themselves: an ancestor is drawn over their ground.
+    pub stood_in: usize,
+}
+
+/// The tiles a frame draws for `cut` while some of its tiles cannot be drawn: not checked yet
+/// (their checks run off the frame, `checks` decides) or failed. Each such tile's nearest
+/// ancestor that passed its check is drawn in its place, the ground of every other tile under
+/// that ancestor with it. Where nothing over a tile has passed, the coarsest unchecked one is
+/// checked on the frame (the first frame checks the top of each chain this way, one tile for
+/// many). A tile that failed, with every ancestor, leaves its ground undrawn, as in a base
+/// grid.
+///
+/// Then the drawn tiles are balanced as [`cut_with`] balances the cut, but upwards: a tile
+/// beside a drawn tile two or more layers coarser is replaced by its ancestor one layer below
+/// that one (or that ancestor's own stand-in), until every two neighbours are at most a layer
+/// apart, which is what the stitches across layers join ([`crate::stitch::stitch_across`]).
+/// Tiles only ever rise towards the top layer, so it ends. With `balance` false (a test's
+/// control) tiles two layers apart may meet, where no stitch joins them. Checked coarse layers
+/// first (as the frames ask, [`Checks::later`]), the stand-ins seldom need it: none of the
+/// orbits and flyovers over the 1K, 4K and 16K mirror sets did (12 frames each, two checks a
+/// frame or checked behind); a tile that fails while its neighbours pass does.
+pub fn stand_in(terrain: &Terrain, cut: &[Node], checks: &mut impl Checks, balance: bool) -> Drawn {
+    let mut drawn: HashSet<usize> = HashSet::with_capacity(cut.len());
+    for n in cut {
+        if let Some(a) = drawable(terrain, n.tile, checks) {
+            drawn.insert(a);
+        }
+    }
+    loop {
+        // A tile under another drawn tile is drawn by it.
+        let over: Vec<usize> = drawn
+            .iter()
+            .copied()
+            .filter(|&t| ancestors(terrain, t).any(|a| drawn.contains(&a)))
+            .collect();
+        for t in over {
+            drawn.remove(&t);
+        }
+        if !balance {
+            break;
+        }
+        let mut rise: Vec<(usize, u32)> = drawn
+            .iter()
+            .filter_map(|&t| coarse_beside(terrain, &drawn, t).map(|r| (t, r)))
+            .collect();
+        if rise.is_empty() {
+            break;
+        }
+
+        rise.sort_unstable();
+        for (t, r) in rise {
+            let a = ancestors(terrain, t)
+                .find(|&a| terrain.tiles[a].layer == r)
+                .expect("a tile beside a coarser one has ancestors up to its layer");
+            drawn.remove(&t);
+            if let Some(b) = drawable(terrain, a, checks) {
+                drawn.insert(b);
+            }
+        }
+    }
+    let stood_in = cut.iter().filter(|n| !drawn.contains(&n.tile)).count();
+    Drawn {
+        tiles: drawn.into_iter().collect(),
+        stood_in,
+    }
+}
+
+/// Tile `i`'s ancestors, nearest first.
+fn ancestors(terrain: &Terrain, i: usize) -> impl Iterator<Item = usize> + '_ {
+    std::iter::successors(terrain.parent(i), |&a| terrain.parent(a))
+}
+
+/// What can be drawn over tile `i`'s ground: the tile itself if it passed its check, else its
+/// nearest ancestor that passed; else, checked on the frame, the coarsest over it that passes.
+/// None: the tile and every ancestor failed. The unchecked tiles between the one drawn and `i`
+/// are asked for [`Checks::later`], so that the ground refines from coarse to fine.
+fn drawable(terrain: &Terrain, i: usize, checks: &mut impl Checks) -> Option<usize> {
+    let chain: Vec<usize> = std::iter::once(i).chain(ancestors(terrain, i)).collect();
+    for &a in &chain {
+        match checks.state(a) {
+            Some(true) => return Some(a),
+            None => checks.later(a),
+            Some(false) => {}
+        }
+    }
+    chain
+        .iter()
+        .rev()
+        .copied()
+        .find(|&a| checks.state(a).is_none() && checks.now(a))
+}
+
+/// The layer tile `t` must rise to: one below the coarsest drawn tile beside it, where that
+/// one is two or more layers above `t`'s (None: no such neighbour).
+fn coarse_beside(terrain: &Terrain, drawn: &HashSet<usize>, t: usize) -> Option<u32> {
+    let tile = &terrain.tiles[t];
+    let q = tile.layer;
+    let (tx, ty) = (i64::from(tile.tx), i64::from(tile.ty));
+    [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)]
+        .iter()
+        .filter_map(|&(dx, dy)| {
+            let (nx, ny) = (tx + dx, ty + dy);
+            if nx < 0 || ny < 0 {
+                return None;
+            }
+            // The drawn tile over the neighbouring cell, if any is at or above layer q.
+            (q..terrain.layers.len() as u32).find_map(|r| {
+                let k = r - q;
+                let j = terrain.tile_in(r, (nx >> k) as u32, (ny >> k) as u32)?;
+                drawn.contains(&j).then_some(r)
+            })
+        })
+        .filter(|&r| r >= q + 2)
+        .max()
+        .map(|r| r - 1)
+}

@@ -124,7 +124,12 @@ pub fn fly(
     // or ahead of need on a thread beside the frames).
     let (_, first) = camera_at(flight, 0);
     let begun = Instant::now();
-    crate::plan::check_view(flight.terrain, &first, flight.size, flight.settings.rule());
+    crate::plan::check_view(
+        flight.terrain,
+        &first,
+        flight.size,
+        flight.settings.planning(),
+    );
     let first_view_check_ms = begun.elapsed().as_secs_f64() * 1000.0;
     let error = flight
         .terrain

@@ -34,6 +34,22 @@ pub enum LevelRule {
     Morph(f64, lod::Bound, bool),
 }
 
+/// When the tiles of a pyramid's cut are checked (`vkterrain --checks`). A base grid's tiles
+/// are always checked on the frame that first needs them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CheckPolicy {
+    /// Off the frame, nearest first, on the thread that checks ahead of need; until a tile
+    /// passes, its nearest ancestor that passed is drawn over its ground ([`crate::cut::stand_in`]).
+    /// The default: no frame waits for more than the top of the pyramid.
+    Behind,
+    /// At most this many a frame on the frame itself, nearest first, the others waiting for
+    /// later frames behind their ancestors, not queued off the frame: what a frame draws
+    /// depends on the frames before it alone (the tests' deterministic stand-ins).
+    PerFrame(u32),
+    /// Every tile on the frame that first needs it, before anything is drawn.
+    OnFrame,
+}
+
 /// One tile to draw, where its data sits in the pool.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Draw {
@@ -81,6 +97,9 @@ pub struct Plan {
     pub tiles_checked: u64,
     /// Tiles that have failed their checks so far (never drawn).
     pub tiles_failed: u64,
+    /// Tiles of the pyramid's cut drawn by an ancestor: not checked yet, failed, or beside a
+    /// tile two layers coarser ([`crate::cut::stand_in`]).
+    pub tiles_stood_in: u64,
 }
 
 /// A tile set whose neighbouring tiles do not share their border.
@@ -114,7 +133,7 @@ pub fn plan(
     manager: &mut Manager,
     camera: &Camera,
     extent: (u32, u32),
-    rule: LevelRule,
+    (rule, checks): (LevelRule, CheckPolicy),
     residency: Residency,
 ) -> Result<Plan, BorderMismatch> {
     let Residency {
@@ -129,15 +148,25 @@ pub fn plan(
     let t = Instant::now();
     let cut = cut_tiles(terrain, &view, camera.position, rule);
     let mut visible = match &cut {
-        Some(cut) => cut.iter().map(|&(i, _)| i).collect(),
+        Some(_) => Vec::new(),
         None => visible_tiles(terrain, &view, camera.position),
     };
     let cpu_cull_ms = ms(t);
-    let tiles_visible = visible.len() as u64;
+    let tiles_visible = cut.as_ref().map_or(visible.len(), Vec::len) as u64;
 
-    // A tile is checked before its first upload; one that fails is never drawn.
+    // A tile is checked before its first upload; one that fails is never drawn. Over a
+    // pyramid, ancestors stand in for the cut's tiles not checked yet.
     let t = Instant::now();
+    let mut stood_in = 0;
+    let mut stand_in_checks = 0;
+    let cut = cut.map(|wanted| {
+        let (drawn, s, c) = drawn_cut(terrain, &view, camera.position, rule, &wanted, checks);
+        (stood_in, stand_in_checks) = (s, c);
+        visible = drawn.iter().map(|&(i, _)| i).collect();
+        drawn
+    });
     let (prefetch, tiles_checked) = check_visible(terrain, &mut visible, prefetch);
+    let tiles_checked = tiles_checked + stand_in_checks;
     let cpu_check_ms = ms(t);
 
     let t = Instant::now();
@@ -188,7 +217,103 @@ pub fn plan(
         cpu_check_ms,
         tiles_checked,
         tiles_failed: terrain.failed_count() as u64,
+        tiles_stood_in: stood_in as u64,
     })
+}
+
+/// The tiles a frame draws of the cut `wanted` (nearest first, with their levels) under the
+/// check policy, nearest first with their levels ([`crate::cut::stand_in`]); how many tiles
+/// of the cut were stood in for; and how many tiles were checked on the frame.
+fn drawn_cut(
+    terrain: &Terrain,
+    view: &View,
+    camera: DVec3,
+    rule: LevelRule,
+    wanted: &[(usize, u32)],
+    policy: CheckPolicy,
+) -> (Vec<(usize, u32)>, usize, u64) {
+    let LevelRule::Tau(tau, _) = rule else {
+        unreachable!("a cut is drawn under tau alone (draws_cut)");
+    };
+    let unchecked: Vec<usize> = wanted
+        .iter()
+        .map(|&(i, _)| i)
+        .filter(|&i| terrain.tiles[i].usable().is_none())
+        .collect();
+    // On the frame, every tile first, on every core.
+    let on_frame = policy == CheckPolicy::OnFrame;
+    if on_frame {
+        terrain.check_all(&unchecked);
+    }
+    let mut checks = FrameChecks {
+        terrain,
+        later: Vec::new(),
+        checked: if on_frame { unchecked.len() as u64 } else { 0 },
+    };
+    let nodes: Vec<crate::cut::Node> = wanted
+        .iter()
+        .map(|&(tile, level)| crate::cut::Node {
+            layer: terrain.tiles[tile].layer,
+            tile,
+            level,
+        })
+        .collect();
+    let drawn = crate::cut::stand_in(terrain, &nodes, &mut checks, true);
+    // The tiles still to check, coarse layers first, nearest first within a layer: each one
+    // checked refines the ground drawn by the one over it.
+    let mut later = checks.later;
+    let mut seen = std::collections::HashSet::new();
+    later.retain(|&i| seen.insert(i) && terrain.tiles[i].usable().is_none());
+    later.sort_by_key(|&i| std::cmp::Reverse(terrain.tiles[i].layer));
+    match policy {
+        CheckPolicy::Behind => terrain.check_first(&later),
+        CheckPolicy::PerFrame(n) => {
+            let now = &later[..later.len().min(n as usize)];
+            terrain.check_all(now);
+            checks.checked += now.len() as u64;
+        }
+        CheckPolicy::OnFrame => {}
+    }
+    let level: HashMap<usize, u32> = wanted.iter().copied().collect();
+    let tiles = drawn
+        .tiles
+        .iter()
+        .map(|&i| {
+            let l = level
+                .get(&i)
+                .copied()
+                .unwrap_or_else(|| crate::cut::level_at(terrain, view, camera, tau, i));
+            (i, l)
+        })
+        .collect();
+    (
+        nearest_first(terrain, camera, tiles),
+        drawn.stood_in,
+        checks.checked,
+    )
+}
+
+/// The frame's side of [`crate::cut::Checks`]: the tiles to check later are listed, for the
+/// policy to check off the frame or on the next ones.
+struct FrameChecks<'a> {
+    terrain: &'a Terrain,
+    later: Vec<usize>,
+    checked: u64,
+}
+
+impl crate::cut::Checks for FrameChecks<'_> {
+    fn state(&self, i: usize) -> Option<bool> {
+        self.terrain.tiles[i].usable()
+    }
+
+    fn later(&mut self, i: usize) {
+        self.later.push(i);
+    }
+
+    fn now(&mut self, i: usize) -> bool {
+        self.checked += 1;
+        self.terrain.check(i).is_ok()
+    }
 }
 
 /// Checks the visible tiles not checked yet (before their first upload) and keeps in `visible`
@@ -247,8 +372,20 @@ fn draw_of(
 /// Checks the tiles `camera` sees at `extent` pixels under `rule`, on every core
 /// ([`Terrain::check`]): the part of opening a tile set that its first view needs, before the
 /// first frame. Over a pyramid, the tiles of the cut.
-pub fn check_view(terrain: &Terrain, camera: &Camera, extent: (u32, u32), rule: LevelRule) {
+pub fn check_view(
+    terrain: &Terrain,
+    camera: &Camera,
+    extent: (u32, u32),
+    (rule, checks): (LevelRule, CheckPolicy),
+) {
     let view = camera.view(extent.0, extent.1);
+    if checks != CheckPolicy::OnFrame {
+        // What the first frame will check, and behind, the rest queued.
+        if let Some(wanted) = cut_tiles(terrain, &view, camera.position, rule) {
+            drawn_cut(terrain, &view, camera.position, rule, &wanted, checks);
+            return;
+        }
+    }
     terrain.check_all(
         &requests_for(terrain, &view, camera.position, rule)
             .iter()
@@ -278,20 +415,22 @@ fn cut_tiles(
         return None;
     }
     let cut = crate::cut::cut(terrain, view, camera, tau);
-    let mut nodes: Vec<(f64, usize, u32)> = cut
-        .nodes
-        .iter()
-        .map(|n| {
-            let t = &terrain.tiles[n.tile];
-            (
-                camera.clamp(t.min, t.max).distance_squared(camera),
-                n.tile,
-                n.level,
-            )
+    let nodes = cut.nodes.iter().map(|n| (n.tile, n.level)).collect();
+    Some(nearest_first(terrain, camera, nodes))
+}
+
+/// Tiles with their levels, sorted by the distance from `camera` to each tile's box, then by
+/// index.
+fn nearest_first(terrain: &Terrain, camera: DVec3, tiles: Vec<(usize, u32)>) -> Vec<(usize, u32)> {
+    let mut keyed: Vec<(f64, usize, u32)> = tiles
+        .into_iter()
+        .map(|(i, l)| {
+            let t = &terrain.tiles[i];
+            (camera.clamp(t.min, t.max).distance_squared(camera), i, l)
         })
         .collect();
-    nodes.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-    Some(nodes.into_iter().map(|(_, i, l)| (i, l)).collect())
+    keyed.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    keyed.into_iter().map(|(_, i, l)| (i, l)).collect()
 }
 
 /// The requests of a cut's tiles that are in `visible` (those that passed their checks).

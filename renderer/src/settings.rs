@@ -35,6 +35,9 @@ pub struct Settings {
     /// Part by part: what building a mix costs, in triangles ([`crate::parts::BuildCost`]).
     pub part_build_cost: crate::parts::BuildCost,
     pub morph_shader: MorphShader,
+    /// When a pyramid's tiles are checked (`--checks`; a base grid's on the frame that first
+    /// needs them).
+    pub checks: crate::plan::CheckPolicy,
 }
 
 /// How the terrain is coloured.
@@ -101,6 +104,11 @@ pub fn parts_pay_on(device: ash::vk::PhysicalDeviceType) -> bool {
 }
 
 impl Settings {
+    /// The level rule and the check policy, as [`crate::plan::plan`] takes them.
+    pub fn planning(&self) -> (LevelRule, crate::plan::CheckPolicy) {
+        (self.rule(), self.checks)
+    }
+
     pub fn rule(&self) -> LevelRule {
         if self.brute_force {
             LevelRule::Finest

@@ -242,7 +242,7 @@ impl App<'_> {
             self.terrain,
             &self.camera,
             (extent.width, extent.height),
-            self.options.settings.rule(),
+            self.options.settings.planning(),
         );
         self.renderer = Some(renderer);
         Ok(())

@@ -10,7 +10,7 @@ use std::f64::consts::TAU;
 
 use glam::DVec3;
 use renderer::camera::Camera;
-use renderer::cut::{cut, cut_with, Cut, Rules};
+use renderer::cut::{cut, cut_with, stand_in, Checks, Cut, Node, Rules};
 use renderer::path::CameraPath;
 use renderer::terrain::Terrain;
 use tiles::BuildParams;
@@ -228,6 +228,103 @@ fn neighbouring_tiles_of_the_cut_are_at_most_a_layer_apart() {
         unbalanced >= 2,
         "unbalanced, neighbours at most {unbalanced} apart"
     );
+}
+
+/// Tiles that passed their checks, for [`stand_in`]: the rest are not checked yet; one
+/// checked on the frame passes.
+struct Passed {
+    passed: Vec<bool>,
+    later: usize,
+    now: usize,
+}
+
+impl Checks for Passed {
+    fn state(&self, i: usize) -> Option<bool> {
+        self.passed[i].then_some(true)
+    }
+
+    fn later(&mut self, _: usize) {
+        self.later += 1;
+    }
+
+    fn now(&mut self, i: usize) -> bool {
+        self.now += 1;
+        self.passed[i] = true;
+        true
+    }
+}
+
+/// Where tiles of the cut are not checked yet, ancestors that passed stand in for them
+/// (`renderer::cut::stand_in`): over the cameras of the first test, with none, half or most
+/// tiles passed at random, the tiles drawn all passed, cover every base tile the cut covers
+/// exactly once, are at most a layer apart, and are the cut itself once every tile passed; a
+/// frame checks no more than the top layer's tiles itself. The control is the same stand-ins
+/// unbalanced, which put neighbours two layers apart.
+#[test]
+fn ancestors_stand_in_for_tiles_not_checked_on_the_same_ground_a_layer_apart() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut rng = splitmix::Rng(0x7374_616e_645f_696e);
+    let (mut stood_in, mut unbalanced) = (0usize, 0u32);
+    for pyramid in sets(dir.path()) {
+        let tops = pyramid.layers[pyramid.top() as usize].len();
+        for camera in cameras(&pyramid, &mut rng) {
+            let view = camera.view(EXTENT.0, EXTENT.1);
+            let wanted = cut(&pyramid, &view, camera.position, 1.0);
+            for share in [0.0, 0.5, 0.9, 1.0] {
+                let passed: Vec<bool> = (0..pyramid.tiles.len())
+                    .map(|_| rng.range(0.0, 1.0) < share)
+                    .collect();
+                let mut checks = Passed {
+                    passed: passed.clone(),
+                    later: 0,
+                    now: 0,
+                };
+                let drawn = stand_in(&pyramid, &wanted.nodes, &mut checks, true);
+                assert!(checks.now <= tops, "{} checked on the frame", checks.now);
+                let as_cut = drawn_as_cut(&pyramid, &drawn.tiles);
+                let (want, got) = (cover(&pyramid, &wanted), cover(&pyramid, &as_cut));
+                assert!(want
+                    .iter()
+                    .zip(&got)
+                    .all(|(&w, &g)| g <= 1 && (w == 0 || g == 1)));
+                assert!(layers_apart(&pyramid, &as_cut).1 <= 1);
+                assert!(drawn.tiles.iter().all(|&t| checks.passed[t]));
+                if share == 1.0 {
+                    assert_eq!((drawn.stood_in, checks.later), (0, 0));
+                    assert_eq!(drawn.tiles.len(), wanted.nodes.len());
+                }
+                stood_in += drawn.stood_in;
+                let mut loose = Passed {
+                    passed,
+                    later: 0,
+                    now: 0,
+                };
+                let drawn = stand_in(&pyramid, &wanted.nodes, &mut loose, false);
+                let as_cut = drawn_as_cut(&pyramid, &drawn.tiles);
+                unbalanced = unbalanced.max(layers_apart(&pyramid, &as_cut).1);
+            }
+        }
+    }
+    assert!(stood_in > 1000, "{stood_in} tiles stood in for");
+    assert!(
+        unbalanced >= 2,
+        "unbalanced, neighbours at most {unbalanced} apart"
+    );
+}
+
+/// Stand-ins' tiles as a cut (levels 0), to measure as one.
+fn drawn_as_cut(pyramid: &Terrain, tiles: &[usize]) -> Cut {
+    Cut {
+        nodes: tiles
+            .iter()
+            .map(|&tile| Node {
+                layer: pyramid.tiles[tile].layer,
+                tile,
+                level: 0,
+            })
+            .collect(),
+        visited: 0,
+    }
 }
 
 /// Neighbouring base tiles both under the cut, and the most layers apart their cut tiles are.

@@ -175,6 +175,45 @@ fn the_pyramids_cut_is_drawn_without_cracks() {
     );
 }
 
+/// `--pyramid --checks 2`: two tiles checked a frame, coarse layers first, and the nearest
+/// ancestor that passed its check drawn over the ground of each tile not checked yet
+/// (`renderer::cut::stand_in`). The same set and flights as the test above, cold, without
+/// prefetching (so that each frame depends on the frames before it alone): the first frame
+/// stands in for tiles of its cut and later frames draw more tiles as they pass; no frame
+/// cracks against brute force, validation silent. (The stand-ins' balance, which these
+/// flights do not need, has its control in `tests/cut.rs`; the stitches across layers theirs
+/// in the test above.)
+#[test]
+fn ancestors_stand_in_for_tiles_not_checked_yet_without_cracks() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let params = tiles::BuildParams {
+        pyramid: true,
+        ..tiles::BuildParams::default()
+    };
+    let set = common::mirror_with(dir.path(), 2049, &params);
+    let flags = ["--pyramid", "--checks", "2", "--no-prefetch", WARM];
+    let (flags, size) = (&flags[..], ["--size", "512x384"]);
+    for path in ["orbit", "flyover"] {
+        let log = tempfile::tempdir().expect("temp dir");
+        let lod = flight(&set, log.path(), path, 6, &[flags, &size].concat());
+        let csv = log.path().join("frames.csv");
+        let stood_in = common::log_column(&csv, "tiles_stood_in");
+        let drawn = common::log_column(&csv, "tiles_drawn");
+        assert!(stood_in[0] > 0.0, "{path}: tiles stood in for {stood_in:?}");
+        assert!(drawn[5] > drawn[0], "{path}: tiles drawn {drawn:?}");
+        let brute = flight(
+            &set,
+            &log.path().join("brute"),
+            path,
+            6,
+            &["--brute-force", size[0], size[1]],
+        );
+        for (k, (l, b)) in lod.iter().zip(&brute).enumerate() {
+            assert!(cracks(l, b).is_empty(), "{path} frame {k}: cracks");
+        }
+    }
+}
+
 /// Flies `path` with LOD (and `extra` flags) and with brute force (whole budget); asserts no
 /// crack and a silhouette within tau + 1 px in every frame. Returns the LOD run's summary.
 fn compare_under_budget(
@@ -208,9 +247,14 @@ fn compare_with_silhouettes(
         brute_args.extend(["--size", extra[i + 1]]);
     }
     let brute = flight(set, &b, path, frames, &brute_args);
-    // Tiles the budget kept coarser than LOD wanted void tau's promise for that frame; the
-    // silhouette is checked on the others (and there must be some).
-    let coarser = common::log_column(&a.join("frames.csv"), "tiles_coarser");
+    // Tiles the budget kept coarser than LOD wanted, or ancestors drawn for them, void tau's
+    // promise for that frame; the silhouette is checked on the others (and there must be
+    // some).
+    let coarser: Vec<f64> = common::log_column(&a.join("frames.csv"), "tiles_coarser")
+        .iter()
+        .zip(common::log_column(&a.join("frames.csv"), "tiles_stood_in"))
+        .map(|(c, s)| c + s)
+        .collect();
     let mut terrain_seen = false;
     let mut silhouettes = 0usize;
     for (k, (l, b)) in lod.iter().zip(&brute).enumerate() {

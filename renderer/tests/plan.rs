@@ -123,7 +123,10 @@ fn tight_budget_draws_what_is_resident_and_stitches_granted_levels() {
             &mut manager,
             &camera,
             EXTENT,
-            LevelRule::Tau(1.0, renderer::lod::Bound::Guaranteed),
+            (
+                LevelRule::Tau(1.0, renderer::lod::Bound::Guaranteed),
+                renderer::plan::CheckPolicy::OnFrame,
+            ),
             Residency {
                 frame: f,
                 completed: f.checked_sub(2),
@@ -705,7 +708,12 @@ fn a_mirror_set_is_checked_where_it_is_seen_and_passes_everywhere() {
     let path = CameraPath::flyover(&terrain);
     let camera = path.at(path.keys[0].time);
     let rule = renderer::plan::LevelRule::Tau(1.0, renderer::lod::Bound::Guaranteed);
-    renderer::plan::check_view(&terrain, &camera, EXTENT, rule);
+    renderer::plan::check_view(
+        &terrain,
+        &camera,
+        EXTENT,
+        (rule, renderer::plan::CheckPolicy::OnFrame),
+    );
     let view = camera.view(EXTENT.0, EXTENT.1);
     let mut visible = visible_tiles(&terrain, &view, camera.position);
     visible.sort_unstable();

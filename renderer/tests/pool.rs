@@ -33,6 +33,7 @@ fn settings(forced_level: Option<u32>) -> Settings {
         part_by_part: false,
         part_build_cost: renderer::parts::BuildCost::FREE,
         morph_shader: Default::default(),
+        checks: renderer::plan::CheckPolicy::OnFrame,
     }
 }
 

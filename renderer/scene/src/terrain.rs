@@ -209,6 +209,12 @@ impl Terrain {
             .filter_map(move |k| self.tile_in(p - 1, 2 * tx + k % 2, 2 * ty + k / 2))
     }
 
+    /// The tile of layer `p + 1` over tile `i` (of layer `p`), if the set has that layer.
+    pub fn parent(&self, i: usize) -> Option<usize> {
+        let t = &self.tiles[i];
+        self.tile_in(t.layer + 1, t.tx / 2, t.ty / 2)
+    }
+
     /// The base grid's tiles under tile `i` (an index in [`Terrain::tiles`]): columns and
     /// rows.
     pub fn base_tiles_under(&self, i: usize) -> (std::ops::Range<u32>, std::ops::Range<u32>) {
@@ -299,12 +305,31 @@ impl Terrain {
         }
     }
 
+    /// Asks for `tiles` to be checked ahead of need before anything else waiting, the first
+    /// of them first: tiles a frame wants now and draws an ancestor in place of until they
+    /// pass (`vkterrain --pyramid`).
+    pub fn check_first(&self, tiles: &[usize]) {
+        let mut ahead = self.ahead.lock().unwrap_or_else(|p| p.into_inner());
+        for &i in tiles.iter().rev() {
+            if self.tiles.get(i).is_none_or(|t| t.usable().is_some()) {
+                continue;
+            }
+            ahead.retain(|&j| j != i);
+            ahead.push_front(i);
+        }
+        ahead.truncate(256);
+        self.ahead_ready.notify_one();
+    }
+
     /// Checks the tiles [`Terrain::check_soon`] asks for, oldest first, until `stop` is set
     /// (then returns within a few milliseconds, after the check in progress). Run on a thread
     /// of its own beside the frames, so that tiles come into view already checked.
     pub fn check_ahead(&self, stop: &AtomicBool) {
+        use rayon::prelude::*;
+        // As many at once as rayon has threads: the frames' own CPU work shares the cores.
+        let batch = rayon::current_num_threads().max(1);
         while !stop.load(Ordering::Acquire) {
-            let next = {
+            let next: Vec<usize> = {
                 let mut ahead = self.ahead.lock().unwrap_or_else(|p| p.into_inner());
                 if ahead.is_empty() {
                     ahead = self
@@ -313,11 +338,12 @@ impl Terrain {
                         .unwrap_or_else(|p| p.into_inner())
                         .0;
                 }
-                ahead.pop_front()
+                let n = ahead.len().min(batch);
+                ahead.drain(..n).collect()
             };
-            if let Some(i) = next {
+            next.par_iter().for_each(|&i| {
                 let _ = self.check(i);
-            }
+            });
         }
     }
 

@@ -290,6 +290,7 @@ impl Renderer {
             .iter()
             .filter(|d| terrain.tiles[d.tile].layer > 0)
             .count() as u64;
+        record.tiles_stood_in = plan.tiles_stood_in;
         record.gpu_allocations = gpu.allocations() - allocations;
         record.prediction_error_m = prepared.prediction_error_m;
         record.cpu_prefetch_ms = prepared.cpu_prefetch_ms;
@@ -342,7 +343,7 @@ impl Renderer {
             &mut self.manager,
             input.camera,
             extent,
-            settings.rule(),
+            settings.planning(),
             plan::Residency {
                 frame: self.frame,
                 completed,

@@ -52,7 +52,7 @@ impl Renderer {
             &mut self.manager,
             camera,
             extent,
-            settings.rule(),
+            settings.planning(),
             plan::Residency {
                 frame: self.frame,
                 completed: self.frame.checked_sub(1),

@@ -15,8 +15,8 @@
 //! shader `heights_read_back, heights_max_diff_m`, the tiles' checks when first needed
 //! `cpu_check_ms, tiles_checked, tiles_failed`, drawing part by part
 //! `tiles_part_by_part, part_builds`, the morph pass's `tiles_unmorphed`, the tiles drawn from
-//! the pyramid's layers above the base grid `tiles_above_base` (`--pyramid`),
-//! and last `tiles_level_0 .. tiles_level_{n-1}`.
+//! the pyramid's layers above the base grid `tiles_above_base` and the tiles of its cut an
+//! ancestor stood in for `tiles_stood_in` (`--pyramid`), and last `tiles_level_0 .. tiles_level_{n-1}`.
 
 use std::path::Path;
 
@@ -126,10 +126,13 @@ pub struct FrameRecord {
     pub tiles_unmorphed: u64,
     /// Drawn tiles of the pyramid's layers above the base grid (`--pyramid`; 0 otherwise).
     pub tiles_above_base: u64,
+    /// Tiles of the pyramid's cut drawn by an ancestor: not checked yet (`--checks`), failed,
+    /// or beside a tile two layers coarser (`--pyramid`; 0 otherwise).
+    pub tiles_stood_in: u64,
     pub tiles_per_level: Vec<u64>,
 }
 
-pub const BASE_COLUMNS: [&str; 57] = [
+pub const BASE_COLUMNS: [&str; 58] = [
     "frame",
     "time_s",
     "frame_ms",
@@ -187,6 +190,7 @@ pub const BASE_COLUMNS: [&str; 57] = [
     "part_builds",
     "tiles_unmorphed",
     "tiles_above_base",
+    "tiles_stood_in",
 ];
 
 pub fn header(levels: u32) -> String {
@@ -275,6 +279,7 @@ impl FrameRecord {
             n(self.part_builds),
             n(self.tiles_unmorphed),
             n(self.tiles_above_base),
+            n(self.tiles_stood_in),
         ];
         let levels = self.tiles_per_level.iter().map(|&v| n(v));
         cells
