@@ -144,6 +144,10 @@ pub struct Cli {
     /// Metres per unit of the source's stored values (grey images).
     #[arg(long, value_name = "S")]
     pub source_vertical_scale: Option<f64>,
+    /// The source's samples across and down, for raw `.r16`/`.f32` sources (which do not
+    /// say).
+    #[arg(long, value_name = "WxH", value_parser = dem::parse_size::<u32>)]
+    pub source_size: Option<(u32, u32)>,
     /// Measure every K-th frame only.
     #[arg(long, default_value_t = 1, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
     pub measure_every: u64,
@@ -224,15 +228,16 @@ pub struct Cli {
     /// cut through it, base tiles near the camera and coarser layers' tiles far away, each
     /// within --tau, stitched where layers meet. Discrete levels: geomorphing does not carry
     /// across layers yet, so --pyramid implies --no-geomorph.
-    #[arg(long, conflicts_with_all = ["brute_force", "level", "measure_error", "read_back_heights"])]
+    #[arg(long, conflicts_with_all = ["brute_force", "level", "read_back_heights"])]
     pub pyramid: bool,
     /// With --pyramid, when the cut's tiles get their checks (checksum and verify's semantic
-    /// checks, made before a tile's first upload): `behind` checks them off the frame, nearest
+    /// checks, made before a tile's first upload): `on-frame` waits for every check on the
+    /// frame that first needs the tile; `behind` checks them off the frames, coarse layers
     /// first, and draws each one's nearest checked ancestor until it passes (no frame waits
-    /// for more than the top of the pyramid); `on-frame` waits for every check on the frame
-    /// that first needs the tile; a number N checks at most N a frame on the frame and stands
-    /// in for the rest (deterministic, for tests). A base grid is always checked on the frame.
-    #[arg(long, default_value = "behind", value_name = "behind|on-frame|N", value_parser = parse_checks)]
+    /// for more than the top of the pyramid, but detail arrives later); a number N checks at
+    /// most N a frame on the frame and stands in for the rest (deterministic, for tests). A
+    /// base grid is always checked on the frame.
+    #[arg(long, default_value = "on-frame", value_name = "on-frame|behind|N", value_parser = parse_checks)]
     pub checks: CheckPolicy,
     /// Write the path flown (CSV keyframes) here.
     #[arg(long)]

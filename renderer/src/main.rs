@@ -36,6 +36,7 @@ fn error_meter(cli: &Cli, terrain: &Terrain, sources: &[PathBuf]) -> Result<Erro
     let options = dem::ReadOptions {
         spacing: cli.source_spacing,
         vertical_scale: cli.source_vertical_scale,
+        size: cli.source_size.map(|(w, h)| (w as usize, h as usize)),
         ..Default::default()
     };
     let grid = dem::read(sources, &options).map_err(|e| anyhow::anyhow!("{e}"))?;

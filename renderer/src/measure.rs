@@ -17,6 +17,13 @@
 //!
 //! Samples where either point is behind the near plane or off the image are skipped (nothing
 //! is seen there).
+//!
+//! Over a pyramid's cut (`--pyramid`), a tile of layer `p` is rasterised at the base grid's
+//! samples under it (its vertex `(x, y)` at `(x, y) << p` base samples from its corner) and
+//! measured against every one of them, as the cut promises ([`crate::cut`]): so a layer tile's
+//! surface is a grid of `(256 << p) + 1` samples a side, and the meter measures pyramids of at
+//! most [`MAX_LAYER`] layers. A tile's pops are against its own previous state; where children
+//! replace their parent (or the reverse) no tile had a previous state, and no pop is measured.
 
 use std::collections::HashMap;
 
@@ -33,6 +40,10 @@ use crate::frame::{DrawnTile, ReadBack};
 use crate::morph;
 use crate::terrain::Terrain;
 
+/// The highest pyramid layer the meter measures: a layer-4 tile's surface is 4097² samples
+/// (67 MB a level kept).
+pub const MAX_LAYER: u32 = 4;
+
 /// The measures of one frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Measured {
@@ -44,7 +55,7 @@ pub struct Measured {
 /// The source samples of every tile, the height grids of the levels drawn so far, and the
 /// levels of the previous measured frame.
 pub struct ErrorMeter {
-    /// Per tile, 257 x 257 source heights (row 0 north), and the last real column / row.
+    /// Per base tile, 257 x 257 source heights (row 0 north), and the last real column / row.
     samples: Vec<(Vec<f32>, u32, u32)>,
     /// Per (tile, level), unmorphed: the drawn surface's height at each sample (NaN where no
     /// triangle covers it).
@@ -66,8 +77,8 @@ pub struct State {
 }
 
 impl ErrorMeter {
-    /// Cuts `grid` into the tile set's tiles; the grid must be the one the set was built from
-    /// (same size).
+    /// Cuts `grid` into the tile set's base tiles; the grid must be the one the set was built
+    /// from (same size), and the terrain's pyramid at most [`MAX_LAYER`] layers high.
     pub fn new(terrain: &Terrain, grid: &Grid) -> Result<ErrorMeter, String> {
         let h = terrain.set.header();
         if (grid.width, grid.height) != (h.grid_width as usize, h.grid_height as usize) {
@@ -76,8 +87,15 @@ impl ErrorMeter {
                 grid.width, grid.height, h.grid_width, h.grid_height
             ));
         }
+        if terrain.top() > MAX_LAYER {
+            return Err(format!(
+                "the error meter measures pyramids of at most {MAX_LAYER} layers above the \
+                 base grid; this one has {}",
+                terrain.top()
+            ));
+        }
         let samples = terrain
-            .tiles
+            .base()
             .iter()
             .map(|t| {
                 let s = tile_samples(grid, t.tx, t.ty);
@@ -183,7 +201,7 @@ impl ErrorMeter {
                         grid.as_ref()
                     }
                 });
-                let (error, pop) = compare(terrain, tile, &samples[tile], now, then, &on_image);
+                let (error, pop) = compare(terrain, tile, samples, now, then, &on_image);
                 (tile, (state, morphed_now), error, pop)
             })
             .collect();
@@ -202,65 +220,85 @@ impl ErrorMeter {
     }
 }
 
-/// The largest distance on the image (pixels) between where `now` draws the tile's samples and
-/// where the source has them (the error), and where `then` drew them (the pop); samples off
-/// the image, or not drawn, count for neither.
+/// The largest distance on the image (pixels) between where `now` draws the base samples under
+/// the tile and where the source has them (the error), and where `then` drew them (the pop);
+/// samples off the image, or not drawn, count for neither.
 fn compare(
     terrain: &Terrain,
     tile: usize,
-    (source, max_x, max_y): &(Vec<f32>, u32, u32),
+    samples: &[(Vec<f32>, u32, u32)],
     now: &[f32],
     then: Option<&Vec<f32>>,
     on_image: &(impl Fn(DVec3) -> Option<(f64, f64)> + Sync),
 ) -> (f64, f64) {
-    let info = &terrain.tiles[tile];
-    let (c0, r0) = (
-        f64::from(info.tx * TILE_CELLS),
-        f64::from(info.ty * TILE_CELLS),
-    );
+    let (c0, r0, side) = footprint(terrain, tile);
     let (sx, sy) = terrain.spacing;
     let distance =
         |a: (f64, f64), b: (f64, f64)| ((a.0 - b.0).powi(2) + (a.1 - b.1).powi(2)).sqrt();
     let (mut error, mut pop) = (0.0f64, 0.0f64);
-    for y in 0..=*max_y as usize {
-        for x in 0..=*max_x as usize {
-            let k = y * TILE_SIZE + x;
-            let z = now[k];
-            if z.is_nan() {
-                continue;
-            }
-            let at = |z: f32| {
-                on_image(DVec3::new(
-                    (c0 + x as f64) * sx,
-                    -(r0 + y as f64) * sy,
-                    f64::from(z),
-                ))
-            };
-            let Some(drawn) = at(z) else { continue };
-            if let Some(truth) = at(source[k]) {
-                error = error.max(distance(drawn, truth));
-            }
-            if let Some(old) = then.map(|t| t[k]).filter(|z| !z.is_nan()).and_then(at) {
-                pop = pop.max(distance(drawn, old));
+    let (columns, rows) = terrain.base_tiles_under(tile);
+    for by in rows {
+        for bx in columns.clone() {
+            let (source, max_x, max_y) = &samples[(by * terrain.tiles_x + bx) as usize];
+            // The base tile's first sample, in the base grid and in the tile's surface.
+            let (bc, br) = (bx * TILE_CELLS, by * TILE_CELLS);
+            let (ox, oy) = ((bc - c0) as usize, (br - r0) as usize);
+            for y in 0..=*max_y as usize {
+                for x in 0..=*max_x as usize {
+                    let k = (oy + y) * side + ox + x;
+                    let z = now[k];
+                    if z.is_nan() {
+                        continue;
+                    }
+                    let at = |z: f32| {
+                        on_image(DVec3::new(
+                            (f64::from(bc) + x as f64) * sx,
+                            -(f64::from(br) + y as f64) * sy,
+                            f64::from(z),
+                        ))
+                    };
+                    let Some(drawn) = at(z) else { continue };
+                    if let Some(truth) = at(source[y * TILE_SIZE + x]) {
+                        error = error.max(distance(drawn, truth));
+                    }
+                    if let Some(old) = then.map(|t| t[k]).filter(|z| !z.is_nan()).and_then(at) {
+                        pop = pop.max(distance(drawn, old));
+                    }
+                }
             }
         }
     }
     (error, pop)
 }
 
-/// The heights one tile draws at its samples in `state` (NaN where none): the level's
-/// triangles over its vertices, geomorphed when `state` has corner levels.
+/// Where tile `i`'s surface grid lies over the base grid: its first base sample (column, row)
+/// and its side in samples (257 for a base tile, `(256 << p) + 1` for one of layer `p`).
+fn footprint(terrain: &Terrain, i: usize) -> (u32, u32, usize) {
+    let t = &terrain.tiles[i];
+    let cells = TILE_CELLS << t.layer;
+    (t.tx * cells, t.ty * cells, cells as usize + 1)
+}
+
+/// The heights one tile draws at the base samples under it in `state` (NaN where none; a grid
+/// of [`footprint`]'s side): the level's triangles over its vertices, geomorphed when `state`
+/// has corner levels.
 fn surface(terrain: &Terrain, tile: usize, state: State) -> Vec<f32> {
-    let mut grid = vec![f32::NAN; TILE_SIZE * TILE_SIZE];
+    let (_, _, side) = footprint(terrain, tile);
+    let mut grid = vec![f32::NAN; side * side];
     let info = &terrain.tiles[tile];
-    let Ok(t) = terrain.set.tile(info.tx, info.ty) else {
+    let Ok(t) = terrain.set_of(info).tile(info.tx, info.ty) else {
         return grid;
     };
-    let vertices = morph::tile_vertices(&t, state.level, state.morph.as_ref());
+    let p = info.layer;
+    let vertices: Vec<(u32, u32, f32)> =
+        morph::tile_vertices(&t, state.level, state.morph.as_ref())
+            .into_iter()
+            .map(|(x, y, z)| (x << p, y << p, z))
+            .collect();
     let Some(l) = t.level(state.level) else {
         return grid;
     };
-    let (mx, my) = (info.header.mesh_max_x, info.header.mesh_max_y);
+    let (mx, my) = (info.header.mesh_max_x << p, info.header.mesh_max_y << p);
     let fans = match &state.parts {
         Some(key) => {
             let made = crate::parts::blocks(terrain, tile).indices(key);
@@ -280,7 +318,7 @@ fn surface(terrain: &Terrain, tile: usize, state: State) -> Vec<f32> {
         for pair in fan[1..].windows(2) {
             if let (Some(a), Some(b)) = (v(pair[0]), v(pair[1])) {
                 raster_barycentric([c, a, b], mx, my, |x, y, z| {
-                    grid[y as usize * TILE_SIZE + x as usize] = z as f32;
+                    grid[y as usize * side + x as usize] = z as f32;
                 });
             }
         }

@@ -524,7 +524,7 @@ fn upload_schemes_draw_the_same_frames() {
 }
 
 /// Runs a flight with `--measure-error` against `source`; returns every frame's error in
-/// pixels and the summary.
+/// pixels.
 fn measured(
     set: &Path,
     source: &[&Path],
@@ -532,6 +532,17 @@ fn measured(
     path: &str,
     extra: &[&str],
 ) -> Vec<f64> {
+    measured_with(set, source, source_flags, path, extra).0
+}
+
+/// [`measured`], and every frame's tiles drawn from a pyramid's layers above the base grid.
+fn measured_with(
+    set: &Path,
+    source: &[&Path],
+    source_flags: &[&str],
+    path: &str,
+    extra: &[&str],
+) -> (Vec<f64>, Vec<f64>) {
     let dir = tempfile::tempdir().expect("temp dir");
     let log = dir.path().join("m.csv");
     let mut args = vec![
@@ -553,7 +564,47 @@ fn measured(
     args.extend(extra);
     let o = vkterrain(&args);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    common::log_column(&log, "max_error_px")
+    (
+        common::log_column(&log, "max_error_px"),
+        common::log_column(&log, "tiles_above_base"),
+    )
+}
+
+/// The error meter over a pyramid's cut (`--pyramid --measure-error`): a layer tile is
+/// measured at every base sample under it, which is what the cut promises to keep within tau.
+/// On the Puget sample with its pyramid, orbit and flyover at tau 2 (warm, 24 frames; at tau
+/// 1 this small set's cut is its base grid): every frame within tau, with layer tiles drawn on
+/// most. The control: one check a frame (`--checks 1`) draws the pyramid's top tile over the
+/// first view, whose error the meter sees above tau.
+#[test]
+fn the_cut_is_measured_within_tau_at_every_base_sample() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let sample = common::sample();
+    let params = tiles::BuildParams {
+        pyramid: true,
+        ..tiles::BuildParams::default()
+    };
+    let set = common::tileset_with(
+        dir.path(),
+        std::slice::from_ref(&sample),
+        common::puget_options(),
+        &params,
+    );
+    let flags = ["--source-spacing", "160", "--source-vertical-scale", "0.1"];
+    let mut layer_frames = 0;
+    for path in ["orbit", "flyover"] {
+        let cut = ["--pyramid", WARM, "--tau", "2"];
+        let (errors, above) = measured_with(&set, &[&sample], &flags, path, &cut);
+        assert!(errors.iter().all(|&e| e <= 2.0), "{path}: {errors:?}");
+        layer_frames += above.iter().filter(|&&n| n > 0.0).count();
+        let stood_in = [&cut[..], &["--checks", "1"]].concat();
+        let (coarse, above) = measured_with(&set, &[&sample], &flags, path, &stood_in);
+        assert!(coarse[0] > 2.0 && above[0] > 0.0, "{path}: {coarse:?}");
+    }
+    assert!(
+        layer_frames >= 12,
+        "layer tiles drawn on {layer_frames} frames"
+    );
 }
 
 /// The error actually delivered, measured against the source DEM on every frame, stays within
