@@ -298,8 +298,9 @@ pub struct Drawn {
 /// beside a drawn tile two or more layers coarser is replaced by its ancestor one layer below
 /// that one (or that ancestor's own stand-in), until every two neighbours are at most a layer
 /// apart, which is what the stitches across layers join ([`crate::stitch::stitch_across`]).
-/// Tiles only ever rise towards the top layer, so it ends. With `balance` false (a test's
-/// control) tiles two layers apart may meet, where no stitch joins them. Checked coarse layers
+/// Tiles only ever rise towards the top layer, so it ends. With `balance` false (the tests'
+/// controls; the fault `no-stand-in-balance`) tiles two layers apart may meet, where no stitch
+/// joins them. Checked coarse layers
 /// first (as the frames ask, [`Checks::later`]), the stand-ins seldom need it: none of the
 /// orbits and flyovers over the 1K, 4K and 16K mirror sets did (12 frames each, two checks a
 /// frame or checked behind); a tile that fails while its neighbours pass does.

@@ -33,6 +33,10 @@ pub enum Fault {
     /// `no-stitch-across`: no stitches where tiles of two pyramid layers meet (the control of
     /// the pyramid's crack test); stitches within a layer stay.
     NoStitchAcross,
+    /// `no-stand-in-balance`: where ancestors stand in for tiles of a pyramid's cut (not
+    /// checked yet, or failed), the drawn tiles are not balanced, so tiles two layers apart may
+    /// meet unstitched (the control of the failed layer tile's crack test).
+    NoStandInBalance,
     /// `unsynchronised`: the first frame rewrites a morphed height between the morph pass and
     /// the draws with no barrier, a hazard only synchronisation validation reports (the
     /// barrier test's control).
@@ -55,6 +59,7 @@ impl Fault {
             "mirror-bias" => Some(Fault::MirrorBias),
             "unsynchronised" => Some(Fault::Unsynchronised),
             "no-stitch-across" => Some(Fault::NoStitchAcross),
+            "no-stand-in-balance" => Some(Fault::NoStandInBalance),
             _ => {
                 let number = |prefix: &str| v.strip_prefix(prefix).and_then(|n| n.parse().ok());
                 number("device-lost-at-")

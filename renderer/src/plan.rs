@@ -258,7 +258,8 @@ fn drawn_cut(
             level,
         })
         .collect();
-    let drawn = crate::cut::stand_in(terrain, &nodes, &mut checks, true);
+    let balance = crate::fault::Fault::of_process() != Some(crate::fault::Fault::NoStandInBalance);
+    let drawn = crate::cut::stand_in(terrain, &nodes, &mut checks, balance);
     // The tiles still to check, coarse layers first, nearest first within a layer: each one
     // checked refines the ground drawn by the one over it.
     let mut later = checks.later;

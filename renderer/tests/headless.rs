@@ -214,6 +214,106 @@ fn ancestors_stand_in_for_tiles_not_checked_yet_without_cracks() {
     }
 }
 
+/// A pyramid tile that fails its check (its fans resealed as restarts, as in
+/// `resealed_broken_fans_are_reported_when_paged_in_and_never_drawn`) is reported once and
+/// drawn by its parent; the tiles beside the parent rise so that no two neighbours are two
+/// layers apart (`renderer::cut::stand_in`). Over the same GENERATED 2049² mirror set and orbit
+/// as above, the tile chosen where the cut draws it and its parent's ground borders a base
+/// tile: exit code 4, tiles stood in for, no crack against brute force, validation silent.
+/// The control: without the balance (`VKTERRAIN_FAULT=no-stand-in-balance`), the parent meets
+/// base tiles unstitched and the seams show.
+#[test]
+fn a_pyramid_tile_that_fails_is_drawn_by_its_parent_without_cracks() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let params = tiles::BuildParams {
+        pyramid: true,
+        ..tiles::BuildParams::default()
+    };
+    let set = common::mirror_with(dir.path(), 2049, &params);
+    let flags = ["--pyramid", WARM, "--size", "512x384"];
+    let trace = dir.path().join("cut.trace");
+    let traced = [&flags[..], &["--trace", s(&trace)]].concat();
+    flight(&set, &dir.path().join("traced"), "orbit", 6, &traced);
+    let terrain = renderer::terrain::Terrain::open_pyramid(&set).expect("open");
+    let text = std::fs::read_to_string(&trace).expect("trace");
+    let frames = memory::trace::Trace::parse(&text)
+        .expect("trace parses")
+        .frames;
+    let broken = frames
+        .iter()
+        .flat_map(|f| {
+            let drawn: Vec<usize> = f.iter().map(|r| r.tile as usize).collect();
+            let terrain = &terrain;
+            drawn.clone().into_iter().filter(move |&i| {
+                let parent = terrain.parent(i);
+                terrain.tiles[i].layer == 1
+                    && parent.is_some_and(|p| borders_base(terrain, p, &drawn))
+            })
+        })
+        .next()
+        .expect("the orbit's cut has a layer-1 tile whose parent borders a drawn base tile");
+    let bad = dir.path().join("bad.vkt");
+    let mut bytes = std::fs::read(&set).expect("read");
+    let info = &terrain.tiles[broken];
+    let level_2 = terrain
+        .set_of(info)
+        .tile(info.tx, info.ty)
+        .expect("tile")
+        .level(2)
+        .expect("level 2")
+        .entry;
+    let at = terrain
+        .set_of(info)
+        .dir_entry(info.tx, info.ty)
+        .expect("entry")
+        .offset as usize
+        + level_2.index_offset as usize;
+    let width = level_2.index_width as usize;
+    bytes[at..at + width * level_2.index_count as usize].fill(0xff);
+    tiles::format::reseal(&mut bytes).expect("reseal");
+    drop(terrain);
+    std::fs::write(&bad, &bytes).expect("write");
+    let out = dir.path().join("bad");
+    let lod = common::flight_exiting(&bad, &out, "orbit", 6, &flags, None, 4);
+    let stood_in = common::log_column(&out.join("frames.csv"), "tiles_stood_in");
+    assert!(stood_in.iter().any(|&n| n > 0.0), "{stood_in:?}");
+    let brute_args = ["--brute-force", "--size", "512x384"];
+    let brute = flight(&set, &dir.path().join("brute"), "orbit", 6, &brute_args);
+    for (k, (l, b)) in lod.iter().zip(&brute).enumerate() {
+        assert!(cracks(l, b).is_empty(), "frame {k}: cracks");
+    }
+    let seams = common::flight_exiting(
+        &bad,
+        &dir.path().join("seams"),
+        "orbit",
+        6,
+        &flags,
+        Some("no-stand-in-balance"),
+        4,
+    );
+    let open: usize = seams
+        .iter()
+        .zip(&brute)
+        .map(|(l, b)| cracks(l, b).len())
+        .sum();
+    assert!(
+        open > 0,
+        "no crack without the balance: the seams were never tested"
+    );
+}
+
+/// Whether a base tile of `drawn` borders the ground of tile `p` across one of its sides.
+fn borders_base(terrain: &renderer::terrain::Terrain, p: usize, drawn: &[usize]) -> bool {
+    let (xs, ys) = terrain.base_tiles_under(p);
+    drawn.iter().any(|&b| {
+        let t = &terrain.tiles[b];
+        let beside = |v: u32, r: &std::ops::Range<u32>| v + 1 == r.start || v == r.end;
+        t.layer == 0
+            && ((beside(t.tx, &xs) && ys.contains(&t.ty))
+                || (beside(t.ty, &ys) && xs.contains(&t.tx)))
+    })
+}
+
 /// Flies `path` with LOD (and `extra` flags) and with brute force (whole budget); asserts no
 /// crack and a silhouette within tau + 1 px in every frame. Returns the LOD run's summary.
 fn compare_under_budget(

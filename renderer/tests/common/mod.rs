@@ -219,6 +219,20 @@ pub fn flight_with_fault(
     extra: &[&str],
     fault: Option<&str>,
 ) -> Vec<image::RgbaImage> {
+    flight_exiting(set, out, path, frames, extra, fault, 0)
+}
+
+/// [`flight_with_fault`], the flight ending with exit code `code` (4: a tile failed its
+/// check).
+pub fn flight_exiting(
+    set: &Path,
+    out: &Path,
+    path: &str,
+    frames: u32,
+    extra: &[&str],
+    fault: Option<&str>,
+    code: i32,
+) -> Vec<image::RgbaImage> {
     let log = out.join("frames.csv");
     let frames_s = frames.to_string();
     let mut args = vec![
@@ -248,9 +262,10 @@ pub fn flight_with_fault(
     }
     let o = command.args(&args).output().expect("vkterrain runs");
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(
-        o.status.success(),
-        "vkterrain failed ({:?}): {err}",
+    assert_eq!(
+        o.status.code(),
+        Some(code),
+        "vkterrain exited {:?}: {err}",
         o.status.code()
     );
     assert!(!err.contains("validation"), "validation messages: {err}");
