@@ -8,12 +8,11 @@
 //! - `max_error_px`: for every sample of every drawn tile, the drawn surface point and the
 //!   source sample are projected with the frame's camera; their distance on the image is that
 //!   sample's error. The frame's value is the largest.
-//! - `pop_px`: for every tile drawn in this frame and the previous one with a different LOD
-//!   state (level, or the camera its vertices took their levels from when morphing), the
-//!   surface point at each sample under
-//!   the previous state and under the current one, both projected with the *current* camera
-//!   (so camera motion is factored out): the largest distance is the frame's pop. A tile newly
-//!   in view has no previous state: no pop.
+//! - `pop_px`: at every base sample drawn in this frame and the previous one by a different
+//!   tile or LOD state (level, or the camera its vertices took their levels from when
+//!   morphing), the surface point as the previous frame drew it and as this one does, both
+//!   projected with the *current* camera (so camera motion is factored out): the largest
+//!   distance is the frame's pop. Ground newly in view has no previous surface: no pop.
 //!
 //! Samples where either point is behind the near plane or off the image are skipped (nothing
 //! is seen there).
@@ -22,8 +21,8 @@
 //! samples under it (its vertex `(x, y)` at `(x, y) << p` base samples from its corner) and
 //! measured against every one of them, as the cut promises ([`crate::cut`]): so a layer tile's
 //! surface is a grid of `(256 << p) + 1` samples a side, and the meter measures pyramids of at
-//! most [`MAX_LAYER`] layers. A tile's pops are against its own previous state; where children
-//! replace their parent (or the reverse) no tile had a previous state, and no pop is measured.
+//! most [`MAX_LAYER`] layers. Pops are measured on the ground, so where children replace their
+//! parent (or the reverse) the jump between the two tiles' surfaces counts.
 
 use std::collections::HashMap;
 
@@ -62,6 +61,8 @@ pub struct ErrorMeter {
     surfaces: HashMap<(usize, u32), Vec<f32>>,
     /// The previous measured frame's state of each tile, and its surface when morphed.
     previous: Option<HashMap<usize, Drawn>>,
+    /// The previous measured frame's tile over each base tile it drew.
+    previous_cover: HashMap<usize, usize>,
 }
 
 /// A tile's state in a measured frame, and its surface when morphed (not cached).
@@ -106,6 +107,7 @@ impl ErrorMeter {
             samples,
             surfaces: HashMap::new(),
             previous: None,
+            previous_cover: HashMap::new(),
         })
     }
 
@@ -167,20 +169,30 @@ impl ErrorMeter {
     ) -> Measured {
         let had_previous = self.previous.is_some();
         let previous = self.previous.take().unwrap_or_default();
-        // The previous state of each tile whose state changed.
-        let before = |tile: usize, state: State| previous.get(&tile).filter(|(s, _)| *s != state);
+        let cover = std::mem::take(&mut self.previous_cover);
         let unmorphed = |s: &State| s.morph.is_none() && s.parts.is_none();
-        // Unmorphed levels are rasterised once and kept: those this frame needs first.
-        let needed = draws.iter().flat_map(|&(tile, state)| {
-            let then = before(tile, state).map(|(s, _)| *s);
-            [Some(state), then]
-                .into_iter()
-                .flatten()
-                .filter(unmorphed)
-                .map(move |s| (tile, s.level))
-        });
+        // Unmorphed levels are rasterised once and kept (the previous frame's are already).
+        let needed = draws
+            .iter()
+            .filter(|(_, s)| unmorphed(s))
+            .map(|&(tile, s)| (tile, s.level));
         self.rasterise(terrain, needed);
         let (surfaces, samples) = (&self.surfaces, &self.samples);
+        // What the previous frame drew over base tile `b`, where it was another tile or another
+        // state than `(tile, state)`: that tile's surface and where it lies.
+        let before = |b: usize, tile: usize, state: State| {
+            let &was = cover.get(&b)?;
+            let (s, grid) = previous.get(&was)?;
+            if was == tile && *s == state {
+                return None;
+            }
+            let grid = if unmorphed(s) {
+                surfaces.get(&(was, s.level))?
+            } else {
+                grid.as_ref()?
+            };
+            Some((grid.as_slice(), footprint(terrain, was)))
+        };
         let view = camera.view(extent.0, extent.1);
         let (w, h) = (f64::from(extent.0), f64::from(extent.1));
         let on_image = |p: DVec3| {
@@ -194,14 +206,8 @@ impl ErrorMeter {
                 let now = morphed_now
                     .as_ref()
                     .unwrap_or_else(|| &surfaces[&(tile, state.level)]);
-                let then = before(tile, state).and_then(|(s, grid)| {
-                    if unmorphed(s) {
-                        surfaces.get(&(tile, s.level))
-                    } else {
-                        grid.as_ref()
-                    }
-                });
-                let (error, pop) = compare(terrain, tile, samples, now, then, &on_image);
+                let then = |b: usize| before(b, tile, state);
+                let (error, pop) = compare(terrain, tile, samples, now, &then, &on_image);
                 (tile, (state, morphed_now), error, pop)
             })
             .collect();
@@ -210,6 +216,13 @@ impl ErrorMeter {
         for (tile, drawn, e, p) in measured {
             error = error.max(e);
             pop = pop.max(p);
+            let (columns, rows) = terrain.base_tiles_under(tile);
+            for by in rows {
+                for bx in columns.clone() {
+                    self.previous_cover
+                        .insert((by * terrain.tiles_x + bx) as usize, tile);
+                }
+            }
             current.insert(tile, drawn);
         }
         self.previous = Some(current);
@@ -220,15 +233,20 @@ impl ErrorMeter {
     }
 }
 
+/// What the previous frame drew over a base tile, where it differs: a tile's surface and its
+/// [`footprint`].
+type Before<'a> = Option<(&'a [f32], (u32, u32, usize))>;
+
 /// The largest distance on the image (pixels) between where `now` draws the base samples under
-/// the tile and where the source has them (the error), and where `then` drew them (the pop);
-/// samples off the image, or not drawn, count for neither.
-fn compare(
+/// the tile and where the source has them (the error), and where the previous frame drew them
+/// (the pop: `then` of each base tile's index); samples off the image, or not drawn, count for
+/// neither.
+fn compare<'a>(
     terrain: &Terrain,
     tile: usize,
     samples: &[(Vec<f32>, u32, u32)],
     now: &[f32],
-    then: Option<&Vec<f32>>,
+    then: &impl Fn(usize) -> Before<'a>,
     on_image: &(impl Fn(DVec3) -> Option<(f64, f64)> + Sync),
 ) -> (f64, f64) {
     let (c0, r0, side) = footprint(terrain, tile);
@@ -239,10 +257,14 @@ fn compare(
     let (columns, rows) = terrain.base_tiles_under(tile);
     for by in rows {
         for bx in columns.clone() {
-            let (source, max_x, max_y) = &samples[(by * terrain.tiles_x + bx) as usize];
+            let b = (by * terrain.tiles_x + bx) as usize;
+            let (source, max_x, max_y) = &samples[b];
             // The base tile's first sample, in the base grid and in the tile's surface.
             let (bc, br) = (bx * TILE_CELLS, by * TILE_CELLS);
             let (ox, oy) = ((bc - c0) as usize, (br - r0) as usize);
+            // And in the surface the previous frame drew there.
+            let was = then(b)
+                .map(|(grid, (pc, pr, side))| (grid, (bc - pc) as usize, (br - pr) as usize, side));
             for y in 0..=*max_y as usize {
                 for x in 0..=*max_x as usize {
                     let k = (oy + y) * side + ox + x;
@@ -261,7 +283,8 @@ fn compare(
                     if let Some(truth) = at(source[y * TILE_SIZE + x]) {
                         error = error.max(distance(drawn, truth));
                     }
-                    if let Some(old) = then.map(|t| t[k]).filter(|z| !z.is_nan()).and_then(at) {
+                    let old = was.map(|(grid, px, py, side)| grid[(py + y) * side + px + x]);
+                    if let Some(old) = old.filter(|z| !z.is_nan()).and_then(at) {
                         pop = pop.max(distance(drawn, old));
                     }
                 }

@@ -17,6 +17,11 @@ use crate::terrain::Terrain;
 use crate::tile::Side;
 use crate::{cull, lod};
 
+mod stand_in;
+
+use stand_in::drawn_cut;
+pub use stand_in::CheckPolicy;
+
 /// How levels are chosen.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum LevelRule {
@@ -32,22 +37,6 @@ pub enum LevelRule {
     /// `true`, part by part: each of a tile's 4 x 4 parts gets its own level
     /// ([`lod::morph_parts`]) and the tile wants the largest ([`crate::parts`] draws them).
     Morph(f64, lod::Bound, bool),
-}
-
-/// When the tiles of a pyramid's cut are checked (`vkterrain --checks`). A base grid's tiles
-/// are always checked on the frame that first needs them.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum CheckPolicy {
-    /// Off the frame, nearest first, on the thread that checks ahead of need; until a tile
-    /// passes, its nearest ancestor that passed is drawn over its ground ([`crate::cut::stand_in`]).
-    /// The default: no frame waits for more than the top of the pyramid.
-    Behind,
-    /// At most this many a frame on the frame itself, nearest first, the others waiting for
-    /// later frames behind their ancestors, not queued off the frame: what a frame draws
-    /// depends on the frames before it alone (the tests' deterministic stand-ins).
-    PerFrame(u32),
-    /// Every tile on the frame that first needs it, before anything is drawn.
-    OnFrame,
 }
 
 /// One tile to draw, where its data sits in the pool.
@@ -219,102 +208,6 @@ pub fn plan(
         tiles_failed: terrain.failed_count() as u64,
         tiles_stood_in: stood_in as u64,
     })
-}
-
-/// The tiles a frame draws of the cut `wanted` (nearest first, with their levels) under the
-/// check policy, nearest first with their levels ([`crate::cut::stand_in`]); how many tiles
-/// of the cut were stood in for; and how many tiles were checked on the frame.
-fn drawn_cut(
-    terrain: &Terrain,
-    view: &View,
-    camera: DVec3,
-    rule: LevelRule,
-    wanted: &[(usize, u32)],
-    policy: CheckPolicy,
-) -> (Vec<(usize, u32)>, usize, u64) {
-    let LevelRule::Tau(tau, _) = rule else {
-        unreachable!("a cut is drawn under tau alone (draws_cut)");
-    };
-    let unchecked: Vec<usize> = wanted
-        .iter()
-        .map(|&(i, _)| i)
-        .filter(|&i| terrain.tiles[i].usable().is_none())
-        .collect();
-    // On the frame, every tile first, on every core.
-    let on_frame = policy == CheckPolicy::OnFrame;
-    if on_frame {
-        terrain.check_all(&unchecked);
-    }
-    let mut checks = FrameChecks {
-        terrain,
-        later: Vec::new(),
-        checked: if on_frame { unchecked.len() as u64 } else { 0 },
-    };
-    let nodes: Vec<crate::cut::Node> = wanted
-        .iter()
-        .map(|&(tile, level)| crate::cut::Node {
-            layer: terrain.tiles[tile].layer,
-            tile,
-            level,
-        })
-        .collect();
-    let balance = crate::fault::Fault::of_process() != Some(crate::fault::Fault::NoStandInBalance);
-    let drawn = crate::cut::stand_in(terrain, &nodes, &mut checks, balance);
-    // The tiles still to check, coarse layers first, nearest first within a layer: each one
-    // checked refines the ground drawn by the one over it.
-    let mut later = checks.later;
-    let mut seen = std::collections::HashSet::new();
-    later.retain(|&i| seen.insert(i) && terrain.tiles[i].usable().is_none());
-    later.sort_by_key(|&i| std::cmp::Reverse(terrain.tiles[i].layer));
-    match policy {
-        CheckPolicy::Behind => terrain.check_first(&later),
-        CheckPolicy::PerFrame(n) => {
-            let now = &later[..later.len().min(n as usize)];
-            terrain.check_all(now);
-            checks.checked += now.len() as u64;
-        }
-        CheckPolicy::OnFrame => {}
-    }
-    let level: HashMap<usize, u32> = wanted.iter().copied().collect();
-    let tiles = drawn
-        .tiles
-        .iter()
-        .map(|&i| {
-            let l = level
-                .get(&i)
-                .copied()
-                .unwrap_or_else(|| crate::cut::level_at(terrain, view, camera, tau, i));
-            (i, l)
-        })
-        .collect();
-    (
-        nearest_first(terrain, camera, tiles),
-        drawn.stood_in,
-        checks.checked,
-    )
-}
-
-/// The frame's side of [`crate::cut::Checks`]: the tiles to check later are listed, for the
-/// policy to check off the frame or on the next ones.
-struct FrameChecks<'a> {
-    terrain: &'a Terrain,
-    later: Vec<usize>,
-    checked: u64,
-}
-
-impl crate::cut::Checks for FrameChecks<'_> {
-    fn state(&self, i: usize) -> Option<bool> {
-        self.terrain.tiles[i].usable()
-    }
-
-    fn later(&mut self, i: usize) {
-        self.later.push(i);
-    }
-
-    fn now(&mut self, i: usize) -> bool {
-        self.checked += 1;
-        self.terrain.check(i).is_ok()
-    }
 }
 
 /// Checks the visible tiles not checked yet (before their first upload) and keeps in `visible`

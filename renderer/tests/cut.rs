@@ -357,3 +357,50 @@ fn layers_apart(pyramid: &Terrain, c: &Cut) -> (usize, u32) {
     }
     (pairs, worst)
 }
+
+/// The error meter measures pops on the ground (`renderer::measure`): where a layer tile's
+/// children replace it, or it replaces them, the jump between the two surfaces counts. On the
+/// Puget sample with its pyramid, one camera of the orbit: the top tile at its coarsest level,
+/// then every base tile at its finest, then the top tile again, each jump a pop of pixels;
+/// the control is the base tiles drawn twice, no pop.
+#[test]
+fn the_meter_sees_the_pop_where_children_replace_their_parent() {
+    use renderer::measure::{ErrorMeter, State};
+    let dir = tempfile::tempdir().expect("temp dir");
+    let inputs = [testdata::sample()];
+    let set = common::tileset_with(
+        dir.path(),
+        &inputs,
+        common::puget_options(),
+        &with_pyramid(),
+    );
+    let terrain = Terrain::open_pyramid(&set).expect("open");
+    let dem = dem::read(&inputs, &common::puget_options()).expect("read");
+    let grid = tiles::Grid {
+        width: dem.width,
+        height: dem.height,
+        first_row: 0,
+        heights: &dem.heights,
+        spacing_x: dem.spacing_x,
+        spacing_y: dem.spacing_y,
+    };
+    let mut meter = ErrorMeter::new(&terrain, &grid).expect("meter");
+    let path = CameraPath::orbit(&terrain);
+    let camera = path.at(path.keys[0].time);
+    let at = |level| State {
+        level,
+        morph: None,
+        parts: None,
+    };
+    let top = [(terrain.index_in(terrain.top(), 0), at(0))];
+    let base: Vec<_> = (0..terrain.base().len())
+        .map(|i| (i, at(terrain.levels - 1)))
+        .collect();
+    let mut fly = |draws: &[(usize, State)]| meter.frame(&terrain, &camera, EXTENT, draws);
+    assert!(fly(&top).pop_px.is_nan(), "no previous frame");
+    let down = fly(&base);
+    let again = fly(&base);
+    let up = fly(&top);
+    assert!(down.pop_px > 1.0 && up.pop_px > 1.0, "{down:?} {up:?}");
+    assert_eq!(again.pop_px, 0.0, "{again:?}");
+}
