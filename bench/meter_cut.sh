@@ -20,3 +20,8 @@ name = {'m1': 'mirror 1025²', 'm4': 'mirror 4097²'}[n]
 print(f"| {name} | {path} | {'cut' if mode == 'pyramid' else 'base grid'} | {tau} | {max(c('max_error_px')):.3f} | {statistics.median(c('max_error_px')):.3f} | {sum(1 for v in c('tiles_above_base') if v > 0)} of {len(r)} | {statistics.median(c('tiles_above_base')):.0f} | {statistics.median(c('triangles')):.0f} |")
 PY
  done; done; done; done
+# Pops on the ground (bench/README, "The error over a cut, measured"): the 4K set's flyover,
+# first 12 s at 30 frames a second, as bench/pyramid.sh cuts it (its m4p.start.csv), e.g.
+#   target/release/vkterrain /tmp/m4p.vkt --headless --path /tmp/pyramid-bench/m4p.start.csv \
+#     --frames 120 --size 480x360 [--no-geomorph | --pyramid | --tau 1] --upload-budget-mb 100000 \
+#     --measure-error /tmp/m4.r16 --source-size 4097x4097 --source-spacing 90 --log pops.csv
