@@ -300,10 +300,10 @@ pub struct Drawn {
 /// apart, which is what the stitches across layers join ([`crate::stitch::stitch_across`]).
 /// Tiles only ever rise towards the top layer, so it ends. With `balance` false (the tests'
 /// controls; the fault `no-stand-in-balance`) tiles two layers apart may meet, where no stitch
-/// joins them. Checked coarse layers
-/// first (as the frames ask, [`Checks::later`]), the stand-ins seldom need it: none of the
-/// orbits and flyovers over the 1K, 4K and 16K mirror sets did (12 frames each, two checks a
-/// frame or checked behind); a tile that fails while its neighbours pass does.
+/// joins them. Checked coarse layers first (as the frames ask, [`Checks::later`]), the
+/// stand-ins seldom need the balance: none of the orbits and flyovers over the 1K, 4K and 16K
+/// mirror sets did (12 frames each, two checks a frame or checked behind); a tile that fails
+/// while its neighbours pass does.
 pub fn stand_in(terrain: &Terrain, cut: &[Node], checks: &mut impl Checks, balance: bool) -> Drawn {
     let mut drawn: HashSet<usize> = HashSet::with_capacity(cut.len());
     for n in cut {

@@ -141,15 +141,15 @@ pub fn plan(
         None => visible_tiles(terrain, &view, camera.position),
     };
     let cpu_cull_ms = ms(t);
-    let tiles_visible = cut.as_ref().map_or(visible.len(), Vec::len) as u64;
+    let tiles_visible = cut.as_ref().map_or(visible.len(), |(_, c)| c.len()) as u64;
 
     // A tile is checked before its first upload; one that fails is never drawn. Over a
     // pyramid, ancestors stand in for the cut's tiles not checked yet.
     let t = Instant::now();
     let mut stood_in = 0;
     let mut stand_in_checks = 0;
-    let cut = cut.map(|wanted| {
-        let (drawn, s, c) = drawn_cut(terrain, &view, camera.position, rule, &wanted, checks);
+    let cut = cut.map(|(tau, wanted)| {
+        let (drawn, s, c) = drawn_cut(terrain, &view, camera.position, tau, &wanted, checks);
         (stood_in, stand_in_checks) = (s, c);
         visible = drawn.iter().map(|&(i, _)| i).collect();
         drawn
@@ -275,8 +275,8 @@ pub fn check_view(
     let view = camera.view(extent.0, extent.1);
     if checks != CheckPolicy::OnFrame {
         // What the first frame will check, and behind, the rest queued.
-        if let Some(wanted) = cut_tiles(terrain, &view, camera.position, rule) {
-            drawn_cut(terrain, &view, camera.position, rule, &wanted, checks);
+        if let Some((tau, wanted)) = cut_tiles(terrain, &view, camera.position, rule) {
+            drawn_cut(terrain, &view, camera.position, tau, &wanted, checks);
             return;
         }
     }
@@ -294,14 +294,14 @@ pub fn draws_cut(terrain: &Terrain, rule: LevelRule) -> bool {
     terrain.top() > 0 && matches!(rule, LevelRule::Tau(..))
 }
 
-/// Where frames draw a cut ([`draws_cut`]): its tiles nearest first, each with the level it is
-/// drawn at ([`crate::cut`]: culled and levelled in one walk).
+/// Where frames draw a cut ([`draws_cut`]): its tau, and its tiles nearest first, each with the
+/// level it is drawn at ([`crate::cut`]: culled and levelled in one walk).
 fn cut_tiles(
     terrain: &Terrain,
     view: &View,
     camera: DVec3,
     rule: LevelRule,
-) -> Option<Vec<(usize, u32)>> {
+) -> Option<(f64, Vec<(usize, u32)>)> {
     let LevelRule::Tau(tau, _) = rule else {
         return None;
     };
@@ -310,7 +310,7 @@ fn cut_tiles(
     }
     let cut = crate::cut::cut(terrain, view, camera, tau);
     let nodes = cut.nodes.iter().map(|n| (n.tile, n.level)).collect();
-    Some(nearest_first(terrain, camera, nodes))
+    Some((tau, nearest_first(terrain, camera, nodes)))
 }
 
 /// Tiles with their levels, sorted by the distance from `camera` to each tile's box, then by
@@ -350,7 +350,7 @@ pub fn requests_for(
     rule: LevelRule,
 ) -> Vec<Request> {
     match cut_tiles(terrain, view, camera, rule) {
-        Some(cut) => {
+        Some((_, cut)) => {
             let tiles: Vec<usize> = cut.iter().map(|&(i, _)| i).collect();
             cut_requests(&cut, &tiles)
         }

@@ -321,9 +321,10 @@ impl Terrain {
         self.ahead_ready.notify_one();
     }
 
-    /// Checks the tiles [`Terrain::check_soon`] asks for, oldest first, until `stop` is set
-    /// (then returns within a few milliseconds, after the check in progress). Run on a thread
-    /// of its own beside the frames, so that tiles come into view already checked.
+    /// Checks the tiles [`Terrain::check_first`] and [`Terrain::check_soon`] ask for, from the
+    /// front of the queue, as many at once as rayon has threads, until `stop` is set (then
+    /// returns within a few milliseconds, after the checks in progress). Run on a thread of its
+    /// own beside the frames, so that tiles come into view already checked.
     pub fn check_ahead(&self, stop: &AtomicBool) {
         use rayon::prelude::*;
         // As many at once as rayon has threads: the frames' own CPU work shares the cores.

@@ -6,40 +6,42 @@ use std::collections::HashMap;
 
 use glam::DVec3;
 
-use super::{nearest_first, LevelRule};
+use super::nearest_first;
 use crate::camera::View;
 use crate::terrain::Terrain;
 
 /// When the tiles of a pyramid's cut are checked (`vkterrain --checks`). A base grid's tiles
 /// are always checked on the frame that first needs them.
+///
+/// Where a tile is not checked yet, its nearest ancestor that passed is drawn over its ground
+/// ([`crate::cut::stand_in`]), and the tiles between them are asked for, coarse layers first
+/// and nearest first within a layer, so that the ground refines from coarse to fine.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CheckPolicy {
-    /// Off the frame, nearest first, on the thread that checks ahead of need; until a tile
-    /// passes, its nearest ancestor that passed is drawn over its ground ([`crate::cut::stand_in`]).
-    /// The default: no frame waits for more than the top of the pyramid.
+    /// Off the frames, on the thread that checks ahead of need: no frame waits for more than
+    /// the top of the pyramid, but the detail arrives later (bench/README, "When the cut's
+    /// tiles are checked").
     Behind,
-    /// At most this many a frame on the frame itself, nearest first, the others waiting for
-    /// later frames behind their ancestors, not queued off the frame: what a frame draws
-    /// depends on the frames before it alone (the tests' deterministic stand-ins).
+    /// At most this many a frame, on the frame (after it is planned, for the next), the
+    /// others not queued off the frame: what a frame draws depends on the frames before it
+    /// alone (the tests' deterministic stand-ins).
     PerFrame(u32),
-    /// Every tile on the frame that first needs it, before anything is drawn.
+    /// Every tile on the frame that first needs it, before anything is drawn (the default).
     OnFrame,
 }
 
-/// The tiles a frame draws of the cut `wanted` (nearest first, with their levels) under the
-/// check policy, nearest first with their levels ([`crate::cut::stand_in`]); how many tiles
-/// of the cut were stood in for; and how many tiles were checked on the frame.
+/// What a frame draws of the cut `wanted` (at `tau`; its tiles nearest first, with their
+/// levels) under `policy`: the tiles, nearest first with their levels (a stand-in at the level
+/// [`crate::cut::level_at`] gives it); how many tiles of the cut were stood in for; and how
+/// many tiles were checked on the frame.
 pub(super) fn drawn_cut(
     terrain: &Terrain,
     view: &View,
     camera: DVec3,
-    rule: LevelRule,
+    tau: f64,
     wanted: &[(usize, u32)],
     policy: CheckPolicy,
 ) -> (Vec<(usize, u32)>, usize, u64) {
-    let LevelRule::Tau(tau, _) = rule else {
-        unreachable!("a cut is drawn under tau alone (draws_cut)");
-    };
     let unchecked: Vec<usize> = wanted
         .iter()
         .map(|&(i, _)| i)
