@@ -237,7 +237,13 @@ pub struct Cli {
     /// for more than the top of the pyramid, but detail arrives later); a number N checks at
     /// most N a frame on the frame and stands in for the rest (deterministic, for tests). A
     /// base grid is always checked on the frame.
-    #[arg(long, default_value = "on-frame", value_name = "on-frame|behind|N", value_parser = parse_checks)]
+    #[arg(
+        long,
+        default_value = "on-frame",
+        value_name = "on-frame|behind|N",
+        value_parser = parse_checks,
+        requires = "pyramid"
+    )]
     pub checks: CheckPolicy,
     /// Write the path flown (CSV keyframes) here.
     #[arg(long)]
@@ -274,10 +280,12 @@ fn parse_checks(s: &str) -> Result<CheckPolicy, String> {
     match s {
         "behind" => Ok(CheckPolicy::Behind),
         "on-frame" => Ok(CheckPolicy::OnFrame),
-        n => n
-            .parse()
-            .map(CheckPolicy::PerFrame)
-            .map_err(|_| format!("expected behind, on-frame or a number of tiles, got {s:?}")),
+        n => match n.parse() {
+            Ok(0) | Err(_) => Err(format!(
+                "expected on-frame, behind or a number of tiles a frame (at least 1), got {s:?}"
+            )),
+            Ok(n) => Ok(CheckPolicy::PerFrame(n)),
+        },
     }
 }
 

@@ -774,6 +774,10 @@ fn bad_flags_and_non_files_give_one_clear_line() {
         (&["--part-build-cost", "inf,0"][..], "--part-build-cost"),
         // A set built without --pyramid has no layer above its base grid.
         (&["--layer", "1"][..], "no pyramid layer 1: the set has 0"),
+        (&["--pyramid", "--checks", "0"][..], "--checks"),
+        (&["--pyramid", "--checks", "soon"][..], "--checks"),
+        (&["--checks", "behind"][..], "--pyramid"),
+        (&["--source-size", "12"][..], "--source-size"),
     ] {
         let mut args = vec![s(&set), "--headless"];
         args.extend(flags);
