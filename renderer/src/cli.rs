@@ -226,9 +226,10 @@ pub struct Cli {
     pub layer: u32,
     /// Fly the set's tile pyramid (built with `tiletool build --pyramid`): each frame draws a
     /// cut through it, base tiles near the camera and coarser layers' tiles far away, each
-    /// within --tau, stitched where layers meet. Discrete levels: geomorphing does not carry
-    /// across layers yet, so --pyramid implies --no-geomorph.
-    #[arg(long, conflicts_with_all = ["brute_force", "level", "read_back_heights"])]
+    /// within --tau, stitched where layers meet. Geomorphing (unless --no-geomorph) morphs each
+    /// tile's levels as over the base grid; where four children replace their parent the
+    /// change is discrete.
+    #[arg(long, conflicts_with_all = ["brute_force", "level"])]
     pub pyramid: bool,
     /// With --pyramid, when the cut's tiles get their checks (checksum and verify's semantic
     /// checks, made before a tile's first upload): `on-frame` waits for every check on the
@@ -446,7 +447,7 @@ impl Cli {
                 LodBound::Guaranteed => Bound::Guaranteed,
                 LodBound::Sampled => Bound::Sampled,
             },
-            geomorph: !self.no_geomorph && !self.pyramid,
+            geomorph: !self.no_geomorph,
             // Pre-recorded frames cannot follow a mix that changes from frame to frame.
             // Where the user did not choose, the device does once it is known
             // (`Cli::parts_by_device`).

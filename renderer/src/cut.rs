@@ -1,7 +1,7 @@
 //! Choosing tiles from the tile pyramid (issue 26): a cut through it, coarse tiles far away and
 //! base tiles near the camera, whose cost follows what is on screen rather than how many tiles
-//! the set has. `vkterrain --pyramid` draws it ([`crate::plan`], discrete levels);
-//! `tilebench cut` measures the choice on its own.
+//! the set has. `vkterrain --pyramid` draws it ([`crate::plan`]; each tile at the cut's
+//! level, or geomorphing, at the morph rule's); `tilebench cut` measures the choice on its own.
 //!
 //! The walk starts at the top layer and descends only into tiles whose box meets the frustum.
 //! A layer tile's level errors are those against the base grid's samples under it (the
@@ -22,8 +22,9 @@
 //!
 //! The frame stitches where tiles of two layers meet (a layer tile's side spans two of the
 //! layer below, [`crate::stitch::stitch_across`]); the memory manager and the prefetcher see
-//! a layer's tiles as any others (one index space, [`Terrain::tiles`]). Not done yet:
-//! geomorphing that carries on across the change from a parent to its children.
+//! a layer's tiles as any others (one index space, [`Terrain::tiles`]). Geomorphing morphs each
+//! tile's own levels, a layer tile's as a base tile's; not done yet: geomorphing that carries
+//! on across the change from a parent to its children, which stays discrete (a pop).
 
 use std::collections::HashSet;
 
@@ -78,12 +79,16 @@ pub struct Rules {
     pub weigh_children: bool,
     /// Split tiles until every two neighbours are at most a layer apart.
     pub balance: bool,
+    /// Weigh and level tiles as geomorphing draws them ([`lod::morph_level`]: a level with
+    /// the blend's margin) rather than at [`lod::level_for`]'s.
+    pub morph: bool,
 }
 
 impl Rules {
     pub const ALL: Rules = Rules {
         weigh_children: true,
         balance: true,
+        morph: false,
     };
 }
 
@@ -97,6 +102,7 @@ pub fn cut_with(terrain: &Terrain, view: &View, camera: DVec3, tau: f64, rules: 
         camera,
         tau,
         weigh_children,
+        morph: rules.morph,
     };
     let top = terrain.top();
     let mut stack: Vec<Pending> = (0..terrain.layers[top as usize].len())
@@ -180,6 +186,7 @@ struct Walk<'a> {
     camera: DVec3,
     tau: f64,
     weigh_children: bool,
+    morph: bool,
 }
 
 impl Walk<'_> {
@@ -197,7 +204,11 @@ impl Walk<'_> {
         if p > 0 && finest > r {
             return None;
         }
-        let level = lod::level_for(tile, r);
+        let level = if self.morph {
+            lod::morph_level(self.view, self.camera, tile, self.tau, Bound::Guaranteed)
+        } else {
+            lod::level_for(tile, r)
+        };
         Some(Some((
             level,
             u64::from(tile.levels[level as usize].triangle_count),

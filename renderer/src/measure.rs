@@ -383,7 +383,7 @@ pub fn check_heights(terrain: &Terrain, read_back: &ReadBack, bias: i8) -> Heigh
     let mut check = HeightCheck::default();
     for &(tile, level, start, morph, parts) in &read_back.draws {
         let info = &terrain.tiles[tile];
-        let Ok(t) = terrain.set.tile(info.tx, info.ty) else {
+        let Ok(t) = terrain.set_of(info).tile(info.tx, info.ty) else {
             continue;
         };
         let mirror = morph::tile_heights(&t, level, morph.as_ref(), bias);

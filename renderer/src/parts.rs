@@ -223,7 +223,7 @@ fn covers(held: &PartKey, key: &PartKey, top: u32) -> bool {
 pub fn blocks(terrain: &Terrain, tile: usize) -> Blocks {
     let info = &terrain.tiles[tile];
     let mesh_max = (info.header.mesh_max_x, info.header.mesh_max_y);
-    match terrain.set.tile(info.tx, info.ty) {
+    match terrain.set_of(info).tile(info.tx, info.ty) {
         Ok(t) => {
             let levels = t.levels().len() as u32;
             Blocks::new(

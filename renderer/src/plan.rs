@@ -160,9 +160,10 @@ pub fn plan(
 
     let t = Instant::now();
     let morphing = matches!(rule, LevelRule::Morph(..));
+    // A cut's tiles take the cut's levels, or morphing, the morph rule's (as any tile's).
     let (requests, parts) = match &cut {
-        Some(cut) => (cut_requests(cut, &visible), Vec::new()),
-        None => wanted(terrain, &view, camera.position, &visible, rule),
+        Some(cut) if !morphing => (cut_requests(cut, &visible), Vec::new()),
+        _ => wanted(terrain, &view, camera.position, &visible, rule),
     };
     let parts: HashMap<u32, tiles::parts::PartLevels> =
         requests.iter().map(|r| r.tile).zip(parts).collect();
@@ -185,8 +186,7 @@ pub fn plan(
     let cpu_residency_ms = ms(t) - cpu_prefetch_ms;
 
     let t = Instant::now();
-    // Two morphed copies of a shared side vertex coincide only where the sides are shared.
-    let stitches = stitch_granted(terrain, &draws, morphing && !terrain.shared_sides)?;
+    let stitches = stitch_granted(terrain, &draws, morphing)?;
     let cpu_stitch_ms = ms(t);
 
     Ok(Plan {
@@ -289,9 +289,10 @@ pub fn check_view(
 }
 
 /// Whether frames over `terrain` under `rule` draw a cut through its pyramid: the terrain
-/// holds layers above its base grid ([`Terrain::open_pyramid`]) and levels follow tau.
+/// holds layers above its base grid ([`Terrain::open_pyramid`]) and levels follow tau, with
+/// or without geomorphing.
 pub fn draws_cut(terrain: &Terrain, rule: LevelRule) -> bool {
-    terrain.top() > 0 && matches!(rule, LevelRule::Tau(..))
+    terrain.top() > 0 && matches!(rule, LevelRule::Tau(..) | LevelRule::Morph(..))
 }
 
 /// Where frames draw a cut ([`draws_cut`]): its tau, and its tiles nearest first, each with the
@@ -302,13 +303,17 @@ fn cut_tiles(
     camera: DVec3,
     rule: LevelRule,
 ) -> Option<(f64, Vec<(usize, u32)>)> {
-    let LevelRule::Tau(tau, _) = rule else {
+    let (LevelRule::Tau(tau, _) | LevelRule::Morph(tau, _, _)) = rule else {
         return None;
     };
     if !draws_cut(terrain, rule) {
         return None;
     }
-    let cut = crate::cut::cut(terrain, view, camera, tau);
+    let rules = crate::cut::Rules {
+        morph: matches!(rule, LevelRule::Morph(..)),
+        ..crate::cut::Rules::ALL
+    };
+    let cut = crate::cut::cut_with(terrain, view, camera, tau, rules);
     let nodes = cut.nodes.iter().map(|n| (n.tile, n.level)).collect();
     Some((tau, nearest_first(terrain, camera, nodes)))
 }
@@ -352,6 +357,9 @@ pub fn requests_for(
     match cut_tiles(terrain, view, camera, rule) {
         Some((_, cut)) => {
             let tiles: Vec<usize> = cut.iter().map(|&(i, _)| i).collect();
+            if matches!(rule, LevelRule::Morph(..)) {
+                return wanted_levels(terrain, view, camera, &tiles, rule);
+            }
             cut_requests(&cut, &tiles)
         }
         None => {
@@ -429,12 +437,15 @@ fn wanted(
 }
 
 /// Stitches between drawn neighbours at their granted levels, each pair once (from the tile
-/// west or north of the seam); `slivers` as in [`stitch_side`]. A draw's record is its index.
+/// west or north of the seam), for frames that geomorph or not. A draw's record is its index.
 pub fn stitch_granted(
     terrain: &Terrain,
     draws: &[Draw],
-    slivers: bool,
+    morphing: bool,
 ) -> Result<Vec<(usize, Stitch)>, BorderMismatch> {
+    // Two morphed copies of a shared side vertex coincide only where the sides are shared
+    // (`slivers` as in [`stitch_side`]); across layers, never.
+    let slivers = morphing && !terrain.shared_sides;
     let level_of: HashMap<usize, (u32, u32)> = draws
         .iter()
         .enumerate()
@@ -499,7 +510,7 @@ pub fn stitch_granted(
                 level: d.level,
                 record: k as u32,
             };
-            if !stitch_across(&mut s, mine, children, side, steps) {
+            if !stitch_across(&mut s, mine, children, side, (steps, morphing)) {
                 return Err(BorderMismatch {
                     a: (a.tx, a.ty),
                     b: (first.tile.tx, first.tile.ty),

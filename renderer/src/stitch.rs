@@ -196,13 +196,15 @@ impl Line {
 /// lines lie on the side's vertical plane, so the triangles are as zero-area in plan view as
 /// [`stitch_side`]'s: where the two layers' heights differ at a shared point (each layer has
 /// its own height lattice), they close the gap. `steps` are the two layers' metres per height
-/// code (`a`'s, then the children's). Returns false if the borders do not line up.
+/// code (`a`'s, then the children's). With `morphing`, no triangle is left out for two
+/// corners at one point with one stored height: the two layers morph their copies apart.
+/// Returns false if the borders do not line up.
 pub fn stitch_across(
     out: &mut Stitch,
     a: DrawnSide,
     children: [Option<DrawnSide>; 2],
     side: Side,
-    steps: (f32, f32),
+    (steps, morphing): ((f32, f32), bool),
 ) -> bool {
     let far = side.opposite();
     let Some(mine) = Line::of(&a, steps.0, side, 2, 0) else {
@@ -248,7 +250,7 @@ pub fn stitch_across(
         let same = |i: usize, j: usize| {
             all_along[t[i]] == all_along[t[j]] && all_height[t[i]] == all_height[t[j]]
         };
-        if !(same(0, 1) || same(1, 2) || same(0, 2)) {
+        if morphing || !(same(0, 1) || same(1, 2) || same(0, 2)) {
             let [i, j, l] = t.map(|i| base + i as u32);
             out.indices.extend_from_slice(&[i, j, l, RESTART]);
             out.triangles += 1;

@@ -111,8 +111,10 @@ fn independent_sides_crack_while_morphing_without_slivers() {
 /// `--pyramid` over a GENERATED 2049² mirror set with its tile pyramid (`common::mirror_with`):
 /// each frame draws the cut, with tiles of the layers above the base grid in most frames;
 /// against brute force over the base grid, no crack and the silhouette within tau + 1 px,
-/// validation silent. The control: without the stitches where two layers meet
-/// (`VKTERRAIN_FAULT=no-stitch-across`, the stitches within a layer kept), the seams show.
+/// validation silent, geomorphing (the default) and with discrete levels; the GPU's morphed
+/// heights, layer tiles' included, equal the CPU mirror's. The control:
+/// without the stitches where two layers meet (`VKTERRAIN_FAULT=no-stitch-across`, the
+/// stitches within a layer kept), the seams show.
 #[test]
 fn the_pyramids_cut_is_drawn_without_cracks() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -122,6 +124,11 @@ fn the_pyramids_cut_is_drawn_without_cracks() {
     };
     let set = common::mirror_with(dir.path(), 2049, &params);
     let size = ["--size", "512x384"];
+    for path in ["orbit", "flyover"] {
+        let discrete = ["--pyramid", "--no-geomorph", WARM, size[0], size[1]];
+        let s = compare_with_silhouettes(&set, path, 6, 1.0, &discrete, 1.0);
+        assert_eq!(s["tiles_coarser"], 0, "{path}: {s}");
+    }
     let mut open = 0;
     for path in ["orbit", "flyover"] {
         let s = compare_with_silhouettes(
@@ -142,6 +149,7 @@ fn the_pyramids_cut_is_drawn_without_cracks() {
             &["--pyramid", WARM, size[0], size[1]],
         );
         let above = common::log_column(&log.path().join("frames.csv"), "tiles_above_base");
+        read_back_over_the_cut(&set, path, size[1]);
         // The flyover ends low over the set, where the cut is the base grid.
         assert!(
             above.iter().filter(|&&n| n > 0.0).count() >= 3,
@@ -218,8 +226,9 @@ fn ancestors_stand_in_for_tiles_not_checked_yet_without_cracks() {
 /// `resealed_broken_fans_are_reported_when_paged_in_and_never_drawn`) is reported once and
 /// drawn by its parent; the tiles beside the parent rise so that no two neighbours are two
 /// layers apart (`renderer::cut::stand_in`). Over the same GENERATED 2049² mirror set and orbit
-/// as above, the tile chosen where the cut draws it and its parent's ground borders a base
-/// tile: exit code 4, tiles stood in for, no crack against brute force, validation silent.
+/// as above (discrete levels), the tile chosen where the cut draws it and its parent's ground
+/// borders a base tile: exit code 4, tiles stood in for, no crack against brute force,
+/// validation silent.
 /// The control: without the balance (`VKTERRAIN_FAULT=no-stand-in-balance`), the parent meets
 /// base tiles unstitched and the seams show.
 #[test]
@@ -230,7 +239,7 @@ fn a_pyramid_tile_that_fails_is_drawn_by_its_parent_without_cracks() {
         ..tiles::BuildParams::default()
     };
     let set = common::mirror_with(dir.path(), 2049, &params);
-    let flags = ["--pyramid", WARM, "--size", "512x384"];
+    let flags = ["--pyramid", "--no-geomorph", WARM, "--size", "512x384"];
     let trace = dir.path().join("cut.trace");
     let traced = [&flags[..], &["--trace", s(&trace)]].concat();
     flight(&set, &dir.path().join("traced"), "orbit", 6, &traced);
@@ -299,6 +308,38 @@ fn a_pyramid_tile_that_fails_is_drawn_by_its_parent_without_cracks() {
     assert!(
         open > 0,
         "no crack without the balance: the seams were never tested"
+    );
+}
+
+/// The heights the GPU morphed over a pyramid's cut, read back, equal the CPU mirror's, layer
+/// tiles included (`--read-back-heights` stops the flight otherwise).
+fn read_back_over_the_cut(set: &Path, path: &str, size: &str) {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let log = dir.path().join("read-back.csv");
+    let o = vkterrain(&[
+        s(set),
+        "--headless",
+        "--validation",
+        "--pyramid",
+        "--read-back-heights",
+        "--frames-in-flight",
+        "1",
+        "--frames",
+        "6",
+        "--size",
+        size,
+        "--path",
+        path,
+        WARM,
+        "--log",
+        s(&log),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let read = common::log_column(&log, "heights_read_back");
+    let above = common::log_column(&log, "tiles_above_base");
+    assert!(
+        read.iter().zip(&above).any(|(&r, &a)| r > 0.0 && a > 0.0),
+        "{path}: heights read back {read:?}, layer tiles {above:?}"
     );
 }
 
@@ -673,9 +714,12 @@ fn measured_with(
 /// The error meter over a pyramid's cut (`--pyramid --measure-error`): a layer tile is
 /// measured at every base sample under it, which is what the cut promises to keep within tau.
 /// On the Puget sample with its pyramid, orbit and flyover at tau 2 (warm, 24 frames; at tau
-/// 1 this small set's cut is its base grid): every frame within tau, with layer tiles drawn on
-/// most. The control: one check a frame (`--checks 1`) draws the pyramid's top tile over the
-/// first view, whose error the meter sees above tau.
+/// 1 this small set's cut is its base grid), geomorphing and with discrete levels: every
+/// frame within tau, with layer tiles drawn (geomorphing weighs a layer tile against its
+/// children at the morph rule's levels, and on this small set mostly takes the children).
+/// The control: one check a frame
+/// (`--checks 1`) draws the pyramid's top tile over the first view, whose error the meter
+/// sees above tau.
 #[test]
 fn the_cut_is_measured_within_tau_at_every_base_sample() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -694,15 +738,20 @@ fn the_cut_is_measured_within_tau_at_every_base_sample() {
     let mut layer_frames = 0;
     for path in ["orbit", "flyover"] {
         let cut = ["--pyramid", WARM, "--tau", "2"];
-        let (errors, above) = measured_with(&set, &[&sample], &flags, path, &cut);
-        assert!(errors.iter().all(|&e| e <= 2.0), "{path}: {errors:?}");
-        layer_frames += above.iter().filter(|&&n| n > 0.0).count();
+        for mode in [&cut[..], &[&cut[..], &["--no-geomorph"]].concat()] {
+            let (errors, above) = measured_with(&set, &[&sample], &flags, path, mode);
+            assert!(
+                errors.iter().all(|&e| e <= 2.0),
+                "{path} {mode:?}: {errors:?}"
+            );
+            layer_frames += above.iter().filter(|&&n| n > 0.0).count();
+        }
         let stood_in = [&cut[..], &["--checks", "1"]].concat();
         let (coarse, above) = measured_with(&set, &[&sample], &flags, path, &stood_in);
         assert!(coarse[0] > 2.0 && above[0] > 0.0, "{path}: {coarse:?}");
     }
     assert!(
-        layer_frames >= 12,
+        layer_frames >= 24,
         "layer tiles drawn on {layer_frames} frames"
     );
 }

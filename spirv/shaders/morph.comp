@@ -182,8 +182,10 @@ void main() {
                 }
                 // The star's reach within the part grid: none across a line between parts or
                 // past the mesh's last column or row.
-                vec2 reach = float(s) * vec2(bvec2((x & 63u) != 0u && x + s <= extent.x,
-                                                   (y & 63u) != 0u && y + s <= extent.y));
+                // (In base samples: a pyramid layer's are 2^layer apart.)
+                vec2 reach = float(s << layer_shift)
+                           * vec2(bvec2((x & 63u) != 0u && x + s <= extent.x,
+                                        (y & 63u) != 0u && y + s <= extent.y));
                 float allowed = allowed_error(clip);
                 if (reach != vec2(0.0)) {
                     allowed = star_error(clip, allowed, reach);

@@ -138,6 +138,7 @@ pub(super) fn write_records(
                     cap: r.cap,
                     tables: r.tables,
                     extent: [r.extent[0], r.extent[1]],
+                    layer: r.layer,
                     parts: d.key,
                     // The morph pass runs exactly when the frame's constants count its draws.
                     rule: if c.draws > 0 {

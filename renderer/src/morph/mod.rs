@@ -325,6 +325,9 @@ pub struct TileMorph {
     pub tables: [LevelCoefficients; 9],
     /// The tile's mesh's last column and row (256 but in a partial tile).
     pub extent: [u32; 2],
+    /// The tile's pyramid layer `p`: its samples are `2^p` base samples apart (0 in the base
+    /// grid).
+    pub layer: u32,
     /// How the draw's vertices morph.
     pub rule: MorphRule,
     /// The levels of the tile's parts when it is drawn part by part (None: at its level
@@ -376,6 +379,7 @@ impl TileMorph {
                 terrain.tiles[tile].header.mesh_max_x,
                 terrain.tiles[tile].header.mesh_max_y,
             ],
+            layer: terrain.tiles[tile].layer,
             rule: MorphRule::Hierarchical,
             parts: None,
         }
@@ -413,6 +417,8 @@ impl TileMorph {
         let clip = self.view_proj * relative.extend(1.0);
         let mut e = allowed_error(&self.frame, clip);
         if reach != Vec2::ZERO {
+            // In base samples: a pyramid layer's are 2^layer apart.
+            let reach = reach * (1u32 << self.layer) as f32;
             let east = self.view_proj.x_axis * (reach.x * self.camera.w);
             let south = self.view_proj.y_axis * (-reach.y * self.spacing_y);
             let lift = (0..4)
@@ -432,8 +438,8 @@ impl TileMorph {
     /// the level the tile's drawn level covers on screen, and the two-levels rule's.
     pub fn vertex(&self, x: u32, y: u32, own: f32) -> (Vec3, f32) {
         let (sx, sy) = (
-            self.tile_offset[0].wrapping_add(x as i32),
-            self.tile_offset[1].wrapping_add(y as i32),
+            self.tile_offset[0].wrapping_add((x << self.layer) as i32),
+            self.tile_offset[1].wrapping_add((y << self.layer) as i32),
         );
         let relative = Vec3::new(
             sx as f32 * self.camera.w,
