@@ -8,7 +8,8 @@ echo "| set | flight | drawn as | tau | max_error_px, largest frame | median fra
 echo "|---|---|---|---:|---:|---:|---:|---:|---:|"
 for set in m1:1025 m4:4097; do n=${set%%:*}; sz=${set##*:}
  for path in orbit flyover; do for tau in 1 3; do for mode in base pyramid; do
-  f="--no-geomorph"; [ $mode = pyramid ] && f="--pyramid"
+  # Discrete levels both ways (`--pyramid` geomorphs since e5b6866).
+  f="--no-geomorph"; [ $mode = pyramid ] && f="--pyramid --no-geomorph"
   $V /tmp/${n}p.vkt --headless --path $path --frames 30 --size 1024x768 $f --tau $tau --upload-budget-mb=100000 \
     --measure-error /tmp/$n.r16 --source-size ${sz}x$sz --source-spacing 90 --log /tmp/mb.csv > /dev/null
   python3 - $n $path $mode $tau <<'PY'
@@ -23,5 +24,6 @@ PY
 # Pops on the ground (bench/README, "The error over a cut, measured"): the 4K set's flyover,
 # first 12 s at 30 frames a second, as bench/pyramid.sh cuts it (its m4p.start.csv), e.g.
 #   target/release/vkterrain /tmp/m4p.vkt --headless --path /tmp/pyramid-bench/m4p.start.csv \
-#     --frames 120 --size 480x360 [--no-geomorph | --pyramid | --tau 1] --upload-budget-mb 100000 \
+#     --frames 120 --size 480x360 [--no-geomorph | --pyramid --no-geomorph | --tau 1 | --pyramid] \
+#     --upload-budget-mb 100000 \
 #     --measure-error /tmp/m4.r16 --source-size 4097x4097 --source-spacing 90 --log pops.csv

@@ -35,7 +35,8 @@ PY
     [ $path = start ] && { frames=360; where="$out/$name.start.csv"; }
     for mode in base pyramid; do
       flags="--no-geomorph"
-      [ $mode = pyramid ] && flags="--pyramid"
+      # Discrete levels both ways, as measured on 0b007a6 (`--pyramid` geomorphs since e5b6866).
+      [ $mode = pyramid ] && flags="--pyramid --no-geomorph"
       run="$out/$name.$path.$mode"
       /usr/bin/time -f "%e %M" -o "$run.first.time" \
         $V "$vkt" --headless --path $where --frames 1 --size 1024x768 $flags > "$run.first.json" 2>/dev/null
