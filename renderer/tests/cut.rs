@@ -376,15 +376,7 @@ fn the_meter_sees_the_pop_where_children_replace_their_parent() {
     );
     let terrain = Terrain::open_pyramid(&set).expect("open");
     let dem = dem::read(&inputs, &common::puget_options()).expect("read");
-    let grid = tiles::Grid {
-        width: dem.width,
-        height: dem.height,
-        first_row: 0,
-        heights: &dem.heights,
-        spacing_x: dem.spacing_x,
-        spacing_y: dem.spacing_y,
-    };
-    let mut meter = ErrorMeter::new(&terrain, &grid).expect("meter");
+    let mut meter = ErrorMeter::new(&terrain, &common::grid_view(&dem)).expect("meter");
     let path = CameraPath::orbit(&terrain);
     let camera = path.at(path.keys[0].time);
     let at = |level| State {
