@@ -13,16 +13,8 @@ use renderer::camera::Camera;
 use renderer::cut::{cut, cut_with, stand_in, Checks, Cut, Node, Rules};
 use renderer::path::CameraPath;
 use renderer::terrain::Terrain;
-use tiles::BuildParams;
 
 const EXTENT: (u32, u32) = (1024, 768);
-
-fn with_pyramid() -> BuildParams {
-    BuildParams {
-        pyramid: true,
-        ..BuildParams::default()
-    }
-}
 
 /// The Puget sample and a GENERATED 2049² mirror tiling of SRTM N55W003 (see
 /// `common::mirror`), both with their pyramids, in `dir`.
@@ -35,9 +27,9 @@ fn sets(dir: &std::path::Path) -> Vec<Terrain> {
         &puget,
         &[testdata::sample()],
         common::puget_options(),
-        &with_pyramid(),
+        &common::with_pyramid(),
     );
-    let mirror = common::mirror_with(&mirror, 2049, &with_pyramid());
+    let mirror = common::mirror_with(&mirror, 2049, &common::with_pyramid());
     [puget, mirror]
         .iter()
         .map(|p| Terrain::open_pyramid(p).unwrap_or_else(|e| panic!("{}: {e}", p.display())))
@@ -117,7 +109,7 @@ fn the_cut_covers_what_the_base_grid_sees_each_tile_once() {
 #[test]
 fn far_views_take_the_top_tile_and_near_views_the_base_grid() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let set = common::mirror_with(dir.path(), 2049, &with_pyramid());
+    let set = common::mirror_with(dir.path(), 2049, &common::with_pyramid());
     let pyramid = Terrain::open_pyramid(&set).expect("open");
     let (lo, hi) = pyramid.bounds();
     let centre = (lo + hi) * 0.5;
@@ -150,7 +142,7 @@ fn the_pyramid_draws_fewer_tiles_for_about_the_same_triangles() {
     // layer tile only where it costs less than its children; the rule without it keeps every
     // layer tile that meets tau and draws several times the triangles (the control).
     let dir = tempfile::tempdir().expect("temp dir");
-    let set = common::mirror_with(dir.path(), 2049, &with_pyramid());
+    let set = common::mirror_with(dir.path(), 2049, &common::with_pyramid());
     let pyramid = Terrain::open_pyramid(&set).expect("open");
     let base = Terrain::open(&set).expect("open");
     let path = CameraPath::orbit(&pyramid);
@@ -372,7 +364,7 @@ fn the_meter_sees_the_pop_where_children_replace_their_parent() {
         dir.path(),
         &inputs,
         common::puget_options(),
-        &with_pyramid(),
+        &common::with_pyramid(),
     );
     let terrain = Terrain::open_pyramid(&set).expect("open");
     let dem = dem::read(&inputs, &common::puget_options()).expect("read");

@@ -118,11 +118,7 @@ fn independent_sides_crack_while_morphing_without_slivers() {
 #[test]
 fn the_pyramids_cut_is_drawn_without_cracks() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let params = tiles::BuildParams {
-        pyramid: true,
-        ..tiles::BuildParams::default()
-    };
-    let set = common::mirror_with(dir.path(), 2049, &params);
+    let set = common::mirror_with(dir.path(), 2049, &common::with_pyramid());
     let size = ["--size", "512x384"];
     for path in ["orbit", "flyover"] {
         let discrete = ["--pyramid", "--no-geomorph", WARM, size[0], size[1]];
@@ -194,11 +190,7 @@ fn the_pyramids_cut_is_drawn_without_cracks() {
 #[test]
 fn ancestors_stand_in_for_tiles_not_checked_yet_without_cracks() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let params = tiles::BuildParams {
-        pyramid: true,
-        ..tiles::BuildParams::default()
-    };
-    let set = common::mirror_with(dir.path(), 2049, &params);
+    let set = common::mirror_with(dir.path(), 2049, &common::with_pyramid());
     let flags = ["--pyramid", "--checks", "2", "--no-prefetch", WARM];
     let (flags, size) = (&flags[..], ["--size", "512x384"]);
     for path in ["orbit", "flyover"] {
@@ -234,11 +226,7 @@ fn ancestors_stand_in_for_tiles_not_checked_yet_without_cracks() {
 #[test]
 fn a_pyramid_tile_that_fails_is_drawn_by_its_parent_without_cracks() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let params = tiles::BuildParams {
-        pyramid: true,
-        ..tiles::BuildParams::default()
-    };
-    let set = common::mirror_with(dir.path(), 2049, &params);
+    let set = common::mirror_with(dir.path(), 2049, &common::with_pyramid());
     let flags = ["--pyramid", "--no-geomorph", WARM, "--size", "512x384"];
     let trace = dir.path().join("cut.trace");
     let traced = [&flags[..], &["--trace", s(&trace)]].concat();
@@ -724,15 +712,11 @@ fn measured_with(
 fn the_cut_is_measured_within_tau_at_every_base_sample() {
     let dir = tempfile::tempdir().expect("temp dir");
     let sample = common::sample();
-    let params = tiles::BuildParams {
-        pyramid: true,
-        ..tiles::BuildParams::default()
-    };
     let set = common::tileset_with(
         dir.path(),
         std::slice::from_ref(&sample),
         common::puget_options(),
-        &params,
+        &common::with_pyramid(),
     );
     let flags = ["--source-spacing", "160", "--source-vertical-scale", "0.1"];
     let mut layer_frames = 0;
@@ -1779,10 +1763,7 @@ fn pyramid_layers_fly_over_the_same_ground() {
         dir.path(),
         &[testdata::sample()],
         common::puget_options(),
-        &tiles::BuildParams {
-            pyramid: true,
-            ..tiles::BuildParams::default()
-        },
+        &common::with_pyramid(),
     );
     let fly = |layer: &str| {
         let out = dir.path().join(format!("layer{layer}"));

@@ -42,20 +42,21 @@ pub(super) fn drawn_cut(
     wanted: &[(usize, u32)],
     policy: CheckPolicy,
 ) -> (Vec<(usize, u32)>, usize, u64) {
-    let unchecked: Vec<usize> = wanted
-        .iter()
-        .map(|&(i, _)| i)
-        .filter(|&i| terrain.tiles[i].usable().is_none())
-        .collect();
     // On the frame, every tile first, on every core.
-    let on_frame = policy == CheckPolicy::OnFrame;
-    if on_frame {
+    let mut checked = 0;
+    if policy == CheckPolicy::OnFrame {
+        let unchecked: Vec<usize> = wanted
+            .iter()
+            .map(|&(i, _)| i)
+            .filter(|&i| terrain.tiles[i].usable().is_none())
+            .collect();
         terrain.check_all(&unchecked);
+        checked = unchecked.len() as u64;
     }
     let mut checks = FrameChecks {
         terrain,
         later: Vec::new(),
-        checked: if on_frame { unchecked.len() as u64 } else { 0 },
+        checked,
     };
     let nodes: Vec<crate::cut::Node> = wanted
         .iter()

@@ -56,6 +56,14 @@ pub fn mirror(dir: &Path, size: usize) -> PathBuf {
     mirror_with(dir, size, &BuildParams::default())
 }
 
+/// Build options with the tile pyramid (`tiletool build --pyramid`).
+pub fn with_pyramid() -> BuildParams {
+    BuildParams {
+        pyramid: true,
+        ..BuildParams::default()
+    }
+}
+
 /// [`mirror`] built with `params`.
 pub fn mirror_with(dir: &Path, size: usize, params: &BuildParams) -> PathBuf {
     let path = data("srtm/N55W003.hgt");
