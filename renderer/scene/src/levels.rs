@@ -70,12 +70,13 @@ impl LevelTable {
         }
     }
 
-    /// The table of the larger error at every level of `self` and `other`.
+    /// The table of the larger error at every level of `self` and `other`. A table with fewer
+    /// levels errs at the levels beyond its finest by its finest's error (they draw its finest
+    /// surface; see `distinct_levels` in [`crate::terrain`]).
     pub fn max(&self, other: &LevelTable) -> LevelTable {
         let n = self.levels.max(other.levels);
-        let errors: Vec<f32> = (0..n)
-            .map(|k| self.errors[k].max(other.errors[k]))
-            .collect();
+        let at = |t: &LevelTable, k: usize| t.errors[k.min(t.levels - 1)];
+        let errors: Vec<f32> = (0..n).map(|k| at(self, k).max(at(other, k))).collect();
         LevelTable::new(&errors)
     }
 
@@ -126,6 +127,22 @@ mod tests {
             assert!(l32 <= last + 1e-6, "not monotone at {r}");
             assert!((f64::from(l32) - l).abs() < 1e-4, "f32 {l32} vs f64 {l}");
             last = l32;
+        }
+    }
+
+    /// A tile whose last levels add nothing has a shorter table; where it shares a side with a
+    /// tile of more levels, the shared table holds its finest error at every finer level (its
+    /// surface there), never the other tile's smaller one alone.
+    #[test]
+    fn a_shorter_table_errs_beyond_its_finest_level_by_that_levels_error() {
+        let short = LevelTable::new(&[64.0, 32.0, 20.0]);
+        let long = LevelTable::new(&[64.0, 32.0, 16.0, 8.0, 4.0]);
+        for m in [short.max(&long), long.max(&short)] {
+            assert_eq!(m.levels, 5);
+            for k in 2..5 {
+                assert!(m.errors[k] >= 20.0, "{k}: {m:?}");
+            }
+            assert!(m.errors[1] >= MIN_RATIO * m.errors[2] * 0.9999, "{m:?}");
         }
     }
 

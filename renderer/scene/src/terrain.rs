@@ -13,7 +13,7 @@ use std::sync::{Condvar, Mutex, OnceLock};
 use std::time::Duration;
 
 use glam::DVec3;
-use tiles::format::TileSet;
+use tiles::format::{LevelEntry, TileSet};
 use tiles::mesh::TILE_CELLS;
 
 use crate::levels::LevelTable;
@@ -654,6 +654,21 @@ fn layer_tiles(set: &TileSet, p: u32) -> Result<Vec<TileInfo>, tiles::FormatErro
     Ok(tiles)
 }
 
+/// How many of a tile's levels draw surfaces of their own: a level that adds no vertex to the
+/// one before draws the same triangles, so it is the same surface with the same error. A
+/// pyramid layer's tile is built no finer than a floor ([`tiles::pyramid::level_floor`]), and
+/// its levels past that floor are such copies: up to 7 of 9 in the mirror sets' top layers.
+/// A level table over them would fall by the least ratio across copies of one surface, and
+/// make the tile's real levels look up to `MIN_RATIO^6` times worse than they are; the table
+/// stops at the last level of its own instead. Levels past it draw the same triangles, and
+/// the same surface, as that level.
+fn distinct_levels(levels: &[LevelEntry]) -> usize {
+    let adds = |k: usize| {
+        levels[k].block_len > 0 || levels[k].triangle_count != levels[k - 1].triangle_count
+    };
+    1 + (1..levels.len()).rev().find(|&k| adds(k)).unwrap_or(0)
+}
+
 /// One tile's header, level table, box and own level table, from its outline (no checksum:
 /// the tile's check comes when it is first needed).
 fn tile_info(set: &TileSet, tx: u32, ty: u32, layer: u32) -> Result<TileInfo, tiles::FormatError> {
@@ -689,7 +704,7 @@ fn tile_info(set: &TileSet, tx: u32, ty: u32, layer: u32) -> Result<TileInfo, ti
         .iter()
         .map(|l| l.max_error.max(0.0) + 0.5 * l.morph_unit.max(0.0))
         .collect();
-    let own_table = LevelTable::new(&errors);
+    let own_table = LevelTable::new(&errors[..distinct_levels(&levels)]);
     Ok(TileInfo {
         tx,
         ty,
