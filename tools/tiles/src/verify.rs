@@ -292,7 +292,10 @@ fn check_tile(set: &TileSet, tile: &Tile, source: Option<&Grid>, report: &mut Ve
     let cells = TILE_CELLS as usize;
     let want_x = (fh.grid_width as usize - 1 - tx as usize * cells).min(cells) as u32;
     let want_y = (fh.grid_height as usize - 1 - ty as usize * cells).min(cells) as u32;
+    // Problems found so far (a level that repeats a clean level need not be walked again).
+    let found = std::cell::Cell::new(0usize);
     let mut problem = |level: Option<u32>, what: String| {
+        found.set(found.get() + 1);
         let at = match level {
             Some(l) => format!("{} level {l}", tile_name(set, tx, ty)),
             None => tile_name(set, tx, ty),
@@ -316,7 +319,11 @@ fn check_tile(set: &TileSet, tile: &Tile, source: Option<&Grid>, report: &mut Ve
     // Vertices in use by the previous level, as sorted lists (sets by bitmap below: the
     // hash sets these replace were most of verify's time).
     let mut previous: Vec<u32> = Vec::new();
+    // The level before, its index list, and whether its checks found nothing (none after a
+    // level cut short).
+    let mut before: Option<(crate::format::Level, Vec<u32>, bool)> = None;
     for level in 0..th.levels {
+        let found_before = found.get();
         report.levels_checked += 1;
         let Some(l) = tile.level(level) else {
             problem(Some(level), "unreadable".into());
@@ -339,129 +346,148 @@ fn check_tile(set: &TileSet, tile: &Tile, source: Option<&Grid>, report: &mut Ve
         if fans.last().is_some_and(|f| f.is_empty()) {
             fans.pop();
         }
-        if fans.len() != e.fan_count as usize {
-            problem(
-                Some(level),
-                format!("{} fans, table says {}", fans.len(), e.fan_count),
-            );
-        }
-        let mut in_use = vec![false; vertices.len()];
+        // A level that adds no vertex and stores the fans, borders and counts of a clean level
+        // before it (a pyramid tile's levels past its floor, [`crate::pyramid::level_floor`]:
+        // up to 7 of 9) passes the walks below as that level did, vertex for vertex: they are
+        // compared, not walked again. Its errors and morph offsets are still checked.
+        let repeats = before.take().is_some_and(|(b, b_flat, clean)| {
+            let be = &b.entry;
+            clean
+                && e.block_len == 0
+                && e.block_start == be.vertex_count()
+                && (e.fan_count, e.triangle_count) == (be.fan_count, be.triangle_count)
+                && e.z_min <= be.z_min
+                && e.z_max >= be.z_max
+                && l.border == b.border
+                && b_flat == flat
+        });
         let mut used: Vec<u32> = Vec::new();
-        for &v in fans.iter().copied().flatten() {
-            match in_use.get_mut(v as usize) {
-                Some(seen) if !*seen => {
-                    *seen = true;
-                    used.push(v);
-                }
-                Some(_) => {}
-                None => used.push(v), // out of range: reported below
-            }
-        }
-        let contains = |v: u32| in_use.get(v as usize).copied().unwrap_or(false);
-        // Nesting: V_i ⊆ V_{i+1}, and block i holds exactly the vertices level i introduces.
-        if let Some(v) = previous.iter().find(|&&v| !contains(v)) {
-            problem(
-                Some(level),
-                format!(
-                    "vertex {v} of level {} is missing (levels not nested)",
-                    level.saturating_sub(1)
-                ),
-            );
-        }
-        let block = e.block_start..e.vertex_count();
-        if used.len() != e.vertex_count() as usize || !block.clone().all(contains) {
-            problem(
-                Some(level),
-                "vertices in use differ from blocks 0..=level".into(),
-            );
-        }
-        let mut presence = vec![false; TILE_SIZE * TILE_SIZE];
-        let pos = |v: u32| vertices.get(v as usize).map(|&(x, y, _)| (x, y));
-        for &v in &used {
-            if let Some((x, y)) = pos(v) {
-                if x > th.mesh_max_x || y > th.mesh_max_y {
-                    problem(
-                        Some(level),
-                        format!("vertex {v} at {x},{y} lies outside the mesh extent"),
-                    );
-                    return;
-                }
-                presence[y as usize * TILE_SIZE + x as usize] = true;
-            }
-        }
-        // Fans: each a closed CCW ring on the square around its centre; together they tile the
-        // mesh extent exactly once, and no level vertex sits inside a fan edge (no T-vertex).
-        let mut covered = vec![false; (TILE_CELLS * TILE_CELLS) as usize];
-        let mut triangles = 0u64;
-        let mut bad_fan = None;
-        for (f, fan) in fans.iter().enumerate() {
-            match check_fan(fan, &vertices, &presence, &mut covered) {
-                Ok(t) => triangles += t,
-                Err(what) => {
-                    bad_fan = Some(format!("fan {f}: {what}"));
-                    break;
-                }
-            }
-        }
-        if let Some(what) = bad_fan {
-            problem(Some(level), what);
-            continue;
-        }
-        let area = (th.mesh_max_x * th.mesh_max_y) as usize;
-        let inside = covered.iter().filter(|&&c| c).count();
-        let all_inside = (0..th.mesh_max_y)
-            .all(|y| (0..th.mesh_max_x).all(|x| covered[(y * TILE_CELLS + x) as usize]));
-        if inside != area || !all_inside {
-            problem(
-                Some(level),
-                format!("fans cover {inside} of the {area} cells of the mesh extent"),
-            );
-        }
-        if triangles != u64::from(e.triangle_count) {
-            problem(
-                Some(level),
-                format!("{triangles} triangles, table says {}", e.triangle_count),
-            );
-        }
-        // Border lists: exactly the level's vertices on each side, in order along it.
-        let sides = [
-            (|x: u32, y: u32, _: u32, _: u32| (y == 0).then_some(x))
-                as fn(u32, u32, u32, u32) -> Option<u32>,
-            |x, y, mx, _| (x == mx).then_some(y),
-            |x, y, _, my| (y == my).then_some(x),
-            |x, y, _, _| (x == 0).then_some(y),
-        ];
-        for (k, side) in sides.iter().enumerate() {
-            let mut want: Vec<(u32, u32)> = used
-                .iter()
-                .filter_map(|&v| {
-                    pos(v)
-                        .and_then(|(x, y)| side(x, y, th.mesh_max_x, th.mesh_max_y))
-                        .map(|t| (t, v))
-                })
-                .collect();
-            want.sort_unstable();
-            let want: Vec<u32> = want.into_iter().map(|(_, v)| v).collect();
-            if want != l.border[k] {
+        if repeats {
+            used.clone_from(&previous);
+        } else {
+            if fans.len() != e.fan_count as usize {
                 problem(
                     Some(level),
-                    format!("border list {k} does not match the level's side vertices"),
+                    format!("{} fans, table says {}", fans.len(), e.fan_count),
                 );
             }
-        }
-        // Heights of the level's vertices bound the level's box.
-        let (zlo, zhi) = used.iter().filter_map(|&v| vertices.get(v as usize)).fold(
-            (f32::INFINITY, f32::NEG_INFINITY),
-            |(lo, hi), &(_, _, z)| (lo.min(z), hi.max(z)),
-        );
-        if zlo < e.z_min || zhi > e.z_max {
-            problem(
-                Some(level),
-                format!(
-                    "vertex heights {zlo}..{zhi} leave the box {}..{}",
-                    e.z_min, e.z_max
-                ),
+            let mut in_use = vec![false; vertices.len()];
+            for &v in fans.iter().copied().flatten() {
+                match in_use.get_mut(v as usize) {
+                    Some(seen) if !*seen => {
+                        *seen = true;
+                        used.push(v);
+                    }
+                    Some(_) => {}
+                    None => used.push(v), // out of range: reported below
+                }
+            }
+            let contains = |v: u32| in_use.get(v as usize).copied().unwrap_or(false);
+            // Nesting: V_i ⊆ V_{i+1}, and block i holds exactly the vertices level i introduces.
+            if let Some(v) = previous.iter().find(|&&v| !contains(v)) {
+                problem(
+                    Some(level),
+                    format!(
+                        "vertex {v} of level {} is missing (levels not nested)",
+                        level.saturating_sub(1)
+                    ),
+                );
+            }
+            let block = e.block_start..e.vertex_count();
+            if used.len() != e.vertex_count() as usize || !block.clone().all(contains) {
+                problem(
+                    Some(level),
+                    "vertices in use differ from blocks 0..=level".into(),
+                );
+            }
+            let mut presence = vec![false; TILE_SIZE * TILE_SIZE];
+            let pos = |v: u32| vertices.get(v as usize).map(|&(x, y, _)| (x, y));
+            for &v in &used {
+                if let Some((x, y)) = pos(v) {
+                    if x > th.mesh_max_x || y > th.mesh_max_y {
+                        problem(
+                            Some(level),
+                            format!("vertex {v} at {x},{y} lies outside the mesh extent"),
+                        );
+                        return;
+                    }
+                    presence[y as usize * TILE_SIZE + x as usize] = true;
+                }
+            }
+            // Fans: each a closed CCW ring on the square around its centre; together they tile the
+            // mesh extent exactly once, and no level vertex sits inside a fan edge (no T-vertex).
+            let mut covered = vec![false; (TILE_CELLS * TILE_CELLS) as usize];
+            let mut triangles = 0u64;
+            let mut bad_fan = None;
+            for (f, fan) in fans.iter().enumerate() {
+                match check_fan(fan, &vertices, &presence, &mut covered) {
+                    Ok(t) => triangles += t,
+                    Err(what) => {
+                        bad_fan = Some(format!("fan {f}: {what}"));
+                        break;
+                    }
+                }
+            }
+            if let Some(what) = bad_fan {
+                problem(Some(level), what);
+                continue;
+            }
+            let area = (th.mesh_max_x * th.mesh_max_y) as usize;
+            let inside = covered.iter().filter(|&&c| c).count();
+            let all_inside = (0..th.mesh_max_y)
+                .all(|y| (0..th.mesh_max_x).all(|x| covered[(y * TILE_CELLS + x) as usize]));
+            if inside != area || !all_inside {
+                problem(
+                    Some(level),
+                    format!("fans cover {inside} of the {area} cells of the mesh extent"),
+                );
+            }
+            if triangles != u64::from(e.triangle_count) {
+                problem(
+                    Some(level),
+                    format!("{triangles} triangles, table says {}", e.triangle_count),
+                );
+            }
+            // Border lists: exactly the level's vertices on each side, in order along it.
+            let sides = [
+                (|x: u32, y: u32, _: u32, _: u32| (y == 0).then_some(x))
+                    as fn(u32, u32, u32, u32) -> Option<u32>,
+                |x, y, mx, _| (x == mx).then_some(y),
+                |x, y, _, my| (y == my).then_some(x),
+                |x, y, _, _| (x == 0).then_some(y),
+            ];
+            for (k, side) in sides.iter().enumerate() {
+                let mut want: Vec<(u32, u32)> = used
+                    .iter()
+                    .filter_map(|&v| {
+                        pos(v)
+                            .and_then(|(x, y)| side(x, y, th.mesh_max_x, th.mesh_max_y))
+                            .map(|t| (t, v))
+                    })
+                    .collect();
+                want.sort_unstable();
+                let want: Vec<u32> = want.into_iter().map(|(_, v)| v).collect();
+                if want != l.border[k] {
+                    problem(
+                        Some(level),
+                        format!("border list {k} does not match the level's side vertices"),
+                    );
+                }
+            }
+            // Heights of the level's vertices bound the level's box.
+            let (zlo, zhi) = used.iter().filter_map(|&v| vertices.get(v as usize)).fold(
+                (f32::INFINITY, f32::NEG_INFINITY),
+                |(lo, hi), &(_, _, z)| (lo.min(z), hi.max(z)),
             );
+            if zlo < e.z_min || zhi > e.z_max {
+                problem(
+                    Some(level),
+                    format!(
+                        "vertex heights {zlo}..{zhi} leave the box {}..{}",
+                        e.z_min, e.z_max
+                    ),
+                );
+            }
         }
         if let Some(s) = &samples {
             let min_spacing = fh.spacing_x.min(fh.spacing_y);
@@ -532,6 +558,7 @@ fn check_tile(set: &TileSet, tile: &Tile, source: Option<&Grid>, report: &mut Ve
         }
         check_morph(tile, level, &fans, &vertices, &mut problem);
         previous = used;
+        before = Some((l, flat, found.get() == found_before));
     }
 }
 
@@ -545,7 +572,10 @@ fn check_morph(
     problem: &mut impl FnMut(Option<u32>, String),
 ) {
     let levels = tile.header.levels;
-    if k + 1 >= levels {
+    // Nothing morphs onto the finest level, nor onto one whose finer blocks are all empty (a
+    // pyramid tile's levels past its floor); an unreadable block is reported where it is read.
+    let empty_or_unreadable = |j: u32| tile.level(j).is_none_or(|b| b.entry.block_len == 0);
+    if (k + 1..levels).all(empty_or_unreadable) {
         return;
     }
     let mut surface = vec![f64::NAN; TILE_SIZE * TILE_SIZE];

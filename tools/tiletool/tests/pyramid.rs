@@ -259,6 +259,47 @@ fn a_corrupted_or_forged_layer_is_refused() {
     }
 }
 
+/// A layer tile's levels past its floor add no vertex and store the fans of the level before:
+/// `verify` compares them with that level instead of walking them again. A broken fan in such
+/// a level (checksums made good) makes it differ, so it is walked and caught. The control:
+/// the file as built verifies.
+#[test]
+fn a_broken_fan_in_a_layer_tiles_repeated_level_is_caught() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let file = build_cropped(dir.path(), "pyramid.vkt", &["--pyramid"]);
+    let o = tiletool(&["verify", s(&file)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let set = tiles::format::TileSet::open(&file).expect("open");
+    let mut bytes = std::fs::read(&file).expect("read");
+    // The top layer's first tile whose last level repeats the one before.
+    let top = set.pyramid_layers();
+    let layer = set.layer(top).expect("top layer");
+    let tile = layer.tile(0, 0).expect("tile");
+    let levels = tile.header.levels;
+    let last = tile.level(levels - 1).expect("level").entry;
+    let before = tile.level(levels - 2).expect("level").entry;
+    assert_eq!(last.block_len, 0, "the top tile's last level adds vertices");
+    assert_eq!(last.triangle_count, before.triangle_count);
+    let entry: DirEntry = bytemuck::pod_read_unaligned(
+        &bytes[layer_entries(&bytes, top)[0]..][..size_of::<DirEntry>()],
+    );
+    // Swap the first fan's second and third ring entries: the ring no longer walks its cell.
+    let w = last.index_width as usize;
+    let at = entry.offset as usize + last.index_offset as usize;
+    let (a, b) = (at + 2 * w, at + 3 * w);
+    let first: Vec<u8> = bytes[a..a + w].to_vec();
+    bytes.copy_within(b..b + w, a);
+    bytes[b..b + w].copy_from_slice(&first);
+    tiles::format::reseal(&mut bytes).expect("reseal");
+    let broken = dir.path().join("broken.vkt");
+    std::fs::write(&broken, &bytes).expect("write");
+    let o = tiletool(&["verify", s(&broken)]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    let want = format!("layer {top} tile 0,0 level {}: fan 0", levels - 1);
+    assert!(err.contains(&want), "want {want:?} in {err}");
+}
+
 #[test]
 fn a_pyramid_leaves_the_base_tiles_alone_and_builds_the_same_bytes_in_bands() {
     let dir = tempfile::tempdir().expect("temp dir");
