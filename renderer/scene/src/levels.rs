@@ -42,18 +42,30 @@ impl LevelTable {
     /// (never below its own), so the table falls strictly and `Λ` is continuous with a bounded
     /// slope.
     pub fn new(errors: &[f32]) -> LevelTable {
-        let n = errors.len().clamp(1, MAX_LEVELS);
+        LevelTable::over(errors, errors.len())
+    }
+
+    /// The table of a tile whose levels from `distinct` on add no vertex: copies of level
+    /// `distinct - 1`'s surface (see `distinct_levels` in [`crate::terrain`]). `Λ` runs over
+    /// the first `distinct` levels, which fall as in [`Self::new`]; the copies' errors are kept
+    /// as given, for [`Self::max`].
+    pub fn over(errors: &[f32], distinct: usize) -> LevelTable {
+        let all = errors.len().clamp(1, MAX_LEVELS);
+        let n = distinct.clamp(1, all);
+        let own = |k: usize| match errors.get(k) {
+            Some(x) if x.is_finite() => x.max(0.0),
+            _ => f32::MAX / 4.0,
+        };
         let mut e = [0.0f32; MAX_LEVELS];
+        for (k, e) in e.iter_mut().enumerate().take(all).skip(n) {
+            *e = own(k);
+        }
         let mut below = 0.0f32;
         for k in (0..n).rev() {
-            let own = match errors.get(k) {
-                Some(x) if x.is_finite() => x.max(0.0),
-                _ => f32::MAX / 4.0,
-            };
             e[k] = if k == n - 1 {
-                own.max(1e-6)
+                own(k).max(1e-6)
             } else {
-                own.max(below * MIN_RATIO)
+                own(k).max(below * MIN_RATIO)
             };
             below = e[k];
         }
@@ -70,14 +82,15 @@ impl LevelTable {
         }
     }
 
-    /// The table of the larger error at every level of `self` and `other`. A table with fewer
-    /// levels errs at the levels beyond its finest by its finest's error (they draw its finest
-    /// surface; see `distinct_levels` in [`crate::terrain`]).
+    /// The table of the larger error at every level of `self` and `other`, over the levels of
+    /// the longer: beyond a table's own levels, its copies' errors (the surface it draws there;
+    /// with copies in neither table at a level, as two tables of that many levels were before
+    /// copies were told apart).
     pub fn max(&self, other: &LevelTable) -> LevelTable {
-        let n = self.levels.max(other.levels);
-        let at = |t: &LevelTable, k: usize| t.errors[k.min(t.levels - 1)];
-        let errors: Vec<f32> = (0..n).map(|k| at(self, k).max(at(other, k))).collect();
-        LevelTable::new(&errors)
+        let errors: [f32; MAX_LEVELS] =
+            std::array::from_fn(|k| self.errors[k].max(other.errors[k]));
+        let all = MAX_LEVELS - errors.iter().rev().take_while(|&&e| e == 0.0).count();
+        LevelTable::over(&errors[..all.max(1)], self.levels.max(other.levels))
     }
 
     /// `Λ(r)`, in f32 as the vertex shader evaluates it.
@@ -130,20 +143,40 @@ mod tests {
         }
     }
 
-    /// A tile whose last levels add nothing has a shorter table; where it shares a side with a
-    /// tile of more levels, the shared table holds its finest error at every finer level (its
-    /// surface there), never the other tile's smaller one alone.
+    /// A tile whose last levels add nothing (copies, errors about the last real level's): its
+    /// `Λ` ends at its last real level, which keeps its own error, where a table over all its
+    /// levels (the control) inflates it by the least ratio per copy. Where it shares a side with
+    /// a tile of more levels, the shared table holds the copies' errors at the finer levels.
     #[test]
-    fn a_shorter_table_errs_beyond_its_finest_level_by_that_levels_error() {
-        let short = LevelTable::new(&[64.0, 32.0, 20.0]);
+    fn a_table_ends_at_the_last_level_that_adds_vertices() {
+        let errors = [64.0, 32.0, 20.0, 19.5, 19.25];
+        let short = LevelTable::over(&errors, 3);
+        assert_eq!((short.levels, short.errors[2]), (3, 20.0), "{short:?}");
+        assert_eq!(short.level(10.0), 2.0);
+        let control = LevelTable::new(&errors);
+        assert!(
+            control.errors[2] >= 19.25 * MIN_RATIO * MIN_RATIO,
+            "{control:?}"
+        );
         let long = LevelTable::new(&[64.0, 32.0, 16.0, 8.0, 4.0]);
         for m in [short.max(&long), long.max(&short)] {
             assert_eq!(m.levels, 5);
-            for k in 2..5 {
-                assert!(m.errors[k] >= 20.0, "{k}: {m:?}");
+            for (k, &e) in errors.iter().enumerate() {
+                assert!(m.errors[k] >= e, "{k}: {m:?}");
             }
-            assert!(m.errors[1] >= MIN_RATIO * m.errors[2] * 0.9999, "{m:?}");
+            for k in 0..4 {
+                assert!(m.errors[k] >= MIN_RATIO * m.errors[k + 1] * 0.9999, "{m:?}");
+            }
         }
+        let other = LevelTable::over(&[60.0, 30.0, 25.0, 24.0, 23.0], 3);
+        let both = short.max(&other);
+        assert_eq!((both.levels, both.errors[2]), (3, 25.0), "{both:?}");
+        assert_eq!(both.errors[4], 23.0, "{both:?}");
+        // Tables without copies merge as they always did.
+        assert_eq!(
+            control.max(&long),
+            LevelTable::new(&[64.0, 32.0, 20.0, 19.5, 19.25])
+        );
     }
 
     /// A level whose error the spacing rule left above the next coarser one's is not allowed to

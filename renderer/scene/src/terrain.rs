@@ -704,7 +704,7 @@ fn tile_info(set: &TileSet, tx: u32, ty: u32, layer: u32) -> Result<TileInfo, ti
         .iter()
         .map(|l| l.max_error.max(0.0) + 0.5 * l.morph_unit.max(0.0))
         .collect();
-    let own_table = LevelTable::new(&errors[..distinct_levels(&levels)]);
+    let own_table = LevelTable::over(&errors, distinct_levels(&levels));
     Ok(TileInfo {
         tx,
         ty,
