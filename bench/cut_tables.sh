@@ -1,0 +1,44 @@
+#!/bin/bash
+# Geomorphing over a pyramid's cut, binaries side by side (`BINS`, default: this build's
+# vkterrain alone): per set, flight and binary, the geomorphing cut (tau 1, the defaults)
+# against the discrete cut (`--no-geomorph`) of the same binary, 60 frames at 1024 x 768:
+# medians after frame 5 of triangles and tiles drawn (of them above the base grid), the time a
+# process takes to open the set and draw one frame (file warm; best of 2), and that first
+# view's checks. Sets as bench/pyramid.sh makes them (GENERATED mirror sets of SRTM3 N55W003).
+# usage: BINS="old/vkterrain target/release/vkterrain" bench/cut_tables.sh SET.vkt...
+set -euo pipefail
+out=${OUT:-/tmp/cut-tables-bench}; mkdir -p "$out"
+bins=${BINS:-target/release/vkterrain}
+echo "| set | flight | binary | drawn as | triangles | tiles (above base) | to first frame | first view checked |"
+echo "|---|---|---|---|---:|---:|---:|---:|"
+for vkt in "$@"; do
+  name=$(basename "$vkt" .vkt)
+  for path in orbit flyover; do
+    for bin in $bins; do
+      for mode in morph discrete; do
+        flags="--pyramid"; [ $mode = discrete ] && flags="--pyramid --no-geomorph"
+        run="$out/$name.$path.$mode.$(echo "$bin" | tr / _)"
+        for i in 1 2; do
+          /usr/bin/time -f "%e" -o "$run.first$i.time" \
+            "$bin" "$vkt" --headless --path $path --frames 1 --size 1024x768 $flags > "$run.first$i.json" 2>/dev/null
+        done
+        "$bin" "$vkt" --headless --path $path --frames 60 --size 1024x768 $flags \
+          --log "$run.csv" > /dev/null 2>&1
+        python3 - "$run" "$name" "$path" "$bin" "$mode" <<'PY'
+import csv, json, statistics, sys
+run, name, path, binary, mode = sys.argv[1:]
+firsts = []
+for i in (1, 2):
+    wall = float(open(f"{run}.first{i}.time").read().split()[0])
+    firsts.append((wall, json.load(open(f"{run}.first{i}.json"))["first_view_check_ms"]))
+wall, checks = min(firsts)
+rows = list(csv.DictReader(open(f"{run}.csv")))[5:]
+med = lambda c: statistics.median(float(r[c] or 0) for r in rows)
+drawn = "geomorphing cut" if mode == "morph" else "discrete cut"
+print(f"| {name} | {path} | `{binary}` | {drawn} | {med('triangles'):,.0f} "
+      f"| {med('tiles_drawn'):.0f} ({med('tiles_above_base'):.0f}) | {wall:.2f} s | {checks:.0f} ms |")
+PY
+      done
+    done
+  done
+done
