@@ -1543,7 +1543,7 @@ pub enum Indices<'a> {
     U32(&'a [u32]),
 }
 
-impl Indices<'_> {
+impl<'a> Indices<'a> {
     pub fn len(&self) -> usize {
         match self {
             Indices::U16(s) => s.len(),
@@ -1563,21 +1563,11 @@ impl Indices<'_> {
     }
 
     /// Indices widened to u32, restarts as `None`.
-    pub fn iter(&self) -> impl Iterator<Item = Option<u32>> + '_ {
-        let (a, b) = match self {
-            Indices::U16(s) => (
-                Some(
-                    s.iter()
-                        .map(|&i| (i != RESTART_U16).then_some(u32::from(i))),
-                ),
-                None,
-            ),
-            Indices::U32(s) => (
-                None,
-                Some(s.iter().map(|&i| (i != RESTART_U32).then_some(i))),
-            ),
-        };
-        a.into_iter().flatten().chain(b.into_iter().flatten())
+    pub fn iter(&self) -> IndexIter<'a> {
+        match *self {
+            Indices::U16(s) => IndexIter::U16(s.iter()),
+            Indices::U32(s) => IndexIter::U32(s.iter()),
+        }
     }
 
     /// The fans: each a slice of vertex indices, centre first, closed perimeter after.
@@ -1604,6 +1594,46 @@ pub struct Tile<'a> {
     pub header: TileHeader,
     levels: &'a [LevelEntry],
 }
+
+/// [`Indices::iter`]: one width chosen once, not a chain of both (the tile checks and the
+/// part tables walk every index of every level this way).
+#[derive(Clone, Debug)]
+pub enum IndexIter<'a> {
+    U16(std::slice::Iter<'a, u16>),
+    U32(std::slice::Iter<'a, u32>),
+}
+
+impl Iterator for IndexIter<'_> {
+    type Item = Option<u32>;
+
+    #[inline]
+    fn next(&mut self) -> Option<Option<u32>> {
+        match self {
+            IndexIter::U16(it) => it
+                .next()
+                .map(|&i| (i != RESTART_U16).then_some(u32::from(i))),
+            IndexIter::U32(it) => it.next().map(|&i| (i != RESTART_U32).then_some(i)),
+        }
+    }
+
+    fn size_hint(&self) -> (usize, Option<usize>) {
+        match self {
+            IndexIter::U16(it) => it.size_hint(),
+            IndexIter::U32(it) => it.size_hint(),
+        }
+    }
+
+    fn fold<B, F: FnMut(B, Option<u32>) -> B>(self, init: B, mut f: F) -> B {
+        match self {
+            IndexIter::U16(it) => it.fold(init, |acc, &i| {
+                f(acc, (i != RESTART_U16).then_some(u32::from(i)))
+            }),
+            IndexIter::U32(it) => it.fold(init, |acc, &i| f(acc, (i != RESTART_U32).then_some(i))),
+        }
+    }
+}
+
+impl ExactSizeIterator for IndexIter<'_> {}
 
 /// The data of one level of one tile, as stored.
 #[derive(Clone, Copy, Debug)]
