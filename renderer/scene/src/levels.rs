@@ -89,8 +89,7 @@ impl LevelTable {
     pub fn max(&self, other: &LevelTable) -> LevelTable {
         let errors: [f32; MAX_LEVELS] =
             std::array::from_fn(|k| self.errors[k].max(other.errors[k]));
-        let all = MAX_LEVELS - errors.iter().rev().take_while(|&&e| e == 0.0).count();
-        LevelTable::over(&errors[..all.max(1)], self.levels.max(other.levels))
+        LevelTable::over(&errors, self.levels.max(other.levels))
     }
 
     /// `Λ(r)`, in f32 as the vertex shader evaluates it.

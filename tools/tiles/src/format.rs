@@ -1622,15 +1622,6 @@ impl Iterator for IndexIter<'_> {
             IndexIter::U32(it) => it.size_hint(),
         }
     }
-
-    fn fold<B, F: FnMut(B, Option<u32>) -> B>(self, init: B, mut f: F) -> B {
-        match self {
-            IndexIter::U16(it) => it.fold(init, |acc, &i| {
-                f(acc, (i != RESTART_U16).then_some(u32::from(i)))
-            }),
-            IndexIter::U32(it) => it.fold(init, |acc, &i| f(acc, (i != RESTART_U32).then_some(i))),
-        }
-    }
 }
 
 impl ExactSizeIterator for IndexIter<'_> {}

@@ -41,6 +41,14 @@ fn verify_against_source(file: &Path) -> Output {
     tiletool(&args)
 }
 
+/// `bytes` with their checksums made good, written to `dir/name`.
+fn write_resealed(dir: &Path, name: &str, mut bytes: Vec<u8>) -> PathBuf {
+    tiles::format::reseal(&mut bytes).expect("reseal");
+    let path = dir.join(name);
+    std::fs::write(&path, &bytes).expect("write");
+    path
+}
+
 /// Where every directory entry of pyramid layer `p` lies in the file.
 fn layer_entries(bytes: &[u8], p: u32) -> Vec<usize> {
     let h: FileHeader = bytemuck::pod_read_unaligned(&bytes[..size_of::<FileHeader>()]);
@@ -132,9 +140,7 @@ fn the_pyramid_is_built_listed_and_verified_and_a_forged_bound_is_caught() {
             bytes[at..][..size_of::<DirEntry>()].copy_from_slice(bytemuck::bytes_of(&e));
         }
     }
-    tiles::format::reseal(&mut bytes).expect("reseal");
-    let forged = dir.path().join("forged.vkt");
-    std::fs::write(&forged, &bytes).expect("write");
+    let forged = write_resealed(dir.path(), "forged.vkt", bytes);
     // Without the source, the levels' floors no longer follow from the claimed bound.
     let o = tiletool(&["verify", s(&forged)]);
     let err = stderr(&o);
@@ -158,9 +164,7 @@ fn the_pyramid_is_built_listed_and_verified_and_a_forged_bound_is_caught() {
     let claimed = f32::from_le_bytes(bytes[at..at + 4].try_into().unwrap());
     assert!(claimed > 0.0);
     bytes[at..at + 4].copy_from_slice(&(claimed * 0.5).to_le_bytes());
-    tiles::format::reseal(&mut bytes).expect("reseal");
-    let low = dir.path().join("low.vkt");
-    std::fs::write(&low, &bytes).expect("write");
+    let low = write_resealed(dir.path(), "low.vkt", bytes);
     let o = verify_against_source(&low);
     let err = stderr(&o);
     assert_eq!(o.status.code(), Some(1), "{err}");
@@ -286,13 +290,8 @@ fn a_broken_fan_in_a_layer_tiles_repeated_level_is_caught() {
     // Swap the first fan's second and third ring entries: the ring no longer walks its cell.
     let w = last.index_width as usize;
     let at = entry.offset as usize + last.index_offset as usize;
-    let (a, b) = (at + 2 * w, at + 3 * w);
-    let first: Vec<u8> = bytes[a..a + w].to_vec();
-    bytes.copy_within(b..b + w, a);
-    bytes[b..b + w].copy_from_slice(&first);
-    tiles::format::reseal(&mut bytes).expect("reseal");
-    let broken = dir.path().join("broken.vkt");
-    std::fs::write(&broken, &bytes).expect("write");
+    bytes[at + 2 * w..at + 4 * w].rotate_left(w);
+    let broken = write_resealed(dir.path(), "broken.vkt", bytes);
     let o = tiletool(&["verify", s(&broken)]);
     let err = stderr(&o);
     assert_eq!(o.status.code(), Some(1), "{err}");
