@@ -175,7 +175,7 @@ fn verify_layer(set: &TileSet, source: Option<&Grid>) -> VerifyReport {
             report.tiles += 1;
             match set.tile(tx, ty) {
                 Ok(tile) => {
-                    check_tile(set, &tile, source, &mut report);
+                    check_tile(set, &tile, source, 0..tile.header.levels, &mut report);
                     check_shared_edges(set, &tile, &mut report);
                 }
                 Err(e) => report.problems.push(e.to_string()),
@@ -193,11 +193,20 @@ fn verify_layer(set: &TileSet, source: Option<&Grid>) -> VerifyReport {
 /// borders, morph offsets. Empty when the tile is sound. Renderers call it before any of the
 /// tile's data leaves for the GPU.
 pub fn tile_problems(set: &TileSet, tile: &Tile) -> Vec<String> {
+    tile_problems_in(set, tile, 0..tile.header.levels)
+}
+
+/// [`tile_problems`] for the tile's `levels` alone, levels before them taken as checked: a
+/// renderer checks the levels a tile is first drawn at, and each finer one before its first
+/// upload. A level's checks cover its fans, cover, borders and box, its nesting in the level
+/// before, and that every finer block's morph offsets onto it land on its surface; so
+/// checking `0..a`, then `a..b`, then `b..levels` checks what one pass over every level does.
+pub fn tile_problems_in(set: &TileSet, tile: &Tile, levels: std::ops::Range<u32>) -> Vec<String> {
     let mut report = VerifyReport {
         recomputed_max_error: vec![0.0; set.header().levels as usize],
         ..Default::default()
     };
-    check_tile(set, tile, None, &mut report);
+    check_tile(set, tile, None, levels, &mut report);
     report.problems
 }
 
@@ -285,7 +294,13 @@ fn shared_side_problem(tile: &Tile, other: &Tile, vertical: bool) -> Option<Stri
     })
 }
 
-fn check_tile(set: &TileSet, tile: &Tile, source: Option<&Grid>, report: &mut VerifyReport) {
+fn check_tile(
+    set: &TileSet,
+    tile: &Tile,
+    source: Option<&Grid>,
+    levels: std::ops::Range<u32>,
+    report: &mut VerifyReport,
+) {
     let th = tile.header;
     let (tx, ty) = (th.tx, th.ty);
     let fh = set.header();
@@ -316,13 +331,20 @@ fn check_tile(set: &TileSet, tile: &Tile, source: Option<&Grid>, report: &mut Ve
     }
     let vertices = tile.vertices();
     let samples = source.map(|g| tile_samples(g, tx, ty));
-    // Vertices in use by the previous level, as sorted lists (sets by bitmap below: the
-    // hash sets these replace were most of verify's time).
+    // Vertices in use by the previous level (sets by bitmap below: the hash sets these
+    // replace were most of verify's time).
     let mut previous: Vec<u32> = Vec::new();
     // The level before, its index list, and whether its checks found nothing (none after a
     // level cut short).
     let mut before: Option<(crate::format::Level, Vec<u32>, bool)> = None;
-    for level in 0..th.levels {
+    // Levels before `levels` were checked by an earlier call: the last of them is where the
+    // first one checked here nests, as if this pass had just checked it.
+    if let Some(l) = levels.start.checked_sub(1).and_then(|k| tile.level(k)) {
+        let flat: Vec<u32> = l.indices.iter().map(|i| i.unwrap_or(u32::MAX)).collect();
+        previous = in_use(&flat, vertices.len()).1;
+        before = Some((l, flat, true));
+    }
+    for level in levels.start..levels.end.min(th.levels) {
         let found_before = found.get();
         report.levels_checked += 1;
         let Some(l) = tile.level(level) else {
@@ -371,17 +393,8 @@ fn check_tile(set: &TileSet, tile: &Tile, source: Option<&Grid>, report: &mut Ve
                     format!("{} fans, table says {}", fans.len(), e.fan_count),
                 );
             }
-            let mut in_use = vec![false; vertices.len()];
-            for &v in fans.iter().copied().flatten() {
-                match in_use.get_mut(v as usize) {
-                    Some(seen) if !*seen => {
-                        *seen = true;
-                        used.push(v);
-                    }
-                    Some(_) => {}
-                    None => used.push(v), // out of range: reported below
-                }
-            }
+            let (in_use, first_used) = self::in_use(&flat, vertices.len());
+            used = first_used;
             let contains = |v: u32| in_use.get(v as usize).copied().unwrap_or(false);
             // Nesting: V_i ⊆ V_{i+1}, and block i holds exactly the vertices level i introduces.
             if let Some(v) = previous.iter().find(|&&v| !contains(v)) {
@@ -560,6 +573,24 @@ fn check_tile(set: &TileSet, tile: &Tile, source: Option<&Grid>, report: &mut Ve
         previous = used;
         before = Some((l, flat, found.get() == found_before));
     }
+}
+
+/// The vertices a level's flat index list (restarts as `u32::MAX`) uses, as a bitmap over the
+/// tile's `count` vertices and as a list in order of first use (an index out of range is
+/// listed, not marked: the checks report it).
+fn in_use(flat: &[u32], count: usize) -> (Vec<bool>, Vec<u32>) {
+    let (mut marked, mut used) = (vec![false; count], Vec::new());
+    for &v in flat.iter().filter(|&&v| v != u32::MAX) {
+        match marked.get_mut(v as usize) {
+            Some(seen) if !*seen => {
+                *seen = true;
+                used.push(v);
+            }
+            Some(_) => {}
+            None => used.push(v),
+        }
+    }
+    (marked, used)
 }
 
 /// Every vertex of a finer block must morph onto level `k`'s surface: `height + offset * unit`
