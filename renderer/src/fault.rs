@@ -74,11 +74,14 @@ impl Fault {
     /// length, as another process rewriting it in place would.
     pub fn cut_file_before(self, frame: u64, terrain: &Terrain) {
         if self == Fault::TruncateAt(frame) {
-            let half = terrain.set.file_len() / 2;
-            let _ = std::fs::OpenOptions::new()
-                .write(true)
-                .open(terrain.set.path())
-                .and_then(|f| f.set_len(half));
+            // Not under a check reading it (a cut there would fault; see `Terrain::check_through`).
+            terrain.with_checks_held(|| {
+                let half = terrain.set.file_len() / 2;
+                let _ = std::fs::OpenOptions::new()
+                    .write(true)
+                    .open(terrain.set.path())
+                    .and_then(|f| f.set_len(half));
+            });
         }
     }
 

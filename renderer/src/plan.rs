@@ -143,8 +143,8 @@ pub fn plan(
     let cpu_cull_ms = ms(t);
     let tiles_visible = cut.as_ref().map_or(visible.len(), |(_, c)| c.len()) as u64;
 
-    // A tile is checked before its first upload; one that fails is never drawn. Over a
-    // pyramid, ancestors stand in for the cut's tiles not checked yet.
+    // A tile's levels are checked before their first upload; a tile that fails is never
+    // drawn. Over a pyramid, ancestors stand in for the cut's tiles not checked yet.
     let t = Instant::now();
     let mut stood_in = 0;
     let mut stand_in_checks = 0;
@@ -154,20 +154,27 @@ pub fn plan(
         visible = drawn.iter().map(|&(i, _)| i).collect();
         drawn
     });
-    let (prefetch, tiles_checked) = check_visible(terrain, &mut visible, prefetch);
-    let tiles_checked = tiles_checked + stand_in_checks;
-    let cpu_check_ms = ms(t);
+    let mut cpu_check_ms = ms(t);
 
     let t = Instant::now();
     let morphing = matches!(rule, LevelRule::Morph(..));
     // A cut's tiles take the cut's levels, or morphing, the morph rule's (as any tile's).
-    let (requests, parts) = match &cut {
+    let (mut requests, mut parts) = match &cut {
         Some(cut) if !morphing => (cut_requests(cut, &visible), Vec::new()),
         _ => wanted(terrain, &view, camera.position, &visible, rule),
     };
+    let cpu_lod_ms = ms(t);
+
+    let t = Instant::now();
+    // A base grid's tiles are checked on the frame; a whole tile is uploaded at once.
+    let policy = cut.as_ref().map_or(CheckPolicy::OnFrame, |_| checks);
+    let whole = manager.config().scheme == memory::Scheme::WholeTile;
+    let requested = (&mut requests, &mut parts);
+    let (prefetch, checked) = check_requests(terrain, requested, prefetch, (policy, whole));
+    let tiles_checked = checked + stand_in_checks;
+    cpu_check_ms += ms(t);
     let parts: HashMap<u32, tiles::parts::PartLevels> =
         requests.iter().map(|r| r.tile).zip(parts).collect();
-    let cpu_lod_ms = ms(t);
 
     let t = Instant::now();
     let mut residency = manager.plan_frame(frame, completed, &requests, allow_uploads);
@@ -210,34 +217,74 @@ pub fn plan(
     })
 }
 
-/// Checks the visible tiles not checked yet (before their first upload) and keeps in `visible`
-/// those that pass; of the `prefetch` requests, keeps the checked tiles that passed and queues
-/// the unchecked ones for a check off the frame. Returns the prefetch requests kept and how
-/// many tiles were checked.
-fn check_visible(
+/// Checks each request's tile through the level it wants (every level with `every_level`:
+/// the manager then uploads whole tiles) before its first upload there, and keeps the
+/// requests that may be drawn, with their part levels (`parts`: one per request, or none).
+/// Under [`CheckPolicy::Behind`] a tile whose first levels passed but not yet the wanted one
+/// is drawn at its finest checked level meanwhile, and the rest is checked off the frame.
+/// Of the `prefetch` requests, keeps those checked through their levels and queues the
+/// others for a check off the frame. Returns the prefetch requests kept and how many tiles
+/// were checked on the frame.
+fn check_requests(
     terrain: &Terrain,
-    visible: &mut Vec<usize>,
+    (requests, parts): (&mut Vec<Request>, &mut Vec<tiles::parts::PartLevels>),
     prefetch: &[Request],
+    (policy, every_level): (CheckPolicy, bool),
 ) -> (Vec<Request>, u64) {
-    let unchecked: Vec<usize> = visible
+    let through = |r: &Request| if every_level { u32::MAX } else { r.wanted };
+    let due: Vec<(usize, u32)> = requests
         .iter()
-        .copied()
-        .filter(|&i| terrain.tiles[i].usable().is_none())
+        .filter(|r| {
+            terrain.tiles[r.tile as usize]
+                .usable_at(through(r))
+                .is_none()
+        })
+        .map(|r| (r.tile as usize, through(r)))
         .collect();
-    terrain.check_all(&unchecked);
-    visible.retain(|&i| terrain.tiles[i].usable() == Some(true));
+    let checked = match policy {
+        CheckPolicy::Behind => {
+            terrain.check_first(&due);
+            0
+        }
+        CheckPolicy::OnFrame | CheckPolicy::PerFrame(_) => {
+            terrain.check_all_through(&due);
+            due.len() as u64
+        }
+    };
+    let has_parts = parts.len() == requests.len();
+    let mut kept = Vec::with_capacity(requests.len());
+    let mut kept_parts = Vec::with_capacity(parts.len());
+    for (k, mut r) in requests.iter().copied().enumerate() {
+        let tile = &terrain.tiles[r.tile as usize];
+        let drawn_at = match tile.usable_at(through(&r)) {
+            Some(true) => r.wanted,
+            Some(false) => continue,
+            // Its own check passed at a coarser level (checked behind): that level for now.
+            None if tile.usable() == Some(true) && !every_level => tile.checked_levels() - 1,
+            None => continue,
+        };
+        r.wanted = r.wanted.min(drawn_at);
+        kept.push(r);
+        if has_parts {
+            kept_parts.push(parts[k].map(|l| l.min(r.wanted as u8)));
+        }
+    }
+    *requests = kept;
+    *parts = kept_parts;
     let prefetch = prefetch
         .iter()
         .copied()
-        .filter(|r| match terrain.tiles[r.tile as usize].usable() {
-            Some(usable) => usable,
-            None => {
-                terrain.check_soon(r.tile as usize);
-                false
-            }
-        })
+        .filter(
+            |r| match terrain.tiles[r.tile as usize].usable_at(through(r)) {
+                Some(usable) => usable,
+                None => {
+                    terrain.check_soon(r.tile as usize, through(r));
+                    false
+                }
+            },
+        )
         .collect();
-    (prefetch, unchecked.len() as u64)
+    (prefetch, checked)
 }
 
 /// The draw of a granted tile (None: nothing of it resident).
@@ -280,10 +327,10 @@ pub fn check_view(
             return;
         }
     }
-    terrain.check_all(
+    terrain.check_all_through(
         &requests_for(terrain, &view, camera.position, rule)
             .iter()
-            .map(|r| r.tile as usize)
+            .map(|r| (r.tile as usize, r.wanted))
             .collect::<Vec<_>>(),
     );
 }

@@ -214,8 +214,8 @@ fn ancestors_stand_in_for_tiles_not_checked_yet_without_cracks() {
     }
 }
 
-/// A pyramid tile that fails its check (its fans resealed as restarts, as in
-/// `resealed_broken_fans_are_reported_when_paged_in_and_never_drawn`) is reported once and
+/// A pyramid tile that fails its check (its level 0's fans resealed as restarts, as in
+/// `resealed_broken_fans_are_reported_when_their_level_is_first_needed`) is reported once and
 /// drawn by its parent; the tiles beside the parent rise so that no two neighbours are two
 /// layers apart (`renderer::cut::stand_in`). Over the same GENERATED 2049² mirror set and orbit
 /// as above (discrete levels), the tile chosen where the cut draws it and its parent's ground
@@ -252,21 +252,21 @@ fn a_pyramid_tile_that_fails_is_drawn_by_its_parent_without_cracks() {
     let bad = dir.path().join("bad.vkt");
     let mut bytes = std::fs::read(&set).expect("read");
     let info = &terrain.tiles[broken];
-    let level_2 = terrain
+    let level_0 = terrain
         .set_of(info)
         .tile(info.tx, info.ty)
         .expect("tile")
-        .level(2)
-        .expect("level 2")
+        .level(0)
+        .expect("level 0")
         .entry;
     let at = terrain
         .set_of(info)
         .dir_entry(info.tx, info.ty)
         .expect("entry")
         .offset as usize
-        + level_2.index_offset as usize;
-    let width = level_2.index_width as usize;
-    bytes[at..at + width * level_2.index_count as usize].fill(0xff);
+        + level_0.index_offset as usize;
+    let width = level_0.index_width as usize;
+    bytes[at..at + width * level_0.index_count as usize].fill(0xff);
     tiles::format::reseal(&mut bytes).expect("reseal");
     drop(terrain);
     std::fs::write(&bad, &bytes).expect("write");
@@ -922,13 +922,15 @@ fn the_frames_barriers_leave_no_hazard() {
 }
 
 /// Fans `tiletool verify` refuses, with checksums recomputed (so only the semantic checks can
-/// see them): a ring walked the wrong way, an index array of restarts only. The set opens (only
-/// its header, directory and tile outlines are read); the broken tile is checked when the
-/// flight first needs it, gets one line naming the file, the tile and the problem, and is never
-/// drawn; the flight and its log go on, and the exit code is 4. The control: the same flight
-/// over the unbroken file draws that tile and exits 0.
+/// see them): a ring walked the wrong way, an index array of restarts only, both at level 2 of
+/// a tile the first frame draws at level 1. The set opens (only its header, directory and tile
+/// outlines are read); the tile is checked through level 1 for the first frame and drawn
+/// there; the frame that first wants it finer checks level 2, which fails: one line naming the
+/// file, the tile, the level and the problem, and the tile is drawn no more; the flight and
+/// its log go on, and the exit code is 4. The control: the same flight over the unbroken file
+/// draws that tile on every frame it sees it and exits 0.
 #[test]
-fn resealed_broken_fans_are_reported_when_paged_in_and_never_drawn() {
+fn resealed_broken_fans_are_reported_when_their_level_is_first_needed() {
     use tiles::format::{LevelEntry, TileHeader};
     let dir = tempfile::tempdir().expect("temp dir");
     let set = puget(dir.path());
@@ -972,22 +974,31 @@ fn resealed_broken_fans_are_reported_when_paged_in_and_never_drawn() {
         let column = |c: &str| parsed.column(c).expect(c).to_vec();
         let trace = std::fs::read_to_string(&trace).expect("trace");
         let trace = memory::trace::Trace::parse(&trace).expect("trace parses");
-        // Per frame: whether tile 1,2 (index 2 * 4 + 1) was among the tiles drawn for.
-        let broken: Vec<bool> = trace
+        // Per frame: the level tile 1,2 (index 2 * 4 + 1) was asked for at, if it was.
+        let broken: Vec<Option<u32>> = trace
             .frames
             .iter()
-            .map(|f| f.iter().any(|r| r.tile == 9))
+            .map(|f| f.iter().find(|r| r.tile == 9).map(|r| r.wanted))
             .collect();
         let columns = [column("tiles_visible"), column("tiles_drawn")];
         (o, columns, column("tiles_failed"), broken)
     };
-    let (control, [visible, drawn], failed, seen) = fly(&set, "control");
+    let (control, [visible, drawn], failed, asked) = fly(&set, "control");
     let err = String::from_utf8_lossy(&control.stderr);
     assert_eq!(control.status.code(), Some(0), "{err}");
     assert_eq!(visible, drawn, "the control draws every visible tile");
     assert!(failed.iter().all(|&f| f == 0.0));
-    assert_eq!(seen.len(), 4);
-    assert!(seen[0], "tile 1,2 is in the first view");
+    assert_eq!(asked.len(), 4);
+    assert!(
+        asked[0].is_some_and(|l| l < level as u32),
+        "tile 1,2 is in the first view, coarser than level {level}: {asked:?}"
+    );
+    // The first frame that wants it at the broken level or finer.
+    let finer = asked
+        .iter()
+        .position(|a| a.is_some_and(|l| l >= level as u32))
+        .expect("a frame wants tile 1,2 at level 2 or finer");
+    let seen: Vec<bool> = asked.iter().map(Option::is_some).collect();
     for (name, mut content) in [("reversed.vkt", reversed), ("restarts.vkt", restarts)] {
         tiles::format::reseal(&mut content).expect("reseal");
         let p = dir.path().join(name);
@@ -1000,19 +1011,28 @@ fn resealed_broken_fans_are_reported_when_paged_in_and_never_drawn() {
             err.contains(name) && err.contains("tile 1,2 level 2") && err.contains("not drawn"),
             "{name}: {err}"
         );
-        // The same tiles are seen; the broken one is never drawn, on any frame.
+        // The same tiles are seen; the broken one is drawn at its sound levels until a frame
+        // wants it finer, and never from that frame on.
         assert_eq!(v, visible, "{name}");
+        assert_eq!(drawn_for[..finer], asked[..finer], "{name}");
         assert!(
-            drawn_for.iter().all(|&b| !b),
-            "{name}: tile 1,2 was asked for"
+            drawn_for[finer..].iter().all(Option::is_none),
+            "{name}: tile 1,2 was asked for after it failed: {drawn_for:?}"
         );
-        let short: Vec<f64> = visible
-            .iter()
-            .zip(&seen)
-            .map(|(&n, &seen)| n - f64::from(u8::from(seen)))
+        let short: Vec<f64> = (0..visible.len())
+            .map(|k| visible[k] - f64::from(u8::from(k >= finer && seen[k])))
             .collect();
-        assert_eq!(d, short, "{name}: one tile fewer drawn where it is seen");
-        assert!(f.iter().all(|&f| f == 1.0), "{name}: {f:?}");
+        assert_eq!(
+            d, short,
+            "{name}: one tile fewer drawn where it is seen after it failed"
+        );
+        let want: Vec<f64> = (0..f.len())
+            .map(|k| f64::from(u8::from(k >= finer)))
+            .collect();
+        assert_eq!(
+            f, want,
+            "{name}: failed from the frame that wanted level {level}"
+        );
         let summary: serde_json::Value = serde_json::from_slice(&o.stdout).expect("summary");
         assert_eq!(summary["tiles_failed"], 1, "{name}");
         assert_eq!(summary["frames"], 4, "{name}");

@@ -652,6 +652,74 @@ fn a_damaged_tile_opens_and_fails_its_check_when_first_needed() {
     assert!(whole.check(broken).is_ok());
 }
 
+/// A tile's levels are checked as they are first needed ([`Terrain::check_through`]): a tile
+/// whose level 6 holds a broken fan (checksums resealed, so only the semantic checks can tell)
+/// passes its check through level 2 and hands out the bytes of levels 0-2, not level 6's;
+/// asked for level 6 it fails, naming the file, the tile and the level, is counted once and
+/// hands out nothing more. The controls: the same file checked at every level at once fails
+/// the same way, and the undamaged set's tile passes through every level.
+#[test]
+fn a_tiles_finer_levels_are_checked_when_first_needed() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let set = common::puget(dir.path());
+    let mut bytes = std::fs::read(&set).expect("read");
+    let ts = tiles::TileSet::open(&set).expect("open");
+    let entry = ts.dir_entry(2, 1).expect("entry");
+    let level = ts
+        .tile(2, 1)
+        .expect("tile")
+        .level(6)
+        .expect("level 6")
+        .entry;
+    drop(ts);
+    // Swap the first fan's second and third ring entries: the ring no longer walks its cell.
+    let w = level.index_width as usize;
+    let at = entry.offset as usize + level.index_offset as usize;
+    bytes[at + 2 * w..at + 4 * w].rotate_left(w);
+    tiles::format::reseal(&mut bytes).expect("reseal");
+    let broken_set = dir.path().join("broken.vkt");
+    std::fs::write(&broken_set, &bytes).expect("write");
+
+    let terrain = Terrain::open(&broken_set).expect("open");
+    let broken = terrain.tile_index(2, 1).expect("tile 2,1");
+    assert!(
+        terrain.check_through(broken, 2).is_ok(),
+        "levels 0-2 are sound"
+    );
+    let tile = &terrain.tiles[broken];
+    assert_eq!(tile.checked_levels(), 3);
+    assert_eq!((tile.usable_at(2), tile.usable_at(3)), (Some(true), None));
+    assert!(terrain.part(broken, memory::Part::Positions(2)).is_some());
+    assert!(
+        terrain.part(broken, memory::Part::Positions(6)).is_none()
+            && terrain.part(broken, memory::Part::Indices(3)).is_none(),
+        "an unchecked level's bytes were handed out"
+    );
+    let problem = terrain
+        .check_through(broken, 6)
+        .err()
+        .expect("level 6 is broken")
+        .to_string();
+    assert!(
+        problem.contains("broken.vkt") && problem.contains("tile 2,1 level 6: fan 0"),
+        "{problem}"
+    );
+    assert_eq!(tile.usable(), Some(false));
+    assert!(terrain.part(broken, memory::Part::Positions(0)).is_none());
+    assert!(terrain.check_through(broken, 1).is_err(), "failed for good");
+    assert_eq!(terrain.failed_count(), 1);
+    assert_eq!(terrain.take_failures(), vec![(broken, problem.clone())]);
+
+    // The controls.
+    let at_once = Terrain::open(&broken_set).expect("open");
+    assert_eq!(at_once.check(broken).err(), Some(problem.as_str()));
+    let sound = Terrain::open(&set).expect("open");
+    assert!(sound.check_through(broken, 2).is_ok());
+    assert_eq!(sound.tiles[broken].checked_levels(), 3);
+    assert!(sound.check_through(broken, sound.levels - 1).is_ok());
+    assert_eq!(sound.tiles[broken].checked_levels(), sound.levels);
+}
+
 /// A tile set that claims shared sides although its tiles were built with independent sides
 /// (the flag forged, checksums resealed): the tiles whose sides differ from a neighbour's fail
 /// their checks when needed, named with the neighbour; they are never drawn, rather than drawn
@@ -689,9 +757,10 @@ fn a_forged_shared_sides_claim_fails_the_tiles_whose_sides_differ() {
 
 /// A GENERATED set four times the Puget sample's side: a 2049² mirror tiling of SRTM N55W003
 /// (64 tiles, `common::mirror`, the grid bench/mirror.py makes for the 4K and 16K benchmark
-/// sets). Opening checks no tile; checking the first view checks exactly the tiles in view, and
-/// those are fewer than the set's (the control: were every tile checked, or none, the sets
-/// would differ); then every tile passes its full check, sides against neighbours included.
+/// sets). Opening checks no tile; checking the first view checks exactly the tiles in view,
+/// each through the level the view draws it at, and those are fewer than the set's (the
+/// control: were every tile checked, or none, the sets would differ); then every tile passes
+/// its full check, sides against neighbours included.
 #[test]
 fn a_mirror_set_is_checked_where_it_is_seen_and_passes_everywhere() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -724,6 +793,14 @@ fn a_mirror_set_is_checked_where_it_is_seen_and_passes_everywhere() {
         terrain.tiles.len()
     );
     assert_eq!(checked(&terrain), visible, "checked: the tiles in view");
+    // Each through the level the view draws it at and no further: its finer levels wait for a
+    // frame that needs them (the control: the view draws some tile coarser than its finest).
+    let requests = renderer::plan::requests_for(&terrain, &view, camera.position, rule);
+    for r in &requests {
+        let t = &terrain.tiles[r.tile as usize];
+        assert_eq!(t.checked_levels(), r.wanted + 1, "tile {},{}", t.tx, t.ty);
+    }
+    assert!(requests.iter().any(|r| r.wanted + 1 < terrain.levels));
     let all: Vec<usize> = (0..terrain.tiles.len()).collect();
     terrain.check_all(&all);
     assert_eq!(terrain.failed_count(), 0, "{:?}", terrain.take_failures());

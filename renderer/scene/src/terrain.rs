@@ -8,8 +8,8 @@
 
 use std::collections::VecDeque;
 use std::path::Path;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::{Condvar, Mutex, OnceLock};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize, Ordering};
+use std::sync::{Condvar, Mutex, OnceLock, RwLock};
 use std::time::Duration;
 
 use glam::DVec3;
@@ -53,10 +53,13 @@ pub struct Terrain {
     /// Tiles that failed their check, in the order they failed, not yet taken.
     failures: Mutex<Vec<usize>>,
     failed: AtomicUsize,
-    /// Tiles to check ahead of need, soonest first ([`Terrain::check_soon`]), and the signal
-    /// that wakes the thread checking them.
-    ahead: Mutex<VecDeque<usize>>,
+    /// Tiles to check ahead of need, soonest first, each through a level
+    /// ([`Terrain::check_soon`]), and the signal that wakes the thread checking them.
+    ahead: Mutex<VecDeque<(usize, u32)>>,
     ahead_ready: Condvar,
+    /// Held (shared) by each check while it reads tile data, and alone by
+    /// [`Terrain::with_checks_held`].
+    reading: RwLock<()>,
 }
 
 /// One layer of the tiles a terrain holds.
@@ -146,6 +149,7 @@ impl Terrain {
             failed: AtomicUsize::new(0),
             ahead: Mutex::new(VecDeque::new()),
             ahead_ready: Condvar::new(),
+            reading: RwLock::new(()),
         };
         terrain.share_tables(0);
         Ok(terrain)
@@ -226,42 +230,135 @@ impl Terrain {
         )
     }
 
-    /// Checks tile `i` the first time it is asked (later calls return the first answer; a
-    /// call while another thread checks it waits for that check): its checksum, structure,
-    /// the semantic checks `tiletool verify` makes without a source (fans, coverage, nesting,
-    /// blocks, borders, morph offsets) and its texture; and where the set shares sides, that
-    /// each side holds the same vertices as the neighbour's (a neighbour that failed its own
-    /// check, or whose data do not read, is never drawn, so no seam joins them and no side is
-    /// compared; a neighbour not checked yet gives its sides from its data read with their
-    /// checksum, without the semantic checks: a pyramid's cut rarely draws a tile's neighbours
-    /// in its own layer, and checking each whole doubled the checks' cost over a flight).
-    /// Checksums catch accidents; the rest catches a file whose checksums were recomputed over
-    /// nonsense. About 10-15 ms a tile (a 257 x 257 tile of 9 levels). Returns the problem, as
-    /// one line naming the file and the tile.
+    /// Checks tile `i` for drawing at every level: [`Terrain::check_through`] its finest.
     pub fn check(&self, i: usize) -> Result<&Paged, &str> {
+        self.check_through(i, u32::MAX)
+    }
+
+    /// Checks tile `i` for drawing at levels up to `level` (clamped to its finest), before
+    /// any of those levels' bytes reach the GPU ([`Terrain::part`] hands out no others).
+    ///
+    /// The first call makes the tile's own check (later calls return its answer; a call while
+    /// another thread makes it waits for it): its checksum, structure and texture, and
+    /// `tiletool verify`'s semantic checks without a source (fans, coverage, nesting, blocks,
+    /// borders, morph offsets) of levels `0..=level`; and where the set shares sides, that each
+    /// side holds the same vertices as the neighbour's at every level (a neighbour that failed
+    /// its own check, or whose data do not read, is never drawn, so no seam joins them and no
+    /// side is compared; a neighbour not checked yet gives its sides from its data read with
+    /// their checksum, without the semantic checks: a pyramid's cut rarely draws a tile's
+    /// neighbours in its own layer, and checking each whole doubled the checks' cost over a
+    /// flight). A later call for a finer level checks the levels in between; one that fails
+    /// then takes the tile out of the flight from then on. A tile is mostly first drawn at a
+    /// coarse level, and its finer levels hold most of its vertices: the 16K mirror set's
+    /// first flyover view checks its 96 tiles through the levels it draws them at in a seventh
+    /// of the time all nine levels take (bench/README, "A tile's levels checked as they are
+    /// first drawn"). Checksums catch accidents; the rest catches a file whose checksums were
+    /// recomputed over nonsense. Returns the problem, as one line naming the file and the tile.
+    ///
+    /// A check that would read the tile's data from a file shorter than it was at open (cut
+    /// in place by another process: reading the mapping past its end would fault) reads
+    /// nothing and returns that problem, without counting the tile as failed: the frame's
+    /// uploads stop the flight on it (`renderer::frame`). A file cut while a check reads it
+    /// can still fault; tile sets are meant to be replaced by rename, as tiletool writes them.
+    pub fn check_through(&self, i: usize, level: u32) -> Result<&Paged, &str> {
         let tile = self.tiles.get(i).ok_or("no such tile")?;
+        let level = level.min((tile.levels.len() as u32).saturating_sub(1));
+        let _reading = self.reading.read().unwrap_or_else(|p| p.into_inner());
+        let reads = tile.usable.get().is_none()
+            || (tile.checked_levels() <= level && tile.late.get().is_none());
+        if reads && self.shrank() {
+            return Err("the tile set changed on disk while in use");
+        }
         let usable = tile.usable.get_or_init(|| {
-            let verdict = self.usable(tile);
+            let verdict = self.usable(tile, level);
             if verdict.is_err() {
-                self.failed.fetch_add(1, Ordering::Relaxed);
-                self.failures
-                    .lock()
-                    .unwrap_or_else(|poisoned| poisoned.into_inner())
-                    .push(i);
+                self.failed_at(i);
             }
             verdict
         });
-        match (usable, self.own(tile)) {
-            (Ok(()), Ok(paged)) => Ok(paged),
-            (Err(e), _) | (_, Err(e)) => Err(e),
+        let paged = match (usable, self.own(tile, level)) {
+            (Ok(()), Ok(paged)) => paged,
+            (Err(e), _) | (_, Err(e)) => return Err(e),
+        };
+        if tile.checked_levels() <= level {
+            self.check_finer(i, level);
+        }
+        match tile.late.get() {
+            Some(problem) => Err(problem),
+            None => Ok(paged),
         }
     }
 
-    /// Checks `tiles` on every core (see [`Terrain::check`]).
+    /// Checks tile `i`'s levels from the first not checked yet through `level`, after its own
+    /// check passed.
+    fn check_finer(&self, i: usize, level: u32) {
+        let tile = &self.tiles[i];
+        let _held = tile
+            .extending
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner());
+        let from = tile.checked_levels();
+        if from > level || tile.late.get().is_some() {
+            return;
+        }
+        let set = self.set_of(tile);
+        let problem = match set.tile(tile.tx, tile.ty) {
+            Ok(data) => tiles::verify::tile_problems_in(set, &data, from..level + 1)
+                .into_iter()
+                .next(),
+            Err(e) => Some(e.to_string()),
+        };
+        match problem {
+            None => tile.checked.store(level + 1, Ordering::Release),
+            Some(what) => {
+                let _ = tile.late.set(self.named(what));
+                self.failed_at(i);
+            }
+        }
+    }
+
+    /// Whether the file on disk is shorter now than when it was opened (its length, as the
+    /// frame's uploads check it).
+    fn shrank(&self) -> bool {
+        std::fs::metadata(self.set.path()).is_ok_and(|m| m.len() < self.set.file_len())
+    }
+
+    /// Runs `f` while no check reads tile data (checks wait for it): what changes the file in
+    /// place does it here (`VKTERRAIN_FAULT=truncate-at-N`).
+    pub fn with_checks_held<R>(&self, f: impl FnOnce() -> R) -> R {
+        let _held = self.reading.write().unwrap_or_else(|p| p.into_inner());
+        f()
+    }
+
+    /// Counts tile `i` as failed and lists it for [`Terrain::take_failures`].
+    fn failed_at(&self, i: usize) {
+        self.failed.fetch_add(1, Ordering::Relaxed);
+        self.failures
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner())
+            .push(i);
+    }
+
+    /// A problem as one line starting with the file's name (verify's problems start with it
+    /// already, a FormatError too).
+    fn named(&self, what: String) -> String {
+        let prefix = format!("{}: ", self.set.path().display());
+        format!("{prefix}{}", what.strip_prefix(&prefix).unwrap_or(&what))
+    }
+
+    /// Checks `tiles` on every core at every level (see [`Terrain::check`]).
     pub fn check_all(&self, tiles: &[usize]) {
         use rayon::prelude::*;
         tiles.par_iter().for_each(|&i| {
             let _ = self.check(i);
+        });
+    }
+
+    /// Checks `tiles` on every core, each through its level (see [`Terrain::check_through`]).
+    pub fn check_all_through(&self, tiles: &[(usize, u32)]) {
+        use rayon::prelude::*;
+        tiles.par_iter().for_each(|&(i, level)| {
+            let _ = self.check_through(i, level);
         });
     }
 
@@ -287,35 +384,47 @@ impl Terrain {
         self.failed.load(Ordering::Relaxed)
     }
 
-    /// Asks for tile `i` to be checked ahead of need, by the thread running
+    /// Asks for tile `i` to be checked through `level` ahead of need, by the thread running
     /// [`Terrain::check_ahead`] (the prefetcher's predicted tiles). Cheap, and a no-op for a
-    /// tile checked already.
-    pub fn check_soon(&self, i: usize) {
-        if self.tiles.get(i).is_none_or(|t| t.usable().is_some()) {
+    /// tile checked that far already.
+    pub fn check_soon(&self, i: usize, level: u32) {
+        if self
+            .tiles
+            .get(i)
+            .is_none_or(|t| t.usable_at(level).is_some())
+        {
             return;
         }
         let mut ahead = self.ahead.lock().unwrap_or_else(|p| p.into_inner());
-        if !ahead.contains(&i) {
-            // A bounded queue: the newest predictions matter, the oldest may be stale.
-            if ahead.len() >= 256 {
-                ahead.pop_front();
+        match ahead.iter_mut().find(|(j, _)| *j == i) {
+            Some((_, queued)) => *queued = (*queued).max(level),
+            None => {
+                // A bounded queue: the newest predictions matter, the oldest may be stale.
+                if ahead.len() >= 256 {
+                    ahead.pop_front();
+                }
+                ahead.push_back((i, level));
+                self.ahead_ready.notify_one();
             }
-            ahead.push_back(i);
-            self.ahead_ready.notify_one();
         }
     }
 
-    /// Asks for `tiles` to be checked ahead of need before anything else waiting, the first
-    /// of them first: tiles a frame wants now and draws an ancestor in place of until they
-    /// pass (`vkterrain --pyramid`).
-    pub fn check_first(&self, tiles: &[usize]) {
+    /// Asks for `tiles` to be checked (each through its level) ahead of need before anything
+    /// else waiting, the first of them first: tiles a frame wants now and draws an ancestor in
+    /// place of, or a coarser level of, until they pass (`vkterrain --pyramid`).
+    pub fn check_first(&self, tiles: &[(usize, u32)]) {
         let mut ahead = self.ahead.lock().unwrap_or_else(|p| p.into_inner());
-        for &i in tiles.iter().rev() {
-            if self.tiles.get(i).is_none_or(|t| t.usable().is_some()) {
+        for &(i, level) in tiles.iter().rev() {
+            if self
+                .tiles
+                .get(i)
+                .is_none_or(|t| t.usable_at(level).is_some())
+            {
                 continue;
             }
-            ahead.retain(|&j| j != i);
-            ahead.push_front(i);
+            let queued = ahead.iter().find(|(j, _)| *j == i).map_or(0, |&(_, l)| l);
+            ahead.retain(|&(j, _)| j != i);
+            ahead.push_front((i, level.max(queued)));
         }
         ahead.truncate(256);
         self.ahead_ready.notify_one();
@@ -330,7 +439,7 @@ impl Terrain {
         // As many at once as rayon has threads: the frames' own CPU work shares the cores.
         let batch = rayon::current_num_threads().max(1);
         while !stop.load(Ordering::Acquire) {
-            let next: Vec<usize> = {
+            let next: Vec<(usize, u32)> = {
                 let mut ahead = self.ahead.lock().unwrap_or_else(|p| p.into_inner());
                 if ahead.is_empty() {
                     ahead = self
@@ -342,8 +451,8 @@ impl Terrain {
                 let n = ahead.len().min(batch);
                 ahead.drain(..n).collect()
             };
-            next.par_iter().for_each(|&i| {
-                let _ = self.check(i);
+            next.par_iter().for_each(|&(i, level)| {
+                let _ = self.check_through(i, level);
             });
         }
     }
@@ -366,20 +475,22 @@ impl Terrain {
         })
     }
 
-    /// The tile's own check (see [`Terrain::check`]), made once.
-    fn own<'a>(&self, tile: &'a TileInfo) -> &'a Result<Paged, String> {
+    /// The tile's own check (see [`Terrain::check_through`]), made once, with the semantic
+    /// checks of levels `0..=level` if it is made now.
+    fn own<'a>(&self, tile: &'a TileInfo, level: u32) -> &'a Result<Paged, String> {
         tile.own.get_or_init(|| {
-            paged(self.set_of(tile), tile).map_err(|what| {
-                // verify's problems start with the file's name, a FormatError too.
-                let prefix = format!("{}: ", self.set.path().display());
-                format!("{prefix}{}", what.strip_prefix(&prefix).unwrap_or(&what))
-            })
+            let paged = paged(self.set_of(tile), tile, level).map_err(|what| self.named(what));
+            if paged.is_ok() {
+                tile.checked.store(level + 1, Ordering::Release);
+            }
+            paged
         })
     }
 
-    /// Whether `tile` may be drawn: its own check, then its sides against its neighbours'.
-    fn usable(&self, tile: &TileInfo) -> Result<(), String> {
-        let mine = self.own(tile).as_ref().map_err(Clone::clone)?;
+    /// Whether `tile` may be drawn: its own check (through `level` if made now), then its sides
+    /// against its neighbours'.
+    fn usable(&self, tile: &TileInfo, level: u32) -> Result<(), String> {
+        let mine = self.own(tile, level).as_ref().map_err(Clone::clone)?;
         if !self.sides_claimed {
             return Ok(());
         }
@@ -497,11 +608,14 @@ impl Terrain {
             .collect()
     }
 
-    /// The stored bytes of one part of a tile, once the tile has passed its check (None
-    /// before, or when it failed).
+    /// The stored bytes of one part of a tile, once the part's level has passed its check
+    /// (None before, or when the tile failed).
     pub fn part(&self, tile: usize, part: memory::Part) -> Option<&[u8]> {
         let info = self.tiles.get(tile)?;
-        if info.usable() != Some(true) {
+        let (memory::Part::Positions(level)
+        | memory::Part::Morph(level)
+        | memory::Part::Indices(level)) = part;
+        if info.usable_at(level) != Some(true) {
             return None;
         }
         let blob = self.set_of(info).blob(info.tx, info.ty)?;
@@ -717,18 +831,23 @@ fn tile_info(set: &TileSet, tx: u32, ty: u32, layer: u32) -> Result<TileInfo, ti
         drawn_table: own_table,
         own: OnceLock::new(),
         usable: OnceLock::new(),
+        checked: AtomicU32::new(0),
+        late: OnceLock::new(),
+        extending: Mutex::new(()),
         heights: OnceLock::new(),
     })
 }
 
-/// A tile's own check, and what it reads: the tile parsed with its checksum, the problems
-/// `tiletool verify` (without a source) would report, the texture, and the level table the
+/// A tile's own check, and what it reads: the tile parsed with its checksum (its structure at
+/// every level), the problems `tiletool verify` (without a source) would report at levels
+/// `0..=level`, the texture, and the level table the
 /// outline read at open still the one stored.
-fn paged(set: &TileSet, info: &TileInfo) -> Result<Paged, String> {
+fn paged(set: &TileSet, info: &TileInfo, level: u32) -> Result<Paged, String> {
     let h = *set.header();
     let (tx, ty) = (info.tx, info.ty);
     let tile = set.tile(tx, ty).map_err(|e| e.to_string())?;
-    if let Some(problem) = tiles::verify::tile_problems(set, &tile).into_iter().next() {
+    let checked = tiles::verify::tile_problems_in(set, &tile, 0..level + 1);
+    if let Some(problem) = checked.into_iter().next() {
         return Err(problem);
     }
     let texture_mips = match set.texture(tx, ty).map_err(|e| e.to_string())? {

@@ -3,7 +3,8 @@
 //! neighbour's frame. Terrain (the whole set), stitching and the level tables all speak of sides
 //! in these terms.
 
-use std::sync::OnceLock;
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::{Mutex, OnceLock};
 
 use glam::DVec3;
 use tiles::format::{LevelEntry, TileHeader};
@@ -38,11 +39,21 @@ pub struct TileInfo {
     /// part, `renderer::lod::morph_level`).
     pub drawn_table: LevelTable,
     /// The tile's own check: its checksum, its structure, `tiletool verify`'s semantic checks
-    /// and its texture; on success, what was read from its data.
+    /// of the levels it is first drawn at, and its texture; on success, what was read from its
+    /// data.
     pub(crate) own: OnceLock<Result<Paged, String>>,
     /// The check that decides whether the tile is drawn: its own, and where the set shares
     /// sides, its sides against those of its neighbours that pass their own.
     pub(crate) usable: OnceLock<Result<(), String>>,
+    /// How many of its levels, from level 0, have passed the semantic checks (their blocks
+    /// and index arrays may leave for the GPU); a finer level is checked before its first
+    /// upload ([`crate::terrain::Terrain::check_through`]).
+    pub(crate) checked: AtomicU32,
+    /// A finer level's check that failed after the tile had passed its first one: the tile
+    /// is drawn no more.
+    pub(crate) late: OnceLock<String>,
+    /// Held while finer levels are checked, so that two threads do not check the same ones.
+    pub(crate) extending: Mutex<()>,
     /// The coarse height map, read from the tile's positions the first time it is asked for.
     pub(crate) heights: OnceLock<[f32; HEIGHT_CELLS * HEIGHT_CELLS]>,
 }
@@ -67,9 +78,27 @@ impl TileInfo {
         self.own.get().and_then(|r| r.as_ref().ok())
     }
 
-    /// Whether the tile may be drawn: None until it is checked.
+    /// Whether the tile may be drawn: None until it is checked (at any level).
     pub fn usable(&self) -> Option<bool> {
+        if self.late.get().is_some() {
+            return Some(false);
+        }
         self.usable.get().map(Result::is_ok)
+    }
+
+    /// Whether the tile may be drawn at `level`: None until its levels up to `level` are
+    /// checked.
+    pub fn usable_at(&self, level: u32) -> Option<bool> {
+        let level = level.min((self.levels.len() as u32).saturating_sub(1));
+        match self.usable()? {
+            false => Some(false),
+            true => (self.checked_levels() > level).then_some(true),
+        }
+    }
+
+    /// How many of its levels, from level 0, have passed their checks (0: none yet).
+    pub fn checked_levels(&self) -> u32 {
+        self.checked.load(Ordering::Acquire)
     }
 }
 

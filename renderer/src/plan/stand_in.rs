@@ -42,19 +42,21 @@ pub(super) fn drawn_cut(
     wanted: &[(usize, u32)],
     policy: CheckPolicy,
 ) -> (Vec<(usize, u32)>, usize, u64) {
-    // On the frame, every tile first, on every core.
+    // On the frame, every tile first, on every core, through the level it is drawn at.
     let mut checked = 0;
     if policy == CheckPolicy::OnFrame {
-        let unchecked: Vec<usize> = wanted
+        let unchecked: Vec<(usize, u32)> = wanted
             .iter()
-            .map(|&(i, _)| i)
-            .filter(|&i| terrain.tiles[i].usable().is_none())
+            .copied()
+            .filter(|&(i, _)| terrain.tiles[i].usable().is_none())
             .collect();
-        terrain.check_all(&unchecked);
+        terrain.check_all_through(&unchecked);
         checked = unchecked.len() as u64;
     }
+    let level: HashMap<usize, u32> = wanted.iter().copied().collect();
     let mut checks = FrameChecks {
         terrain,
+        level: &level,
         later: Vec::new(),
         checked,
     };
@@ -74,16 +76,21 @@ pub(super) fn drawn_cut(
     let mut seen = std::collections::HashSet::new();
     later.retain(|&i| seen.insert(i) && terrain.tiles[i].usable().is_none());
     later.sort_by_key(|&i| std::cmp::Reverse(terrain.tiles[i].layer));
+    // An ancestor is checked through level 0 to stand in; the frame checks it further where
+    // it is drawn finer.
+    let later: Vec<(usize, u32)> = later
+        .into_iter()
+        .map(|i| (i, level.get(&i).copied().unwrap_or(0)))
+        .collect();
     match policy {
         CheckPolicy::Behind => terrain.check_first(&later),
         CheckPolicy::PerFrame(n) => {
             let now = &later[..later.len().min(n as usize)];
-            terrain.check_all(now);
+            terrain.check_all_through(now);
             checks.checked += now.len() as u64;
         }
         CheckPolicy::OnFrame => {}
     }
-    let level: HashMap<usize, u32> = wanted.iter().copied().collect();
     let tiles = drawn
         .tiles
         .iter()
@@ -106,6 +113,8 @@ pub(super) fn drawn_cut(
 /// policy to check off the frame or on the next ones.
 struct FrameChecks<'a> {
     terrain: &'a Terrain,
+    /// The level each tile of the cut is drawn at (what it is checked through).
+    level: &'a HashMap<usize, u32>,
     later: Vec<usize>,
     checked: u64,
 }
@@ -121,6 +130,7 @@ impl crate::cut::Checks for FrameChecks<'_> {
 
     fn now(&mut self, i: usize) -> bool {
         self.checked += 1;
-        self.terrain.check(i).is_ok()
+        let level = self.level.get(&i).copied().unwrap_or(0);
+        self.terrain.check_through(i, level).is_ok()
     }
 }
