@@ -720,6 +720,52 @@ fn a_tiles_finer_levels_are_checked_when_first_needed() {
     assert_eq!(sound.tiles[broken].checked_levels(), sound.levels);
 }
 
+/// A tile's sides are compared with a neighbour not checked yet as the neighbour stores them,
+/// and only where they differ again with the neighbour's checksum
+/// (`Terrain::check_through`): a neighbour whose side vertex is damaged (its checksum no longer
+/// matches) leaves the tile passing, and fails its own check. The control: the same damage
+/// with the checksum resealed fails the tile, naming the neighbour's side.
+#[test]
+fn a_neighbours_damaged_side_is_not_taken_for_the_tiles_own() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let set = common::puget(dir.path());
+    let mut bytes = std::fs::read(&set).expect("read");
+    let ts = tiles::TileSet::open(&set).expect("open");
+    let entry = ts.dir_entry(3, 1).expect("entry");
+    let level = ts.tile(3, 1).expect("tile").level(0).expect("level 0");
+    // The first vertex of its west side at level 0: one bit of its height code.
+    let v = level.border[Side::West.index()][0];
+    let at = entry.offset as usize + level.entry.positions_offset as usize + 4 * v as usize + 3;
+    drop(ts);
+    bytes[at] ^= 1;
+    for (name, reseal) in [("damaged.vkt", false), ("resealed.vkt", true)] {
+        let mut bytes = bytes.clone();
+        if reseal {
+            tiles::format::reseal(&mut bytes).expect("reseal");
+        }
+        let path = dir.path().join(name);
+        std::fs::write(&path, &bytes).expect("write");
+        let terrain = Terrain::open(&path).expect("open");
+        let (tile, east) = (terrain.tile_index(2, 1), terrain.tile_index(3, 1));
+        let (tile, east) = (tile.expect("tile 2,1"), east.expect("tile 3,1"));
+        let verdict = terrain.check_through(tile, 0).map(|_| ());
+        if reseal {
+            let problem = verdict.expect_err("the control: a side that differs");
+            assert!(
+                problem.contains("tile 2,1: its East side differs from tile 3,1's"),
+                "{problem}"
+            );
+        } else {
+            assert_eq!(verdict, Ok(()), "{name}");
+            let problem = terrain.check_through(east, 0).err().expect("damaged");
+            assert!(
+                problem.contains("tile 3,1") && problem.contains("checksum"),
+                "{problem}"
+            );
+        }
+    }
+}
+
 /// A tile set that claims shared sides although its tiles were built with independent sides
 /// (the flag forged, checksums resealed): the tiles whose sides differ from a neighbour's fail
 /// their checks when needed, named with the neighbour; they are never drawn, rather than drawn

@@ -6,7 +6,7 @@
 //! the GPU. A tile that fails is never drawn; the flight goes on without it and
 //! [`Terrain::take_failures`] names it.
 
-use std::collections::VecDeque;
+use std::collections::{HashMap, VecDeque};
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize, Ordering};
 use std::sync::{Condvar, Mutex, OnceLock, RwLock};
@@ -14,7 +14,7 @@ use std::time::Duration;
 
 use glam::DVec3;
 use tiles::format::{LevelEntry, TileSet};
-use tiles::mesh::TILE_CELLS;
+use tiles::mesh::{TILE_CELLS, TILE_SIZE};
 
 use crate::levels::LevelTable;
 use crate::tile::{rebase, Paged, Side, TileInfo, HEIGHT_CELLS};
@@ -60,6 +60,9 @@ pub struct Terrain {
     /// Held (shared) by each check while it reads tile data, and alone by
     /// [`Terrain::with_checks_held`].
     reading: RwLock<()>,
+    /// Pyramid layers' coarse height maps read so far, by layer, column and row
+    /// ([`Terrain::max_height_near`]; the base grid's are its tiles').
+    layer_heights: Mutex<HashMap<(u32, u32, u32), [f32; HEIGHT_CELLS * HEIGHT_CELLS]>>,
 }
 
 /// One layer of the tiles a terrain holds.
@@ -150,6 +153,7 @@ impl Terrain {
             ahead: Mutex::new(VecDeque::new()),
             ahead_ready: Condvar::new(),
             reading: RwLock::new(()),
+            layer_heights: Mutex::new(HashMap::new()),
         };
         terrain.share_tables(0);
         Ok(terrain)
@@ -502,28 +506,38 @@ impl Terrain {
                 continue;
             };
             let b = &self.tiles[j];
-            // The neighbour's sides: from its own check where it has had one, else read from
-            // its data alone (a neighbour the cut never draws need not be checked whole).
-            let parsed;
-            let theirs = match b.own.get() {
-                Some(Ok(paged)) => &paged.borders,
-                Some(Err(_)) => continue,
-                None => match self.set_of(b).tile(b.tx, b.ty) {
-                    Ok(data) => {
-                        parsed = borders(&data, self.levels).1;
-                        &parsed
-                    }
-                    Err(_) => continue,
-                },
+            let differs = |theirs: &Borders| {
+                units(tile) != units(b)
+                    || (0..self.levels as usize).any(|level| {
+                        let rebased: Option<Vec<u32>> = theirs
+                            .get(level)
+                            .map_or(&[][..], |t| &t[side.opposite().index()])
+                            .iter()
+                            .map(|&p| rebase(p, side, b, tile))
+                            .collect();
+                        rebased.as_ref() != Some(&mine.borders[level][side.index()])
+                    })
             };
-            let differs = units(tile) != units(b)
-                || (0..self.levels as usize).any(|level| {
-                    let rebased: Option<Vec<u32>> = theirs[level][side.opposite().index()]
-                        .iter()
-                        .map(|&p| rebase(p, side, b, tile))
-                        .collect();
-                    rebased.as_ref() != Some(&mine.borders[level][side.index()])
-                });
+            // The neighbour's sides: from its own check where it has had one, else read from
+            // its data alone (a neighbour the cut never draws need not be checked whole): as
+            // stored, unchecked (its sides' few pages); only where those differ from this
+            // tile's, again with its checksum and structure, so that damage to the neighbour is
+            // not taken for this tile's (a neighbour whose data do not read is never drawn).
+            let set = self.set_of(b);
+            let differs = match b.own.get() {
+                Some(Ok(paged)) => differs(&paged.borders),
+                Some(Err(_)) => false,
+                None => {
+                    let stored = set
+                        .tile_outline(b.tx, b.ty)
+                        .ok()
+                        .and_then(|data| side_vertices(&data, self.levels));
+                    stored.is_none_or(|s| differs(&s))
+                        && set.tile(b.tx, b.ty).is_ok_and(|data| {
+                            side_vertices(&data, self.levels).is_none_or(|s| differs(&s))
+                        })
+                }
+            };
             if differs {
                 return Err(format!(
                     "{}: tile {},{}: its {side:?} side differs from tile {},{}'s, in a set built with shared sides (corrupted file)",
@@ -689,8 +703,23 @@ impl Terrain {
     }
 
     /// The highest ground within `radius` metres of (x, y), from the coarse height maps of the
-    /// tiles there (each read from its tile's positions the first time it is needed).
+    /// tiles there (each read from its tile's positions the first time it is needed). In a set
+    /// with a pyramid, from the coarsest layer whose map's cells are at most half the radius
+    /// ([`Terrain::max_height_near_in`]), whether or not the terrain opened its layers, so that
+    /// a flyover over a wide set reads a few tiles a key rather than hundreds, and flies the
+    /// same path either way.
     pub fn max_height_near(&self, x: f64, y: f64, radius: f64) -> f64 {
+        let cell =
+            f64::from(TILE_SIZE as u32) / HEIGHT_CELLS as f64 * self.spacing.0.max(self.spacing.1);
+        let p = (0..=self.set.pyramid_layers())
+            .take_while(|&p| cell * f64::from(1u32 << p) <= radius / 2.0)
+            .last()
+            .unwrap_or(0);
+        if p > 0 {
+            if let Some(z) = self.max_height_near_in(p, x, y, radius) {
+                return z;
+            }
+        }
         let mut best = f64::NEG_INFINITY;
         let (sx, sy) = self.spacing;
         let tile_w = f64::from(TILE_CELLS) * sx;
@@ -717,7 +746,9 @@ impl Terrain {
                 {
                     continue;
                 }
-                let heights = t.heights.get_or_init(|| coarse_heights(&self.set, t));
+                let heights = t
+                    .heights
+                    .get_or_init(|| coarse_heights(&self.set, t.tx, t.ty));
                 for cy in 0..HEIGHT_CELLS {
                     for cx in 0..HEIGHT_CELLS {
                         let h = heights[cy * HEIGHT_CELLS + cx];
@@ -744,6 +775,52 @@ impl Terrain {
         } else {
             self.bounds().1.z
         }
+    }
+
+    /// [`Terrain::max_height_near`] from pyramid layer `p`'s coarse height maps, each cell's
+    /// highest vertex raised by its tile's decimation error (its vertices are base samples, and
+    /// its surface lies within that error of every base sample under it); None where the layer
+    /// holds no tile there.
+    fn max_height_near_in(&self, p: u32, x: f64, y: f64, radius: f64) -> Option<f64> {
+        let layer = self.set.layer(p)?;
+        let (tiles_x, tiles_y) = (layer.header().tiles_x, layer.header().tiles_y);
+        let f = f64::from(1u32 << p);
+        let (sx, sy) = (self.spacing.0 * f, self.spacing.1 * f);
+        let (tile_w, tile_h) = (f64::from(TILE_CELLS) * sx, f64::from(TILE_CELLS) * sy);
+        let clamp_to = |v: f64, n: u32| v.floor().clamp(0.0, f64::from(n.max(1) - 1)) as u32;
+        let mut best = f64::NEG_INFINITY;
+        for ty in
+            clamp_to(-(y + radius) / tile_h, tiles_y)..=clamp_to(-(y - radius) / tile_h, tiles_y)
+        {
+            for tx in
+                clamp_to((x - radius) / tile_w, tiles_x)..=clamp_to((x + radius) / tile_w, tiles_x)
+            {
+                let heights = {
+                    let mut maps = self.layer_heights.lock().unwrap_or_else(|e| e.into_inner());
+                    *maps.entry((p, tx, ty)).or_insert_with(|| {
+                        let raise = layer.decimation_error(tx, ty).unwrap_or(0.0);
+                        coarse_heights(&layer, tx, ty).map(|h| h + raise)
+                    })
+                };
+                let (x_west, y_north) = (f64::from(tx) * tile_w, -f64::from(ty) * tile_h);
+                let cell = 257.0 / HEIGHT_CELLS as f64;
+                for (k, &h) in heights.iter().enumerate() {
+                    let (cx, cy) = ((k % HEIGHT_CELLS) as f64, (k / HEIGHT_CELLS) as f64);
+                    let x0 = x_west + cx * cell * sx;
+                    let y1 = y_north - cy * cell * sy;
+                    let (x1, y0) = (x0 + cell * sx, y1 - cell * sy);
+                    if h > f32::NEG_INFINITY
+                        && x1 >= x - radius
+                        && x0 <= x + radius
+                        && y1 >= y - radius
+                        && y0 <= y + radius
+                    {
+                        best = best.max(f64::from(h));
+                    }
+                }
+            }
+        }
+        best.is_finite().then_some(best)
     }
 }
 
@@ -858,7 +935,8 @@ fn paged(set: &TileSet, info: &TileInfo, level: u32) -> Result<Paged, String> {
             .collect(),
         None => Vec::new(),
     };
-    let (border_indices, borders) = borders(&tile, h.levels);
+    let (border_indices, borders) =
+        borders(&tile, h.levels).ok_or("a border names a vertex outside its blocks")?;
     Ok(Paged {
         borders,
         border_indices,
@@ -870,32 +948,48 @@ fn paged(set: &TileSet, info: &TileInfo, level: u32) -> Result<Paged, String> {
 /// Per level, the vertex indices on the tile's N, E, S, W sides and the packed vertices there.
 type Borders = Vec<[Vec<u32>; 4]>;
 
-/// A tile's sides at each of its `levels` levels: [`Borders`] as indices, then as vertices.
-fn borders(tile: &tiles::format::Tile, levels: u32) -> (Borders, Borders) {
-    let packed: Vec<u32> = (0..levels)
-        .filter_map(|i| tile.level(i))
-        .flat_map(|l| l.positions.iter().copied())
-        .collect();
+/// A tile's sides at each of its `levels` levels: [`Borders`] as indices, then as vertices
+/// (None where a side names a vertex no block holds: data not checked).
+fn borders(tile: &tiles::format::Tile, levels: u32) -> Option<(Borders, Borders)> {
     let indices: Borders = (0..levels)
         .filter_map(|i| tile.level(i))
         .map(|l| l.border.map(|side| side.to_vec()))
         .collect();
-    let vertices = indices
-        .iter()
-        .map(|sides| {
-            sides
-                .clone()
-                .map(|side| side.iter().map(|&v| packed[v as usize]).collect())
-        })
+    Some((indices, side_vertices(tile, levels)?))
+}
+
+/// A tile's sides at each of its `levels` levels as packed vertices, each looked up in the
+/// block that holds it (no copy of the tile's vertices); None where a side names a vertex no
+/// block holds (data not checked).
+fn side_vertices(tile: &tiles::format::Tile, levels: u32) -> Option<Borders> {
+    let blocks: Vec<(u32, &[u32])> = (0..levels)
+        .filter_map(|j| tile.level(j))
+        .map(|l| (l.entry.block_start, l.positions))
         .collect();
-    (indices, vertices)
+    let at = |v: u32| -> Option<u32> {
+        let j = blocks
+            .partition_point(|&(start, _)| start <= v)
+            .checked_sub(1)?;
+        let (start, positions) = blocks[j];
+        positions.get((v - start) as usize).copied()
+    };
+    (0..levels)
+        .map(|i| {
+            let l = tile.level(i)?;
+            let mut sides: [Vec<u32>; 4] = Default::default();
+            for (side, stored) in sides.iter_mut().zip(l.border) {
+                *side = stored.iter().map(|&v| at(v)).collect::<Option<_>>()?;
+            }
+            Some(sides)
+        })
+        .collect()
 }
 
 /// A tile's coarse height map: the highest vertex in each cell, from its positions as stored
 /// (unchecked: the map only places cameras).
-fn coarse_heights(set: &TileSet, info: &TileInfo) -> [f32; HEIGHT_CELLS * HEIGHT_CELLS] {
+fn coarse_heights(set: &TileSet, tx: u32, ty: u32) -> [f32; HEIGHT_CELLS * HEIGHT_CELLS] {
     let mut heights = [f32::NEG_INFINITY; HEIGHT_CELLS * HEIGHT_CELLS];
-    let Ok(tile) = set.tile_outline(info.tx, info.ty) else {
+    let Ok(tile) = set.tile_outline(tx, ty) else {
         return heights;
     };
     let q = tile.quantiser();

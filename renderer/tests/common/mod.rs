@@ -64,8 +64,9 @@ pub fn with_pyramid() -> BuildParams {
     }
 }
 
-/// [`mirror`] built with `params`.
-pub fn mirror_with(dir: &Path, size: usize, params: &BuildParams) -> PathBuf {
+/// The heights of [`mirror`]'s grid of `size` x `size` samples (metres, row-major, north
+/// first): SRTM3 N55W003 mirrored at its edges, voids as 0.
+pub fn mirror_heights(size: usize) -> Vec<f32> {
     let path = data("srtm/N55W003.hgt");
     let raw = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let side = ((raw.len() / 2) as f64).sqrt().round() as usize;
@@ -87,9 +88,14 @@ pub fn mirror_with(dir: &Path, size: usize, params: &BuildParams) -> PathBuf {
             2 * (side - 1) - j
         }
     };
-    let heights: Vec<f32> = (0..size * size)
+    (0..size * size)
         .map(|i| source(mirrored(i % size), mirrored(i / size)))
-        .collect();
+        .collect()
+}
+
+/// [`mirror`] built with `params`.
+pub fn mirror_with(dir: &Path, size: usize, params: &BuildParams) -> PathBuf {
+    let heights = mirror_heights(size);
     let grid = Grid {
         width: size,
         height: size,
