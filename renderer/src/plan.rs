@@ -260,8 +260,10 @@ fn check_requests(
             Some(true) => r.wanted,
             Some(false) => continue,
             // Its own check passed at a coarser level (checked behind): that level for now.
-            None if tile.usable() == Some(true) && !every_level => tile.checked_levels() - 1,
-            None => continue,
+            None => match (tile.usable(), tile.checked_levels().checked_sub(1)) {
+                (Some(true), Some(checked)) if !every_level => checked,
+                _ => continue,
+            },
         };
         r.wanted = r.wanted.min(drawn_at);
         kept.push(r);

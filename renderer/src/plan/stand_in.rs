@@ -20,11 +20,13 @@ use crate::terrain::Terrain;
 pub enum CheckPolicy {
     /// Off the frames, on the thread that checks ahead of need: no frame waits for more than
     /// the top of the pyramid, but the detail arrives later (bench/README, "When the cut's
-    /// tiles are checked").
+    /// tiles are checked"); a tile drawn already is drawn at its finest checked level until
+    /// the finer one it wants passes.
     Behind,
     /// At most this many a frame, on the frame (after it is planned, for the next), the
     /// others not queued off the frame: what a frame draws depends on the frames before it
-    /// alone (the tests' deterministic stand-ins).
+    /// alone (the tests' deterministic stand-ins). A tile drawn already is checked through a
+    /// finer level on the frame that first wants it.
     PerFrame(u32),
     /// Every tile on the frame that first needs it, before anything is drawn (the default).
     OnFrame,
