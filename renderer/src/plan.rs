@@ -87,7 +87,8 @@ pub struct Plan {
     /// Tiles that have failed their checks so far (never drawn).
     pub tiles_failed: u64,
     /// Tiles of the pyramid's cut drawn by an ancestor: not checked yet, failed, or beside a
-    /// tile two layers coarser ([`crate::cut::stand_in`]).
+    /// tile two layers coarser ([`crate::cut::stand_in`]); or held at a coarser level of their
+    /// own than they want until the finer one passes its check (`--checks behind`).
     pub tiles_stood_in: u64,
 }
 
@@ -170,7 +171,7 @@ pub fn plan(
     let policy = cut.as_ref().map_or(CheckPolicy::OnFrame, |_| checks);
     let whole = manager.config().scheme == memory::Scheme::WholeTile;
     let requested = (&mut requests, &mut parts);
-    let (prefetch, checked) = check_requests(terrain, requested, prefetch, (policy, whole));
+    let (prefetch, checked, held) = check_requests(terrain, requested, prefetch, (policy, whole));
     let tiles_checked = checked + stand_in_checks;
     cpu_check_ms += ms(t);
     let parts: HashMap<u32, tiles::parts::PartLevels> =
@@ -213,7 +214,7 @@ pub fn plan(
         cpu_check_ms,
         tiles_checked,
         tiles_failed: terrain.failed_count() as u64,
-        tiles_stood_in: stood_in as u64,
+        tiles_stood_in: (stood_in + held) as u64,
     })
 }
 
@@ -223,14 +224,14 @@ pub fn plan(
 /// Under [`CheckPolicy::Behind`] a tile whose first levels passed but not yet the wanted one
 /// is drawn at its finest checked level meanwhile, and the rest is checked off the frame.
 /// Of the `prefetch` requests, keeps those checked through their levels and queues the
-/// others for a check off the frame. Returns the prefetch requests kept and how many tiles
-/// were checked on the frame.
+/// others for a check off the frame. Returns the prefetch requests kept, how many tiles were
+/// checked on the frame and how many are held at a coarser level than they want.
 fn check_requests(
     terrain: &Terrain,
     (requests, parts): (&mut Vec<Request>, &mut Vec<tiles::parts::PartLevels>),
     prefetch: &[Request],
     (policy, every_level): (CheckPolicy, bool),
-) -> (Vec<Request>, u64) {
+) -> (Vec<Request>, u64, usize) {
     let through = |r: &Request| if every_level { u32::MAX } else { r.wanted };
     let due: Vec<(usize, u32)> = requests
         .iter()
@@ -254,6 +255,7 @@ fn check_requests(
     let has_parts = parts.len() == requests.len();
     let mut kept = Vec::with_capacity(requests.len());
     let mut kept_parts = Vec::with_capacity(parts.len());
+    let mut held = 0;
     for (k, mut r) in requests.iter().copied().enumerate() {
         let tile = &terrain.tiles[r.tile as usize];
         let drawn_at = match tile.usable_at(through(&r)) {
@@ -261,7 +263,10 @@ fn check_requests(
             Some(false) => continue,
             // Its own check passed at a coarser level (checked behind): that level for now.
             None => match (tile.usable(), tile.checked_levels().checked_sub(1)) {
-                (Some(true), Some(checked)) if !every_level => checked,
+                (Some(true), Some(checked)) if !every_level => {
+                    held += 1;
+                    checked
+                }
                 _ => continue,
             },
         };
@@ -286,7 +291,7 @@ fn check_requests(
             },
         )
         .collect();
-    (prefetch, checked)
+    (prefetch, checked, held)
 }
 
 /// The draw of a granted tile (None: nothing of it resident).

@@ -16,7 +16,8 @@
 //! `cpu_check_ms, tiles_checked, tiles_failed`, drawing part by part
 //! `tiles_part_by_part, part_builds`, the morph pass's `tiles_unmorphed`, the tiles drawn from
 //! the pyramid's layers above the base grid `tiles_above_base` and the tiles of its cut an
-//! ancestor stood in for `tiles_stood_in` (`--pyramid`), and last `tiles_level_0 .. tiles_level_{n-1}`.
+//! ancestor (or a coarser checked level) stood in for `tiles_stood_in` (`--pyramid`), and last
+//! `tiles_level_0 .. tiles_level_{n-1}`.
 
 use std::path::Path;
 
@@ -127,7 +128,8 @@ pub struct FrameRecord {
     /// Drawn tiles of the pyramid's layers above the base grid (`--pyramid`; 0 otherwise).
     pub tiles_above_base: u64,
     /// Tiles of the pyramid's cut drawn by an ancestor: not checked yet (`--checks`), failed,
-    /// or beside a tile two layers coarser (`--pyramid`; 0 otherwise).
+    /// or beside a tile two layers coarser; or held at a coarser level of their own until the
+    /// finer one passes its check (`--checks behind`) (`--pyramid`; 0 otherwise).
     pub tiles_stood_in: u64,
     pub tiles_per_level: Vec<u64>,
 }
