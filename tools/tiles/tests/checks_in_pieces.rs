@@ -4,28 +4,16 @@
 //! reported in the piece that holds level `k`, with the same line as the whole check, and in no
 //! piece before it. The control: the sound tile passes in every split.
 
-use testdata::data;
+mod common;
+
 use tiles::verify::{tile_problems, tile_problems_in};
 use tiles::{build_tileset, BuildParams, Grid, TileSet, TileSetMeta};
 
-/// A crop of the SRTM3 tile N43E007 (the Alps) in metres: rough ground, every level distinct.
-fn alps(w: usize, h: usize) -> Vec<f32> {
-    let n = 1201;
-    let bytes = std::fs::read(data("srtm/N43E007.hgt")).expect("readable hgt");
-    let mut out = Vec::with_capacity(w * h);
-    for y in 300..300 + h {
-        for x in 400..400 + w {
-            let i = 2 * (y * n + x);
-            out.push(f32::from(i16::from_be_bytes([bytes[i], bytes[i + 1]])));
-        }
-    }
-    out
-}
-
 /// One full tile and a partial one, 9 levels, shared sides.
 fn build(dir: &std::path::Path) -> std::path::PathBuf {
+    // A crop of the SRTM3 tile N43E007 (the Alps): rough ground, every level distinct.
     let (w, h) = (256 + 1 + 90, 257);
-    let heights = alps(w, h);
+    let heights = common::hgt_crop("srtm/N43E007.hgt", 1201, (400, 300), (w, h));
     let grid = Grid {
         width: w,
         height: h,
