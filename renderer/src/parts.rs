@@ -68,9 +68,10 @@ impl PartDraws {
             d.key = None;
             let Some(wanted) = d.parts else { continue };
             // Read with the tile's check (drawn tiles passed it).
-            let Some((centres, counts)) = terrain.tiles[d.tile].paged().map(|p| &p.parts) else {
+            let Some(tables) = terrain.tiles[d.tile].paged().map(|p| p.parts()) else {
                 continue;
             };
+            let (centres, counts) = &*tables;
             let Some(key) = centres.key(&wanted, d.level) else {
                 continue;
             };

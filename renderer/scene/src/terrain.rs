@@ -9,7 +9,7 @@
 use std::collections::{HashMap, VecDeque};
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize, Ordering};
-use std::sync::{Condvar, Mutex, OnceLock, RwLock};
+use std::sync::{Arc, Condvar, Mutex, OnceLock, RwLock};
 use std::time::Duration;
 
 use glam::DVec3;
@@ -307,9 +307,17 @@ impl Terrain {
         }
         let set = self.set_of(tile);
         let problem = match set.tile(tile.tx, tile.ty) {
-            Ok(data) => tiles::verify::tile_problems_in(set, &data, from..level + 1)
-                .into_iter()
-                .next(),
+            Ok(data) => {
+                let problem = tiles::verify::tile_problems_in(set, &data, from..level + 1)
+                    .into_iter()
+                    .next();
+                // The part tables of the levels now checked, before they may be drawn.
+                if let (None, Some(paged)) = (&problem, tile.paged()) {
+                    let tables = tiles::parts::tables_through(&data, level + 1);
+                    *paged.parts.write().unwrap_or_else(|p| p.into_inner()) = Arc::new(tables);
+                }
+                problem
+            }
             Err(e) => Some(e.to_string()),
         };
         match problem {
@@ -941,7 +949,7 @@ fn paged(set: &TileSet, info: &TileInfo, level: u32) -> Result<Paged, String> {
         borders,
         border_indices,
         texture_mips,
-        parts: tiles::parts::tables(&tile),
+        parts: RwLock::new(Arc::new(tiles::parts::tables_through(&tile, level + 1))),
     })
 }
 

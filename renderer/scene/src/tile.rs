@@ -4,7 +4,7 @@
 //! in these terms.
 
 use std::sync::atomic::{AtomicU32, Ordering};
-use std::sync::{Mutex, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock, RwLock};
 
 use glam::DVec3;
 use tiles::format::{LevelEntry, TileHeader};
@@ -67,8 +67,19 @@ pub struct Paged {
     /// Per texture mip, finest first: its BC1 blocks' place in the tile's texture blob (empty
     /// when the set has no textures).
     pub(crate) texture_mips: Vec<std::ops::Range<usize>>,
-    /// What drawing the tile part by part needs ([`tiles::parts::tables`]).
-    pub parts: (tiles::parts::Centres, tiles::parts::Counts),
+    /// What drawing the tile part by part needs ([`tiles::parts::tables_through`]), for the
+    /// levels checked so far (each check of finer levels replaces it).
+    pub(crate) parts: RwLock<Arc<PartTables>>,
+}
+
+/// A tile's part tables: its parts' centres, and its checked levels' counts.
+pub type PartTables = (tiles::parts::Centres, tiles::parts::Counts);
+
+impl Paged {
+    /// What drawing the tile part by part needs, for the levels checked so far.
+    pub fn parts(&self) -> Arc<PartTables> {
+        Arc::clone(&self.parts.read().unwrap_or_else(|p| p.into_inner()))
+    }
 }
 
 impl TileInfo {

@@ -511,12 +511,19 @@ impl Counts {
 /// What drawing `tile` part by part needs of its data, from its positions and stored arrays
 /// (its [`Centres`] and [`Counts`], about 2.5 KB).
 pub fn tables(tile: &crate::format::Tile) -> (Centres, Counts) {
-    let levels = tile.levels().len() as u32;
+    tables_through(tile, tile.levels().len() as u32)
+}
+
+/// [`tables`] for the tile's first `levels` levels alone (their counts; the centres are the
+/// blocks'), for a reader that has checked only those: their index arrays are the only ones
+/// read.
+pub fn tables_through(tile: &crate::format::Tile, levels: u32) -> (Centres, Counts) {
+    let all = tile.levels().len() as u32;
     let blocks = Blocks::new(
-        (0..levels).filter_map(|j| tile.level(j).map(|l| l.positions)),
+        (0..all).filter_map(|j| tile.level(j).map(|l| l.positions)),
         (tile.header.mesh_max_x, tile.header.mesh_max_y),
     );
-    let arrays: Vec<_> = (0..levels).filter_map(|j| tile.level(j)).collect();
+    let arrays: Vec<_> = (0..levels.min(all)).filter_map(|j| tile.level(j)).collect();
     let counts = Counts::new(&blocks, arrays.iter().map(|l| l.indices.iter()));
     (blocks.centres(), counts)
 }

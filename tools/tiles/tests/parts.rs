@@ -272,3 +272,44 @@ fn spliced_levels_have_t_junctions_and_the_check_finds_them() {
     let mesh_max = (tile.header.mesh_max_x, tile.header.mesh_max_y);
     assert!(open_edges(&spliced, &points, mesh_max) > 0);
 }
+
+/// The part tables of a tile's first `n` levels (`tables_through`, what a renderer holds for
+/// the levels it has checked) count every key within those levels as the whole tile's tables
+/// do, and no key past them (the control: the whole tables count those).
+#[test]
+fn the_first_levels_tables_count_as_the_whole_tiles_do() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = set(dir.path());
+    let (mut within, mut past) = (0, 0);
+    for ty in 0..2 {
+        for tx in 0..3 {
+            let tile = set.tile(tx, ty).expect("tile");
+            let levels = tile.levels().len() as u32;
+            let b = blocks(&tile);
+            let (_, whole) = tiles::parts::tables(&tile);
+            for n in 1..=levels {
+                let (_, first) = tiles::parts::tables_through(&tile, n);
+                for seed in 0..30u64 {
+                    let top = (seed % u64::from(levels)) as u32;
+                    let Some(key) = b.key(&wanted(seed * 7 + u64::from(n), levels as u8), top)
+                    else {
+                        continue;
+                    };
+                    let g = u32::from(*key.levels.iter().max().expect("16 parts"));
+                    if g < n {
+                        assert_eq!(first.count(&key), whole.count(&key), "{tx},{ty} n {n}");
+                        within += 1;
+                    } else {
+                        assert_eq!(first.count(&key), None, "{tx},{ty} n {n}: past its levels");
+                        assert!(whole.count(&key).is_some(), "the control");
+                        past += 1;
+                    }
+                }
+            }
+        }
+    }
+    assert!(
+        within > 100 && past > 100,
+        "{within} keys within, {past} past"
+    );
+}
