@@ -1,9 +1,10 @@
 //! A mapped tile set as the renderer sees it. Opening reads the header, the directory (both
 //! checksummed) and each tile's header and level table: every tile's world box, level tables
 //! and memory costs are known at once, for culling, LOD and the memory manager, while the tiles'
-//! data stay on disk. A tile is checked the first time it is needed ([`Terrain::check`]): its
-//! checksum, structure and `tiletool verify`'s semantic checks, before any of its bytes reach
-//! the GPU. A tile that fails is never drawn; the flight goes on without it and
+//! data stay on disk. A tile is checked the first time it is needed
+//! ([`Terrain::check_through`]): its checksum, structure and `tiletool verify`'s semantic checks
+//! of the levels wanted, and of each finer level when first wanted, before any of their bytes
+//! reach the GPU. A tile that fails is never drawn; the flight goes on without it and
 //! [`Terrain::take_failures`] names it.
 
 use std::collections::{HashMap, VecDeque};
@@ -248,16 +249,17 @@ impl Terrain {
     /// borders, morph offsets) of levels `0..=level`; and where the set shares sides, that each
     /// side holds the same vertices as the neighbour's at every level (a neighbour that failed
     /// its own check, or whose data do not read, is never drawn, so no seam joins them and no
-    /// side is compared; a neighbour not checked yet gives its sides from its data read with
-    /// their checksum, without the semantic checks: a pyramid's cut rarely draws a tile's
-    /// neighbours in its own layer, and checking each whole doubled the checks' cost over a
-    /// flight). A later call for a finer level checks the levels in between; one that fails
-    /// then takes the tile out of the flight from then on. A tile is mostly first drawn at a
-    /// coarse level, and its finer levels hold most of its vertices: the 16K mirror set's
-    /// first flyover view checks its 96 tiles through the levels it draws them at in a seventh
-    /// of the time all nine levels take (bench/README, "A tile's levels checked as they are
-    /// first drawn"). Checksums catch accidents; the rest catches a file whose checksums were
-    /// recomputed over nonsense. Returns the problem, as one line naming the file and the tile.
+    /// side is compared; a neighbour not checked yet gives its sides as stored, read again
+    /// with its checksum only where they differ, without the semantic checks: a pyramid's cut
+    /// rarely draws a tile's neighbours in its own layer, and checking each whole doubled the
+    /// checks' cost over a flight). A later call for a finer level checks the levels in
+    /// between; one that fails then takes the tile out of the flight from then on. A tile is
+    /// mostly first drawn at a coarse level, and its finer levels hold most of its vertices:
+    /// the 16K mirror set's first flyover view checks its 96 tiles through the levels it draws
+    /// them at in a seventh of the time all nine levels take (bench/README, "A tile's levels
+    /// checked as they are first needed"). Checksums catch accidents; the rest catches a file
+    /// whose checksums were recomputed over nonsense. Returns the problem, as one line naming
+    /// the file and the tile.
     ///
     /// A check that would read the tile's data from a file shorter than it was at open (cut
     /// in place by another process: reading the mapping past its end would fault) reads
