@@ -369,11 +369,20 @@ impl Terrain {
     }
 
     /// Checks `tiles` on every core, each through its level (see [`Terrain::check_through`]).
+    /// A single tile is checked on the calling thread, and none costs nothing: handing work to
+    /// rayon's pool waits for a free worker, and the thread that checks ahead of need may hold
+    /// them all, a tile's check each.
     pub fn check_all_through(&self, tiles: &[(usize, u32)]) {
         use rayon::prelude::*;
-        tiles.par_iter().for_each(|&(i, level)| {
-            let _ = self.check_through(i, level);
-        });
+        match tiles {
+            [] => {}
+            &[(i, level)] => {
+                let _ = self.check_through(i, level);
+            }
+            _ => tiles.par_iter().for_each(|&(i, level)| {
+                let _ = self.check_through(i, level);
+            }),
+        }
     }
 
     /// The tiles that failed their check since the last call, with their problems.
