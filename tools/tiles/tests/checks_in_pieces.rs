@@ -7,30 +7,7 @@
 mod common;
 
 use tiles::verify::{tile_problems, tile_problems_in};
-use tiles::{build_tileset, BuildParams, Grid, TileSet, TileSetMeta};
-
-/// One full tile and a partial one, 9 levels, shared sides.
-fn build(dir: &std::path::Path) -> std::path::PathBuf {
-    // A crop of the SRTM3 tile N43E007 (the Alps): rough ground, every level distinct.
-    let (w, h) = (256 + 1 + 90, 257);
-    let heights = common::hgt_crop("srtm/N43E007.hgt", 1201, (400, 300), (w, h));
-    let grid = Grid {
-        width: w,
-        height: h,
-        first_row: 0,
-        heights: &heights,
-        spacing_x: 67.5,
-        spacing_y: 92.6,
-    };
-    let out = dir.join("alps.vkt");
-    let params = BuildParams {
-        levels: 9,
-        base_error: 1.0,
-        ..BuildParams::default()
-    };
-    build_tileset(&grid, &params, &TileSetMeta::default(), &out, &|| {}).expect("build");
-    out
-}
+use tiles::TileSet;
 
 /// The problems of tile 0,0 checked in the pieces that `cuts` splits its levels into.
 fn in_pieces(set: &TileSet, cuts: &[u32]) -> Vec<Vec<String>> {
@@ -48,7 +25,8 @@ fn in_pieces(set: &TileSet, cuts: &[u32]) -> Vec<Vec<String>> {
 #[test]
 fn checks_in_pieces_find_what_one_pass_finds() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let file = build(dir.path());
+    // One full tile and a partial one.
+    let file = common::alps_set(dir.path(), (256 + 1 + 90, 257));
     let splits: [&[u32]; 4] = [&[], &[3], &[1, 5], &[1, 2, 3, 4, 5, 6, 7, 8]];
     let sound = TileSet::open(&file).expect("open");
     for cuts in splits {

@@ -5,47 +5,18 @@
 //! array's room by it). The control: the stored meshes of two levels spliced part by part
 //! have T-junctions, and the check finds them.
 
+mod common;
+
 use std::collections::HashMap;
 
-use testdata::data;
 use tiles::format::Tile;
 use tiles::pack::unpack;
 use tiles::parts::{Blocks, PartKey, PartLevels, RESTART};
-use tiles::{build_tileset, BuildParams, Grid, TileSet, TileSetMeta};
-
-/// A crop of the SRTM3 tile N43E007 (the Alps) in metres: rough ground, every level distinct.
-fn alps(w: usize, h: usize) -> Vec<f32> {
-    let n = 1201;
-    let bytes = std::fs::read(data("srtm/N43E007.hgt")).expect("readable hgt");
-    let mut out = Vec::with_capacity(w * h);
-    for y in 300..300 + h {
-        for x in 400..400 + w {
-            let i = 2 * (y * n + x);
-            out.push(f32::from(i16::from_be_bytes([bytes[i], bytes[i + 1]])));
-        }
-    }
-    out
-}
+use tiles::TileSet;
 
 /// 3 x 2 tiles, the third column and the second row partial, 9 levels, shared sides.
 fn set(dir: &std::path::Path) -> TileSet {
-    let (w, h) = (2 * 256 + 1 + 140, 257 + 100);
-    let heights = alps(w, h);
-    let grid = Grid {
-        width: w,
-        height: h,
-        first_row: 0,
-        heights: &heights,
-        spacing_x: 67.5,
-        spacing_y: 92.6,
-    };
-    let out = dir.join("alps.vkt");
-    let params = BuildParams {
-        levels: 9,
-        base_error: 1.0,
-        ..BuildParams::default()
-    };
-    build_tileset(&grid, &params, &TileSetMeta::default(), &out, &|| {}).expect("build");
+    let out = common::alps_set(dir, (2 * 256 + 1 + 140, 257 + 100));
     TileSet::open(&out).expect("open")
 }
 

@@ -34,3 +34,27 @@ pub fn srtm3_grid(heights: &[f32], (w, h): (usize, usize)) -> tiles::Grid<'_> {
         spacing_y: 92.6,
     }
 }
+
+/// A `w x h` crop of the SRTM3 tile N43E007 (the Alps; rough ground, every level distinct)
+/// built as `dir/alps.vkt`: 67.5 x 92.6 m spacing, 9 levels, base error 1 m, shared sides.
+#[allow(dead_code)]
+pub fn alps_set(dir: &std::path::Path, (w, h): (usize, usize)) -> std::path::PathBuf {
+    let heights = hgt_crop("srtm/N43E007.hgt", 1201, (400, 300), (w, h));
+    let grid = tiles::Grid {
+        width: w,
+        height: h,
+        first_row: 0,
+        heights: &heights,
+        spacing_x: 67.5,
+        spacing_y: 92.6,
+    };
+    let out = dir.join("alps.vkt");
+    let params = tiles::BuildParams {
+        levels: 9,
+        base_error: 1.0,
+        ..tiles::BuildParams::default()
+    };
+    let meta = tiles::TileSetMeta::default();
+    tiles::build_tileset(&grid, &params, &meta, &out, &|| {}).expect("build");
+    out
+}
