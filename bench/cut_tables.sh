@@ -18,20 +18,13 @@ for vkt in "$@"; do
       for mode in morph discrete; do
         flags="--pyramid"; [ $mode = discrete ] && flags="--pyramid --no-geomorph"
         run="$out/$name.$path.$mode.$(echo "$bin" | tr / _)"
-        for i in 1 2; do
-          /usr/bin/time -f "%e" -o "$run.first$i.time" \
-            "$bin" "$vkt" --headless --path $path --frames 1 --size 1024x768 $flags > "$run.first$i.json" 2>/dev/null
-        done
+        first=$(bench/first_frame.sh "$bin" "$vkt" $path "$run" $flags)
         "$bin" "$vkt" --headless --path $path --frames 60 --size 1024x768 $flags \
           --log "$run.csv" > /dev/null 2>&1
-        python3 - "$run" "$name" "$path" "$bin" "$mode" <<'PY'
+        python3 - "$run" "$name" "$path" "$bin" "$mode" "$first" <<'PY'
 import csv, json, statistics, sys
-run, name, path, binary, mode = sys.argv[1:]
-firsts = []
-for i in (1, 2):
-    wall = float(open(f"{run}.first{i}.time").read().split()[0])
-    firsts.append((wall, json.load(open(f"{run}.first{i}.json"))["first_view_check_ms"]))
-wall, checks = min(firsts)
+run, name, path, binary, mode, first = sys.argv[1:]
+wall, checks = map(float, first.split())
 rows = list(csv.DictReader(open(f"{run}.csv")))[5:]
 med = lambda c: statistics.median(float(r[c] or 0) for r in rows)
 drawn = "geomorphing cut" if mode == "morph" else "discrete cut"

@@ -23,20 +23,13 @@ for vkt in "$@"; do
   for path in orbit flyover; do
     for bin in $bins; do
       run="$out/$name.$path.$(echo "$bin" | tr / _)"
-      for i in 1 2; do
-        /usr/bin/time -f "%e" -o "$run.first$i.time" \
-          "$bin" "$vkt" --headless --path $path --frames 1 --size 1024x768 $flags > "$run.first$i.json" 2>/dev/null
-      done
+      first=$(bench/first_frame.sh "$bin" "$vkt" $path "$run" $flags)
       "$bin" "$vkt" --headless --path $path --frames 60 --size 1024x768 $flags \
         --log "$run.csv" > /dev/null 2>&1
-      python3 - "$run" "$name" "$path" "$bin" "$flags" <<'PY'
+      python3 - "$run" "$name" "$path" "$bin" "$flags" "$first" <<'PY'
 import csv, json, statistics, sys
-run, name, path, binary, flags = sys.argv[1:]
-firsts = []
-for i in (1, 2):
-    wall = float(open(f"{run}.first{i}.time").read().split()[0])
-    firsts.append((wall, json.load(open(f"{run}.first{i}.json"))["first_view_check_ms"]))
-wall, checks = min(firsts)
+run, name, path, binary, flags, first = sys.argv[1:]
+wall, checks = map(float, first.split())
 rows = list(csv.DictReader(open(f"{run}.csv")))
 col = lambda c, rs=rows: [float(r[c] or 0) for r in rs]
 frames = col("frame_ms", rows[5:])
