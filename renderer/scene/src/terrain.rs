@@ -307,14 +307,17 @@ impl Terrain {
         if from > level || tile.late.get().is_some() {
             return;
         }
-        // Its checksum and every level's structure passed its own check, over these same
-        // mapped bytes (a file cut since is refused before this): the outline, not again.
+        // Its checksum passed its own check, over these same mapped bytes (a file cut since
+        // is refused before this): the outline, and the new levels' structure.
         let set = self.set_of(tile);
         let problem = match set.tile_outline(tile.tx, tile.ty) {
             Ok(data) => {
-                let problem = tiles::verify::tile_problems_in(set, &data, from..level + 1)
-                    .into_iter()
-                    .next();
+                let problem = match data.check_levels(from..level + 1) {
+                    Err(what) => Some(set.tile_error(tile.tx, tile.ty, what).to_string()),
+                    Ok(()) => tiles::verify::tile_problems_in(set, &data, from..level + 1)
+                        .into_iter()
+                        .next(),
+                };
                 // The part tables of the levels now checked, before they may be drawn.
                 if let (None, Some(paged)) = (&problem, tile.paged()) {
                     let tables = tiles::parts::tables_through(&data, level + 1);
@@ -936,14 +939,15 @@ fn tile_info(set: &TileSet, tx: u32, ty: u32, layer: u32) -> Result<TileInfo, ti
     })
 }
 
-/// A tile's own check, and what it reads: the tile parsed with its checksum (its structure at
-/// every level), the problems `tiletool verify` (without a source) would report at levels
-/// `0..=level`, the texture, and the level table the
+/// A tile's own check, and what it reads: the tile's checksum, its structure and the problems
+/// `tiletool verify` (without a source) would report at levels `0..=level`, the texture, and the level table the
 /// outline read at open still the one stored.
 fn paged(set: &TileSet, info: &TileInfo, level: u32) -> Result<Paged, String> {
     let h = *set.header();
     let (tx, ty) = (info.tx, info.ty);
-    let tile = set.tile(tx, ty).map_err(|e| e.to_string())?;
+    let tile = set
+        .tile_levels(tx, ty, 0..level + 1)
+        .map_err(|e| e.to_string())?;
     let checked = tiles::verify::tile_problems_in(set, &tile, 0..level + 1);
     if let Some(problem) = checked.into_iter().next() {
         return Err(problem);

@@ -1372,7 +1372,8 @@ impl TileSet {
     }
 
     /// An error about tile `(tx, ty)` of this file.
-    fn tile_error(&self, tx: u32, ty: u32, what: String) -> FormatError {
+    /// A problem with tile `(tx, ty)` of this view, as one line naming the file and the tile.
+    pub fn tile_error(&self, tx: u32, ty: u32, what: String) -> FormatError {
         FormatError::Invalid {
             path: self.path.clone(),
             what: match self.layer {
@@ -1497,6 +1498,18 @@ impl TileSet {
     /// Tile `(tx, ty)`, checksum and structure validated (with compact levels, the checksum of
     /// the stored bytes, and the structure of the blob rebuilt from them).
     pub fn tile(&self, tx: u32, ty: u32) -> Result<Tile<'_>, FormatError> {
+        self.tile_levels(tx, ty, 0..self.header.levels)
+    }
+
+    /// [`tile`](Self::tile) with the structure of levels `levels` alone checked (the checksum
+    /// covers every level): a reader that reads a tile's finer levels later checks each first
+    /// ([`Tile::check_levels`]).
+    pub fn tile_levels(
+        &self,
+        tx: u32,
+        ty: u32,
+        levels: std::ops::Range<u32>,
+    ) -> Result<Tile<'_>, FormatError> {
         let invalid = |what: String| self.tile_error(tx, ty, what);
         let e = self.checked_entry(tx, ty)?;
         let blob = &self.map[e.offset as usize..(e.offset + e.len) as usize];
@@ -1508,7 +1521,10 @@ impl TileSet {
         } else {
             blob
         };
-        Tile::parse(blob, tx, ty, self.header.levels, self.header.height_step).map_err(invalid)
+        let tile = Tile::outline(blob, tx, ty, self.header.levels, self.header.height_step)
+            .map_err(invalid)?;
+        tile.check_levels(levels).map_err(invalid)?;
+        Ok(tile)
     }
 
     /// Whether the tiles hold compact levels ([`FLAG_COMPACT_LEVELS`]).
@@ -1777,11 +1793,27 @@ impl<'a> Tile<'a> {
         step: f32,
     ) -> Result<Tile<'a>, String> {
         let tile = Tile::outline(blob, tx, ty, levels, step)?;
-        let header = tile.header;
-        for (i, e) in tile.levels.iter().enumerate() {
+        tile.check_levels(0..levels)?;
+        Ok(tile)
+    }
+
+    /// The structure [`TileSet::tile`] checks, for levels `levels` of a tile read by its
+    /// outline: every vertex of their blocks inside the mesh extent, every index and border
+    /// entry inside blocks `0..=level`. Levels outside the range keep their sections' bounds
+    /// (the outline's) and nothing more: a reader checks a level before it reads its values.
+    pub fn check_levels(&self, levels: std::ops::Range<u32>) -> Result<(), String> {
+        let header = self.header;
+        let end = (levels.end as usize).min(self.levels.len());
+        for (i, e) in self
+            .levels
+            .iter()
+            .enumerate()
+            .take(end)
+            .skip(levels.start as usize)
+        {
             let err = |what: String| format!("level {i}: {what}");
             let start = e.block_start + e.block_len;
-            let level = tile.level_unchecked(i as u32).map_err(err)?;
+            let level = self.level_unchecked(i as u32).map_err(err)?;
             // Decoded positions inside the tile's mesh extent (readers index by them).
             let (mx, my) = (header.mesh_max_x, header.mesh_max_y);
             if let Some((k, (x, y, _))) = level
@@ -1811,7 +1843,7 @@ impl<'a> Tile<'a> {
                 return Err(err(format!("border vertex {v} outside blocks 0..={i}")));
             }
         }
-        Ok(tile)
+        Ok(())
     }
 
     pub fn levels(&self) -> &'a [LevelEntry] {
@@ -1871,16 +1903,22 @@ impl<'a> Tile<'a> {
 
     /// Every vertex of the tile, decoded: (x, y, height in metres), in index order.
     pub fn vertices(&self) -> Vec<(u32, u32, f32)> {
+        self.vertices_through(self.header.levels)
+    }
+
+    /// The vertices of blocks `0..levels`, decoded as [`vertices`](Self::vertices) decodes them.
+    pub fn vertices_through(&self, levels: u32) -> Vec<(u32, u32, f32)> {
         let q = self.quantiser();
-        (0..self.header.levels)
+        let blocks: Vec<Level> = (0..levels.min(self.header.levels))
             .filter_map(|i| self.level(i))
-            .flat_map(|l| {
-                l.positions
-                    .iter()
-                    .map(|&p| crate::pack::unpack(p))
-                    .collect::<Vec<_>>()
-            })
-            .map(|(x, y, h)| (x, y, q.height(h)))
-            .collect()
+            .collect();
+        let mut out = Vec::with_capacity(blocks.iter().map(|l| l.positions.len()).sum());
+        for l in &blocks {
+            out.extend(l.positions.iter().map(|&p| {
+                let (x, y, h) = crate::pack::unpack(p);
+                (x, y, q.height(h))
+            }));
+        }
+        out
     }
 }

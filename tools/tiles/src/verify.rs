@@ -329,8 +329,21 @@ fn check_tile(
         );
         return;
     }
-    let vertices = tile.vertices();
+    let end = levels.end.min(th.levels);
+    let vertices = tile.vertices_through(end);
     let samples = source.map(|g| tile_samples(g, tx, ty));
+    // Each level's surface, for the morph offsets of the finer blocks checked here: those of
+    // levels checked before by their index lists, which passed then.
+    let adds = |j: u32| tile.level(j).is_some_and(|b| b.entry.block_len > 0);
+    let mut surfaces: Vec<Option<Vec<f64>>> = vec![None; end as usize];
+    if (levels.start.max(1)..end).any(adds) {
+        for k in 0..levels.start.min(end) {
+            if let Some(l) = tile.level(k) {
+                let flat: Vec<u32> = l.indices.iter().map(|i| i.unwrap_or(u32::MAX)).collect();
+                surfaces[k as usize] = Some(level_surface(&split_fans(&flat), &vertices));
+            }
+        }
+    }
     // Vertices in use by the previous level (sets by bitmap below: the hash sets these
     // replace were most of verify's time).
     let mut previous: Vec<u32> = Vec::new();
@@ -344,7 +357,7 @@ fn check_tile(
         previous = in_use(&flat, vertices.len()).1;
         before = Some((l, flat, true));
     }
-    for level in levels.start..levels.end.min(th.levels) {
+    for level in levels.start..end {
         let found_before = found.get();
         report.levels_checked += 1;
         let Some(l) = tile.level(level) else {
@@ -361,13 +374,8 @@ fn check_tile(
                 format!("error bound {} should be {bound}", e.error_bound),
             );
         }
-        // The fans as slices of one array (as `Indices::fans` splits them, without a vector
-        // per fan): split at restarts, a trailing empty piece dropped.
         let flat: Vec<u32> = l.indices.iter().map(|i| i.unwrap_or(u32::MAX)).collect();
-        let mut fans: Vec<&[u32]> = flat.split(|&i| i == u32::MAX).collect();
-        if fans.last().is_some_and(|f| f.is_empty()) {
-            fans.pop();
-        }
+        let fans = split_fans(&flat);
         // A level that adds no vertex and stores the fans, borders and counts of a clean level
         // before it (a pyramid tile's levels past its floor, [`crate::pyramid::level_floor`]:
         // up to 7 of 9) passes the walks below as that level did, vertex for vertex: they are
@@ -569,7 +577,10 @@ fn check_tile(
                 excess: f64::from(e.limited_excess),
             });
         }
-        check_morph(tile, level, &fans, &vertices, &mut problem);
+        check_morph(tile, level, &surfaces, &vertices, &mut problem);
+        if (level + 1..end).any(adds) {
+            surfaces[level as usize] = Some(level_surface(&fans, &vertices));
+        }
         previous = used;
         before = Some((l, flat, found.get() == found_before));
     }
@@ -593,22 +604,8 @@ fn in_use(flat: &[u32], count: usize) -> (Vec<bool>, Vec<u32>) {
     (marked, used)
 }
 
-/// Every vertex of a finer block must morph onto level `k`'s surface: `height + offset * unit`
-/// within half a unit of where level `k`'s fans (rasterised here) put its position.
-fn check_morph(
-    tile: &Tile,
-    k: u32,
-    fans: &[&[u32]],
-    vertices: &[(u32, u32, f32)],
-    problem: &mut impl FnMut(Option<u32>, String),
-) {
-    let levels = tile.header.levels;
-    // Nothing morphs onto the finest level, nor onto one whose finer blocks are all empty (a
-    // pyramid tile's levels past its floor); an unreadable block is reported where it is read.
-    let empty_or_unreadable = |j: u32| tile.level(j).is_none_or(|b| b.entry.block_len == 0);
-    if (k + 1..levels).all(empty_or_unreadable) {
-        return;
-    }
+/// Level `k`'s surface over the tile's grid, rasterised from its fans (NaN outside them).
+fn level_surface(fans: &[&[u32]], vertices: &[(u32, u32, f32)]) -> Vec<f64> {
     let mut surface = vec![f64::NAN; TILE_SIZE * TILE_SIZE];
     for fan in fans {
         let c = vertices[fan[0] as usize];
@@ -619,24 +616,56 @@ fn check_morph(
             });
         }
     }
-    let Some(coarse) = tile.level(k) else { return };
-    let unit = f64::from(coarse.entry.morph_unit);
-    let mut worst = 0.0f64;
-    for j in k + 1..levels {
-        let Some(block) = tile.level(j) else { return };
-        let n = block.entry.block_len as usize;
-        let row = &block.morph[k as usize * n..(k as usize + 1) * n];
+    surface
+}
+
+/// Level `k`'s fans as slices of its flat index list (restarts as `u32::MAX`), as
+/// `Indices::fans` splits them without a vector per fan: a trailing empty piece dropped.
+fn split_fans(flat: &[u32]) -> Vec<&[u32]> {
+    let mut fans: Vec<&[u32]> = flat.split(|&i| i == u32::MAX).collect();
+    if fans.last().is_some_and(|f| f.is_empty()) {
+        fans.pop();
+    }
+    fans
+}
+
+/// Every vertex of block `j` must morph onto each coarser level `k`'s surface: `height +
+/// offset_k * unit_k` within half a unit of where level `k`'s fans put its position.
+/// `surfaces[k]` is level `k`'s (None where its fans failed their checks: nothing is measured
+/// against it). Checked with block `j`'s level, so a renderer checking a tile's levels as it
+/// first needs them ([`tile_problems_in`]) checks the offsets it uploads with them.
+fn check_morph(
+    tile: &Tile,
+    j: u32,
+    surfaces: &[Option<Vec<f64>>],
+    vertices: &[(u32, u32, f32)],
+    problem: &mut impl FnMut(Option<u32>, String),
+) {
+    let Some(block) = tile.level(j) else { return };
+    let n = block.entry.block_len as usize;
+    for (k, surface) in surfaces.iter().enumerate().take(j as usize) {
+        let (Some(surface), Some(coarse)) = (surface, tile.level(k as u32)) else {
+            continue;
+        };
+        let unit = f64::from(coarse.entry.morph_unit);
+        let row = &block.morph[k * n..(k + 1) * n];
+        let mut worst = 0.0f64;
         for (i, &offset) in row.iter().enumerate() {
             let (x, y, h) = vertices[block.entry.block_start as usize + i];
-            let target = surface[y as usize * TILE_SIZE + x as usize];
+            // (Outside the mesh extent: the level's structure check reports it.)
+            let inside = x <= tile.header.mesh_max_x && y <= tile.header.mesh_max_y;
+            let target = match inside {
+                true => surface[y as usize * TILE_SIZE + x as usize],
+                false => f64::NAN,
+            };
             let miss = (f64::from(h) + f64::from(offset) * unit - target).abs();
             if miss.is_nan() || miss > unit * 0.5 + 1e-3 {
                 worst = worst.max(if miss.is_nan() { f64::INFINITY } else { miss });
             }
         }
-    }
-    if worst > 0.0 {
-        problem(Some(k), format!("morph offsets of finer blocks miss this level's surface by up to {worst:.4} m (unit {unit:.4} m)"));
+        if worst > 0.0 {
+            problem(Some(j), format!("morph offsets onto level {k} miss its surface by up to {worst:.4} m (unit {unit:.4} m)"));
+        }
     }
 }
 
