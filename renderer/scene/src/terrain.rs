@@ -861,12 +861,14 @@ fn layer_tiles(set: &TileSet, p: u32) -> Result<Vec<TileInfo>, tiles::FormatErro
             }
         }
     }
-    for ty in 0..h.tiles_y {
-        for tx in 0..h.tiles_x {
-            tiles.push(tile_info(set, tx, ty, p)?);
-        }
-    }
-    Ok(tiles)
+    // Each table is read from the file (no page of the mapping), so the reads run on every
+    // core.
+    use rayon::prelude::*;
+    (0..h.tiles_x * h.tiles_y)
+        .into_par_iter()
+        .map(|i| tile_info(set, i % h.tiles_x, i / h.tiles_x, p))
+        .collect_into_vec(&mut tiles);
+    tiles.into_iter().collect()
 }
 
 /// How many of a tile's levels draw surfaces of their own: a level that adds no vertex to the
