@@ -66,8 +66,8 @@ pub fn parents(x: u32, y: u32) -> Option<[(u32, u32); 2]> {
 /// Each level's new vertices, `(x, y, height code)`.
 pub type LevelSets = Vec<Vec<(u32, u32, u16)>>;
 
-/// A vertex the walk adds, with its two parents.
-type Walked = ((u32, u32), (u32, u32), (u32, u32));
+/// A vertex the walk adds, with its two parents (flat grid indices).
+type Walked = (usize, usize, usize);
 
 fn at((x, y): (u32, u32)) -> usize {
     y as usize * TILE_SIZE + x as usize
@@ -80,6 +80,29 @@ fn points_of_scale(s: u32) -> impl Iterator<Item = (u32, u32)> {
         .step_by(s as usize)
         .flat_map(move |y| (0..side).step_by(s as usize).map(move |x| (x, y)))
         .filter(move |&(x, y)| scale_of(x, y) == s)
+}
+
+/// The walk's order (scales 128 down to 1, each row-major) as flat grid indices: each point
+/// but the tile's corners with its two parents, `[point, parent, parent]`. Made once: the
+/// walk runs once a level of every tile coded or decoded, and finding each point's scale and
+/// parents again every time was most of a decode.
+fn walk() -> &'static [[u32; 3]] {
+    static WALK: std::sync::OnceLock<Vec<[u32; 3]>> = std::sync::OnceLock::new();
+    WALK.get_or_init(|| {
+        (0..8)
+            .rev()
+            .flat_map(|k| points_of_scale(1 << k))
+            .filter_map(|p| {
+                let [a, b] = parents(p.0, p.1)?;
+                Some([at(p), at(a), at(b)].map(|i| i as u32))
+            })
+            .collect()
+    })
+}
+
+/// The grid point at flat index `i`.
+fn point(i: u32) -> (u32, u32) {
+    (i % TILE_SIZE as u32, i / TILE_SIZE as u32)
 }
 
 /// The unary quotients from which a residual is sent whole (17 bits after `ESCAPE` 1s).
@@ -129,17 +152,34 @@ struct Reader<'a> {
 }
 
 impl Reader<'_> {
+    /// The next `width` bits (at most 32), least significant first.
     fn read(&mut self, width: u32) -> Result<u32, String> {
-        let mut value = 0u32;
-        for i in 0..width {
-            let byte = self
-                .bytes
-                .get(self.at / 8)
-                .ok_or("the compact levels end early")?;
-            value |= u32::from((byte >> (self.at % 8)) & 1) << i;
-            self.at += 1;
+        let end = self.at + width as usize;
+        if end > 8 * self.bytes.len() {
+            return Err("the compact levels end early".into());
         }
-        Ok(value)
+        if width == 0 {
+            return Ok(0);
+        }
+        // The 8 bytes from the one holding the first bit: at most 7 + 32 bits are needed.
+        let first = self.at / 8;
+        let mut window = [0u8; 8];
+        let n = (self.bytes.len() - first).min(8);
+        window[..n].copy_from_slice(&self.bytes[first..first + n]);
+        let value = u64::from_le_bytes(window) >> (self.at % 8);
+        self.at = end;
+        Ok((value & ((1u64 << width) - 1)) as u32)
+    }
+
+    /// The next bit.
+    fn bit(&mut self) -> Result<bool, String> {
+        let byte = self
+            .bytes
+            .get(self.at / 8)
+            .ok_or("the compact levels end early")?;
+        let bit = (byte >> (self.at % 8)) & 1 == 1;
+        self.at += 1;
+        Ok(bit)
     }
 
     fn align(&mut self) {
@@ -189,23 +229,19 @@ pub fn encode(tile: &Tile) -> Vec<u8> {
             known[at((x, y))] = true;
         }
         let mut added = Vec::new();
-        for s in (0..8).rev().map(|k| 1u32 << k) {
-            for p in points_of_scale(s) {
-                let Some([a, b]) = parents(p.0, p.1).filter(|_| !known[at(p)]) else {
-                    continue;
-                };
-                if known[at(a)] && known[at(b)] {
-                    let adds = block[at(p)] == j;
-                    bits.push(u32::from(adds), 1);
-                    if adds {
-                        known[at(p)] = true;
-                        added.push((p, a, b));
-                    }
+        for &[p, a, b] in walk() {
+            let (p, a, b) = (p as usize, a as usize, b as usize);
+            if !known[p] && known[a] && known[b] {
+                let adds = block[p] == j;
+                bits.push(u32::from(adds), 1);
+                if adds {
+                    known[p] = true;
+                    added.push((p, a, b));
                 }
             }
         }
         let residual = |&(p, a, b): &Walked| {
-            let r = i32::from(code[at(p)]) - predicted(code[at(a)], code[at(b)]);
+            let r = i32::from(code[p]) - predicted(code[a], code[b]);
             ((r << 1) ^ (r >> 31)) as u32
         };
         let zs: Vec<u32> = added.iter().map(residual).collect();
@@ -253,15 +289,11 @@ pub fn decode(bytes: &[u8], levels: u32) -> Result<LevelSets, String> {
             set.push((x, y, c));
         }
         let mut added: Vec<Walked> = Vec::new();
-        for s in (0..8).rev().map(|k| 1u32 << k) {
-            for p in points_of_scale(s) {
-                let Some([a, b]) = parents(p.0, p.1).filter(|_| !known[at(p)]) else {
-                    continue;
-                };
-                if known[at(a)] && known[at(b)] && reader.read(1)? == 1 {
-                    known[at(p)] = true;
-                    added.push((p, a, b));
-                }
+        for &[p, a, b] in walk() {
+            let (p, a, b) = (p as usize, a as usize, b as usize);
+            if !known[p] && known[a] && known[b] && reader.bit()? {
+                known[p] = true;
+                added.push((p, a, b));
             }
         }
         let k = reader.read(5)?;
@@ -270,7 +302,7 @@ pub fn decode(bytes: &[u8], levels: u32) -> Result<LevelSets, String> {
         }
         for (p, a, b) in added {
             let mut q = 0;
-            while q < ESCAPE && reader.read(1)? == 1 {
+            while q < ESCAPE && reader.bit()? {
                 q += 1;
             }
             let z = if q == ESCAPE {
@@ -279,14 +311,16 @@ pub fn decode(bytes: &[u8], levels: u32) -> Result<LevelSets, String> {
                 (q << k) | reader.read(k)?
             };
             let r = (z >> 1) as i32 ^ -((z & 1) as i32);
-            let c = predicted(code[at(a)], code[at(b)]) + r;
+            let c = predicted(code[a], code[b]) + r;
+            let (x, y) = point(p as u32);
             if !(0..=i32::from(HEIGHT_MAX_CODE)).contains(&c) {
                 return Err(format!(
-                    "level {j}: vertex {p:?} has height code {c}, out of range"
+                    "level {j}: vertex {:?} has height code {c}, out of range",
+                    (x, y)
                 ));
             }
-            code[at(p)] = c as u16;
-            set.push((p.0, p.1, c as u16));
+            code[p] = c as u16;
+            set.push((x, y, c as u16));
         }
         reader.align();
         sets.push(set);
@@ -353,5 +387,37 @@ mod tests {
             }
         }
         assert_eq!(visited, TILE_SIZE * TILE_SIZE - 4);
+        // The table the coder and decoder walk is that walk.
+        let walked: Vec<[(u32, u32); 3]> = (0..8)
+            .rev()
+            .flat_map(|k| points_of_scale(1 << k))
+            .map(|(x, y)| {
+                let [a, b] = parents(x, y).expect("parents");
+                [(x, y), a, b]
+            })
+            .collect();
+        let table: Vec<[(u32, u32); 3]> = walk().iter().map(|w| w.map(point)).collect();
+        assert_eq!(table, walked);
+    }
+
+    /// The reader's window reads what a bit at a time reads, at every offset and width, and
+    /// refuses a read one bit past the end.
+    #[test]
+    fn windowed_reads_are_bit_by_bit_reads() {
+        let bytes: Vec<u8> = (0..23u32).map(|i| (i * 151 + 7) as u8).collect();
+        let bit = |i: usize| u32::from((bytes[i / 8] >> (i % 8)) & 1);
+        for at in 0..8 * bytes.len() {
+            for width in 0..=32u32 {
+                let mut reader = Reader { bytes: &bytes, at };
+                let end = at + width as usize;
+                if end > 8 * bytes.len() {
+                    assert!(reader.read(width).is_err(), "{at} + {width}");
+                    continue;
+                }
+                let want = (0..width as usize).fold(0u32, |v, i| v | bit(at + i) << i);
+                assert_eq!(reader.read(width), Ok(want), "{at} + {width}");
+                assert_eq!(reader.at, end);
+            }
+        }
     }
 }
