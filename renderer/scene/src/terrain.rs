@@ -320,8 +320,12 @@ impl Terrain {
                 };
                 // The part tables of the levels now checked, before they may be drawn.
                 if let (None, Some(paged)) = (&problem, tile.paged()) {
-                    let tables = tiles::parts::tables_through(&data, level + 1);
-                    *paged.parts.write().unwrap_or_else(|p| p.into_inner()) = Arc::new(tables);
+                    let held = paged.parts();
+                    let (centres, counts) = held.as_ref();
+                    let counts = tiles::parts::counts_through(&data, counts, level + 1);
+                    let centres = *centres;
+                    *paged.parts.write().unwrap_or_else(|p| p.into_inner()) =
+                        Arc::new((centres, counts));
                 }
                 problem
             }

@@ -60,6 +60,8 @@ pub struct PartKey {
 pub struct Blocks {
     /// Per vertex in index order, its lattice point.
     points: Vec<(u32, u32)>,
+    /// How many blocks there are.
+    levels: usize,
     block: Vec<u8>,
     vertex: Vec<u32>,
     mesh_max: (u32, u32),
@@ -89,7 +91,9 @@ impl Blocks {
         let mut vertex = vec![u32::MAX; POINTS];
         let mut index = 0u32;
         let mut points = Vec::new();
+        let mut blocks_read = 0;
         for (j, positions) in blocks.into_iter().enumerate() {
+            blocks_read = j + 1;
             for &p in positions {
                 let (x, y, _) = unpack(p);
                 points.push((x, y));
@@ -120,6 +124,7 @@ impl Blocks {
         });
         Blocks {
             points,
+            levels: blocks_read,
             block,
             vertex,
             mesh_max,
@@ -337,11 +342,14 @@ const SEGMENTS: usize = 2 * (PARTS + 1) * PARTS;
 /// most its midpoint. The edges of part `q`'s leaves along a segment cover it, so the segment
 /// adds `V(P) - V(L_q)` to that side, `V(X)` the vertices of level `X` strictly inside the
 /// segment.
+#[derive(Clone)]
 pub struct Counts {
-    /// Per level and part: indices of the level's fans centred in the part, and the fans.
+    /// Per level and part: indices of the level's fans centred in the part, and the fans (of
+    /// the levels counted).
     indices: Vec<[u32; PARTS * PARTS]>,
     fans: Vec<[u32; PARTS * PARTS]>,
-    /// Per level and segment: the level's vertices strictly inside the segment.
+    /// Per level and segment: the level's vertices strictly inside the segment (of every
+    /// level the blocks have: they come from the blocks, which are read whole).
     inside: Vec<[u32; SEGMENTS]>,
     /// Parts the mesh reaches.
     reached: [bool; PARTS * PARTS],
@@ -367,41 +375,7 @@ impl Counts {
         L: IntoIterator<Item = I>,
         I: IntoIterator<Item = Option<u32>>,
     {
-        let (mut indices, mut fans) = (Vec::new(), Vec::new());
-        for level in levels {
-            let (mut lengths, mut counts) = ([0u32; PARTS * PARTS], [0u32; PARTS * PARTS]);
-            let mut fan = |centre: Option<u32>, length: u32| {
-                let Some(&(x, y)) = centre.and_then(|c| blocks.points.get(c as usize)) else {
-                    return;
-                };
-                if !x.is_multiple_of(PART_CELLS) && !y.is_multiple_of(PART_CELLS) {
-                    let q = (y / PART_CELLS) as usize * PARTS + (x / PART_CELLS) as usize;
-                    lengths[q] += length;
-                    counts[q] += 1;
-                }
-            };
-            let (mut centre, mut length) = (None, 0u32);
-            for i in level {
-                match i {
-                    Some(v) => {
-                        if length == 0 {
-                            centre = Some(v);
-                        }
-                        length += 1;
-                    }
-                    None => {
-                        fan(centre, length);
-                        length = 0;
-                    }
-                }
-            }
-            if length > 0 {
-                fan(centre, length);
-            }
-            indices.push(lengths);
-            fans.push(counts);
-        }
-        let n = indices.len();
+        let n = blocks.levels;
         let mut inside = vec![[0u32; SEGMENTS]; n];
         for (i, &b) in blocks.block.iter().enumerate() {
             let (x, y) = ((i % TILE_SIZE) as u32, (i / TILE_SIZE) as u32);
@@ -415,13 +389,63 @@ impl Counts {
         let reached = std::array::from_fn(|q| {
             ((q % PARTS) as u32 * PART_CELLS) < mx && ((q / PARTS) as u32 * PART_CELLS) < my
         });
-        Counts {
-            indices,
-            fans,
+        let mut counts = Counts {
+            indices: Vec::new(),
+            fans: Vec::new(),
             inside,
             reached,
             centres: blocks.centres,
+        };
+        let at = |v: u32| blocks.points.get(v as usize).copied();
+        for level in levels {
+            counts.push_level(&at, level);
         }
+        counts
+    }
+
+    /// Counts the next level's fans: `level` its stored index array, `at` a vertex's lattice
+    /// point.
+    fn push_level(
+        &mut self,
+        at: &dyn Fn(u32) -> Option<(u32, u32)>,
+        level: impl IntoIterator<Item = Option<u32>>,
+    ) {
+        let (mut lengths, mut counts) = ([0u32; PARTS * PARTS], [0u32; PARTS * PARTS]);
+        let mut fan = |centre: Option<u32>, length: u32| {
+            let Some((x, y)) = centre.and_then(at) else {
+                return;
+            };
+            if !x.is_multiple_of(PART_CELLS) && !y.is_multiple_of(PART_CELLS) {
+                let q = (y / PART_CELLS) as usize * PARTS + (x / PART_CELLS) as usize;
+                lengths[q] += length;
+                counts[q] += 1;
+            }
+        };
+        let (mut centre, mut length) = (None, 0u32);
+        for i in level {
+            match i {
+                Some(v) => {
+                    if length == 0 {
+                        centre = Some(v);
+                    }
+                    length += 1;
+                }
+                None => {
+                    fan(centre, length);
+                    length = 0;
+                }
+            }
+        }
+        if length > 0 {
+            fan(centre, length);
+        }
+        self.indices.push(lengths);
+        self.fans.push(counts);
+    }
+
+    /// How many levels are counted.
+    pub fn levels(&self) -> u32 {
+        self.indices.len() as u32
     }
 
     /// The length of `key`'s array and its triangles, for a key [`Centres::key`] made (every
@@ -526,6 +550,31 @@ pub fn tables_through(tile: &crate::format::Tile, levels: u32) -> (Centres, Coun
     let arrays: Vec<_> = (0..levels.min(all)).filter_map(|j| tile.level(j)).collect();
     let counts = Counts::new(&blocks, arrays.iter().map(|l| l.indices.iter()));
     (blocks.centres(), counts)
+}
+
+/// `counts` (a tile's part tables through some level) with the tile's levels up to `levels`
+/// counted as well: what [`tables_through`] gives, reading the new levels' index arrays alone.
+pub fn counts_through(tile: &crate::format::Tile, counts: &Counts, levels: u32) -> Counts {
+    let all = tile.levels().len() as u32;
+    let blocks: Vec<(u32, &[u32])> = (0..all)
+        .filter_map(|j| tile.level(j))
+        .map(|l| (l.entry.block_start, l.positions))
+        .collect();
+    let at = |v: u32| -> Option<(u32, u32)> {
+        let j = blocks
+            .partition_point(|&(start, _)| start <= v)
+            .checked_sub(1)?;
+        let (start, positions) = blocks[j];
+        let (x, y, _) = unpack(*positions.get((v - start) as usize)?);
+        Some((x, y))
+    };
+    let mut out = counts.clone();
+    for j in counts.levels()..levels.min(all) {
+        if let Some(l) = tile.level(j) {
+            out.push_level(&at, l.indices.iter());
+        }
+    }
+    out
 }
 
 /// `t` steps from `a` towards `b` (`a` itself when they are equal).

@@ -246,7 +246,9 @@ fn spliced_levels_have_t_junctions_and_the_check_finds_them() {
 
 /// The part tables of a tile's first `n` levels (`tables_through`, what a renderer holds for
 /// the levels it has checked) count every key within those levels as the whole tile's tables
-/// do, and no key past them (the control: the whole tables count those).
+/// do, and no key past them (the control: the whole tables count those). Grown from there to
+/// every level (`counts_through`, as the renderer grows them when it checks a finer level),
+/// they count every key as the whole tables do.
 #[test]
 fn the_first_levels_tables_count_as_the_whole_tiles_do() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -260,6 +262,8 @@ fn the_first_levels_tables_count_as_the_whole_tiles_do() {
             let (_, whole) = tiles::parts::tables(&tile);
             for n in 1..=levels {
                 let (_, first) = tiles::parts::tables_through(&tile, n);
+                let grown = tiles::parts::counts_through(&tile, &first, levels);
+                assert_eq!(grown.levels(), levels);
                 for seed in 0..30u64 {
                     let top = (seed % u64::from(levels)) as u32;
                     let Some(key) = b.key(&wanted(seed * 7 + u64::from(n), levels as u8), top)
@@ -267,6 +271,11 @@ fn the_first_levels_tables_count_as_the_whole_tiles_do() {
                         continue;
                     };
                     let g = u32::from(*key.levels.iter().max().expect("16 parts"));
+                    assert_eq!(
+                        grown.count(&key),
+                        whole.count(&key),
+                        "{tx},{ty} grown from {n}"
+                    );
                     if g < n {
                         assert_eq!(first.count(&key), whole.count(&key), "{tx},{ty} n {n}");
                         within += 1;
