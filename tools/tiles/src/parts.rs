@@ -105,35 +105,14 @@ impl Blocks {
                 index += 1;
             }
         }
-        let at = |x: u32, y: u32| block[y as usize * TILE_SIZE + x as usize];
-        let half = PART_CELLS / 2;
-        let centres = std::array::from_fn(|q| {
-            let (i, j) = ((q % PARTS) as u32, (q / PARTS) as u32);
-            at(i * PART_CELLS + half, j * PART_CELLS + half)
-        });
-        let quadrant_centres = std::array::from_fn(|k| {
-            let (i, j) = ((k % 2) as u32, (k / 2) as u32);
-            at(
-                2 * PART_CELLS * i + PART_CELLS,
-                2 * PART_CELLS * j + PART_CELLS,
-            )
-        });
-        let corners = std::array::from_fn(|c| {
-            let (i, j) = ((c % (PARTS + 1)) as u32, (c / (PARTS + 1)) as u32);
-            at(i * PART_CELLS, j * PART_CELLS)
-        });
+        let centres = Centres::of(&block, mesh_max);
         Blocks {
             points,
             levels: blocks_read,
             block,
             vertex,
             mesh_max,
-            centres: Centres {
-                parts: centres,
-                quadrants: quadrant_centres,
-                corners,
-                mesh_max,
-            },
+            centres,
         }
     }
 
@@ -257,7 +236,50 @@ impl Blocks {
     }
 }
 
+/// Per lattice point, the last of blocks `0..` (their packed positions) that holds it
+/// ([`NEVER`]: none), and how many blocks there are: what [`Blocks`] holds, less each vertex's
+/// index and point.
+fn lattice_blocks<'a>(blocks: impl IntoIterator<Item = &'a [u32]>) -> (Vec<u8>, usize) {
+    let mut block = vec![NEVER; POINTS];
+    let mut count = 0;
+    for (j, positions) in blocks.into_iter().enumerate() {
+        count = j + 1;
+        let j = j.min(usize::from(NEVER - 1)) as u8;
+        for &p in positions {
+            let (x, y, _) = unpack(p);
+            if (x as usize) < TILE_SIZE && (y as usize) < TILE_SIZE {
+                block[y as usize * TILE_SIZE + x as usize] = j;
+            }
+        }
+    }
+    (block, count)
+}
+
 impl Centres {
+    /// From each lattice point's block ([`lattice_blocks`]).
+    fn of(block: &[u8], mesh_max: (u32, u32)) -> Centres {
+        let at = |x: u32, y: u32| block[y as usize * TILE_SIZE + x as usize];
+        let half = PART_CELLS / 2;
+        Centres {
+            parts: std::array::from_fn(|q| {
+                let (i, j) = ((q % PARTS) as u32, (q / PARTS) as u32);
+                at(i * PART_CELLS + half, j * PART_CELLS + half)
+            }),
+            quadrants: std::array::from_fn(|k| {
+                let (i, j) = ((k % 2) as u32, (k / 2) as u32);
+                at(
+                    2 * PART_CELLS * i + PART_CELLS,
+                    2 * PART_CELLS * j + PART_CELLS,
+                )
+            }),
+            corners: std::array::from_fn(|c| {
+                let (i, j) = ((c % (PARTS + 1)) as u32, (c / (PARTS + 1)) as u32);
+                at(i * PART_CELLS, j * PART_CELLS)
+            }),
+            mesh_max,
+        }
+    }
+
     /// The key that draws part `q` at `wanted[q]` or finer, with every part at most `top` (the
     /// level whose blocks are resident). None: the parts cannot be drawn apart at `top` (the
     /// tile is drawn at `top` as one level).
@@ -375,32 +397,44 @@ impl Counts {
         L: IntoIterator<Item = I>,
         I: IntoIterator<Item = Option<u32>>,
     {
-        let n = blocks.levels;
-        let mut inside = vec![[0u32; SEGMENTS]; n];
-        for (i, &b) in blocks.block.iter().enumerate() {
-            let (x, y) = ((i % TILE_SIZE) as u32, (i / TILE_SIZE) as u32);
-            if let (Some(seg), true) = (segment(x, y), usize::from(b) < n) {
-                for level in &mut inside[usize::from(b)..] {
-                    level[seg] += 1;
-                }
-            }
-        }
-        let (mx, my) = blocks.mesh_max;
-        let reached = std::array::from_fn(|q| {
-            ((q % PARTS) as u32 * PART_CELLS) < mx && ((q / PARTS) as u32 * PART_CELLS) < my
-        });
-        let mut counts = Counts {
-            indices: Vec::new(),
-            fans: Vec::new(),
-            inside,
-            reached,
-            centres: blocks.centres,
-        };
+        let mut counts = Counts::empty(&blocks.block, blocks.levels, blocks.centres);
         let at = |v: u32| blocks.points.get(v as usize).copied();
         for level in levels {
             counts.push_level(&at, level);
         }
         counts
+    }
+
+    /// No level counted yet: each level's vertices on the segments, from each lattice point's
+    /// block (of `n` blocks, [`lattice_blocks`]).
+    fn empty(block: &[u8], n: usize, centres: Centres) -> Counts {
+        let mut inside = vec![[0u32; SEGMENTS]; n];
+        // The points on the lines between parts (the others lie on no segment).
+        let line = (0..=PARTS as u32).map(|k| k * PART_CELLS);
+        let along = 0..TILE_SIZE as u32;
+        let on_lines = line
+            .clone()
+            .flat_map(|x| along.clone().map(move |y| (x, y)))
+            .chain(line.flat_map(|y| along.clone().map(move |x| (x, y))));
+        for (x, y) in on_lines {
+            let b = usize::from(block[y as usize * TILE_SIZE + x as usize]);
+            if let (Some(seg), true) = (segment(x, y), b < n) {
+                for level in &mut inside[b..] {
+                    level[seg] += 1;
+                }
+            }
+        }
+        let (mx, my) = centres.mesh_max;
+        let reached = std::array::from_fn(|q| {
+            ((q % PARTS) as u32 * PART_CELLS) < mx && ((q / PARTS) as u32 * PART_CELLS) < my
+        });
+        Counts {
+            indices: Vec::new(),
+            fans: Vec::new(),
+            inside,
+            reached,
+            centres,
+        }
     }
 
     /// Counts the next level's fans: `level` its stored index array, `at` a vertex's lattice
@@ -543,13 +577,10 @@ pub fn tables(tile: &crate::format::Tile) -> (Centres, Counts) {
 /// read.
 pub fn tables_through(tile: &crate::format::Tile, levels: u32) -> (Centres, Counts) {
     let all = tile.levels().len() as u32;
-    let blocks = Blocks::new(
-        (0..all).filter_map(|j| tile.level(j).map(|l| l.positions)),
-        (tile.header.mesh_max_x, tile.header.mesh_max_y),
-    );
-    let arrays: Vec<_> = (0..levels.min(all)).filter_map(|j| tile.level(j)).collect();
-    let counts = Counts::new(&blocks, arrays.iter().map(|l| l.indices.iter()));
-    (blocks.centres(), counts)
+    let (block, n) = lattice_blocks((0..all).filter_map(|j| tile.level(j).map(|l| l.positions)));
+    let centres = Centres::of(&block, (tile.header.mesh_max_x, tile.header.mesh_max_y));
+    let counts = counts_through(tile, &Counts::empty(&block, n, centres), levels);
+    (centres, counts)
 }
 
 /// `counts` (a tile's part tables through some level) with the tile's levels up to `levels`

@@ -260,6 +260,10 @@ fn the_first_levels_tables_count_as_the_whole_tiles_do() {
             let levels = tile.levels().len() as u32;
             let b = blocks(&tile);
             let (_, whole) = tiles::parts::tables(&tile);
+            // The same counts made from the tile's blocks, as the index builder's check makes
+            // them.
+            let arrays: Vec<_> = (0..levels).filter_map(|j| tile.level(j)).collect();
+            let direct = tiles::parts::Counts::new(&b, arrays.iter().map(|l| l.indices.iter()));
             for n in 1..=levels {
                 let (_, first) = tiles::parts::tables_through(&tile, n);
                 let grown = tiles::parts::counts_through(&tile, &first, levels);
@@ -275,6 +279,11 @@ fn the_first_levels_tables_count_as_the_whole_tiles_do() {
                         grown.count(&key),
                         whole.count(&key),
                         "{tx},{ty} grown from {n}"
+                    );
+                    assert_eq!(
+                        direct.count(&key),
+                        whole.count(&key),
+                        "{tx},{ty} from blocks"
                     );
                     if g < n {
                         assert_eq!(first.count(&key), whole.count(&key), "{tx},{ty} n {n}");
