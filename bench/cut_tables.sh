@@ -24,7 +24,7 @@ for vkt in "$@"; do
         python3 - "$run" "$name" "$path" "$bin" "$mode" "$first" <<'PY'
 import csv, json, statistics, sys
 run, name, path, binary, mode, first = sys.argv[1:]
-wall, checks = map(float, first.split())
+wall, checks = map(float, first.split()[:2])
 rows = list(csv.DictReader(open(f"{run}.csv")))[5:]
 med = lambda c: statistics.median(float(r[c] or 0) for r in rows)
 drawn = "geomorphing cut" if mode == "morph" else "discrete cut"

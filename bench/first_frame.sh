@@ -1,7 +1,7 @@
 #!/bin/bash
-# The time a process takes to open a set and draw one frame (file warm; best of 2 runs) and
-# that first view's checks: prints "WALL_S CHECK_MS". Shared by bench/cut_tables.sh and
-# bench/level_checks.sh.
+# The time a process takes to open a set and draw one frame (file warm; best of 2 runs),
+# that first view's checks and the open itself: prints "WALL_S CHECK_MS OPEN_MS". Shared by
+# bench/cut_tables.sh and bench/level_checks.sh.
 # usage: bench/first_frame.sh VKTERRAIN SET.vkt PATH OUT_PREFIX [FLAGS...]
 set -euo pipefail
 bin=$1 vkt=$2 path=$3 run=$4; shift 4
@@ -15,6 +15,7 @@ run = sys.argv[1]
 firsts = []
 for i in (1, 2):
     wall = float(open(f"{run}.first{i}.time").read().split()[0])
-    firsts.append((wall, json.load(open(f"{run}.first{i}.json"))["first_view_check_ms"]))
+    summary = json.load(open(f"{run}.first{i}.json"))
+    firsts.append((wall, summary["first_view_check_ms"], summary["open_ms"]))
 print(*min(firsts))
 PY

@@ -10,6 +10,9 @@ mod common;
 use tiles::format::{LevelEntry, TileHeader};
 use tiles::TileSet;
 
+/// A change to one level's entry, given the tile's length.
+type Damage = fn(&mut LevelEntry, u32);
+
 #[test]
 fn tables_read_from_the_file_are_the_outlines() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -34,7 +37,7 @@ fn tables_read_from_the_file_are_the_outlines() {
     let bytes = std::fs::read(&file).expect("read");
     let table =
         |k: usize| entry.offset as usize + size_of::<TileHeader>() + k * size_of::<LevelEntry>();
-    let damage: [(&str, fn(&mut LevelEntry, u32)); 4] = [
+    let damage: [(&str, Damage); 4] = [
         ("indices past the end", |e, len| e.index_offset = len),
         ("positions misaligned", |e, _| e.positions_offset += 2),
         ("morph offsets past the end", |e, len| {
