@@ -74,7 +74,7 @@ enum Command {
         force: bool,
         /// Tile rows (256 grid rows each) held at a time when reading SRTM and raw inputs,
         /// which are read a band at a time; other inputs are held whole
-        /// [default: about 64 M samples a band]
+        /// [default: about 64 M samples a band; for a shard, at most a quarter of its rows]
         #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
         band_rows: Option<u32>,
         #[command(flatten)]
@@ -498,8 +498,19 @@ impl Progress {
 const BAND_SAMPLES: usize = 1 << 26;
 
 /// Tile rows per band for a grid `width` samples wide: about [`BAND_SAMPLES`], at least one.
-fn default_band_rows(width: usize) -> u32 {
-    (BAND_SAMPLES / (257 * width.max(1))).clamp(1, u32::MAX as usize) as u32
+/// For shard `shard` of a grid `height` samples high, at most a quarter of the shard's tile
+/// rows (at least one): its memory then follows its share of the grid, about 1/N of the whole
+/// build's plus a band, as a distributed build wants of it.
+fn default_band_rows(width: usize, shard: Option<(tiles::shard::Shard, usize)>) -> u32 {
+    let whole = (BAND_SAMPLES / (257 * width.max(1))).clamp(1, u32::MAX as usize) as u32;
+    let share = shard.and_then(|(s, height)| {
+        let (_, tiles_y) = tiles::format::tile_count(width, height).ok()?;
+        Some(s.rows(tiles_y).len() as u32)
+    });
+    match share {
+        Some(rows) => whole.min(rows.div_ceil(4).max(1)),
+        None => whole,
+    }
 }
 
 /// A DEM stream as the tile builder reads it.
@@ -609,16 +620,19 @@ fn build(
         }
         _ => None,
     };
+    let ours = shard.as_ref().map(|(s, _, _)| *s);
     let dem = if texture.texture.is_some() {
         Dem::Whole(read_dem(&input.inputs, &input.read)?)
     } else if let Some(scans) = &scans {
         let stream =
             dem::open_unscanned(&input.inputs, &input.read.options(), (scans.lo, scans.hi))?;
-        let per_band = band_rows.unwrap_or_else(|| default_band_rows(stream.width));
+        let per_band = band_rows
+            .unwrap_or_else(|| default_band_rows(stream.width, ours.map(|s| (s, stream.height))));
         Dem::Bands(StreamHeights { stream, per_band })
     } else {
         let stream = dem::open(&input.inputs, &input.read.options())?;
-        let per_band = band_rows.unwrap_or_else(|| default_band_rows(stream.width));
+        let per_band = band_rows
+            .unwrap_or_else(|| default_band_rows(stream.width, ours.map(|s| (s, stream.height))));
         Dem::Bands(StreamHeights { stream, per_band })
     };
     let (texturing, laid) = texture

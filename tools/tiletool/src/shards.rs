@@ -169,7 +169,7 @@ fn reopen(
     };
     let stream =
         dem::open(&inputs, &read.options()).map_err(|e| tiles::BuildError::Input(e.to_string()))?;
-    let per_band = default_band_rows(stream.width);
+    let per_band = default_band_rows(stream.width, None);
     Ok((Box::new(StreamHeights { stream, per_band }), texturing))
 }
 
@@ -329,7 +329,7 @@ pub fn scan(input: &InputArgs, shard: tiles::shard::Shard, output: &Path) -> Res
     let stream = dem::open_unscanned(&input.inputs, &opts, (0.0, 0.0))?;
     let rows = tiles::shard::scan_rows(shard, (stream.width, stream.height))?;
     let read = dem::scan_rows(&input.inputs, &opts, rows)?;
-    let per_band = default_band_rows(stream.width);
+    let per_band = default_band_rows(stream.width, Some((shard, stream.height)));
     let heights = StreamHeights { stream, per_band };
     let (max_range, max_abs) = tiles::shard::tile_ranges(&heights, shard)?;
     let found = tiles::shard::ShardScan {
