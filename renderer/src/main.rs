@@ -157,9 +157,9 @@ struct Flown {
     part_by_part: bool,
 }
 
-/// Opening read every tile's outline (a page each):
-/// with a file cache budget smaller than the set, the process gives those pages back before
-/// flying, and holds what the flight pages in (advice only: a kernel that ignores it costs the
+/// Opening mapped the header and directory (each tile's table is read from the file, not
+/// through the mapping): with a file cache budget smaller than the set, the process gives
+/// those pages back before flying, and holds what the flight pages in (advice only: a kernel that ignores it costs the
 /// budget, not the run).
 /// `--cold-file-cache` drops the set from the page cache. Returns the bytes given back.
 fn prepare_file_cache(cli: &Cli, terrain: &Terrain, memory: &MemoryOptions) -> Result<u64> {

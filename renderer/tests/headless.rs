@@ -1615,7 +1615,7 @@ fn prefetching_draws_fewer_tiles_coarser_after_the_cold_start() {
     assert_eq!(none["prefetch_hits"].as_u64(), Some(0), "{none}");
 }
 
-/// `--file-cache-mb`: the few pages opening the set read are given back before the flight; once
+/// `--file-cache-mb`: the few pages opening the set mapped are given back before the flight; once
 /// the flight has paged in more of the tile set than the budget, tiles behind the camera are
 /// advised `DONTNEED` (counted apart); and the process ends the flyover holding less of the
 /// mapping than without the budget (the control, which releases nothing and holds more than
@@ -1651,7 +1651,8 @@ fn a_file_cache_budget_gives_back_the_tiles_behind_the_camera() {
     let free = run(&[]);
     let capped = run(&["--file-cache-mb", budget_mb]);
     assert_eq!((released(&free), at_open(&free)), (0.0, 0.0), "{free}");
-    // Opening reads only the tiles' outlines (a page or so each): less than the budget.
+    // Opening maps only the header and directory (each tile's table is read from the file):
+    // less than the budget.
     assert!(at_open(&capped) < budget, "{capped}");
     assert!(
         held(&free) > 2.0 * budget,

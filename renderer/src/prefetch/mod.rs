@@ -7,6 +7,7 @@
 
 pub mod predict;
 
+use std::collections::HashMap;
 use std::time::Instant;
 
 use glam::DVec3;
@@ -64,8 +65,11 @@ pub struct Predicted {
 pub struct Prefetcher {
     pub options: PrefetchOptions,
     predictor: Predictor,
-    /// Per tile: its bytes were advised or read by this run (and not released since).
+    /// Per tile: its bytes were advised or read by this run (and not released since); and
+    /// those tiles, listed (with tiles released since, until the next release drops them), so
+    /// that releasing looks at what was paged, not at every tile of the set.
     paged: Vec<bool>,
+    paged_list: Vec<usize>,
     paged_bytes: u64,
     /// What a horizon cost in the last frame that looked at one (the slowest of its
     /// horizons), ms: a horizon starts only when one as slow still ends within the budget.
@@ -78,6 +82,7 @@ impl Prefetcher {
             options,
             predictor: Predictor::default(),
             paged: vec![false; tiles],
+            paged_list: Vec::new(),
             paged_bytes: 0,
             horizon_ms: 0.0,
         }
@@ -103,7 +108,9 @@ impl Prefetcher {
     ) -> Predicted {
         let started = Instant::now();
         let mut out = Predicted::default();
-        let mut listed: Vec<Option<u32>> = vec![None; terrain.tiles.len()];
+        // Per tile listed so far, its finest level listed (a frame's few hundred tiles, not a
+        // slot for each of the set's).
+        let mut listed: HashMap<usize, u32> = HashMap::new();
         let mut slowest = 0.0f64;
         for h in self.predictor.horizons() {
             // A horizon starts only if one as slow as the slowest yet still ends in budget.
@@ -119,10 +126,10 @@ impl Prefetcher {
             let wanted = plan::requests_for(terrain, &view, predicted.position, rule);
             for r in wanted {
                 let i = r.tile as usize;
-                if listed[i].is_some_and(|l| l >= r.wanted) {
+                if listed.get(&i).is_some_and(|&l| l >= r.wanted) {
                     continue;
                 }
-                listed[i] = Some(r.wanted);
+                listed.insert(i, r.wanted);
                 out.requests.push(r);
             }
             slowest = slowest.max(ms(t));
@@ -151,6 +158,7 @@ impl Prefetcher {
     pub fn touched(&mut self, terrain: &Terrain, tile: usize) {
         if !self.paged[tile] {
             self.paged[tile] = true;
+            self.paged_list.push(tile);
             self.paged_bytes += blob_len(terrain, tile);
         }
     }
@@ -167,6 +175,7 @@ impl Prefetcher {
         // Advice only: a kernel that refuses it costs nothing but the read-ahead.
         let _ = terrain.set.will_need(range.clone());
         self.paged[tile] = true;
+        self.paged_list.push(tile);
         let len = range.end - range.start;
         self.paged_bytes += len;
         len
@@ -178,12 +187,20 @@ impl Prefetcher {
         &mut self,
         terrain: &Terrain,
         camera: &Camera,
-        predicted: &[Option<u32>],
+        predicted: &HashMap<usize, u32>,
         budget: u64,
     ) -> u64 {
         let forward = camera.forward();
-        let mut behind: Vec<(f64, usize)> = (0..terrain.tiles.len())
-            .filter(|&i| self.paged[i] && predicted[i].is_none())
+        // Tiles released since they were listed, or listed twice, leave the list here.
+        self.paged_list.sort_unstable();
+        self.paged_list.dedup();
+        let paged = &self.paged;
+        self.paged_list.retain(|&i| paged[i]);
+        let mut behind: Vec<(f64, usize)> = self
+            .paged_list
+            .iter()
+            .copied()
+            .filter(|i| !predicted.contains_key(i))
             .filter_map(|i| {
                 let t = &terrain.tiles[i];
                 let centre = (t.min + t.max) * 0.5;
