@@ -818,10 +818,13 @@ impl Manager {
         s.chunk_move_bytes = plan.moves.iter().map(|m| m.bytes).sum();
         s.chunks_free = (self.chunks.len() - self.owned) as u64;
         (s.resident_bytes, s.used_bytes) = (0, 0);
-        for (t, res) in self.resident.iter().enumerate() {
-            if let Some(res) = res {
-                s.resident_bytes += self.classes.sizes[self.chunks[res.chunk].class];
-                s.used_bytes += self.held_bytes(t, res);
+        // Over the pool's chunks, not the set's tiles: each resident tile owns one chunk
+        // ([`Manager::check`]), and a frame's cost follows the pool, not the set's size.
+        for (i, c) in self.chunks.iter().enumerate() {
+            let Some(t) = c.owner else { continue };
+            if let Some(res) = self.resident[t as usize].as_ref().filter(|r| r.chunk == i) {
+                s.resident_bytes += self.classes.sizes[c.class];
+                s.used_bytes += self.held_bytes(t as usize, res);
             }
         }
     }
