@@ -583,10 +583,17 @@ impl Terrain {
     /// Gives every tile its side and corner level tables: the larger errors of the tiles that
     /// hold the side or corner, the same table in each of them.
     fn share_tables(&mut self, p: u32) {
+        use rayon::prelude::*;
         let layer = &self.layers[p as usize];
         let range = layer.first..layer.first + layer.len();
-        let own: Vec<LevelTable> = self.tiles.iter().map(|t| t.tables[0]).collect();
-        let index = |tx: u32, ty: u32| self.tile_in(p, tx, ty);
+        // The layer's own tables, by index within the layer.
+        let own: Vec<LevelTable> = self.tiles[range.clone()]
+            .iter()
+            .map(|t| t.tables[0])
+            .collect();
+        let index = |tx: u32, ty: u32| {
+            (tx < layer.tiles_x && ty < layer.tiles_y).then(|| (ty * layer.tiles_x + tx) as usize)
+        };
         let at = |tx: i64, ty: i64| {
             (tx >= 0 && ty >= 0)
                 .then(|| index(tx as u32, ty as u32))
@@ -600,7 +607,7 @@ impl Terrain {
                 .fold(own[index(t.tx, t.ty).unwrap_or(0)], |a, b| a.max(&b))
         };
         let tables: Vec<[LevelTable; 9]> = self.tiles[range.clone()]
-            .iter()
+            .par_iter()
             .map(|t| {
                 [
                     own[index(t.tx, t.ty).unwrap_or(0)],
