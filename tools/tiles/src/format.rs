@@ -1527,7 +1527,10 @@ impl TileSet {
         let invalid = |what: String| self.tile_error(tx, ty, what);
         let e = self.checked_entry(tx, ty)?;
         let blob = &self.map[e.offset as usize..(e.offset + e.len) as usize];
-        if crc32fast::hash(blob) != e.crc {
+        let crc = self
+            .crc_read(e.offset, e.len)
+            .map_err(|err| invalid(format!("cannot be read: {err}")))?;
+        if crc != e.crc {
             return Err(invalid("checksum mismatch (corrupted file)".into()));
         }
         let blob = if self.compact() {
@@ -1539,6 +1542,25 @@ impl TileSet {
             .map_err(invalid)?;
         tile.check_levels(levels).map_err(invalid)?;
         Ok(tile)
+    }
+
+    /// The crc32 of `len` bytes of the file at `offset`, read from the file rather than through
+    /// the mapping: a tile's checksum covers every level, and a reader that draws its first
+    /// levels only would otherwise hold the pages of all of them mapped (most of a tile's
+    /// bytes are its finest levels'), which the process's resident set would count.
+    fn crc_read(&self, offset: u64, len: u64) -> std::io::Result<u32> {
+        use std::os::unix::fs::FileExt;
+        const CHUNK: u64 = 1 << 20;
+        let mut hasher = crc32fast::Hasher::new();
+        let mut buf = vec![0u8; CHUNK.min(len) as usize];
+        let mut at = 0;
+        while at < len {
+            let n = CHUNK.min(len - at) as usize;
+            self.file.read_exact_at(&mut buf[..n], offset + at)?;
+            hasher.update(&buf[..n]);
+            at += n as u64;
+        }
+        Ok(hasher.finalize())
     }
 
     /// Whether the tiles hold compact levels ([`FLAG_COMPACT_LEVELS`]).
