@@ -307,8 +307,8 @@ impl Terrain {
         if from > level || tile.late.get().is_some() {
             return;
         }
-        // Its checksum passed its own check, over these same mapped bytes (a file cut since
-        // is refused before this): the outline, and the new levels' structure.
+        // Its checksum passed its own check, over these same bytes (a file cut since is refused
+        // before this): the outline, and the new levels' structure.
         let set = self.set_of(tile);
         let problem = match set.tile_outline(tile.tx, tile.ty) {
             Ok(data) => {
@@ -321,11 +321,9 @@ impl Terrain {
                 // The part tables of the levels now checked, before they may be drawn.
                 if let (None, Some(paged)) = (&problem, tile.paged()) {
                     let held = paged.parts();
-                    let (centres, counts) = held.as_ref();
-                    let counts = tiles::parts::counts_through(&data, counts, level + 1);
-                    let centres = *centres;
+                    let counts = tiles::parts::counts_through(&data, &held.1, level + 1);
                     *paged.parts.write().unwrap_or_else(|p| p.into_inner()) =
-                        Arc::new((centres, counts));
+                        Arc::new((held.0, counts));
                 }
                 problem
             }
@@ -953,8 +951,8 @@ fn tile_info(set: &TileSet, tx: u32, ty: u32, layer: u32) -> Result<TileInfo, ti
 }
 
 /// A tile's own check, and what it reads: the tile's checksum, its structure and the problems
-/// `tiletool verify` (without a source) would report at levels `0..=level`, the texture, and the level table the
-/// outline read at open still the one stored.
+/// `tiletool verify` (without a source) would report at levels `0..=level`, the texture, and
+/// the level table read at open still the one stored.
 fn paged(set: &TileSet, info: &TileInfo, level: u32) -> Result<Paged, String> {
     let h = *set.header();
     let (tx, ty) = (info.tx, info.ty);

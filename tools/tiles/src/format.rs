@@ -867,7 +867,8 @@ pub fn tile_count(width: usize, height: usize) -> Result<(u32, u32), String> {
 pub struct TileSet {
     path: PathBuf,
     map: std::sync::Arc<memmap2::Mmap>,
-    /// The file mapped, for reads that should not page the mapping in ([`TileSet::tile_table`]).
+    /// The file mapped, for reads that should not page the mapping in: each tile's table at a
+    /// reader's open ([`TileSet::tile_table`]) and the checksum of a tile read in part.
     file: std::sync::Arc<File>,
     /// The file's header; in a layer's view ([`TileSet::layer`]), the layer's grid, spacing,
     /// height lattice and directory in place of the base's.
@@ -1375,7 +1376,6 @@ impl TileSet {
         (start as usize, (end - start) as usize)
     }
 
-    /// An error about tile `(tx, ty)` of this file.
     /// A problem with tile `(tx, ty)` of this view, as one line naming the file and the tile.
     pub fn tile_error(&self, tx: u32, ty: u32, what: String) -> FormatError {
         FormatError::Invalid {

@@ -199,8 +199,10 @@ pub fn tile_problems(set: &TileSet, tile: &Tile) -> Vec<String> {
 /// [`tile_problems`] for the tile's `levels` alone, levels before them taken as checked: a
 /// renderer checks the levels a tile is first drawn at, and each finer one before its first
 /// upload. A level's checks cover its fans, cover, borders and box, its nesting in the level
-/// before, and that every finer block's morph offsets onto it land on its surface; so
-/// checking `0..a`, then `a..b`, then `b..levels` checks what one pass over every level does.
+/// before, and that its block's morph offsets onto every coarser level land on that level's
+/// surface; so checking `0..a`, then `a..b`, then `b..levels` checks what one pass over every
+/// level does, and reads blocks `a..b` alone for `a..b` (the structure of those levels is the
+/// caller's to check first, [`crate::format::TileSet::tile_levels`]).
 pub fn tile_problems_in(set: &TileSet, tile: &Tile, levels: std::ops::Range<u32>) -> Vec<String> {
     let mut report = VerifyReport {
         recomputed_max_error: vec![0.0; set.header().levels as usize],
