@@ -36,9 +36,25 @@ fn whole(set: &TileSet) -> Option<String> {
     }
 }
 
-/// Asserts that the damage at level `k` is found, first, in the piece holding level `k` of
-/// every split, as the whole check finds it, and in no piece before.
-fn found_where_it_is(set: &TileSet, k: u32, splits: &[&[u32]], whole: &Option<String>) {
+/// `bytes` with their checksums recomputed, written to `dir/name` and opened.
+fn resealed(dir: &std::path::Path, mut bytes: Vec<u8>, name: &str) -> TileSet {
+    tiles::format::reseal(&mut bytes).expect("reseal");
+    let path = dir.join(name);
+    std::fs::write(&path, &bytes).expect("write");
+    TileSet::open(&path).expect("open")
+}
+
+/// Asserts that the whole check's first problem names every one of `names`, and that the
+/// damage at level `k` is found first in the piece holding level `k` of every split, with
+/// that line, and in no piece before.
+fn found_where_it_is(set: &TileSet, k: u32, splits: &[&[u32]], names: &[&str]) {
+    let whole = whole(set);
+    assert!(
+        whole
+            .as_ref()
+            .is_some_and(|p| names.iter().all(|n| p.contains(n))),
+        "level {k}, {names:?}: {whole:?}"
+    );
     for &cuts in splits {
         let pieces = in_pieces(set, cuts);
         let starts: Vec<u32> = std::iter::once(0).chain(cuts.iter().copied()).collect();
@@ -84,18 +100,9 @@ fn checks_in_pieces_find_what_one_pass_finds() {
         let w = e.index_width as usize;
         let at = entry.offset as usize + e.index_offset as usize;
         broken[at + 2 * w..at + 4 * w].rotate_left(w);
-        tiles::format::reseal(&mut broken).expect("reseal");
-        let path = dir.path().join(format!("broken{k}.vkt"));
-        std::fs::write(&path, &broken).expect("write");
-        let set = TileSet::open(&path).expect("open");
-        let first = whole(&set);
-        assert!(
-            first
-                .as_ref()
-                .is_some_and(|p| p.contains(&format!("tile 0,0 level {k}: fan 0"))),
-            "level {k}: {first:?}"
-        );
-        found_where_it_is(&set, k, &splits, &first);
+        let set = resealed(dir.path(), broken, &format!("broken{k}.vkt"));
+        let what = format!("tile 0,0 level {k}: fan 0");
+        found_where_it_is(&set, k, &splits, &[&what]);
     }
     // Block k's first vertex: its offset onto level 0 off by 40 units, then its column moved
     // past the mesh extent (9 bits hold up to 511).
@@ -115,19 +122,9 @@ fn checks_in_pieces_find_what_one_pass_finds() {
             (off_surface, "morph offsets onto level 0 miss its surface"),
             (outside, "outside the mesh extent"),
         ];
-        for (n, (mut broken, what)) in cases.into_iter().enumerate() {
-            tiles::format::reseal(&mut broken).expect("reseal");
-            let path = dir.path().join(format!("block{k}.{n}.vkt"));
-            std::fs::write(&path, &broken).expect("write");
-            let set = TileSet::open(&path).expect("open");
-            let first = whole(&set);
-            assert!(
-                first
-                    .as_ref()
-                    .is_some_and(|p| p.contains(&format!("level {k}")) && p.contains(what)),
-                "block {k}, {what}: {first:?}"
-            );
-            found_where_it_is(&set, k, &splits, &first);
+        for (n, (broken, what)) in cases.into_iter().enumerate() {
+            let set = resealed(dir.path(), broken, &format!("block{k}.{n}.vkt"));
+            found_where_it_is(&set, k, &splits, &[&format!("level {k}"), what]);
         }
     }
 }
