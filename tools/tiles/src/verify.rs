@@ -170,21 +170,45 @@ fn verify_layer(set: &TileSet, source: Option<&Grid>) -> VerifyReport {
             return report;
         }
     }
-    for ty in 0..h.tiles_y {
-        for tx in 0..h.tiles_x {
-            report.tiles += 1;
+    // Tile by tile on every core, each into a report of its own, joined in the tiles' order
+    // (so the problems read as one pass over the rows would list them).
+    use rayon::prelude::*;
+    let levels = h.levels as usize;
+    let each: Vec<VerifyReport> = (0..h.tiles_x * h.tiles_y)
+        .into_par_iter()
+        .map(|i| {
+            let (tx, ty) = (i % h.tiles_x, i / h.tiles_x);
+            let mut one = VerifyReport {
+                tiles: 1,
+                recomputed_max_error: vec![0.0; levels],
+                ..Default::default()
+            };
             match set.tile(tx, ty) {
                 Ok(tile) => {
-                    check_tile(set, &tile, source, 0..tile.header.levels, &mut report);
-                    check_shared_edges(set, &tile, &mut report);
+                    check_tile(set, &tile, source, 0..tile.header.levels, &mut one);
+                    check_shared_edges(set, &tile, &mut one);
                 }
-                Err(e) => report.problems.push(e.to_string()),
+                Err(e) => one.problems.push(e.to_string()),
             }
             // The texture: checksum, layout and every mip's size (None: the set has none).
             if let Err(e) = set.texture(tx, ty) {
-                report.problems.push(e.to_string());
+                one.problems.push(e.to_string());
             }
+            one
+        })
+        .collect();
+    for one in each {
+        report.tiles += one.tiles;
+        report.levels_checked += one.levels_checked;
+        for (all, e) in report
+            .recomputed_max_error
+            .iter_mut()
+            .zip(one.recomputed_max_error)
+        {
+            *all = all.max(e);
         }
+        report.limited.extend(one.limited);
+        report.problems.extend(one.problems);
     }
     report
 }
