@@ -123,6 +123,11 @@ pub struct Cli {
     /// pass's heights, as the vertex shader drew them), so it takes no --morph-shader.
     #[arg(long, conflicts_with = "morph_shader")]
     pub read_back_heights: bool,
+    /// Send each block's morph rows (its stored offsets to the coarser levels) and hold them in
+    /// the pool, although the default shaders read none: the comparison for what leaving them
+    /// on disk saves. Implied by --morph-shader two-levels and forward-differences.
+    #[arg(long)]
+    pub morph_rows: bool,
     /// How tile levels travel: progressive (new blocks and one index array per refinement),
     /// per-level (each level from scratch) or whole-tile (every level at once, the old scheme).
     /// --draw-only uses whole-tile, so that every pre-recorded frame finds its levels.
@@ -506,6 +511,8 @@ impl Cli {
                 IndexArraysArg::Sent => memory::IndexArrays::Sent,
             },
             read_back_heights: self.read_back_heights,
+            // Whether geomorphing is on or not: the window's key switches it.
+            morph_rows: self.morph_rows || self.morph_shader != MorphShaderArg::Hierarchical,
         })
     }
 

@@ -89,7 +89,8 @@ pub struct TileRecord {
     /// First vertex of blocks 1..=8 (u32::MAX past the last block).
     pub starts_lo: [u32; 4],
     pub starts_hi: [u32; 4],
-    /// Per block: its first vertex, its vertices, the pool byte of its morph rows, 0.
+    /// Per block: its first vertex, its vertices, the pool byte of its morph rows (where the
+    /// rows are sent: only the two-levels shaders read them, `MemoryOptions::morph_rows`), 0.
     pub blocks: [[u32; 4]; 9],
     /// Metres per morph offset unit of levels 0..8.
     pub units: [f32; 8],

@@ -151,6 +151,11 @@ pub struct MemoryOptions {
     /// Read every drawn vertex's height back from the vertex shader (a buffer per frame slot),
     /// for the check against the CPU mirror (`vkterrain --read-back-heights`).
     pub read_back_heights: bool,
+    /// Send each block's morph rows and hold them in the pool ([`Terrain::costs`]): only the
+    /// vertex shaders of `--morph-shader two-levels` and `forward-differences` read them.
+    ///
+    /// [`Terrain::costs`]: crate::terrain::Terrain::costs
+    pub morph_rows: bool,
 }
 
 impl Default for MemoryOptions {
@@ -169,6 +174,7 @@ impl Default for MemoryOptions {
             anisotropy: 16.0,
             index_arrays: IndexArrays::Built,
             read_back_heights: false,
+            morph_rows: false,
         }
     }
 }

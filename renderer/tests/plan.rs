@@ -113,7 +113,7 @@ fn tight_budget_draws_what_is_resident_and_stitches_granted_levels() {
         upload_budget: 64 << 10,
         ..Config::default()
     };
-    let mut manager = Manager::new(terrain.costs(), config);
+    let mut manager = Manager::new(terrain.costs(false), config);
     let path = CameraPath::flyover(&terrain);
     let (mut coarser_frames, mut seams_differ) = (0, 0);
     for f in 0..60u64 {

@@ -1,16 +1,18 @@
 //! The tile pool on lavapipe with the validation layer on: after flights that refine tiles
 //! progressively within a small pool and a small upload budget (so chunks move and tiles are
-//! evicted), every resident tile's blocks, morph rows and index array read back from GPU
-//! memory as the file stores them, through both transfer paths: blocks and morph rows byte
-//! for byte, index arrays byte for byte when sent and fan for fan when built on the GPU
-//! (each ring may start elsewhere, see `tests/indices.rs`).
+//! evicted), every resident tile's blocks, morph rows (where they are sent) and index array
+//! read back from GPU memory as the file stores them, through both transfer paths: blocks and
+//! morph rows byte for byte, index arrays byte for byte when sent and fan for fan when built
+//! on the GPU (each ring may start elsewhere, see `tests/indices.rs`). And leaving the morph
+//! rows on disk, as by default, changes no frame.
 
 use memory::{IndexArrays, Part};
 use renderer::camera::Camera;
 use renderer::frame::{FrameInput, Renderer};
 use renderer::log::FrameRecord;
 use renderer::path::CameraPath;
-use renderer::settings::{MemoryOptions, Settings};
+use renderer::prefetch::PrefetchOptions;
+use renderer::settings::{MemoryOptions, MorphShader, Settings};
 use renderer::terrain::Terrain;
 use renderer::vulkan::{Gpu, GpuOptions};
 
@@ -37,10 +39,16 @@ fn settings(forced_level: Option<u32>) -> Settings {
     }
 }
 
-/// Compares every resident tile's data in the pool with the file; returns how many tiles and
-/// bytes were compared. `shift` reads each tile's data one chunk-offset off (a negative
-/// control: then nothing may match).
-fn check_pool(gpu: &Gpu, renderer: &Renderer, terrain: &Terrain) -> (usize, u64, usize) {
+/// Compares every resident tile's data in the pool with the file (its morph rows where
+/// `morph_rows`; else the tiles must have no room for them); returns how many tiles and bytes
+/// were compared, and how many tiles' data another tile's chunk does not hold (the negative
+/// control: most).
+fn check_pool(
+    gpu: &Gpu,
+    renderer: &Renderer,
+    terrain: &Terrain,
+    morph_rows: bool,
+) -> (usize, u64, usize) {
     let m = renderer.manager();
     let pool = renderer
         .pool()
@@ -66,7 +74,11 @@ fn check_pool(gpu: &Gpu, renderer: &Renderer, terrain: &Terrain) -> (usize, u64,
         };
         for j in 0..=blocks.expect("blocks") {
             expect(offset + cost.positions_before(j), Part::Positions(j));
-            expect(offset + layout.morph + cost.morph_before(j), Part::Morph(j));
+            if morph_rows {
+                expect(offset + layout.morph + cost.morph_before(j), Part::Morph(j));
+            } else {
+                assert_eq!(cost.levels[j as usize].morph, 0, "tile {t}: room for rows");
+            }
         }
         let level = index.expect("index array");
         // Where the drawn array is: the index region's start, or a promoted spare's place.
@@ -95,7 +107,7 @@ fn check_pool(gpu: &Gpu, renderer: &Renderer, terrain: &Terrain) -> (usize, u64,
     (tiles, bytes, wrong_if_swapped)
 }
 
-fn fly(force_staging: bool, index_arrays: IndexArrays) {
+fn fly(force_staging: bool, index_arrays: IndexArrays, morph_rows: bool) {
     let dir = tempfile::tempdir().expect("temp dir");
     let set = common::puget(dir.path());
     let terrain = common::open_checked(&set);
@@ -110,6 +122,7 @@ fn fly(force_staging: bool, index_arrays: IndexArrays) {
         frames_in_flight: 2,
         force_staging,
         index_arrays,
+        morph_rows,
         ..Default::default()
     };
     let mut renderer = Renderer::new(&gpu, &terrain, (128, 96), memory).expect("renderer");
@@ -176,7 +189,7 @@ fn fly(force_staging: bool, index_arrays: IndexArrays) {
             "direct path staged {staged} of {uploaded}"
         );
     }
-    let (tiles, bytes, control) = check_pool(&gpu, &renderer, &terrain);
+    let (tiles, bytes, control) = check_pool(&gpu, &renderer, &terrain, morph_rows);
     assert!(
         tiles >= 4 && bytes > 100_000,
         "{tiles} tiles, {bytes} bytes checked"
@@ -191,15 +204,110 @@ fn fly(force_staging: bool, index_arrays: IndexArrays) {
 
 #[test]
 fn direct_writes_and_built_index_arrays_read_back_from_the_pool() {
-    fly(false, IndexArrays::Built);
+    fly(false, IndexArrays::Built, false);
 }
 
 #[test]
-fn staged_copies_chunk_moves_and_built_index_arrays_read_back_from_the_pool() {
-    fly(true, IndexArrays::Built);
+fn staged_copies_chunk_moves_morph_rows_and_built_index_arrays_read_back_from_the_pool() {
+    fly(true, IndexArrays::Built, true);
 }
 
 #[test]
 fn direct_writes_of_sent_index_arrays_read_back_from_the_pool() {
-    fly(false, IndexArrays::Sent);
+    fly(false, IndexArrays::Sent, true);
+}
+
+/// One flight of the Puget sample (30 frames of the flyover at 160 x 120, every upload sent at
+/// once and no prefetching, so that two flights plan alike), alternating geomorphing part by
+/// part with discrete levels frame by frame: each frame's pixels and triangles, and the block
+/// bytes sent.
+fn frames(morph_rows: bool, shader: MorphShader) -> (Vec<(Vec<u8>, u64)>, u64) {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = common::puget(dir.path());
+    let terrain = common::open_checked(&set);
+    let gpu = Gpu::new(&GpuOptions {
+        validation: true,
+        ..Default::default()
+    })
+    .expect("Vulkan device");
+    let memory = MemoryOptions {
+        upload_budget: u64::MAX,
+        prefetch: PrefetchOptions {
+            enabled: false,
+            ..Default::default()
+        },
+        morph_rows,
+        ..Default::default()
+    };
+    let mut renderer = Renderer::new(&gpu, &terrain, (160, 120), memory).expect("renderer");
+    let path = CameraPath::flyover(&terrain);
+    let mut done = Vec::new();
+    for k in 0..30u64 {
+        let t = path.keys[0].time + path.duration() * k as f64 / 30.0;
+        let camera: Camera = path.at(t);
+        let input = FrameInput {
+            camera: &camera,
+            time_s: t,
+            label: k,
+            screenshot: true,
+            present: None,
+        };
+        let s = Settings {
+            geomorph: k % 2 == 0,
+            part_by_part: true,
+            morph_shader: shader,
+            ..settings(None)
+        };
+        done.extend(renderer.render(&gpu, &terrain, &s, input).expect("frame"));
+    }
+    done.extend(renderer.finish_all(&gpu).expect("finish"));
+    renderer.destroy(&gpu);
+    assert_eq!(gpu.validation_messages(), 0);
+    assert_eq!(done.len(), 30);
+    let blocks = done.iter().map(|f| f.record.upload_bytes_blocks).sum();
+    let frames = done
+        .into_iter()
+        .map(|f| (f.pixels.expect("screenshot"), f.record.triangles))
+        .collect();
+    (frames, blocks)
+}
+
+/// Leaving the morph rows on disk ([`MemoryOptions::morph_rows`] false, the default) changes no
+/// pixel: the morph pass places every vertex from its parents' own heights and the discrete
+/// shader reads positions alone. The Puget flyover flown with and without the rows, geomorphing
+/// part by part and discrete levels in turn: every frame equal, and without the rows at most
+/// 55% of the block bytes (Puget's positions are 3.5 of its 7.3 bytes a sample). The control:
+/// the two-levels shader, which reads the rows, draws other frames without them.
+#[test]
+fn frames_are_the_same_without_the_morph_rows_no_shader_reads() {
+    let (with, with_bytes) = frames(true, MorphShader::Hierarchical);
+    let (without, without_bytes) = frames(false, MorphShader::Hierarchical);
+    assert!(with.iter().all(|(_, triangles)| *triangles > 1_000));
+    for (k, (a, b)) in with.iter().zip(&without).enumerate() {
+        assert_eq!(a.1, b.1, "frame {k}: triangles");
+        assert!(
+            a.0 == b.0,
+            "frame {k}: the pixels differ without the morph rows"
+        );
+    }
+    assert!(
+        without_bytes * 100 <= with_bytes * 55 && without_bytes > 0,
+        "block bytes {without_bytes} without the rows, {with_bytes} with them"
+    );
+    // The control.
+    let (rows, _) = frames(true, MorphShader::TwoLevels);
+    let (no_rows, _) = frames(false, MorphShader::TwoLevels);
+    let differ = rows
+        .iter()
+        .zip(&no_rows)
+        .filter(|(a, b)| a.0 != b.0)
+        .count();
+    eprintln!(
+        "block bytes {without_bytes} without the rows, {with_bytes} with them; the two-levels \
+         shader without its rows: {differ} of 30 frames differ"
+    );
+    assert!(
+        differ >= 10,
+        "the two-levels shader drew {differ} of 30 frames otherwise without its rows"
+    );
 }

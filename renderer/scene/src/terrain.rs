@@ -635,8 +635,13 @@ impl Terrain {
         self.tile_in(tile.layer, x, y)
     }
 
-    /// What each tile costs in GPU memory, level by level (the memory manager's view).
-    pub fn costs(&self) -> Vec<memory::TileCost> {
+    /// What each tile costs in GPU memory, level by level (the memory manager's view). A
+    /// block's morph rows (its stored offsets to the coarser levels) count, and so travel and
+    /// take pool memory, only with `morph_rows`: the vertex shaders that read them are
+    /// `--morph-shader two-levels` and `forward-differences`. The morph pass places every
+    /// vertex from its parents' own heights and discrete levels read none, so by default a
+    /// level sends its positions alone.
+    pub fn costs(&self, morph_rows: bool) -> Vec<memory::TileCost> {
         self.tiles
             .iter()
             .map(|t| memory::TileCost {
@@ -646,7 +651,11 @@ impl Terrain {
                     .enumerate()
                     .map(|(i, l)| memory::LevelCost {
                         positions: 4 * u64::from(l.block_len),
-                        morph: i as u64 * u64::from(l.block_len),
+                        morph: if morph_rows {
+                            i as u64 * u64::from(l.block_len)
+                        } else {
+                            0
+                        },
                         indices: u64::from(l.index_count) * u64::from(l.index_width),
                         index_width: l.index_width,
                     })

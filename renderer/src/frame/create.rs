@@ -128,7 +128,7 @@ impl Renderer {
             index_arrays: split.index_arrays,
         };
         let fault = Fault::from_env();
-        let (manager, pool) = allocate_pool(gpu, terrain, config, options.force_staging, fault)?;
+        let (manager, pool) = allocate_pool(gpu, terrain, config, &options, fault)?;
         let mut parts = Parts::default();
         let made = make_parts(
             &mut parts,
@@ -395,17 +395,17 @@ fn allocate_pool(
     gpu: &Gpu,
     terrain: &Terrain,
     mut config: Config,
-    force_staging: bool,
+    options: &MemoryOptions,
     fault: Option<Fault>,
 ) -> VkResult<(Manager, TilePool)> {
     let mut first = None;
     loop {
-        let manager = Manager::new(terrain.costs(), config);
+        let manager = Manager::new(terrain.costs(options.morph_rows), config);
         let bytes = manager.pool_bytes();
         let wanted = *first.get_or_insert(bytes);
         let result = match fault {
             Some(Fault::OomAbove(limit)) if bytes > limit => Err(VkError::OutOfMemory),
-            _ => TilePool::new(gpu, bytes, force_staging),
+            _ => TilePool::new(gpu, bytes, options.force_staging),
         };
         match result {
             Ok(pool) => {
