@@ -47,8 +47,8 @@ pub struct MorphFrame {
     pub jacobian: [f32; 4],
     pub tau: f32,
     pub near: f32,
-    /// How far inside the image (a share of its half-width, in clip coordinates) a point of a
-    /// vertex's star counts fully towards the vertex's level ([`crate::morph::STAR_RAMP`]).
+    /// How much of the segment from a vertex to a corner of its star must be in view for the
+    /// corner to count fully towards the vertex's level ([`crate::morph::STAR_RAMP`]).
     pub ramp: f32,
     pub pad: f32,
 }

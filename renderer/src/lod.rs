@@ -189,10 +189,12 @@ pub fn level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: Bound)
 /// ([`crate::morph::table_of`]): the interior its own, a side the larger of the two tiles'. So
 /// the drawn level is the largest, over the interior and the four sides, of
 /// `ceil(Λ_part(τ / S_part))`, with `S_part` the proved bound over the on-screen pieces of that
-/// part's box: the whole tile's box for the interior, a side's line (its `x, y` segment times
-/// the tile's height range, in [`SPLIT`] pieces) for a side. A side whose table is the
-/// interior's adds nothing and is skipped. A rough neighbour then makes a tile finer only as
-/// far as the shared side itself needs, not the whole tile wherever it is seen.
+/// part's box: the whole tile's box for the interior; for a side, the strip
+/// [`crate::morph::SIDE_REACH`] samples deep on both sides of it, into the neighbour (the
+/// tile's height range, in [`SPLIT`] pieces along the side), where the stars of the side's
+/// vertices reach ([`crate::morph`], "Over the star"). A rough neighbour then makes a tile
+/// finer only as far as the strip along the shared side needs, not the whole tile wherever it
+/// is seen.
 ///
 /// The four corners take no part: a tile's corners are vertices of its coarsest level (block
 /// 0), which every level holds at the vertex's own height, so no level moves them and none
@@ -201,7 +203,8 @@ pub fn level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: Bound)
 /// only diagonally, for nothing. The surface near a corner is the interior's and the sides'
 /// (every point there is in their boxes).
 ///
-/// When the whole box already allows level 0 under the largest table, level 0 it is.
+/// When the whole box and the strips already allow level 0 under the largest table, level 0 it
+/// is.
 pub fn morph_level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: Bound) -> u32 {
     let finest = tile.levels.len().saturating_sub(1) as u32;
     let within =
@@ -216,7 +219,11 @@ pub fn morph_level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: 
     }
     let (lo, hi) = tile_box(tile);
     let (lo, hi) = (lo - camera, hi - camera);
-    if within(&tile.drawn_table, error_for(bound(view, lo, hi), tau)) == 0 {
+    if within(
+        &tile.drawn_table,
+        error_for(reach_bound(view, tile, lo, hi), tau),
+    ) == 0
+    {
         return 0;
     }
     let planes = view.frustum();
@@ -225,13 +232,18 @@ pub fn morph_level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: 
         interior,
         error_for(pieces_bound(view, &planes, lo, hi, (SPLIT, SPLIT)), tau),
     );
-    for (part, (a, b)) in sides(lo, hi).into_iter().enumerate() {
+    for (part, (a, b)) in strips(lo, hi, strip_depth(tile, lo, hi))
+        .into_iter()
+        .enumerate()
+    {
+        // (A side whose table is the interior's still covers the strip's outer half.)
         let table = &tile.tables[part + 1];
-        if level == finest || table == interior {
+        if level == finest {
             continue;
         }
-        let along = |a: f64, b: f64| if a == b { 1 } else { SPLIT };
-        let s = pieces_bound(view, &planes, a, b, (along(a.x, b.x), along(a.y, b.y)));
+        // Split along the side, not across it.
+        let along = |axis: usize| if part % 2 == axis { SPLIT } else { 1 };
+        let s = pieces_bound(view, &planes, a, b, (along(0), along(1)));
         // 0: no piece of the part touches the frustum, so none of its vertices is on screen.
         if s > 0.0 {
             level = level.max(within(table, error_for(s, tau)));
@@ -242,8 +254,9 @@ pub fn morph_level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: 
 
 /// The levels of a tile's 4 x 4 parts while geomorphing part by part ([`tiles::parts`]): for
 /// each part, [`morph_level`]'s rule over the part alone, the interior table over the part's
-/// box (the whole tile's height range, in 2 x 2 pieces) and each side's table over the stretch
-/// of the side that bounds the part. A part no piece of which touches the frustum has no
+/// box (the whole tile's height range, in 2 x 2 pieces) and each side's table over the strip
+/// across the stretch of the side that bounds the part. A part no piece of which touches the
+/// frustum has no
 /// vertex on screen and gets level 0. Every on-screen vertex lies in the closed box of each
 /// part whose mesh holds it (a vertex on a line between parts is in the boxes of all parts
 /// there), so its level is within each of those parts' levels: the cover of [`morph_level`],
@@ -265,7 +278,11 @@ pub fn morph_parts(
     let tau = tau * crate::morph::TAU_MARGIN;
     let (tlo, thi) = tile_box(tile);
     let (tlo, thi) = (tlo - camera, thi - camera);
-    if within(&tile.drawn_table, error_for(bound(view, tlo, thi), tau)) == 0 {
+    if within(
+        &tile.drawn_table,
+        error_for(reach_bound(view, tile, tlo, thi), tau),
+    ) == 0
+    {
         return [0; PARTS * PARTS];
     }
     let planes = view.frustum();
@@ -273,10 +290,7 @@ pub fn morph_parts(
     // Parts run east with i and south with j (rows from the tile's first, northern, row), 64
     // cells each; the box's x and y span the mesh (fewer cells in a partial tile).
     let cells = (tile.header.mesh_max_x.max(1), tile.header.mesh_max_y.max(1));
-    let part = (
-        (thi.x - tlo.x) / f64::from(cells.0) * f64::from(PART_CELLS),
-        (thi.y - tlo.y) / f64::from(cells.1) * f64::from(PART_CELLS),
-    );
+    let part = cells_size(tile, tlo, thi, PART_CELLS);
     std::array::from_fn(|q| {
         let (i, j) = ((q % PARTS) as u32, (q / PARTS) as u32);
         if i * PART_CELLS >= cells.0 || j * PART_CELLS >= cells.1 {
@@ -310,13 +324,15 @@ pub fn morph_parts(
             return 0;
         }
         let mut level = within(interior, error_for(s, tau));
-        for (side, (a, b)) in sides(lo, hi).into_iter().enumerate() {
+        for (side, (a, b)) in strips(lo, hi, strip_depth(tile, tlo, thi))
+            .into_iter()
+            .enumerate()
+        {
             let table = &tile.tables[side + 1];
-            if !touches[side] || level == finest || table == interior {
+            if !touches[side] || level == finest {
                 continue;
             }
-            let along = |a: f64, b: f64| if a == b { 1 } else { 2 };
-            let s = pieces_bound(view, &planes, a, b, (along(a.x, b.x), along(a.y, b.y)));
+            let s = pieces_bound(view, &planes, a, b, (2, 2));
             if s > 0.0 {
                 level = level.max(within(table, error_for(s, tau)));
             }
@@ -325,16 +341,39 @@ pub fn morph_parts(
     })
 }
 
-/// The boxes of a tile's sides in the order of its level tables after the interior: the N, E,
-/// S and W sides (north is +y), each over the whole height.
-fn sides(lo: DVec3, hi: DVec3) -> [(DVec3, DVec3); 4] {
+/// The size (m, east and north) of `cells` of `tile`'s grid, from the tile's box `lo..hi`
+/// (fewer cells a side in a partial tile).
+fn cells_size(tile: &TileInfo, lo: DVec3, hi: DVec3, cells: u32) -> (f64, f64) {
+    let mesh = (tile.header.mesh_max_x.max(1), tile.header.mesh_max_y.max(1));
+    (
+        (hi.x - lo.x) / f64::from(mesh.0) * f64::from(cells),
+        (hi.y - lo.y) / f64::from(mesh.1) * f64::from(cells),
+    )
+}
+
+/// [`bound`] over the tile's box `lo..hi` and the strips along its sides ([`strips`]).
+fn reach_bound(view: &View, tile: &TileInfo, lo: DVec3, hi: DVec3) -> f64 {
+    let (dx, dy) = strip_depth(tile, lo, hi);
+    let d = DVec3::new(dx, dy, 0.0);
+    bound(view, lo - d, hi + d)
+}
+
+/// How deep the strips of [`strips`] reach on either side of a tile's side (m).
+fn strip_depth(tile: &TileInfo, lo: DVec3, hi: DVec3) -> (f64, f64) {
+    cells_size(tile, lo, hi, crate::morph::SIDE_REACH)
+}
+
+/// The strips along the N, E, S and W sides of the box `lo..hi` (a tile's, or a part's), `depth`
+/// deep on either side of the side (into the neighbouring tile), each over the whole height:
+/// where the stars of the side's vertices reach ([`crate::morph::TileMorph::reach`]).
+fn strips(lo: DVec3, hi: DVec3, depth: (f64, f64)) -> [(DVec3, DVec3); 4] {
     let at = |x: f64, y: f64, z: f64| DVec3::new(x, y, z);
-    let side = |x0: f64, y0: f64, x1: f64, y1: f64| (at(x0, y0, lo.z), at(x1, y1, hi.z));
+    let (dx, dy) = depth;
     [
-        side(lo.x, hi.y, hi.x, hi.y),
-        side(hi.x, lo.y, hi.x, hi.y),
-        side(lo.x, lo.y, hi.x, lo.y),
-        side(lo.x, lo.y, lo.x, hi.y),
+        (at(lo.x, hi.y - dy, lo.z), at(hi.x, hi.y + dy, hi.z)),
+        (at(hi.x - dx, lo.y, lo.z), at(hi.x + dx, hi.y, hi.z)),
+        (at(lo.x, lo.y - dy, lo.z), at(hi.x, lo.y + dy, hi.z)),
+        (at(lo.x - dx, lo.y, lo.z), at(lo.x + dx, hi.y, hi.z)),
     ]
 }
 

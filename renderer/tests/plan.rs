@@ -435,7 +435,8 @@ fn cover_views(terrain: &Terrain, rng: &mut splitmix::Rng) -> Vec<Camera> {
 /// the tile's corners, which are checked to be block-0 vertices (own height on every level).
 /// Controls: the interior's table alone over the whole box does not cover them (the sides'
 /// tables matter); the rule before (the largest of the nine tables over the whole box) drew
-/// some tiles finer and none coarser; and some corner on screen does want more than its
+/// some tiles finer (it may draw a tile coarser only where a side's strip, which reaches into
+/// the neighbour, needs more: counted); and some corner on screen does want more than its
 /// tile's drawn level (leaving the corners out changed something).
 #[test]
 fn the_drawn_level_covers_every_vertex_on_screen() {
@@ -448,7 +449,7 @@ fn the_drawn_level_covers_every_vertex_on_screen() {
     let terrains = cover_terrains((dir.path(), srtm_dir.path()));
     let mut rng = splitmix::Rng(0x6d6f_7270_685f_6c76);
     let (mut checked, mut interior_misses, mut coarser, mut tiles) = (0usize, 0usize, 0usize, 0);
-    let mut corners_above = 0usize;
+    let (mut corners_above, mut finer) = (0usize, 0usize);
     for terrain in &terrains {
         let finest = terrain.levels - 1;
         // Every third camera of the paths (the test's cost is in its vertices).
@@ -470,11 +471,8 @@ fn the_drawn_level_covers_every_vertex_on_screen() {
                         (table.level_f64(r).ceil() as u32).min(finest)
                     };
                     let (interior, before) = (whole(&tile.tables[0]), whole(&tile.drawn_table));
-                    assert!(
-                        drawn <= before,
-                        "tile {i}: drawn {drawn}, the rule before {before}"
-                    );
                     coarser += usize::from(drawn < before);
+                    finer += usize::from(drawn > before);
                     tiles += 1;
                     let morph = TileMorph::from_camera(terrain, &camera, EXTENT, tau, i);
                     let data = terrain.set.tile(tile.tx, tile.ty).expect("tile");
@@ -508,8 +506,8 @@ fn the_drawn_level_covers_every_vertex_on_screen() {
     }
     eprintln!(
         "{checked} on-screen vertices covered; {coarser} of {tiles} tile draws coarser than \
-         the rule before; the interior's table alone misses in {interior_misses}; \
-         {corners_above} corners on screen above their tile's drawn level"
+         the rule before, {finer} finer (the strips); the interior's table alone misses in \
+         {interior_misses}; {corners_above} corners on screen above their tile's drawn level"
     );
     assert!(
         corners_above > 0,
@@ -525,7 +523,8 @@ fn the_drawn_level_covers_every_vertex_on_screen() {
 
 /// The level the morph pass places a vertex at (`renderer::morph`, "Over the star") is never
 /// below the vertex's own, and for every vertex on screen both are within the level of every
-/// part whose closed box holds it (`lod::morph_parts`, the cover part by part): the star
+/// part whose closed box holds it (`lod::morph_parts`, the cover part by part; for a vertex
+/// on the tile's side, which the tile draws at its level, within that level): the star
 /// raises a vertex no further than each part drawing it allows, so a vertex that a part's next
 /// level adds starts on the surface drawn without it, as before the star, and a coarser part's
 /// fans, which take in a line's vertices, are not bent by a finer part's needs. (Before
@@ -566,10 +565,15 @@ fn the_placed_level_stays_within_every_part_that_draws_the_vertex() {
                             continue;
                         }
                         let placed = morph.placed(x, y, own);
-                        let within = span(x)
-                            .flat_map(|i| span(y).map(move |j| parts[(4 * j + i) as usize]))
-                            .min()
-                            .expect("a part") as f32;
+                        let side = |c: u32| c == 0 || c == 256;
+                        let within = if side(x) || side(y) {
+                            parts.iter().copied().max().expect("parts")
+                        } else {
+                            span(x)
+                                .flat_map(|i| span(y).map(move |j| parts[(4 * j + i) as usize]))
+                                .min()
+                                .expect("a part")
+                        } as f32;
                         checked += 1;
                         assert!(
                             placed >= point,

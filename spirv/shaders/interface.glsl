@@ -11,6 +11,9 @@ const uint FLAG_LEVEL_COLOURS = 2u;    // colour by level
 const uint FLAG_TEXTURE = 4u;          // sample the tile's texture
 const uint FLAG_RELIEF = 8u;           // grey relief
 const uint FLAG_TILES = 16u;           // a flat colour per tile
+// How far (samples) the star of a vertex on a tile's side reaches across the side, into both
+// tiles (renderer/src/morph/mod.rs, "Over the star"; renderer/src/lod.rs covers it).
+const uint SIDE_REACH = 16u;
 
 layout(push_constant) uniform FrameConstants {
     mat4 view_proj;          // camera at the origin, world axes x east, y north, z up

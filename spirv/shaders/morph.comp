@@ -12,8 +12,8 @@
 //     m(v) = (m(p) + m(q)) / 2 + w (own(v) - (own(p) + own(q)) / 2),   w = clamp(l - j + 1, 0, 1),
 //
 // its parents' mean plus its share w of its own detail; block 0 is always at its own height.
-// Its level l is the one its position and the camera give it, raised towards the levels at the
-// corners of its star's box within its part as far as they are seen (star_error below).
+// Its level l is the one its position and the camera give it, raised towards the levels on the
+// segments in view from it to the corners of its star's box (star_error below).
 // Where every vertex is at w = 1 that is the level's surface; where a vertex has w = 0 it lies
 // on the surface drawn without it, so a finer level arriving moves nothing at first.
 //
@@ -61,26 +61,43 @@ uint scale_index(uint x, uint y) {
     return m == 0u ? 9u : uint(findLSB(m));
 }
 
-// How far a point at clip position `q` is inside the image, as a weight: 0 off it (or behind
-// the near plane), rising to 1 where it is `ramp` of the half-width inside every edge (and
-// twice the near plane's depth away): continuous in the camera.
-float seen(vec4 q) {
-    MorphFrame m = frame_morph.morph;
-    float inside = min(q.w - abs(q.x), q.w - abs(q.y));
-    float near = clamp((q.w - m.near) / m.near, 0.0, 1.0);
-    return q.w > m.near ? clamp(inside / (m.ramp * q.w), 0.0, 1.0) * near : 0.0;
+// The part of the segment from clip position `a` to `b` that is in view (inside the image and
+// at least twice the near plane's depth away), as (lo, hi) along it: empty where lo > hi.
+vec2 in_view(vec4 a, vec4 b) {
+    float near = 2.0 * frame_morph.morph.near;
+    float fa[5] = float[](a.w - a.x, a.w + a.x, a.w - a.y, a.w + a.y, a.w - near);
+    float fb[5] = float[](b.w - b.x, b.w + b.x, b.w - b.y, b.w + b.y, b.w - near);
+    float lo = 0.0;
+    float hi = 1.0;
+    for (int i = 0; i < 5; ++i) {
+        float d = fb[i] - fa[i];
+        if (d > 0.0) {
+            lo = max(lo, -fa[i] / d);
+        } else if (d < 0.0) {
+            hi = min(hi, -fa[i] / d);
+        } else if (fa[i] < 0.0) {
+            hi = -1.0;
+        }
+    }
+    return vec2(lo, hi);
 }
 
-// The error allowed at a vertex whose own allowed error is `e`, lowered towards that of the
-// corners of its star's box within its part (x +- reach.x, y +- reach.y at its height) as far
-// as each is seen (renderer/src/morph/mod.rs, "Over the star").
+// The error allowed at a vertex whose own allowed error is `e`, lowered towards that at the
+// farthest point in view on the segment to each corner of its star's box (x +- reach.x,
+// y +- reach.y at its height), weighted by how much of the segment is in view
+// (renderer/src/morph/mod.rs, "Over the star").
 float star_error(vec4 clip, float e, vec2 reach) {
     vec4 east = frame.view_proj[0] * (reach.x * frame.camera.w);
     vec4 south = frame.view_proj[1] * (-reach.y * frame.spacing_y);
     float lift = 0.0;
     for (int k = 0; k < 4; ++k) {
         vec4 q = (clip + ((k & 1) == 0 ? -east : east)) + ((k & 2) == 0 ? -south : south);
-        lift = max(lift, seen(q) * (e - allowed_error(q)));
+        vec2 span = in_view(clip, q);
+        if (span.x <= span.y) {
+            float weight = clamp((span.y - span.x) / frame_morph.morph.ramp, 0.0, 1.0);
+            vec4 p = clip + (q - clip) * span.y;
+            lift = max(lift, weight * (e - allowed_error(p)));
+        }
     }
     return e - lift;
 }
@@ -180,12 +197,24 @@ void main() {
                 } else {
                     c = records.tiles[r].tables[t];
                 }
-                // The star's reach within the part grid: none across a line between parts or
-                // past the mesh's last column or row.
+                // The star's reach (TileMorph::reach): none across a line between parts or
+                // past the mesh's last column or row; along a tile's side its scale, across
+                // the side at most SIDE_REACH.
                 // (In base samples: a pyramid layer's are 2^layer apart.)
+                bool side_x = x == 0u || x == 256u;
+                bool side_y = y == 0u || y == 256u;
                 vec2 reach = float(s << layer_shift)
-                           * vec2(bvec2((x & 63u) != 0u && x + s <= extent.x,
-                                        (y & 63u) != 0u && y + s <= extent.y));
+                           * vec2(bvec2((side_y || (x & 63u) != 0u) && x + s <= extent.x,
+                                        (side_x || (y & 63u) != 0u) && y + s <= extent.y));
+                if (side_x) {
+                    reach.x = float(min(s, SIDE_REACH) << layer_shift);
+                }
+                if (side_y) {
+                    reach.y = float(min(s, SIDE_REACH) << layer_shift);
+                }
+                if (side_x && side_y) {
+                    reach = vec2(0.0);
+                }
                 float allowed = allowed_error(clip);
                 if (reach != vec2(0.0)) {
                     allowed = star_error(clip, allowed, reach);

@@ -100,37 +100,48 @@
 //! flyover at 1024 x 768 in 120 frames at tau 3 reached 3.069 px at frame 20, inside a triangle
 //! of a scale-8 vertex at level 0.003 whose neighbour, four samples nearer, wanted 0.149. So
 //! the morph pass (not the two-levels rule) takes, for `e(v) = τ / |J z(v)|` the error allowed
-//! at `v` and the corners `q_k = (x ± r_x, y ± r_y)` at `v`'s own height,
+//! at `v` and the corners `q_k = (x ± r_x, y ± r_y)` at `v`'s own height, the farthest point
+//! `p_k` of the segment from `v` to `q_k` that is in view (in clip space: inside the image and
+//! at least twice the near plane's depth away; [`in_view`]), and `I_k` the share of the segment
+//! in view,
 //!
 //! ```text
-//! e*(v) = e(v) - max_k seen(q_k) · max(e(v) - e(q_k), 0),      l*(v) = Λ(e*(v)),
+//! e*(v) = e(v) - max_k ω_k · max(e(v) - e(p_k), 0),   ω_k = clamp(I_k / STAR_RAMP, 0, 1),
+//! l*(v) = Λ(e*(v)).
 //! ```
 //!
-//! `seen(q)` being 0 off the image or behind the near plane, 1 once `q` is [`STAR_RAMP`] of
-//! the half-width inside every edge (and twice the near plane's depth away), linear between.
-//! The reach `r` is `s` along each axis in which `v` is not on a line between the tile's 4 x 4
-//! parts (nor on its border, nor within `s` of its mesh's last column or row) and 0 across one
-//! ([`TileMorph::reach`]), so every corner lies in the closed box of every part whose mesh
-//! holds `v` (on a line, on the line itself), at a height within the tile's range.
+//! The reach `r` ([`TileMorph::reach`]) is `s` along each axis in which `v` is not on a line
+//! between the tile's 4 x 4 parts (nor within `s` of its mesh's last column or row), and 0
+//! across such a line, so every `p_k` lies in the closed box of every part whose mesh holds `v`
+//! (on a line, on the line itself), at a height within the tile's range. On a tile's side
+//! (which is drawn at the tile's level, whatever its parts') `r` is `s` along the side, across
+//! a line or not, and [`SIDE_REACH`] samples at most across it, into both tiles.
 //!
-//! - **Within every part drawing the vertex.** A corner that counts is on screen in the box of
-//!   each part `P` holding `v`, so its `|J z|` is within that part's bound and `Λ(e(q_k))`
+//! - **Within every mesh drawing the vertex.** A point that counts is in view in the box of
+//!   each part `P` holding `v`, so its `|J z|` is within that part's bound and `Λ(e(p_k))`
 //!   within `P`'s drawn level `G_P` ("Part by part" below), as `l(v)` is when `v` is on
-//!   screen: `l*(v) <= G_P` for every such part. A vertex that a part's next level adds has
-//!   `w = 0` when it arrives, as before; a coarser part's fans, which take in a line's
-//!   vertices, are not bent by a finer part's needs. The test
-//!   `the_placed_level_stays_within_every_part_that_draws_the_vertex` checks it vertex by
-//!   vertex (its control: the whole star's box, across lines, would break it).
-//! - **Continuous** in the camera: `seen` ramps, and max and clamp are continuous; a point
-//!   coming into view raises the levels near it over [`STAR_RAMP`] of the image, not at once.
-//!   (With a ramp of 0.1 the 48 s Puget flyover at 30 frames a second moved a vertex 0.31 px a
-//!   frame for three frames; at 0.3, 0.187 px at most, as without the star.)
-//! - **The same in every tile** holding a vertex of a tile's side: its corners lie on the side,
-//!   computed from the same integers with the same table and arithmetic.
-//! - **Not a bound**: the corners stand at the vertex's height, not on the surface, and
-//!   `|J z|` inside the box is not bounded by its corners' (its depth is, being affine).
-//!   Measured: the flight above 2.927 px at tau 3 (4.996 at tau 5, 5.035 before), the 48 s
-//!   Puget flyover at 30 frames a second 2.906 px (2.982 before).
+//!   screen: `l*(v) <= G_P` for every such part. A side's vertex takes the side's table, and
+//!   each tile's parts along the side cover, under that table, the strip `SIDE_REACH` deep on
+//!   both sides of the side ([`crate::lod::morph_parts`]), so its `l*` is within the level of
+//!   each tile drawing it. A vertex that a mesh's next level adds has `w = 0` when it arrives,
+//!   as before; a coarser part's fans, which take in a line's vertices, are not bent by a finer
+//!   part's needs. The test `the_placed_level_stays_within_every_part_that_draws_the_vertex`
+//!   checks it vertex by vertex (its control: the whole star's box, across lines, would break
+//!   it).
+//! - **Continuous** in the camera: the ends of the in-view share move continuously, and its
+//!   weight vanishes with it; max and clamp are continuous. A corner leaving the image does not
+//!   switch off: its point slides along the segment to the edge. (The rule before weighted
+//!   each corner itself by how far inside the image it was, over 0.3 of the half-width, so a
+//!   vertex near the edges of the image, whose corners were off it, was barely raised.)
+//! - **The same in every tile** holding a vertex of a tile's side: its corners are computed
+//!   from the same integers with the same table and arithmetic.
+//! - **Not a bound**: the points stand at the vertex's height, not on the surface, and
+//!   `|J z|` inside the box is not bounded by that on the segments (its depth is, being
+//!   affine). Measured (bench/README.md, "Over the side"): the 4K mirror's 30 frames a second
+//!   flight at tau 1 1.043 px before, 0.975 px now; the Puget flyover at 1024 x 768 in 120
+//!   frames 2.927 and 4.996 px at tau 3 and 5 before. The case that showed it: a coast
+//!   cliff, a side vertex at level 0.80 whose star reached neither across the side nor along it
+//!   past a line, 26 samples from a sample that needed 0.96.
 //!
 //! # The level a tile is drawn at
 //!
@@ -199,7 +210,7 @@
 //! screen only where that part's box covers it. The error meter's `pop_px` measures what is
 //! left.
 
-use glam::{Mat4, Vec2, Vec3, Vec4};
+use glam::{Mat4, Vec3, Vec4};
 
 use crate::camera::{View, NEAR};
 use crate::interface::{LevelCoefficients, MorphFrame};
@@ -207,22 +218,32 @@ pub use crate::levels::{LevelTable, MAX_LEVELS};
 use crate::terrain::Terrain;
 
 mod hierarchy;
+mod star;
 mod two_levels;
 
 use hierarchy::hierarchical;
 pub use hierarchy::{block_points, orphan, parents, scale_of};
+pub use star::in_view;
 pub use two_levels::{height_slope, morphed_height, weights};
+
+/// How far (samples) the star of a vertex on a tile's side reaches across the side, into both
+/// tiles ([`TileMorph::reach`]; `SIDE_REACH` of the shader interface): the drawn level covers
+/// that strip ([`crate::lod::morph_parts`]), so the deeper the reach, the finer the parts along
+/// the sides. Measured (bench/README.md, "Over the side"): 16 brings the 4K mirror flight
+/// within tau for +0-1.2% triangles; 64 cost up to 10% more triangles and doubled a pop.
+pub use spirv::flags::SIDE_REACH;
 
 /// The share of `tau` the vertex rule and the drawn level aim at: the excess over the blend's
 /// bound where the levels of a point's vertices differ (module header, "The morph" and "Over
-/// the star") is not bounded by the rule. With the star, the Puget flyover in 120 frames at
-/// 1024 x 768 measured 0.6% over the aim at tau 3 and 3.0% at tau 5 (5.5% and 3.8% before it);
-/// the test flights stay under the aim. 3% is kept for it.
+/// the star") is not bounded by the rule. With the star over tile sides and to the view's
+/// edge, the Puget flyover in 120 frames at 1024 x 768 measured 2.882 and 4.757 px at tau 3 and
+/// 5 (within the aim), the 4K mirror's flyover 0.975 px at tau 1 (0.5% over the aim, 4.3% over
+/// tau before); the test flights stay under the aim. 3% is kept for it.
 pub const TAU_MARGIN: f64 = 0.97;
 
-/// How far inside the image, as a share of its half-width, a corner of a vertex's star counts
-/// fully towards the vertex's level (module header, "Over the star"): a point coming into
-/// view raises the levels near it over this much of the image, not at once.
+/// How much of the segment from a vertex to a corner of its star must be in view for the
+/// corner to count fully towards the vertex's level (module header, "Over the star"): a
+/// segment coming into view raises the vertex as it does, not at once.
 pub const STAR_RAMP: f32 = 0.3;
 
 /// The frame's constants of the vertex rule for `view` at tolerance `tau` (`MorphFrame` of the
@@ -292,19 +313,6 @@ pub fn level_for(e: f32, c: &LevelCoefficients) -> f32 {
     (0..4)
         .map(|k| term(c.a_lo[k], c.b_lo[k]) + term(c.a_hi[k], c.b_hi[k]))
         .sum()
-}
-
-/// How far a point at clip position `q` is inside the image, as a weight (module header,
-/// "Over the star"): 0 off it or behind the near plane, 1 once it is [`STAR_RAMP`] of the
-/// half-width inside every edge and twice the near plane's depth away, linear between, as
-/// `seen` in `morph.comp`.
-pub fn seen(m: &MorphFrame, q: Vec4) -> f32 {
-    if q.w <= m.near {
-        return 0.0;
-    }
-    let inside = (q.w - q.x.abs()).min(q.w - q.y.abs());
-    let near = ((q.w - m.near) / m.near).clamp(0.0, 1.0);
-    (inside / (m.ramp * q.w)).clamp(0.0, 1.0) * near
 }
 
 /// What a morphing draw of one tile depends on, as its record and the frame's constants give
@@ -383,54 +391,6 @@ impl TileMorph {
             rule: MorphRule::Hierarchical,
             parts: None,
         }
-    }
-
-    /// The level the morph pass places the vertex at (module header, "Over the star"), as
-    /// `morph.comp` computes it: [`TileMorph::vertex`]'s, raised towards the levels at the
-    /// seen corners of its star's box within the part grid ([`TileMorph::reach`]).
-    pub fn placed(&self, x: u32, y: u32, own: f32) -> f32 {
-        self.level_reaching(x, y, own, self.reach(x, y))
-    }
-
-    /// How far (samples, east and north) the morph pass looks from the vertex at `(x, y)` for
-    /// its star: its scale along each axis in which it is not on a line between parts (nor on
-    /// the tile's border, nor on the mesh's last column or row), else 0. The corners of that
-    /// box lie in every part whose closed box holds the vertex.
-    pub fn reach(&self, x: u32, y: u32) -> Vec2 {
-        let s = scale_of(x, y);
-        let part = tiles::parts::PART_CELLS;
-        let reach = |c: u32, last: u32| {
-            if !c.is_multiple_of(part) && c + s <= last {
-                s as f32
-            } else {
-                0.0
-            }
-        };
-        Vec2::new(reach(x, self.extent[0]), reach(y, self.extent[1]))
-    }
-
-    /// The vertex's level raised towards the levels at the corners `(x ± reach.x, y ±
-    /// reach.y)` at its height, each as far as it is [`seen`]: the placed level at the rule's
-    /// [`TileMorph::reach`] (other reaches are the tests' controls).
-    pub fn level_reaching(&self, x: u32, y: u32, own: f32, reach: Vec2) -> f32 {
-        let (relative, _) = self.vertex(x, y, own);
-        let clip = self.view_proj * relative.extend(1.0);
-        let mut e = allowed_error(&self.frame, clip);
-        if reach != Vec2::ZERO {
-            // In base samples: a pyramid layer's are 2^layer apart.
-            let reach = reach * (1u32 << self.layer) as f32;
-            let east = self.view_proj.x_axis * (reach.x * self.camera.w);
-            let south = self.view_proj.y_axis * (-reach.y * self.spacing_y);
-            let lift = (0..4)
-                .map(|k| {
-                    let q = (clip + if k & 1 == 0 { -east } else { east })
-                        + if k & 2 == 0 { -south } else { south };
-                    seen(&self.frame, q) * (e - allowed_error(&self.frame, q))
-                })
-                .fold(0.0f32, f32::max);
-            e -= lift;
-        }
-        level_for(e, &self.tables[table_of(x, y)]).min(self.cap)
     }
 
     /// The vertex's unmorphed position relative to the camera and its level `Λ(τ / S)` at its
