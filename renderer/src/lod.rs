@@ -256,11 +256,11 @@ pub fn morph_level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: 
 /// each part, [`morph_level`]'s rule over the part alone, the interior table over the part's
 /// box (the whole tile's height range, in 2 x 2 pieces) and each side's table over the strip
 /// across the stretch of the side that bounds the part. A part no piece of which touches the
-/// frustum has no
-/// vertex on screen and gets level 0. Every on-screen vertex lies in the closed box of each
-/// part whose mesh holds it (a vertex on a line between parts is in the boxes of all parts
-/// there), so its level is within each of those parts' levels: the cover of [`morph_level`],
-/// part by part. The tile's level, the largest of its parts', is at most [`morph_level`]'s.
+/// frustum has no vertex on screen and gets level 0. Every on-screen vertex lies in the closed
+/// box of each part whose mesh holds it (a vertex on a line between parts is in the boxes of
+/// all parts there), so its level is within each of those parts' levels: the cover of
+/// [`morph_level`], part by part. The tile's level, the largest of its parts', is at most
+/// [`morph_level`]'s.
 pub fn morph_parts(
     view: &View,
     camera: DVec3,
