@@ -1562,8 +1562,9 @@ fn prefetching_under_a_tight_budget_stays_crack_free() {
     assert!(s["prefetch_hits"].as_u64() > Some(0), "{s}");
 }
 
-/// The measure prefetching exists for: on the Puget flyover under 0.05 MiB a frame (index arrays
-/// built on the GPU, so the budget pays for blocks only), tiles arrive late
+/// The measure prefetching exists for: on the Puget flyover under 0.025 MiB a frame (index
+/// arrays built on the GPU, so the budget pays for blocks only, their positions: 0.05 MiB
+/// made too few tiles late once the morph rows stayed on disk), tiles arrive late
 /// after the cold start without prefetching (the control), and with it (our predictor, and the
 /// next level's index array sent ahead as a spare) far fewer do, validation silent. The CPU
 /// limit is lifted so a loaded machine cannot change what is predicted.
@@ -1585,7 +1586,7 @@ fn prefetching_draws_fewer_tiles_coarser_after_the_cold_start() {
             "--tau",
             "1",
             "--upload-budget-mb",
-            "0.05",
+            "0.025",
             "--prefetch-ms",
             budget_ms,
             // Each tile at one level: drawn part by part, the flyover's tiles want coarser
