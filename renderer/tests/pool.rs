@@ -107,7 +107,8 @@ fn check_pool(
     (tiles, bytes, wrong_if_swapped)
 }
 
-fn fly(force_staging: bool, index_arrays: IndexArrays, morph_rows: bool) {
+/// The Puget sample's tile set, checked, and lavapipe with the validation layer on.
+fn puget_on_a_device() -> (tempfile::TempDir, Terrain, Gpu) {
     let dir = tempfile::tempdir().expect("temp dir");
     let set = common::puget(dir.path());
     let terrain = common::open_checked(&set);
@@ -116,6 +117,17 @@ fn fly(force_staging: bool, index_arrays: IndexArrays, morph_rows: bool) {
         ..Default::default()
     })
     .expect("Vulkan device");
+    (dir, terrain, gpu)
+}
+
+/// Frame `k` of `n` along `path`: its camera and its time on the path.
+fn along(path: &CameraPath, k: u64, n: u64) -> (Camera, f64) {
+    let t = path.keys[0].time + path.duration() * k as f64 / n as f64;
+    (path.at(t), t)
+}
+
+fn fly(force_staging: bool, index_arrays: IndexArrays, morph_rows: bool) {
+    let (_dir, terrain, gpu) = puget_on_a_device();
     let memory = MemoryOptions {
         gpu_budget_bytes: 3 << 20,
         upload_budget: 256 << 10,
@@ -134,8 +146,7 @@ fn fly(force_staging: bool, index_arrays: IndexArrays, morph_rows: bool) {
     let mut records: Vec<FrameRecord> = Vec::new();
     // Coarse first (tiles take small chunks), then tau 1 (they refine, outgrow and move).
     for k in 0..40u64 {
-        let t = path.keys[0].time + path.duration() * k as f64 / 40.0;
-        let camera: Camera = path.at(t);
+        let (camera, t) = along(&path, k, 40);
         let input = FrameInput {
             camera: &camera,
             time_s: t,
@@ -222,14 +233,7 @@ fn direct_writes_of_sent_index_arrays_read_back_from_the_pool() {
 /// part with discrete levels frame by frame: each frame's pixels and triangles, and the block
 /// bytes sent.
 fn frames(morph_rows: bool, shader: MorphShader) -> (Vec<(Vec<u8>, u64)>, u64) {
-    let dir = tempfile::tempdir().expect("temp dir");
-    let set = common::puget(dir.path());
-    let terrain = common::open_checked(&set);
-    let gpu = Gpu::new(&GpuOptions {
-        validation: true,
-        ..Default::default()
-    })
-    .expect("Vulkan device");
+    let (_dir, terrain, gpu) = puget_on_a_device();
     let memory = MemoryOptions {
         upload_budget: u64::MAX,
         prefetch: PrefetchOptions {
@@ -243,8 +247,7 @@ fn frames(morph_rows: bool, shader: MorphShader) -> (Vec<(Vec<u8>, u64)>, u64) {
     let path = CameraPath::flyover(&terrain);
     let mut done = Vec::new();
     for k in 0..30u64 {
-        let t = path.keys[0].time + path.duration() * k as f64 / 30.0;
-        let camera: Camera = path.at(t);
+        let (camera, t) = along(&path, k, 30);
         let input = FrameInput {
             camera: &camera,
             time_s: t,
