@@ -23,10 +23,13 @@ use std::collections::HashMap;
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
+use tiles::build::Numbering;
 use tiles::compact::{parents, scale_of};
 use tiles::TileSet;
 
 const SIDE: usize = 257;
+const DECODE: Numbering = Numbering::Decode;
+const FIRST_USE: Numbering = Numbering::FirstUse;
 
 /// Byte counts and bit counts summed over a set's base tiles.
 #[derive(Default)]
@@ -180,17 +183,24 @@ fn weigh_tile(tile: &tiles::format::Tile, blob: &[u8], w: &mut Weights) -> Resul
         })
         .collect();
     let started = std::time::Instant::now();
-    let rebuilt = tiles::build::rebuild_tile(&tile.header, tile.levels(), &coded);
+    let rebuilt = tiles::build::rebuild_tile(&tile.header, tile.levels(), &coded, DECODE);
     w.rebuild_seconds += started.elapsed().as_secs_f64();
-    if rebuilt != blob {
+    // Sets written before the decoding order numbered blocks by first use.
+    let numbering = if rebuilt == blob {
+        DECODE
+    } else if tiles::build::rebuild_tile(&tile.header, tile.levels(), &coded, FIRST_USE) == blob {
+        FIRST_USE
+    } else {
         bail!("its blob does not follow from its vertices and heights");
-    }
+    };
     // And the bit stream itself: its bytes, and the same blob from them.
     let stream = tiles::compact::encode(tile);
     w.encoded += stream.len() as u64;
     w.tables += (std::mem::size_of::<tiles::format::TileHeader>()
         + blocks.len() * std::mem::size_of::<tiles::format::LevelEntry>()) as u64;
-    if tiles::compact::rebuild(&tile.header, tile.levels(), &stream).as_deref() != Ok(blob) {
+    if tiles::compact::rebuild(&tile.header, tile.levels(), &stream, numbering).as_deref()
+        != Ok(blob)
+    {
         bail!("its compact bit stream does not rebuild its blob");
     }
     let present = |at: usize, j: usize| block[at] <= j;

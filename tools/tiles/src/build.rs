@@ -363,7 +363,21 @@ struct LevelOut {
     border: [Vec<u32>; 4],
 }
 
-/// The tile's vertices in index order: blocks by introducing level, each in first-use order.
+/// How the vertices a level adds are numbered within its block.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Numbering {
+    /// In the order the level's fans first use them (files written before the compact levels'
+    /// version 5: version 3 sets and version 4 compact sets).
+    FirstUse,
+    /// In the order the level's compact stream decodes them ([`crate::compact`]): first the
+    /// vertices without both parents among the levels so far, row-major, then the others by
+    /// scale, coarsest first, each scale row-major. A GPU decoding the stream then writes the
+    /// block the file describes, with no permutation sent beside it.
+    Decode,
+}
+
+/// The tile's vertices in index order: blocks by introducing level, each in the order its
+/// [`Numbering`] gives.
 struct VertexOrder {
     /// Global vertex index of each lattice point (`NO_VERTEX` if not a vertex yet).
     index_of: Vec<u32>,
@@ -372,12 +386,61 @@ struct VertexOrder {
 }
 
 impl VertexOrder {
+    fn new() -> Self {
+        VertexOrder {
+            index_of: vec![NO_VERTEX; TILE_SIZE * TILE_SIZE],
+            lattice_of: Vec::new(),
+        }
+    }
+
     fn index(&mut self, l: usize) -> u32 {
         if self.index_of[l] == NO_VERTEX {
             self.index_of[l] = self.lattice_of.len() as u32;
             self.lattice_of.push(l as u32);
         }
         self.index_of[l]
+    }
+
+    /// Numbers the vertices the mesh of `leaves` adds in [`Numbering::Decode`]'s order, before
+    /// its fans are emitted (which then find every vertex numbered).
+    fn number_for_decoding(&mut self, mesher: &Mesher, leaves: &[Quad]) {
+        let mut new = Vec::new();
+        let mut fan = Vec::with_capacity(10);
+        for &q in leaves {
+            fan.clear();
+            mesher.fan(q, &mut fan);
+            for &(x, y) in &fan {
+                let l = lattice(x, y);
+                if self.index_of[l] == NO_VERTEX {
+                    // Marked as met (not a vertex index: no block is that long).
+                    self.index_of[l] = NO_VERTEX - 1;
+                    new.push(l as u32);
+                }
+            }
+        }
+        let is_vertex = |index_of: &[u32], (x, y): (u32, u32)| index_of[lattice(x, y)] != NO_VERTEX;
+        let keys: Vec<(u32, u32, u32)> = new
+            .iter()
+            .map(|&l| {
+                let (x, y) = xy(l);
+                match crate::compact::parents(x, y) {
+                    Some([a, b])
+                        if is_vertex(&self.index_of, a) && is_vertex(&self.index_of, b) =>
+                    {
+                        (1, 8 - crate::compact::scale_of(x, y).trailing_zeros(), l)
+                    }
+                    _ => (0, 0, l),
+                }
+            })
+            .collect();
+        let mut order: Vec<usize> = (0..new.len()).collect();
+        order.sort_unstable_by_key(|&i| keys[i]);
+        for &l in &new {
+            self.index_of[l as usize] = NO_VERTEX;
+        }
+        for i in order {
+            self.index(new[i] as usize);
+        }
     }
 }
 
@@ -427,10 +490,10 @@ fn emit_fans(
 }
 
 /// One level rebuilt by [`fans_from_vertices`]: its block (its new vertices, `(x, y)` in
-/// first-use order) and its index array (fans joined by `u32::MAX` restarts).
+/// [`Numbering::Decode`]'s order) and its index array (fans joined by `u32::MAX` restarts).
 pub type RebuiltLevel = (Vec<(u32, u32)>, Vec<u32>);
 
-/// Each level's block (its new vertices, `(x, y)` in first-use order) and index array, from
+/// Each level's block (its new vertices, `(x, y)` in decoding order) and index array, from
 /// the levels' vertex sets alone (`sets[j]`: the vertices level `j` adds, in any order), as
 /// [`build_tile`] emits them: the decoding half of issue 28's compact levels, where the fans
 /// and the vertices' order are not stored but follow from which vertices each level has
@@ -438,10 +501,7 @@ pub type RebuiltLevel = (Vec<(u32, u32)>, Vec<u32>);
 pub fn fans_from_vertices(samples: &TileSamples, sets: &[Vec<(u32, u32)>]) -> Vec<RebuiltLevel> {
     let quantiser = Quantiser::for_tile(0.0, 1.0);
     let mut vertex = vec![false; TILE_SIZE * TILE_SIZE];
-    let mut vertices = VertexOrder {
-        index_of: vec![NO_VERTEX; TILE_SIZE * TILE_SIZE],
-        lattice_of: Vec::new(),
-    };
+    let mut vertices = VertexOrder::new();
     let mut cache = FifoCache::new(TILE_SIZE * TILE_SIZE);
     // One mesher for all levels: a finer level's set holds a coarser one's, so each level only
     // adds splits and activations to the last (as rebuild_tile does).
@@ -454,6 +514,7 @@ pub fn fans_from_vertices(samples: &TileSamples, sets: &[Vec<(u32, u32)>]) -> Ve
             mesher.extend_to_vertices(|(x, y)| vertex[lattice(x, y)]);
             let leaves = p_order(mesher.leaves());
             let start = vertices.lattice_of.len();
+            vertices.number_for_decoding(&mesher, &leaves);
             let (indices, _) = emit_fans(&mesher, &leaves, &mut vertices, &mut cache);
             let block = vertices.lattice_of[start..]
                 .iter()
@@ -474,6 +535,7 @@ pub fn rebuild_tile(
     header: &TileHeader,
     entries: &[LevelEntry],
     sets: &[Vec<(u32, u32, u16)>],
+    numbering: Numbering,
 ) -> Vec<u8> {
     let quantiser = Quantiser {
         base: header.height_base,
@@ -490,7 +552,7 @@ pub fn rebuild_tile(
         code[lattice(x, y)] = c;
     }
     let mut mesher = Mesher::new(&samples, &quantiser, 1.0);
-    let mut assembly = Assembly::new(sets.len(), samples.mesh_max(), Output::Tile);
+    let mut assembly = Assembly::new(sets.len(), samples.mesh_max(), Output::Tile, numbering);
     let mut vertex = vec![false; TILE_SIZE * TILE_SIZE];
     for (set, stored) in sets.iter().zip(entries) {
         for &(x, y, _) in set {
@@ -642,7 +704,7 @@ fn mesh_tile(
     let mut mesher = Mesher::new(&samples, &quantiser, grid.spacing_x.min(grid.spacing_y));
     let mesh_max = samples.mesh_max();
     let n = params.levels as usize;
-    let mut assembly = Assembly::new(n, mesh_max, output);
+    let mut assembly = Assembly::new(n, mesh_max, output, Numbering::Decode);
     let code_of = |l: usize| quantiser.quantise(samples.heights[l]);
     for level in 0..n {
         let e = params.level_error(level as u32).max(agreement.floor);
@@ -748,6 +810,7 @@ fn mesh_tile(
 /// set, so that the two make the same bytes by construction.
 struct Assembly {
     output: Output,
+    numbering: Numbering,
     levels_wanted: usize,
     mesh_max: (u32, u32),
     vertices: VertexOrder,
@@ -764,15 +827,13 @@ struct Assembly {
 }
 
 impl Assembly {
-    fn new(levels: usize, mesh_max: (u32, u32), output: Output) -> Self {
+    fn new(levels: usize, mesh_max: (u32, u32), output: Output, numbering: Numbering) -> Self {
         Assembly {
             output,
+            numbering,
             levels_wanted: levels,
             mesh_max,
-            vertices: VertexOrder {
-                index_of: vec![NO_VERTEX; TILE_SIZE * TILE_SIZE],
-                lattice_of: Vec::new(),
-            },
+            vertices: VertexOrder::new(),
             levels: Vec::with_capacity(levels),
             surfaces: Vec::with_capacity(levels),
             finest_surface: Vec::new(),
@@ -798,6 +859,9 @@ impl Assembly {
         let vertices = &mut self.vertices;
         let block_start = vertices.lattice_of.len();
         let (indices, triangles) = if full {
+            if self.numbering == Numbering::Decode {
+                vertices.number_for_decoding(mesher, leaves);
+            }
             emit_fans(mesher, leaves, vertices, &mut self.cache)
         } else {
             let mut fan = Vec::with_capacity(10);

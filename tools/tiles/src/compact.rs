@@ -269,11 +269,23 @@ pub fn encode(tile: &Tile) -> Vec<u8> {
 /// `levels` levels, or why the stream is not one: it ends early, a vertex is out of the grid
 /// or sent twice, or a height comes out of the code range.
 pub fn decode(bytes: &[u8], levels: u32) -> Result<LevelSets, String> {
+    decode_levels(bytes, levels).map(|(sets, _)| sets)
+}
+
+/// [`decode`], with each level's bytes in the stream: what a decoder of one level (the GPU's,
+/// `renderer::vulkan::decode`) is handed. Each set is in the order a level's vertices are
+/// decoded: the raw ones as sent, then the walk's in the walk's order.
+pub fn decode_levels(
+    bytes: &[u8],
+    levels: u32,
+) -> Result<(LevelSets, Vec<std::ops::Range<usize>>), String> {
     let mut reader = Reader { bytes, at: 0 };
+    let mut ranges = Vec::with_capacity(levels as usize);
     let mut code = vec![0u16; TILE_SIZE * TILE_SIZE];
     let mut known = vec![false; TILE_SIZE * TILE_SIZE];
     let mut sets = Vec::with_capacity(levels as usize);
     for j in 0..levels {
+        let start = reader.at / 8;
         let mut set = Vec::new();
         let raw = reader.read(16)?;
         for _ in 0..raw {
@@ -324,6 +336,7 @@ pub fn decode(bytes: &[u8], levels: u32) -> Result<LevelSets, String> {
         }
         reader.align();
         sets.push(set);
+        ranges.push(start..reader.at / 8);
     }
     if reader.at / 8 != bytes.len() {
         return Err(format!(
@@ -331,18 +344,21 @@ pub fn decode(bytes: &[u8], levels: u32) -> Result<LevelSets, String> {
             bytes.len() - reader.at / 8
         ));
     }
-    Ok(sets)
+    Ok((sets, ranges))
 }
 
-/// A tile's blob from its header, its level entries and its compact levels: [`decode`], then
-/// [`crate::build::rebuild_tile`].
+/// A tile's blob from its header, its level entries and its compact levels, its blocks numbered
+/// as `numbering` says: [`decode`], then [`crate::build::rebuild_tile`].
 pub fn rebuild(
     header: &TileHeader,
     entries: &[LevelEntry],
     bytes: &[u8],
+    numbering: crate::build::Numbering,
 ) -> Result<Vec<u8>, String> {
     let sets = decode(bytes, header.levels)?;
-    Ok(crate::build::rebuild_tile(header, entries, &sets))
+    Ok(crate::build::rebuild_tile(
+        header, entries, &sets, numbering,
+    ))
 }
 
 #[cfg(test)]

@@ -24,9 +24,13 @@
 //!                             (see [`crate::texture`] for the layout and the texel mapping)
 //! ```
 //!
-//! Version 4 ([`FLAG_COMPACT_LEVELS`]) keeps each tile's header and level table, then the
+//! Version 5 ([`FLAG_COMPACT_LEVELS`]) keeps each tile's header and level table, then the
 //! crc32 of the version 3 blob and the levels as [`crate::compact`]'s bit stream, from which a
-//! reader rebuilds the version 3 blob; everything else is as in version 3.
+//! reader rebuilds the version 3 blob; everything else is as in version 3. Its blocks number
+//! their vertices in the order the stream decodes them ([`Numbering::Decode`], as version 3
+//! files are written since); version 4, read still, is the same with each block in the order
+//! its fans first use its vertices ([`Numbering::FirstUse`]), which only a rebuild of the
+//! whole tile on the CPU can give.
 //!
 //! Version 1 files (no texture fields) are still read, as tile sets without textures; version 2
 //! files (no pyramid: the field was reserved and zero) as tile sets without a pyramid.
@@ -69,6 +73,7 @@ use std::path::{Path, PathBuf};
 
 use bytemuck::{Pod, Zeroable};
 
+use crate::build::Numbering;
 use crate::mesh::TILE_CELLS;
 use crate::quantise::Quantiser;
 use crate::texture;
@@ -78,7 +83,18 @@ pub const TILE_MAGIC: [u8; 4] = *b"TILE";
 pub const VERSION: u32 = 3;
 /// The version of files whose tiles hold compact levels ([`FLAG_COMPACT_LEVELS`]); other files
 /// are still written as [`VERSION`], which readers of version 3 read.
-pub const COMPACT_VERSION: u32 = 4;
+pub const COMPACT_VERSION: u32 = 5;
+/// The first compact version, read still: its blocks in [`Numbering::FirstUse`] order.
+pub const FIRST_COMPACT_VERSION: u32 = 4;
+
+/// How a compact file of `version` numbers its blocks' vertices.
+pub fn numbering(version: u32) -> Numbering {
+    if version == FIRST_COMPACT_VERSION {
+        Numbering::FirstUse
+    } else {
+        Numbering::Decode
+    }
+}
 /// The oldest version this reader reads: version 1 had no textures and zeros in their fields.
 pub const OLDEST_VERSION: u32 = 1;
 
@@ -88,7 +104,7 @@ pub const OLDEST_VERSION: u32 = 1;
 /// tiles, bit for bit. Files without it (built with `--independent-sides`, or by older
 /// builders) are read the same way; the renderer closes their morphing seams with slivers.
 pub const FLAG_SHARED_SIDES: u32 = 1;
-/// `FileHeader::flags` (version 4, and only there): each tile's blob holds its header and level
+/// `FileHeader::flags` (versions 4 and 5, and only there): each tile's blob holds its header and level
 /// table as version 3 does, the crc32 of its version 3 blob, then its levels as
 /// [`crate::compact`]'s bit stream in place of the sections; a reader rebuilds the version 3
 /// blob from them ([`crate::compact::rebuild`], once per tile, kept), checks it against that
@@ -120,7 +136,12 @@ fn table_len(levels: u32) -> usize {
 /// as [`Tile::parse`] checks it, the stream as [`crate::compact::decode`] does, and the blob
 /// rebuilt must have the stored table and checksum (the file's own checksum covers the stored
 /// bytes; this one, what a decoder made of them).
-fn rebuilt(stored: &[u8], tx: u32, ty: u32, levels: u32, step: f32) -> Result<Vec<u8>, String> {
+fn rebuilt(
+    stored: &[u8],
+    (tx, ty): (u32, u32),
+    (levels, step): (u32, f32),
+    numbering: Numbering,
+) -> Result<Vec<u8>, String> {
     let table = table_len(levels);
     if stored.len() < table + 4 {
         return Err(format!(
@@ -133,7 +154,7 @@ fn rebuilt(stored: &[u8], tx: u32, ty: u32, levels: u32, step: f32) -> Result<Ve
     let entries = stored_entries(stored, levels);
     check_table(&header, &entries)?;
     let crc = u32::from_le_bytes(stored[table..table + 4].try_into().expect("4 bytes"));
-    let blob = crate::compact::rebuild(&header, &entries, &stored[table + 4..])?;
+    let blob = crate::compact::rebuild(&header, &entries, &stored[table + 4..], numbering)?;
     if blob.get(..table) != Some(&stored[..table]) {
         return Err("its compact levels do not rebuild its level table".into());
     }
@@ -647,7 +668,13 @@ impl TileSetWriter {
         let mut out = blob[..table].to_vec();
         out.extend(crc32fast::hash(blob).to_le_bytes());
         out.extend(crate::compact::encode(&tile));
-        if rebuilt(&out, tx, ty, self.header.levels, step).map_err(internal)? != blob {
+        let made = rebuilt(
+            &out,
+            (tx, ty),
+            (self.header.levels, step),
+            Numbering::Decode,
+        );
+        if made.map_err(internal)? != blob {
             return Err(internal("its compact levels do not rebuild it".into()));
         }
         Ok(out)
@@ -962,9 +989,10 @@ impl TileSet {
                 header.version
             )));
         }
-        if (header.version == COMPACT_VERSION) != (header.flags & FLAG_COMPACT_LEVELS != 0) {
+        let compact_version = header.version >= FIRST_COMPACT_VERSION;
+        if compact_version != (header.flags & FLAG_COMPACT_LEVELS != 0) {
             return Err(invalid(format!(
-                "format version {} with flags {:#x}: compact levels are version {COMPACT_VERSION}'s alone",
+                "format version {} with flags {:#x}: compact levels are versions {FIRST_COMPACT_VERSION} and {COMPACT_VERSION}'s alone",
                 header.version, header.flags
             )));
         }
@@ -1581,8 +1609,14 @@ impl TileSet {
             if check && crc32fast::hash(stored) != e.crc {
                 return Err("checksum mismatch (corrupted file)".into());
             }
-            rebuilt(stored, tx, ty, self.header.levels, self.header.height_step)
-                .map(Vec::into_boxed_slice)
+            let numbering = numbering(self.header.version);
+            rebuilt(
+                stored,
+                (tx, ty),
+                (self.header.levels, self.header.height_step),
+                numbering,
+            )
+            .map(Vec::into_boxed_slice)
         });
         made.as_deref().map_err(Clone::clone)
     }

@@ -1098,5 +1098,11 @@ fn reseal(
     for (e, &u) in entries.iter_mut().zip(units) {
         e.morph_unit = u as f32;
     }
-    Ok(crate::build::rebuild_tile(&tile.header, &entries, &sets))
+    let numbering = crate::build::Numbering::Decode;
+    Ok(crate::build::rebuild_tile(
+        &tile.header,
+        &entries,
+        &sets,
+        numbering,
+    ))
 }

@@ -116,3 +116,79 @@ fn compact_sets_read_back_as_built_and_refuse_a_damaged_stream() {
     std::fs::write(&undamaged, &same).expect("write");
     assert!(TileSet::open(&undamaged).expect("open").tile(1, 0).is_ok());
 }
+
+/// Version 4 compact files, written before blocks were numbered in decoding order, still read:
+/// their tiles rebuild in first-use order, which their checksums vouch for. Made here from a
+/// version 5 build by rebuilding each tile in that order and storing its checksum, as the
+/// version 4 writer did. The control: the same tiles under version 5 fail their checksums.
+#[test]
+fn version_4_compact_sets_still_read_in_first_use_order() {
+    use tiles::build::Numbering;
+    use tiles::format::{FileHeader, LevelEntry, TileHeader, FIRST_COMPACT_VERSION};
+
+    let (w, h) = (400, 300);
+    let heights = srtm3_crop(500, 300, w, h);
+    let grid = common::srtm3_grid(&heights, (w, h));
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("compact.vkt");
+    let meta = TileSetMeta {
+        compact: true,
+        ..TileSetMeta::default()
+    };
+    build_tileset(&grid, &BuildParams::default(), &meta, &path, &|| {}).expect("compact");
+    let built = TileSet::open(&path).expect("open");
+    let levels = built.header().levels;
+    let table =
+        std::mem::size_of::<TileHeader>() + levels as usize * std::mem::size_of::<LevelEntry>();
+    let mut bytes = std::fs::read(&path).expect("read");
+    let mut first_use = Vec::new();
+    let mut reordered = 0;
+    for ty in 0..built.header().tiles_y {
+        for tx in 0..built.header().tiles_x {
+            let e = built.dir_entry(tx, ty).expect("entry");
+            let at = e.offset as usize;
+            let stored = &bytes[at..at + e.len as usize];
+            let (header, entries) = built.tile_table(tx, ty).expect("table");
+            let blob = tiles::compact::rebuild(
+                &header,
+                &entries,
+                &stored[table + 4..],
+                Numbering::FirstUse,
+            )
+            .expect("rebuilt");
+            reordered += usize::from(Some(&blob[..]) != built.blob(tx, ty));
+            let crc = crc32fast::hash(&blob).to_le_bytes();
+            bytes[at + table..at + table + 4].copy_from_slice(&crc);
+            first_use.push(((tx, ty), blob));
+        }
+    }
+    assert!(
+        reordered > 0,
+        "no tile's order differs: the test proves nothing"
+    );
+    let version_at = std::mem::offset_of!(FileHeader, version);
+    let write = |version: u32, name: &str| {
+        let mut b = bytes.clone();
+        b[version_at..version_at + 4].copy_from_slice(&version.to_le_bytes());
+        reseal(&mut b).expect("reseal");
+        let p = dir.path().join(name);
+        std::fs::write(&p, &b).expect("write");
+        TileSet::open(&p).expect("open")
+    };
+    let old = write(FIRST_COMPACT_VERSION, "version4.vkt");
+    assert_eq!(old.header().version, FIRST_COMPACT_VERSION);
+    for ((tx, ty), blob) in &first_use {
+        old.tile(*tx, *ty).expect("a version 4 tile reads");
+        assert_eq!(old.blob(*tx, *ty), Some(&blob[..]), "tile {tx},{ty}");
+    }
+    let report = verify(&old, Some(&grid));
+    assert!(report.ok(), "{:#?}", report.problems);
+    // The control: under version 5 the same tiles rebuild in decoding order, which the
+    // first-use checksums do not vouch for.
+    let wrong = write(COMPACT_VERSION, "version5.vkt");
+    let refused = first_use
+        .iter()
+        .filter(|((tx, ty), _)| wrong.tile(*tx, *ty).is_err())
+        .count();
+    assert_eq!(refused, reordered);
+}

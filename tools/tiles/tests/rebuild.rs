@@ -9,7 +9,7 @@
 
 mod common;
 
-use tiles::build::{fans_from_vertices, rebuild_tile, RebuiltLevel};
+use tiles::build::{fans_from_vertices, rebuild_tile, Numbering, RebuiltLevel};
 use tiles::compact;
 use tiles::mesh::TileSamples;
 use tiles::{build_tileset, BuildParams, Grid, TileSet, TileSetMeta};
@@ -121,14 +121,15 @@ fn compare(
                     coded,
                     "tile {tx},{ty}: the stream's vertices"
                 );
-                let from_stream = compact::rebuild(&tile.header, tile.levels(), &bytes);
+                let from_stream =
+                    compact::rebuild(&tile.header, tile.levels(), &bytes, Numbering::Decode);
                 assert_eq!(from_stream.as_deref(), Ok(stored_blob), "tile {tx},{ty}");
                 // Cut short, it is refused.
                 let cut = compact::decode(&bytes[..bytes.len() - 1], header.levels);
                 assert!(cut.is_err(), "tile {tx},{ty}: a truncated stream decoded");
                 compact_bytes += bytes.len();
             }
-            let rebuilt = rebuild_tile(&tile.header, tile.levels(), &coded);
+            let rebuilt = rebuild_tile(&tile.header, tile.levels(), &coded, Numbering::Decode);
             if rebuilt != stored_blob {
                 blobs_differing += 1;
                 assert!(

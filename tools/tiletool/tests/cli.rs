@@ -198,14 +198,14 @@ fn verify_against_the_wrong_source_fails() {
 }
 
 /// `--compact` builds the same tiles as the version 3 build (`verify --against`, every tile
-/// read back byte for byte, and its errors against the source), in a version 4 file a tenth
+/// read back byte for byte, and its errors against the source), in a version 5 file a tenth
 /// the size; `--against` a set of other tiles fails, naming both files.
 #[test]
 fn a_compact_build_verifies_against_the_plain_one() {
     let dir = tempfile::tempdir().expect("temp dir");
     let (plain, _) = build_sample(dir.path(), "plain.vkt", &["--no-texture"]);
     let (compact, info) = build_sample(dir.path(), "compact.vkt", &["--no-texture", "--compact"]);
-    assert_eq!(info["format_version"], 4, "{info}");
+    assert_eq!(info["format_version"], 5, "{info}");
     let size = |p: &Path| std::fs::metadata(p).expect("size").len();
     assert!(
         size(&compact) * 10 < size(&plain),
