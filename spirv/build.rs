@@ -13,7 +13,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 /// (constant, file, stage, macro defined for this build).
-const SHADERS: [(&str, &str, shaderc::ShaderKind, Option<&str>); 10] = [
+const SHADERS: [(&str, &str, shaderc::ShaderKind, Option<&str>); 11] = [
     (
         "TERRAIN_VERT",
         "terrain.vert",
@@ -74,6 +74,12 @@ const SHADERS: [(&str, &str, shaderc::ShaderKind, Option<&str>); 10] = [
         shaderc::ShaderKind::Compute,
         None,
     ),
+    (
+        "DECODE_COMP",
+        "decode.comp",
+        shaderc::ShaderKind::Compute,
+        None,
+    ),
 ];
 
 /// The shared interface, and the structs of it whose layout the host mirrors.
@@ -91,7 +97,7 @@ fn main() {
         PathBuf::from(std::env::var("CARGO_MANIFEST_DIR").expect("cargo sets it")).join("shaders");
     let compiler = shaderc::Compiler::new().expect("shaderc initialises");
     let mut out = String::new();
-    for include in [INTERFACE, "parts.glsl"] {
+    for include in [INTERFACE, "parts.glsl", "hierarchy.glsl"] {
         println!("cargo:rerun-if-changed={}", dir.join(include).display());
     }
     let mut layout = None;

@@ -44,6 +44,7 @@ layout(std430, set = 0, binding = 6) writeonly buffer Morphed { float values[]; 
 
 // The level whose blocks the draw's mesh takes at a point (the index builder's rule).
 #include "parts.glsl"
+#include "hierarchy.glsl"
 
 // Vertices listed per scale index (scale 2^k at k) for the tile being placed.
 shared uint listed[8];
@@ -165,23 +166,8 @@ void main() {
                 uint v = entry.y;
                 uint x = v & 511u;
                 uint y = (v >> 9) & 511u;
-                bool ox = ((x >> k) & 1u) == 1u;
-                bool oy = ((y >> k) & 1u) == 1u;
                 uvec2 p, q;
-                if (ox && oy) {
-                    // A cell's centre: the diagonal through its parent cell's centre (the
-                    // tile's centre, whose cell has no parent: the north-west one).
-                    bool dx = s == 128u || (((x + s) >> (k + 1)) & 1u) == 1u;
-                    bool dy = s == 128u || (((y + s) >> (k + 1)) & 1u) == 1u;
-                    p = uvec2(dx ? x + s : x - s, dy ? y + s : y - s);
-                    q = uvec2(dx ? x - s : x + s, dy ? y - s : y + s);
-                } else if (ox) {
-                    p = uvec2(x - s, y);
-                    q = uvec2(x + s, y);
-                } else {
-                    p = uvec2(x, y - s);
-                    q = uvec2(x, y + s);
-                }
+                parents_of(x, y, uint(k), p, q);
                 vec2 a = uintBitsToFloat(scratch.cells[region + p.y * SIDE + p.x]);
                 vec2 b = uintBitsToFloat(scratch.cells[region + q.y * SIDE + q.x]);
                 float own = float(height_base + int(v >> 18)) * height_step;

@@ -3,6 +3,7 @@
 
 pub mod buffer;
 pub mod context;
+pub mod decode;
 pub mod image;
 pub mod indices;
 pub mod morph_pass;

@@ -1,0 +1,344 @@
+//! Compact levels decoded on the GPU (`spirv/shaders/decode.comp`, issue 28): a level's bit
+//! stream ([`tiles::compact`]) becomes its block of packed positions in the tile pool, from the
+//! tile's coarser blocks already there, so that a refinement can cross the bus as the heights
+//! it adds and which vertices they are, about a third of the positions' bytes. One workgroup
+//! decodes one level, with a grid of height codes of its own (scratch); a dispatch decodes as
+//! many levels as there are grids. Each frame slot has its own list and a status word the
+//! shader raises, with a reason, when a stream is not a level of its tile.
+//!
+//! The block's vertices come out in the order the stream gives them
+//! ([`tiles::compact::decode_levels`]): its raw vertices, then the walk's. The CPU decoder
+//! makes the same sets in the same order, and `renderer/tests/decode.rs` compares the two
+//! word for word on every level of real tiles.
+
+use ash::vk;
+use bytemuck::{Pod, Zeroable};
+use gpu_allocator::MemoryLocation;
+
+use super::buffer::BufferDesc;
+use super::sync;
+use super::{Buffer, Gpu, VkError, VkResult};
+
+/// Levels decoded at once at most, each with a grid of 257 x 257 codes.
+pub const MAX_DECODES_PER_DISPATCH: u32 = 8;
+const GRID_BYTES: u64 = 257 * 257 * 4;
+const STATUS_BYTES: u64 = 16;
+
+/// One level to decode (the shader's `Decode`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct Decode {
+    /// The level's first bit in the streams buffer, and the bit after its last byte.
+    pub stream_bit: u32,
+    pub end_bit: u32,
+    /// Pool word of block 0's first packed position, and the vertices of the coarser blocks.
+    pub known_word: u32,
+    pub known_count: u32,
+    /// Pool word of the level's block, and the vertices the file says it holds.
+    pub out_word: u32,
+    pub expected: u32,
+    /// Reported when the decode fails.
+    pub tile: u32,
+    pub level: u32,
+}
+
+/// Why the shader refused a stream (its reason codes).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Refusal {
+    /// It ends before the level does, or runs past the level's bytes.
+    EndsEarly,
+    /// A raw vertex lies outside the grid or is known already.
+    RawVertex,
+    /// More vertices than the block holds.
+    TooMany,
+    /// A Rice parameter over 16.
+    RiceParameter,
+    /// A height code outside 0..=16383.
+    CodeRange,
+    /// Fewer vertices than the block holds.
+    Count,
+    /// Whole bytes left after the level's last code.
+    BitsLeft,
+    Unknown(u32),
+}
+
+impl Refusal {
+    fn from_code(code: u32) -> Self {
+        match code {
+            1 => Refusal::EndsEarly,
+            2 => Refusal::RawVertex,
+            3 => Refusal::TooMany,
+            4 => Refusal::RiceParameter,
+            5 => Refusal::CodeRange,
+            6 => Refusal::Count,
+            7 => Refusal::BitsLeft,
+            c => Refusal::Unknown(c),
+        }
+    }
+}
+
+/// A decode that failed (read after its frame completed): the first of `failed`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DecodeFailure {
+    pub failed: u32,
+    pub tile: u32,
+    pub level: u32,
+    pub reason: Refusal,
+}
+
+pub struct Decoder {
+    set_layout: vk::DescriptorSetLayout,
+    layout: vk::PipelineLayout,
+    pipeline: vk::Pipeline,
+    descriptors: vk::DescriptorPool,
+    /// Per frame slot.
+    sets: Vec<vk::DescriptorSet>,
+    lists: Vec<Buffer>,
+    status: Vec<Buffer>,
+    grids: Buffer,
+    capacity: usize,
+    /// Grids in `grids`: workgroups per dispatch.
+    groups: u32,
+}
+
+impl Decoder {
+    /// A decoder reading `streams` and writing into `pool`, for `slots` frame slots of up to
+    /// `capacity` decodes each, `groups` (1 to [`MAX_DECODES_PER_DISPATCH`]) levels at once.
+    pub fn new(
+        gpu: &Gpu,
+        (pool, streams): (&Buffer, &Buffer),
+        slots: usize,
+        capacity: usize,
+        groups: u32,
+    ) -> VkResult<Self> {
+        let groups = groups.clamp(1, MAX_DECODES_PER_DISPATCH);
+        let bindings: Vec<_> = (0..5)
+            .map(|b| {
+                vk::DescriptorSetLayoutBinding::default()
+                    .binding(b)
+                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .descriptor_count(1)
+                    .stage_flags(vk::ShaderStageFlags::COMPUTE)
+            })
+            .collect();
+        let set_info = vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings);
+        // SAFETY: valid create info.
+        let set_layout = unsafe { gpu.device.create_descriptor_set_layout(&set_info, None) }?;
+        gpu.name(set_layout, "decode set layout");
+        let mut decoder = Decoder {
+            set_layout,
+            layout: vk::PipelineLayout::null(),
+            pipeline: vk::Pipeline::null(),
+            descriptors: vk::DescriptorPool::null(),
+            sets: Vec::new(),
+            lists: Vec::new(),
+            status: Vec::new(),
+            grids: Buffer::new(
+                gpu,
+                BufferDesc {
+                    size: GRID_BYTES * u64::from(groups),
+                    usage: vk::BufferUsageFlags::STORAGE_BUFFER,
+                    location: MemoryLocation::GpuOnly,
+                },
+                "decode grids",
+            )?,
+            capacity: capacity.max(1),
+            groups,
+        };
+        // On failure the partly made decoder is destroyed (null handles are skipped).
+        match decoder.create(gpu, (pool, streams), slots.max(1)) {
+            Ok(()) => Ok(decoder),
+            Err(e) => {
+                decoder.destroy(gpu);
+                Err(e)
+            }
+        }
+    }
+
+    fn create(&mut self, gpu: &Gpu, buffers: (&Buffer, &Buffer), slots: usize) -> VkResult<()> {
+        let ranges = [vk::PushConstantRange::default()
+            .stage_flags(vk::ShaderStageFlags::COMPUTE)
+            .size(4)];
+        let set_layouts = [self.set_layout];
+        let layout_info = vk::PipelineLayoutCreateInfo::default()
+            .set_layouts(&set_layouts)
+            .push_constant_ranges(&ranges);
+        // SAFETY: valid create info.
+        self.layout = unsafe { gpu.device.create_pipeline_layout(&layout_info, None) }?;
+        gpu.name(self.layout, "decode pipeline layout");
+        self.pipeline = super::pipeline::compute_pipeline(
+            gpu,
+            spirv::DECODE_COMP,
+            self.layout,
+            "decode pipeline",
+        )?;
+        self.create_sets(gpu, buffers, slots)
+    }
+
+    /// The per-slot lists and status words, and a descriptor set per slot over them, the
+    /// pool, the streams and the grids.
+    fn create_sets(
+        &mut self,
+        gpu: &Gpu,
+        (pool, streams): (&Buffer, &Buffer),
+        slots: usize,
+    ) -> VkResult<()> {
+        let sizes = [vk::DescriptorPoolSize::default()
+            .ty(vk::DescriptorType::STORAGE_BUFFER)
+            .descriptor_count(5 * slots as u32)];
+        let info = vk::DescriptorPoolCreateInfo::default()
+            .max_sets(slots as u32)
+            .pool_sizes(&sizes);
+        // SAFETY: valid create info.
+        self.descriptors = unsafe { gpu.device.create_descriptor_pool(&info, None) }?;
+        gpu.name(self.descriptors, "decode descriptors");
+        let layouts = vec![self.set_layout; slots];
+        let alloc = vk::DescriptorSetAllocateInfo::default()
+            .descriptor_pool(self.descriptors)
+            .set_layouts(&layouts);
+        // SAFETY: the pool has room for these sets.
+        self.sets = unsafe { gpu.device.allocate_descriptor_sets(&alloc) }?;
+        let list_bytes = (self.capacity * std::mem::size_of::<Decode>()) as u64;
+        for s in 0..slots {
+            self.lists.push(Buffer::new(
+                gpu,
+                BufferDesc::upload(list_bytes, vk::BufferUsageFlags::STORAGE_BUFFER),
+                &format!("decodes, slot {s}"),
+            )?);
+            let mut status = Buffer::new(
+                gpu,
+                BufferDesc::readback_storage(STATUS_BYTES),
+                &format!("decode status, slot {s}"),
+            )?;
+            if !status.write(0, &[0; STATUS_BYTES as usize]) {
+                return Err(VkError::Unsupported(
+                    "the decode status is not host-visible".into(),
+                ));
+            }
+            self.status.push(status);
+        }
+        let limit = u64::from(gpu.properties.limits.max_storage_buffer_range);
+        for (s, &set) in self.sets.iter().enumerate() {
+            let whole = |buffer: &Buffer, range: u64| {
+                [vk::DescriptorBufferInfo::default()
+                    .buffer(buffer.raw)
+                    .range(range)]
+            };
+            let infos = [
+                whole(pool, pool.size.min(limit)),
+                whole(streams, streams.size.min(limit)),
+                whole(&self.grids, vk::WHOLE_SIZE),
+                whole(&self.lists[s], vk::WHOLE_SIZE),
+                whole(&self.status[s], vk::WHOLE_SIZE),
+            ];
+            let writes: Vec<_> = infos
+                .iter()
+                .enumerate()
+                .map(|(b, info)| {
+                    vk::WriteDescriptorSet::default()
+                        .dst_set(set)
+                        .dst_binding(b as u32)
+                        .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                        .buffer_info(info)
+                })
+                .collect();
+            // SAFETY: the set is not in use; the buffers are live.
+            unsafe { gpu.device.update_descriptor_sets(&writes, &[]) };
+        }
+        Ok(())
+    }
+
+    /// Decodes a slot's list holds.
+    pub fn capacity(&self) -> usize {
+        self.capacity
+    }
+
+    /// Bytes of GPU memory the decoder holds beside the pool and the streams.
+    pub fn bytes(&self) -> u64 {
+        self.grids.size
+            + self.lists.iter().map(|b| b.size).sum::<u64>()
+            + self.status.iter().map(|b| b.size).sum::<u64>()
+    }
+
+    /// Writes slot `s`'s decodes (its previous frame has completed); false if they do not fit.
+    pub fn write(&mut self, s: usize, decodes: &[Decode]) -> bool {
+        decodes.len() <= self.capacity && self.lists[s].write(0, bytemuck::cast_slice(decodes))
+    }
+
+    /// Records slot `s`'s first `count` decodes: after the copies that brought their streams
+    /// and coarser blocks (and earlier frames' reads of the blocks they write), before
+    /// whatever reads the blocks (`readers`: stages and accesses).
+    pub fn record(
+        &self,
+        gpu: &Gpu,
+        cmd: vk::CommandBuffer,
+        (s, count): (usize, u32),
+        readers: sync::Scope,
+    ) {
+        if count == 0 {
+            return;
+        }
+        let compute = vk::PipelineStageFlags::COMPUTE_SHADER;
+        let shader = vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE;
+        let earlier = vk::PipelineStageFlags::VERTEX_INPUT
+            | vk::PipelineStageFlags::VERTEX_SHADER
+            | vk::PipelineStageFlags::TRANSFER
+            | vk::PipelineStageFlags::HOST
+            | compute;
+        let written = vk::AccessFlags::TRANSFER_WRITE
+            | vk::AccessFlags::SHADER_WRITE
+            | vk::AccessFlags::HOST_WRITE;
+        sync::memory_barrier(gpu, cmd, (earlier, written), (compute, shader));
+        sync::bind_compute(gpu, cmd, (self.pipeline, self.layout), self.sets[s], &[]);
+        let mut first = 0;
+        while first < count {
+            if first > 0 {
+                // The next dispatch reuses the grids, and may read blocks this one wrote.
+                sync::memory_barrier(gpu, cmd, (compute, shader), (compute, shader));
+            }
+            let n = (count - first).min(self.groups);
+            // SAFETY: as above; the pipeline and set are bound.
+            unsafe {
+                gpu.device.cmd_push_constants(
+                    cmd,
+                    self.layout,
+                    vk::ShaderStageFlags::COMPUTE,
+                    0,
+                    bytemuck::bytes_of(&first),
+                );
+                gpu.device.cmd_dispatch(cmd, n, 1, 1);
+            }
+            first += n;
+        }
+        sync::memory_barrier(gpu, cmd, (compute, vk::AccessFlags::SHADER_WRITE), readers);
+    }
+
+    /// After slot `s`'s frame completed: its first failed decode, if any (and the status is
+    /// cleared for the slot's next frame).
+    pub fn take_failure(&mut self, s: usize) -> Option<DecodeFailure> {
+        let status = self.status[s].mapped()?;
+        let words: [u32; 4] = bytemuck::pod_read_unaligned(&status[..STATUS_BYTES as usize]);
+        status.fill(0);
+        (words[0] > 0).then_some(DecodeFailure {
+            failed: words[0],
+            tile: words[1],
+            level: words[2],
+            reason: Refusal::from_code(words[3]),
+        })
+    }
+
+    pub fn destroy(self, gpu: &Gpu) {
+        // SAFETY: no command buffer in flight uses them; null handles are ignored.
+        unsafe {
+            gpu.device.destroy_pipeline(self.pipeline, None);
+            gpu.device.destroy_pipeline_layout(self.layout, None);
+            gpu.device.destroy_descriptor_pool(self.descriptors, None);
+            gpu.device
+                .destroy_descriptor_set_layout(self.set_layout, None);
+        }
+        for b in self.lists.into_iter().chain(self.status) {
+            b.destroy(gpu);
+        }
+        self.grids.destroy(gpu);
+    }
+}
