@@ -189,6 +189,12 @@ impl Reader<'_> {
 
 /// A tile's levels as the compact bit stream (module header).
 pub fn encode(tile: &Tile) -> Vec<u8> {
+    encode_levels(tile).0
+}
+
+/// [`encode`], with each level's bytes in the stream (levels start on bytes, in order).
+pub fn encode_levels(tile: &Tile) -> (Vec<u8>, Vec<u32>) {
+    let mut lengths = Vec::with_capacity(tile.header.levels as usize);
     let mut bits = Bits {
         bytes: Vec::new(),
         len: 0,
@@ -261,8 +267,9 @@ pub fn encode(tile: &Tile) -> Vec<u8> {
             }
         }
         bits.align();
+        lengths.push((bits.len / 8) as u32 - lengths.iter().sum::<u32>());
     }
-    bits.bytes
+    (bits.bytes, lengths)
 }
 
 /// Each level's new vertices `(x, y, code)` from the compact bit stream of a tile with
@@ -355,10 +362,19 @@ pub fn rebuild(
     bytes: &[u8],
     numbering: crate::build::Numbering,
 ) -> Result<Vec<u8>, String> {
-    let sets = decode(bytes, header.levels)?;
-    Ok(crate::build::rebuild_tile(
-        header, entries, &sets, numbering,
-    ))
+    rebuild_levels(header, entries, bytes, numbering).map(|(blob, _)| blob)
+}
+
+/// [`rebuild`], with each level's bytes in the stream.
+pub fn rebuild_levels(
+    header: &TileHeader,
+    entries: &[LevelEntry],
+    bytes: &[u8],
+    numbering: crate::build::Numbering,
+) -> Result<(Vec<u8>, Vec<std::ops::Range<usize>>), String> {
+    let (sets, ranges) = decode_levels(bytes, header.levels)?;
+    let blob = crate::build::rebuild_tile(header, entries, &sets, numbering);
+    Ok((blob, ranges))
 }
 
 #[cfg(test)]

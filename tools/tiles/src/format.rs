@@ -25,12 +25,14 @@
 //! ```
 //!
 //! Version 5 ([`FLAG_COMPACT_LEVELS`]) keeps each tile's header and level table, then the
-//! crc32 of the version 3 blob and the levels as [`crate::compact`]'s bit stream, from which a
-//! reader rebuilds the version 3 blob; everything else is as in version 3. Its blocks number
+//! crc32 of the version 3 blob, each level's bytes in the stream (u32 each, so that one level's
+//! stream can be handed to a decoder alone: a refinement on the bus) and the levels as
+//! [`crate::compact`]'s bit stream, from which a reader rebuilds the version 3 blob;
+//! everything else is as in version 3. Its blocks number
 //! their vertices in the order the stream decodes them ([`Numbering::Decode`], as version 3
 //! files are written since); version 4, read still, is the same with each block in the order
 //! its fans first use its vertices ([`Numbering::FirstUse`]), which only a rebuild of the
-//! whole tile on the CPU can give.
+//! whole tile on the CPU can give, and without the level lengths.
 //!
 //! Version 1 files (no texture fields) are still read, as tile sets without textures; version 2
 //! files (no pyramid: the field was reserved and zero) as tile sets without a pyramid.
@@ -131,19 +133,41 @@ fn table_len(levels: u32) -> usize {
     size_of::<TileHeader>() + levels as usize * size_of::<LevelEntry>()
 }
 
+/// Where a compact tile's bit stream starts in its stored bytes: after its header and level
+/// table, the crc32 of its version 3 blob and (version 5) each level's bytes in the stream.
+fn stream_start(levels: u32, version: u32) -> usize {
+    let lengths = if version == FIRST_COMPACT_VERSION {
+        0
+    } else {
+        4 * levels as usize
+    };
+    table_len(levels) + 4 + lengths
+}
+
+/// A version 5 compact tile's stored level lengths (`stored` holds them).
+fn stored_lengths(stored: &[u8], levels: u32) -> Vec<u32> {
+    let at = table_len(levels) + 4;
+    stored[at..at + 4 * levels as usize]
+        .chunks_exact(4)
+        .map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")))
+        .collect()
+}
+
 /// The version 3 blob of a compact tile's stored bytes (its header and level table, the crc32
-/// of the version 3 blob, then its levels' bit stream), or what is wrong with them: the header
-/// as [`Tile::parse`] checks it, the stream as [`crate::compact::decode`] does, and the blob
+/// of the version 3 blob, in version 5 each level's bytes in the stream, then its levels' bit
+/// stream), or what is wrong with them: the header as [`Tile::parse`] checks it, the stream as
+/// [`crate::compact::decode`] does, each level ending where its length says, and the blob
 /// rebuilt must have the stored table and checksum (the file's own checksum covers the stored
 /// bytes; this one, what a decoder made of them).
 fn rebuilt(
     stored: &[u8],
     (tx, ty): (u32, u32),
     (levels, step): (u32, f32),
-    numbering: Numbering,
+    version: u32,
 ) -> Result<Vec<u8>, String> {
     let table = table_len(levels);
-    if stored.len() < table + 4 {
+    let start = stream_start(levels, version);
+    if stored.len() < start {
         return Err(format!(
             "{} bytes is too short for a tile's table",
             stored.len()
@@ -154,7 +178,22 @@ fn rebuilt(
     let entries = stored_entries(stored, levels);
     check_table(&header, &entries)?;
     let crc = u32::from_le_bytes(stored[table..table + 4].try_into().expect("4 bytes"));
-    let blob = crate::compact::rebuild(&header, &entries, &stored[table + 4..], numbering)?;
+    let (blob, ranges) =
+        crate::compact::rebuild_levels(&header, &entries, &stored[start..], numbering(version))?;
+    if version != FIRST_COMPACT_VERSION {
+        let lengths = stored_lengths(stored, levels);
+        if let Some(j) = ranges
+            .iter()
+            .zip(&lengths)
+            .position(|(r, &n)| r.len() != n as usize)
+        {
+            return Err(format!(
+                "level {j}'s stream is {} bytes, its length says {}",
+                ranges[j].len(),
+                lengths[j]
+            ));
+        }
+    }
     if blob.get(..table) != Some(&stored[..table]) {
         return Err("its compact levels do not rebuild its level table".into());
     }
@@ -667,13 +706,10 @@ impl TileSetWriter {
         let table = table_len(self.header.levels);
         let mut out = blob[..table].to_vec();
         out.extend(crc32fast::hash(blob).to_le_bytes());
-        out.extend(crate::compact::encode(&tile));
-        let made = rebuilt(
-            &out,
-            (tx, ty),
-            (self.header.levels, step),
-            Numbering::Decode,
-        );
+        let (stream, lengths) = crate::compact::encode_levels(&tile);
+        out.extend(bytemuck::cast_slice(&lengths));
+        out.extend(stream);
+        let made = rebuilt(&out, (tx, ty), (self.header.levels, step), COMPACT_VERSION);
         if made.map_err(internal)? != blob {
             return Err(internal("its compact levels do not rebuild it".into()));
         }
@@ -1508,11 +1544,29 @@ impl TileSet {
         tx: u32,
         ty: u32,
     ) -> Result<(TileHeader, Vec<LevelEntry>), FormatError> {
+        self.tile_table_and_streams(tx, ty)
+            .map(|(header, entries, _)| (header, entries))
+    }
+
+    /// [`tile_table`](Self::tile_table), with a compact version 5 tile's level lengths (each
+    /// level's bytes in its bit stream, which a decoder of one level is handed: what a
+    /// refinement sends), read in the same call; empty for other files. They must add up to
+    /// the tile's stream.
+    pub fn tile_table_and_streams(
+        &self,
+        tx: u32,
+        ty: u32,
+    ) -> Result<(TileHeader, Vec<LevelEntry>, Vec<u32>), FormatError> {
         use std::os::unix::fs::FileExt;
         let invalid = |what: String| self.tile_error(tx, ty, what);
         let e = self.checked_entry(tx, ty)?;
         let levels = self.header.levels;
         let (header_len, table) = (size_of::<TileHeader>(), table_len(levels));
+        let streams = self.compact() && self.header.version != FIRST_COMPACT_VERSION;
+        let read = match streams {
+            true => stream_start(levels, self.header.version),
+            false => table,
+        };
         if (e.len as usize) < table {
             let (what, count, at) = match (e.len as usize) < header_len {
                 true => ("tile header", 1, 0),
@@ -1523,7 +1577,13 @@ impl TileSet {
                 false => format!("{what} ({count} items at {at}) runs past the tile"),
             }));
         }
-        let mut stored = vec![0u8; table];
+        if (e.len as usize) < read {
+            return Err(invalid(format!(
+                "{} bytes is too short for a tile's table",
+                e.len
+            )));
+        }
+        let mut stored = vec![0u8; read];
         self.file
             .read_exact_at(&mut stored, e.offset)
             .map_err(|err| invalid(format!("its table cannot be read: {err}")))?;
@@ -1534,7 +1594,33 @@ impl TileSet {
         if !self.compact() {
             check_sections(&entries, e.len).map_err(invalid)?;
         }
-        Ok((header, entries))
+        let lengths = match streams {
+            true => stored_lengths(&stored, levels),
+            false => Vec::new(),
+        };
+        let stream = lengths.iter().map(|&n| u64::from(n)).sum::<u64>();
+        if streams && stream != e.len - read as u64 {
+            return Err(invalid(format!(
+                "its levels' lengths add up to {stream} bytes, its stream has {}",
+                e.len - read as u64
+            )));
+        }
+        Ok((header, entries, lengths))
+    }
+
+    /// Level `j`'s bytes of compact tile `(tx, ty)`'s bit stream (version 5 files; None
+    /// otherwise), unchecked: a reader hands them to a decoder once the tile has passed its
+    /// check, which decodes every level and compares its end with its length.
+    pub fn level_stream(&self, tx: u32, ty: u32, j: u32) -> Option<&[u8]> {
+        if !self.compact() || self.header.version == FIRST_COMPACT_VERSION {
+            return None;
+        }
+        let e = self.dir_entry(tx, ty)?;
+        let stored = self.bytes_at(e.offset, e.len)?;
+        let start = stream_start(self.header.levels, self.header.version);
+        let lengths = stored_lengths(stored.get(..start)?, self.header.levels);
+        let from = start + lengths.get(..j as usize)?.iter().sum::<u32>() as usize;
+        stored.get(from..from + *lengths.get(j as usize)? as usize)
     }
 
     /// Tile `(tx, ty)`, checksum and structure validated (with compact levels, the checksum of
@@ -1609,12 +1695,11 @@ impl TileSet {
             if check && crc32fast::hash(stored) != e.crc {
                 return Err("checksum mismatch (corrupted file)".into());
             }
-            let numbering = numbering(self.header.version);
             rebuilt(
                 stored,
                 (tx, ty),
                 (self.header.levels, self.header.height_step),
-                numbering,
+                self.header.version,
             )
             .map(Vec::into_boxed_slice)
         });

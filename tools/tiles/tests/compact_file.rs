@@ -119,12 +119,14 @@ fn compact_sets_read_back_as_built_and_refuse_a_damaged_stream() {
 
 /// Version 4 compact files, written before blocks were numbered in decoding order, still read:
 /// their tiles rebuild in first-use order, which their checksums vouch for. Made here from a
-/// version 5 build by rebuilding each tile in that order and storing its checksum, as the
-/// version 4 writer did. The control: the same tiles under version 5 fail their checksums.
+/// version 5 build as the version 4 writer laid tiles out: each tile's stream straight after
+/// the crc32 of its blob rebuilt in first-use order (no level lengths; the directory entry
+/// shortened, the freed bytes left as a gap). The control: the same tiles under version 5 are
+/// refused.
 #[test]
 fn version_4_compact_sets_still_read_in_first_use_order() {
     use tiles::build::Numbering;
-    use tiles::format::{FileHeader, LevelEntry, TileHeader, FIRST_COMPACT_VERSION};
+    use tiles::format::{DirEntry, FileHeader, LevelEntry, TileHeader, FIRST_COMPACT_VERSION};
 
     let (w, h) = (400, 300);
     let heights = srtm3_crop(500, 300, w, h);
@@ -137,28 +139,30 @@ fn version_4_compact_sets_still_read_in_first_use_order() {
     };
     build_tileset(&grid, &BuildParams::default(), &meta, &path, &|| {}).expect("compact");
     let built = TileSet::open(&path).expect("open");
-    let levels = built.header().levels;
-    let table =
-        std::mem::size_of::<TileHeader>() + levels as usize * std::mem::size_of::<LevelEntry>();
+    assert_eq!(built.header().version, COMPACT_VERSION);
+    let levels = built.header().levels as usize;
+    let table = std::mem::size_of::<TileHeader>() + levels * std::mem::size_of::<LevelEntry>();
     let mut bytes = std::fs::read(&path).expect("read");
+    let (tiles_x, tiles_y) = (built.header().tiles_x, built.header().tiles_y);
     let mut first_use = Vec::new();
     let mut reordered = 0;
-    for ty in 0..built.header().tiles_y {
-        for tx in 0..built.header().tiles_x {
-            let e = built.dir_entry(tx, ty).expect("entry");
-            let at = e.offset as usize;
-            let stored = &bytes[at..at + e.len as usize];
+    for ty in 0..tiles_y {
+        for tx in 0..tiles_x {
+            let mut e = built.dir_entry(tx, ty).expect("entry");
+            let (at, len) = (e.offset as usize, e.len as usize);
             let (header, entries) = built.tile_table(tx, ty).expect("table");
-            let blob = tiles::compact::rebuild(
-                &header,
-                &entries,
-                &stored[table + 4..],
-                Numbering::FirstUse,
-            )
-            .expect("rebuilt");
+            let stream = bytes[at + table + 4 + 4 * levels..at + len].to_vec();
+            let blob = tiles::compact::rebuild(&header, &entries, &stream, Numbering::FirstUse)
+                .expect("rebuilt");
             reordered += usize::from(Some(&blob[..]) != built.blob(tx, ty));
             let crc = crc32fast::hash(&blob).to_le_bytes();
             bytes[at + table..at + table + 4].copy_from_slice(&crc);
+            bytes[at + table + 4..at + table + 4 + stream.len()].copy_from_slice(&stream);
+            e.len -= 4 * levels as u64;
+            let slot = std::mem::size_of::<FileHeader>()
+                + (ty * tiles_x + tx) as usize * std::mem::size_of::<DirEntry>();
+            bytes[slot..slot + std::mem::size_of::<DirEntry>()]
+                .copy_from_slice(bytemuck::bytes_of(&e));
             first_use.push(((tx, ty), blob));
         }
     }
@@ -180,15 +184,69 @@ fn version_4_compact_sets_still_read_in_first_use_order() {
     for ((tx, ty), blob) in &first_use {
         old.tile(*tx, *ty).expect("a version 4 tile reads");
         assert_eq!(old.blob(*tx, *ty), Some(&blob[..]), "tile {tx},{ty}");
+        assert_eq!(
+            old.level_stream(*tx, *ty, 0),
+            None,
+            "version 4 has no level lengths"
+        );
     }
     let report = verify(&old, Some(&grid));
     assert!(report.ok(), "{:#?}", report.problems);
-    // The control: under version 5 the same tiles rebuild in decoding order, which the
-    // first-use checksums do not vouch for.
+    // The control: read as version 5, every tile is refused (its level lengths are not there).
     let wrong = write(COMPACT_VERSION, "version5.vkt");
     let refused = first_use
         .iter()
         .filter(|((tx, ty), _)| wrong.tile(*tx, *ty).is_err())
         .count();
-    assert_eq!(refused, reordered);
+    assert_eq!(refused, first_use.len());
+}
+
+/// A version 5 tile's level lengths locate each level's stream: the levels' streams, joined,
+/// are the tile's, each decodes to its level's vertices; lengths that do not add up to the
+/// stream are refused when the table is read.
+#[test]
+fn level_lengths_locate_each_levels_stream() {
+    let (w, h) = (300, 300);
+    let heights = srtm3_crop(200, 700, w, h);
+    let grid = common::srtm3_grid(&heights, (w, h));
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("compact.vkt");
+    let meta = TileSetMeta {
+        compact: true,
+        ..TileSetMeta::default()
+    };
+    build_tileset(&grid, &BuildParams::default(), &meta, &path, &|| {}).expect("compact");
+    let set = TileSet::open(&path).expect("open");
+    let levels = set.header().levels;
+    let tile = set.tile(0, 0).expect("tile");
+    let (stream, lengths) = tiles::compact::encode_levels(&tile);
+    let (_, _, stored) = set.tile_table_and_streams(0, 0).expect("table");
+    assert_eq!(stored, lengths);
+    let joined: Vec<u8> = (0..levels)
+        .flat_map(|j| set.level_stream(0, 0, j).expect("level").to_vec())
+        .collect();
+    assert_eq!(joined, stream);
+    assert_eq!(set.level_stream(0, 0, levels), None);
+
+    // A length changed (and the file resealed) is refused with the tile named.
+    let mut bytes = std::fs::read(&path).expect("read");
+    let e = set.dir_entry(0, 0).expect("entry");
+    let at = e.offset as usize
+        + std::mem::size_of::<tiles::format::TileHeader>()
+        + levels as usize * std::mem::size_of::<tiles::format::LevelEntry>()
+        + 4;
+    bytes[at] ^= 1;
+    reseal(&mut bytes).expect("reseal");
+    let damaged = dir.path().join("lengths.vkt");
+    std::fs::write(&damaged, &bytes).expect("write");
+    let d = TileSet::open(&damaged).expect("open");
+    let error = d
+        .tile_table_and_streams(0, 0)
+        .expect_err("refused")
+        .to_string();
+    assert!(
+        error.contains("lengths.vkt") && error.contains("0,0"),
+        "{error}"
+    );
+    assert!(d.tile(0, 0).is_err());
 }
