@@ -14,6 +14,10 @@ pub struct LevelCost {
     pub indices: u64,
     /// 2 or 4.
     pub index_width: u32,
+    /// Block `i`'s positions sent as the level's compact stream of this many bytes and decoded
+    /// on the GPU into its place (`None`: sent as they are). The chunk holds the positions
+    /// either way.
+    pub stream: Option<u64>,
 }
 
 /// Every level of one tile.
@@ -45,10 +49,17 @@ impl TileCost {
         self.levels.len().saturating_sub(1) as u32
     }
 
-    /// Bytes of block `j`: its positions and its morph rows.
+    /// Bytes of block `j` in the pool: its positions and its morph rows.
     pub fn block_bytes(&self, j: u32) -> u64 {
         let l = &self.levels[j as usize];
         l.positions + l.morph
+    }
+
+    /// Bytes block `j` sends: its positions, or its stream where they are decoded on the GPU,
+    /// and its morph rows.
+    pub fn block_sent(&self, j: u32) -> u64 {
+        let l = &self.levels[j as usize];
+        l.stream.unwrap_or(l.positions) + l.morph
     }
 
     /// Position bytes of blocks `0..j` (where block `j`'s positions start).
@@ -134,6 +145,7 @@ pub(crate) mod tests {
                         morph: u64::from(i) * verts,
                         indices: 2 * 6 * (scale << (i + 1)),
                         index_width: 2,
+                        stream: None,
                     }
                 })
                 .collect(),

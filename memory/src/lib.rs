@@ -43,8 +43,8 @@
 //! // One tile of two levels: 100 then 300 vertices, u16 indices.
 //! let tile = TileCost {
 //!     levels: vec![
-//!         LevelCost { positions: 400, morph: 0, indices: 700, index_width: 2 },
-//!         LevelCost { positions: 800, morph: 200, indices: 2_000, index_width: 2 },
+//!         LevelCost { positions: 400, morph: 0, indices: 700, index_width: 2, stream: None },
+//!         LevelCost { positions: 800, morph: 200, indices: 2_000, index_width: 2, stream: None },
 //!     ],
 //! };
 //! let mut manager = Manager::new(vec![tile], Config::default());

@@ -129,6 +129,9 @@ pub struct Upload {
     /// An index array built on the GPU from the tile's blocks ([`IndexArrays::Built`]):
     /// nothing is sent, and it is written in the frame's command buffer after the copies.
     pub built: bool,
+    /// Positions sent as the level's compact stream of this many bytes ([`LevelCost::stream`])
+    /// and decoded on the GPU into `bytes` at `dst`, after the copies and before the builds.
+    pub stream: Option<u64>,
 }
 
 impl Upload {
@@ -136,6 +139,8 @@ impl Upload {
     pub fn sent(&self) -> u64 {
         if self.built {
             0
+        } else if let Some(stream) = self.stream {
+            stream
         } else {
             self.bytes
         }
@@ -627,10 +632,10 @@ impl Manager {
         let mut sum = 0;
         let mut top = b;
         for j in b + 1..=wanted.min(res.layout.capacity) {
-            if sum + t.block_bytes(j) > left {
+            if sum + t.block_sent(j) > left {
                 break;
             }
-            sum += t.block_bytes(j);
+            sum += t.block_sent(j);
             top = j;
         }
         let base = self.chunks[res.chunk].offset;
@@ -757,7 +762,7 @@ impl Manager {
                     return;
                 }
                 let t = &self.tiles[tile as usize];
-                if t.block_bytes(0) + self.index_cost(tile, 0) > left {
+                if t.block_sent(0) + self.index_cost(tile, 0) > left {
                     return;
                 }
                 let Some(res) = self.admit(tile, wanted, plan) else {
@@ -809,7 +814,7 @@ impl Manager {
         for u in plan.uploads.iter().filter(|u| !u.built) {
             match u.part {
                 Part::Indices(_) => s.upload_bytes_indices += u.bytes,
-                _ => s.upload_bytes_blocks += u.bytes,
+                _ => s.upload_bytes_blocks += u.sent(),
             }
         }
         let builds = gpu_builds(&plan.uploads);
@@ -979,6 +984,7 @@ impl Manager {
             in_flight: self.read_in_flight(chunk),
             chunk: self.chunks[chunk].offset,
             built,
+            stream: None,
         }
     }
 
@@ -1010,7 +1016,7 @@ impl Manager {
             Some(res) if res.whole => 0,
             Some(res) => self.step_cost(tile, &res, wanted),
             None => {
-                (0..=wanted).map(|j| t.block_bytes(j)).sum::<u64>() + self.index_cost(tile, wanted)
+                (0..=wanted).map(|j| t.block_sent(j)).sum::<u64>() + self.index_cost(tile, wanted)
             }
         }
     }
@@ -1059,7 +1065,7 @@ impl Manager {
             (Scheme::Progressive, Some(b)) => b + 1,
             _ => 0,
         };
-        let blocks: u64 = (first_block..=level).map(|j| t.block_bytes(j)).sum();
+        let blocks: u64 = (first_block..=level).map(|j| t.block_sent(j)).sum();
         let index = match res.spare {
             Some((s, _)) if s == level => 0,
             _ => self.index_cost(tile, level),
@@ -1244,6 +1250,7 @@ impl Manager {
             in_flight: false,
             chunk: base,
             built: false,
+            stream: l.stream,
         });
         if l.morph > 0 {
             plan.uploads.push(Upload {
@@ -1254,6 +1261,7 @@ impl Manager {
                 in_flight: false,
                 chunk: base,
                 built: false,
+                stream: None,
             });
         }
     }
@@ -1285,6 +1293,7 @@ impl Manager {
                         in_flight: false,
                         chunk: base,
                         built: false,
+                        stream: None,
                     });
                 }
             }

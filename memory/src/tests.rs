@@ -67,6 +67,48 @@ fn config(pool: u64, upload: u64) -> Config {
     }
 }
 
+/// A block whose positions travel as a compact stream (decoded on the GPU) costs its stream on
+/// the bus and its positions in the pool: the upload says both, the budget counts the stream,
+/// so a budget that refines one level with positions refines further with streams, into the
+/// same chunk.
+#[test]
+fn streamed_blocks_cost_their_stream_on_the_bus_and_their_positions_in_the_pool() {
+    // Without morph rows, as the default shaders draw.
+    let mut plain = tile(6, 50);
+    for l in &mut plain.levels {
+        l.morph = 0;
+    }
+    let mut streamed = plain.clone();
+    for l in &mut streamed.levels {
+        l.stream = Some(l.positions / 3);
+    }
+    let built = |pool, upload| Config {
+        index_arrays: IndexArrays::Built,
+        ..config(pool, upload)
+    };
+    // Presence at level 0, then a budget that covers block 1 sent as positions.
+    let budget = plain.block_sent(1);
+    let mut levels = Vec::new();
+    for t in [&plain, &streamed] {
+        let mut m = Manager::new(vec![t.clone()], built(64 << 20, budget));
+        let p = m.plan_frame(0, None, &[req(0, 0)], true);
+        assert_eq!(p.grants[0].level, Some(0));
+        let p = m.plan_frame(1, Some(0), &[req(0, 5)], true);
+        check_budget(&p, &[], budget).expect("within the budget");
+        for u in p.uploads.iter().filter(|u| matches!(u.part, Part::Positions(_))) {
+            let Part::Positions(j) = u.part else { continue };
+            let l = &t.levels[j as usize];
+            let sent = l.stream.unwrap_or(l.positions);
+            assert_eq!((u.bytes, u.stream, u.sent()), (l.positions, l.stream, sent));
+            assert_eq!(u.dst - u.chunk, t.positions_before(j), "the pool's layout");
+        }
+        levels.push(p.grants[0].level.expect("drawn"));
+    }
+    // The control: with positions the budget takes one level; with streams a third the size,
+    // two (blocks double each level: 1/3 + 2/3 of block 1's bytes).
+    assert_eq!(levels, vec![1, 2]);
+}
+
 #[test]
 fn progressive_refinement_sends_only_new_blocks_and_one_index_array() {
     let t = tile(6, 50);

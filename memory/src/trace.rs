@@ -22,7 +22,8 @@
 //! `predicted` is 0 for those rows; rows with 1 follow a frame's requests and list what the
 //! camera predictor expected to become visible (soonest first, nearest first, with the level
 //! it would want), whether or not prefetching was on, so the simulator can replay prefetching.
-//! Version 1 traces (no `predicted` column) still read.
+//! Version 1 traces (no `predicted` column) still read. Compact streams decoded on the GPU
+//! ([`LevelCost::stream`]) are not recorded: a trace replays blocks sent as positions.
 
 use std::collections::HashMap;
 use std::fmt::Write as _;
@@ -138,6 +139,7 @@ impl Trace {
                     morph: v[3],
                     indices: v[4],
                     index_width: v[5] as u32,
+                    stream: None,
                 });
                 continue;
             }
@@ -221,6 +223,7 @@ mod tests {
             morph: 10 * i,
             indices: 100 * (i + 1),
             index_width: 2,
+            stream: None,
         };
         (0..6)
             .map(|_| TileCost {

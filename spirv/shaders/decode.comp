@@ -62,7 +62,7 @@ struct Decode {
 };
 
 layout(std430, set = 0, binding = 0) buffer Pool { uint positions[]; };
-// The streams, each padded by a word past its end (a read takes two words).
+// The streams, each starting on a word.
 layout(std430, set = 0, binding = 1) readonly buffer Streams { uint stream[]; };
 layout(std430, set = 0, binding = 2) coherent buffer Scratch { uint codes[]; };
 layout(std430, set = 0, binding = 3) readonly buffer Decodes { Decode decodes[]; };
@@ -87,13 +87,18 @@ bool is_known(uint i) {
     return (known[i / 32u] & (1u << (i % 32u))) != 0u;
 }
 
+// The stream's word `w`, or 0 past the buffer's end (a read looks ahead of what it takes).
+uint word(uint w) {
+    return w < uint(stream.length()) ? stream[w] : 0u;
+}
+
 // `width` (at most 32) bits from bit `at`, least significant first.
 uint bits(uint at, uint width) {
     uint w = at >> 5u;
     uint o = at & 31u;
-    uint v = stream[w] >> o;
+    uint v = word(w) >> o;
     if (o != 0u) {
-        v |= stream[w + 1u] << (32u - o);
+        v |= word(w + 1u) << (32u - o);
     }
     return width == 32u ? v : v & ((1u << width) - 1u);
 }
