@@ -147,9 +147,9 @@ impl Upload {
     }
 
     /// Written on the GPU in the frame's command buffer (after its in-pool copies), not by
-    /// the CPU when planned.
+    /// the CPU when planned: a staged copy, a built index array, a decoded block.
     pub fn gpu_ordered(&self) -> bool {
-        self.in_flight || self.built
+        self.in_flight || self.built || self.stream.is_some()
     }
 }
 
@@ -638,10 +638,11 @@ impl Manager {
             sum += t.block_sent(j);
             top = j;
         }
-        let base = self.chunks[res.chunk].offset;
         for j in b + 1..=top {
-            self.push_block(tile, j, base, &res.layout, plan);
+            self.push_block(tile, j, (res.chunk, &res.layout), plan);
         }
+        let base = self.chunks[res.chunk].offset;
+        let t = &self.tiles[tile as usize];
         if top > b {
             res.blocks = Some(top);
             speculate(&mut res, b + 1, sum);
@@ -1127,6 +1128,15 @@ impl Manager {
         min: u32,
         plan: &mut FramePlan,
     ) -> Option<()> {
+        // Not a tile whose blocks this frame decodes on the GPU: the decodes run after the
+        // frame's copies, so the move would carry the blocks' old bytes.
+        if plan
+            .uploads
+            .iter()
+            .any(|u| u.tile == tile && u.stream.is_some())
+        {
+            return None;
+        }
         let bytes = self.needs[tile as usize][level as usize];
         let chunk = self.obtain(bytes, plan)?;
         let t = &self.tiles[tile as usize];
@@ -1191,15 +1201,15 @@ impl Manager {
         let Some(mut res) = self.resident[tile as usize] else {
             return;
         };
-        let t = &self.tiles[tile as usize];
-        let base = self.chunks[res.chunk].offset;
         let first_block = match (self.config.scheme, res.blocks) {
             (Scheme::Progressive, Some(b)) => b + 1,
             _ => 0,
         };
         for j in first_block..=level {
-            self.push_block(tile, j, base, &res.layout, plan);
+            self.push_block(tile, j, (res.chunk, &res.layout), plan);
         }
+        let base = self.chunks[res.chunk].offset;
+        let t = &self.tiles[tile as usize];
         let bytes = t.levels[level as usize].indices;
         if let Some((_, at)) = res.spare.filter(|&(s, _)| s == level) {
             // Sent ahead by a prefetch: draw it (a hit when a frame does, not another prefetch).
@@ -1239,7 +1249,25 @@ impl Manager {
     }
 
     /// Records the upload of block `j`'s positions and morph rows into the chunk at `base`.
-    fn push_block(&self, tile: TileId, j: u32, base: u64, layout: &Layout, plan: &mut FramePlan) {
+    fn push_block(
+        &mut self,
+        tile: TileId,
+        j: u32,
+        (chunk, layout): (usize, &Layout),
+        plan: &mut FramePlan,
+    ) {
+        let base = self.chunks[chunk].offset;
+        if self.tiles[tile as usize].levels[j as usize]
+            .stream
+            .is_some()
+        {
+            // Decoded on the GPU when this frame runs (and its coarser blocks read): as for an
+            // index array built there, the chunk is used by this frame, so it is not evicted
+            // or reused before the frame completes (a prefetch decodes into chunks no frame
+            // draws).
+            self.touch(chunk);
+            self.chunks[chunk].built_in = Some(self.frame);
+        }
         let t = &self.tiles[tile as usize];
         let l = &t.levels[j as usize];
         plan.uploads.push(Upload {

@@ -95,7 +95,11 @@ fn streamed_blocks_cost_their_stream_on_the_bus_and_their_positions_in_the_pool(
         assert_eq!(p.grants[0].level, Some(0));
         let p = m.plan_frame(1, Some(0), &[req(0, 5)], true);
         check_budget(&p, &[], budget).expect("within the budget");
-        for u in p.uploads.iter().filter(|u| matches!(u.part, Part::Positions(_))) {
+        for u in p
+            .uploads
+            .iter()
+            .filter(|u| matches!(u.part, Part::Positions(_)))
+        {
             let Part::Positions(j) = u.part else { continue };
             let l = &t.levels[j as usize];
             let sent = l.stream.unwrap_or(l.positions);
@@ -670,7 +674,8 @@ proptest! {
 
     /// On random flights with random budgets, weights and frames in flight: the bookkeeping
     /// holds, resident bytes stay within the pool, every drawn tile is drawn at a level whose
-    /// data was sent, and nothing a frame in flight may read is written by the CPU or reused.
+    /// data was sent, and nothing a frame in flight may read is written by the CPU or reused;
+    /// with blocks sent as positions or as streams decoded on the GPU.
     #[test]
     fn random_traces_keep_the_invariants(
         scales in proptest::collection::vec(20u64..400, 2..14),
@@ -684,8 +689,15 @@ proptest! {
         prefetch in any::<bool>(),
         noise in proptest::collection::vec((0u32..14, 0u32..7), 0..4),
         built in any::<bool>(),
+        streamed in any::<bool>(),
     ) {
-        let tiles: Vec<TileCost> = scales.iter().map(|&s| tile(7, s)).collect();
+        let mut tiles: Vec<TileCost> = scales.iter().map(|&s| tile(7, s)).collect();
+        if streamed {
+            // Blocks decoded on the GPU from streams a third their size.
+            for l in tiles.iter_mut().flat_map(|t| &mut t.levels) {
+                l.stream = Some(l.positions / 3 + 1);
+            }
+        }
         let n = tiles.len() as u32;
         let mut c = config(pool_kib << 10, upload);
         c.weight = weight;

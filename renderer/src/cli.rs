@@ -128,6 +128,12 @@ pub struct Cli {
     /// on disk saves. Implied by --morph-shader two-levels and forward-differences.
     #[arg(long)]
     pub morph_rows: bool,
+    /// How a compact tile set's levels (tiletool build --compact, format version 5) travel:
+    /// gpu (each level's compact stream, about a third of its positions' bytes, decoded by a
+    /// compute pass into the pool) or cpu (the positions the CPU rebuilt when it checked the
+    /// tile). Other sets send positions either way.
+    #[arg(long, value_enum, default_value_t = DecodeArg::Gpu)]
+    pub decode: DecodeArg,
     /// How tile levels travel: progressive (new blocks and one index array per refinement),
     /// per-level (each level from scratch) or whole-tile (every level at once, the old scheme).
     /// --draw-only uses whole-tile, so that every pre-recorded frame finds its levels.
@@ -417,6 +423,12 @@ pub enum IndexArraysArg {
     Sent,
 }
 
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum DecodeArg {
+    Gpu,
+    Cpu,
+}
+
 impl Cli {
     /// How to draw, checked against the tile set (photo shading needs its textures).
     pub fn settings(&self, terrain: &Terrain) -> Result<Settings> {
@@ -513,6 +525,7 @@ impl Cli {
             read_back_heights: self.read_back_heights,
             // Whether geomorphing is on or not: the window's key switches it.
             morph_rows: self.morph_rows || self.morph_shader != MorphShaderArg::Hierarchical,
+            decode_on_gpu: self.decode == DecodeArg::Gpu,
         })
     }
 

@@ -42,6 +42,8 @@ pub enum FrameError {
     PastIndexing { bytes: u64 },
     #[error("{builds} index builds in one frame (room for {capacity})")]
     TooManyBuilds { builds: usize, capacity: usize },
+    #[error("{decodes} compact levels to decode in one frame (room for {capacity})")]
+    TooManyDecodes { decodes: usize, capacity: usize },
     #[error("stitch geometry ({bytes} bytes) does not fit its buffer ({capacity} bytes)")]
     StitchesOverflow { bytes: u64, capacity: u64 },
     #[error("{tiles} tiles in view; at most {max} can be drawn in one frame")]

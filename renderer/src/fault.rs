@@ -41,6 +41,13 @@ pub enum Fault {
     /// the draws with no barrier, a hazard only synchronisation validation reports (the
     /// barrier test's control).
     Unsynchronised,
+    /// `decode-skip`: a compact set's levels are sent as streams but never decoded, so the
+    /// pool holds no positions where their blocks go (the control of the decoded flight's
+    /// pixel test).
+    DecodeSkip,
+    /// `decode-count`: every compact level the GPU decodes is said to hold one vertex more
+    /// than it does, which the decoder refuses (the refusal path's test).
+    DecodeCount,
 }
 
 impl Fault {
@@ -60,6 +67,8 @@ impl Fault {
             "unsynchronised" => Some(Fault::Unsynchronised),
             "no-stitch-across" => Some(Fault::NoStitchAcross),
             "no-stand-in-balance" => Some(Fault::NoStandInBalance),
+            "decode-skip" => Some(Fault::DecodeSkip),
+            "decode-count" => Some(Fault::DecodeCount),
             _ => {
                 let number = |prefix: &str| v.strip_prefix(prefix).and_then(|n| n.parse().ok());
                 number("device-lost-at-")

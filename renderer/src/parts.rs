@@ -291,6 +291,7 @@ mod tests {
             in_flight: false,
             chunk: dst,
             built: false,
+            stream: None,
         }
     }
 

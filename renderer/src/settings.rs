@@ -156,6 +156,10 @@ pub struct MemoryOptions {
     ///
     /// [`Terrain::costs`]: crate::terrain::Terrain::costs
     pub morph_rows: bool,
+    /// A compact set's levels (version 5) travel as their compact streams and a compute pass
+    /// decodes them into the pool (`vulkan::decode`); false: the positions the CPU rebuilt at
+    /// the tile's check are sent, as for other sets.
+    pub decode_on_gpu: bool,
 }
 
 impl Default for MemoryOptions {
@@ -175,6 +179,7 @@ impl Default for MemoryOptions {
             index_arrays: IndexArrays::Built,
             read_back_heights: false,
             morph_rows: false,
+            decode_on_gpu: true,
         }
     }
 }

@@ -117,8 +117,8 @@ impl Bench {
         .expect("streams");
         let decoder = Decoder::new(
             &gpu,
-            (&pool.buffer, &streams),
-            1,
+            &pool.buffer,
+            &[&streams],
             64,
             MAX_DECODES_PER_DISPATCH,
         )
@@ -185,7 +185,7 @@ impl Bench {
                 ash::vk::AccessFlags::HOST_READ,
             );
             sync::run_once(gpu, "decodes", |cmd| {
-                decoder.record(gpu, cmd, (0, decodes.len() as u32), host)
+                decoder.record(gpu, cmd, (0, &[decodes.len() as u32]), host)
             })
             .expect("decodes run");
             failures.extend(self.decoder.take_failure(0));

@@ -116,7 +116,7 @@ fn tight_budget_draws_what_is_resident_and_stitches_granted_levels() {
         upload_budget: 64 << 10,
         ..Config::default()
     };
-    let mut manager = Manager::new(terrain.costs(false), config);
+    let mut manager = Manager::new(terrain.costs(false, false), config);
     let path = CameraPath::flyover(&terrain);
     let (mut coarser_frames, mut seams_differ) = (0, 0);
     let mut drawn_before = std::collections::HashMap::new();

@@ -17,15 +17,16 @@
 // codes into a grid of its own (scratch, never cleared: only points marked are read). Invocation
 // 0 reads the raw vertices. The walk goes a scale at a time: a point's parents are of coarser
 // scales, so which of a scale's points are asked about is known before any of its bits is
-// read. The invocations each take a run of the scale's points, count the questions in it,
-// and after a prefix sum read their bits from their own offset; a second prefix sum over the
-// answers gives each its place in the block. The residuals' codes are of varying length, so
+// read. The invocations each take a run of the scale's rows, count the questions in it, and
+// after a prefix sum count the ones among their bits; a second prefix sum over those gives
+// each its place in the block, and each reads its answers. The residuals' codes are of varying length, so
 // invocation 0 reads them in order, each vertex's parents decoded before it.
 //
 // A stream that is not a level of this tile (it ends early or runs past its level's end, a
 // raw vertex is outside the grid or known, more vertices than the block holds or fewer, a
-// Rice parameter over 16, a code out of range) is reported in `status` with a reason; the
-// positions written are then not to be drawn.
+// Rice parameter over 16, a code out of range), or coarser blocks that hold a point outside
+// the grid, are reported in `status` with a reason; the positions written are then not to be
+// drawn.
 
 #include "hierarchy.glsl"
 
@@ -45,6 +46,7 @@ const uint RICE_PARAMETER = 4u;
 const uint CODE_RANGE = 5u;
 const uint COUNT = 6u;
 const uint BITS_LEFT = 7u;
+const uint COARSER_BLOCKS = 8u;
 
 struct Decode {
     // The level's first bit in `stream`, and the bit after its last (its bytes' end).
@@ -85,6 +87,17 @@ uint region;
 
 bool is_known(uint i) {
     return (known[i / 32u] & (1u << (i % 32u))) != 0u;
+}
+
+// `width` (at most 32) bits of the known bitmap from bit `at`.
+uint bits_at_known(uint at, uint width) {
+    uint w = at >> 5u;
+    uint o = at & 31u;
+    uint v = known[w] >> o;
+    if (o != 0u && w + 1u < known.length()) {
+        v |= known[w + 1u] << (32u - o);
+    }
+    return width == 32u ? v : v & ((1u << width) - 1u);
 }
 
 // The stream's word `w`, or 0 past the buffer's end (a read looks ahead of what it takes).
@@ -144,16 +157,12 @@ void read_raw(Decode d) {
     placed = raw;
 }
 
-// Whether the walk asks about lattice point `e` of scale 2^k (m points a side, row-major),
-// with its grid index: a point of this scale not known yet whose parents are.
-bool asked(uint e, uint k, uint m, out uint i) {
-    uint ci = e % m;
-    uint cj = e / m;
-    uint x = ci << k;
-    uint y = cj << k;
+// Whether the walk asks about grid point (x, y) of scale 2^k, with its grid index: a point not
+// known yet whose parents are.
+bool asked(uint x, uint y, uint k, out uint i) {
     i = y * SIDE + x;
-    if (((ci | cj) & 1u) == 0u || is_known(i)) {
-        return false;   // a coarser scale's point, or known
+    if (is_known(i)) {
+        return false;
     }
     uvec2 p, q;
     parents_of(x, y, k, p, q);
@@ -171,17 +180,31 @@ uint prefix(uint r, uint base) {
     return end;
 }
 
-// The walk over the points of scale 2^k: each invocation takes a run of the scale's lattice.
-// No point of a scale is a parent of another, so the questions are known before any answer.
+// The ones among `count` bits from bit `at`.
+uint ones_in(uint at, uint count) {
+    uint n = 0u;
+    for (uint done = 0u; done < count; done += 32u) {
+        n += uint(bitCount(bits(at + done, min(32u, count - done))));
+    }
+    return n;
+}
+
+// The walk over the points of scale 2^k, row-major: each invocation takes a run of the
+// scale's lattice rows (m a side), in a row of even index its odd columns (the even ones are
+// coarser points), in an odd row every column. No point of a scale is a parent of another,
+// so the questions are known before any answer; the answers are counted from the stream.
 void walk_scale(Decode d, uint k, uint lane) {
     uint m = (256u >> k) + 1u;
-    uint run = (m * m + LANES - 1u) / LANES;
-    uint first = min(lane * run, m * m);
-    uint last = min(first + run, m * m);
+    uint rows = (m + LANES - 1u) / LANES;
+    uint first = min(lane * rows, m);
+    uint last = min(first + rows, m);
     uint i;
     uint questions = 0u;
-    for (uint e = first; e < last; e++) {
-        questions += asked(e, k, m, i) ? 1u : 0u;
+    for (uint cj = first; cj < last; cj++) {
+        uint step = 2u - (cj & 1u);
+        for (uint ci = step - 1u; ci < m; ci += step) {
+            questions += asked(ci << k, cj << k, k, i) ? 1u : 0u;
+        }
     }
     runs[0][lane] = questions;
     barrier();
@@ -192,17 +215,7 @@ void walk_scale(Decode d, uint k, uint lane) {
         }
     }
     barrier();
-    uint answers = 0u;
-    if (failure == 0u) {
-        uint at = runs[0][lane];
-        for (uint e = first; e < last; e++) {
-            if (asked(e, k, m, i)) {
-                answers += bits(at, 1u);
-                at++;
-            }
-        }
-    }
-    runs[1][lane] = answers;
+    runs[1][lane] = failure == 0u ? ones_in(runs[0][lane], questions) : 0u;
     barrier();
     if (lane == 0u && failure == 0u) {
         placed = prefix(1u, placed);
@@ -214,15 +227,122 @@ void walk_scale(Decode d, uint k, uint lane) {
     if (failure == 0u) {
         uint at = runs[0][lane];
         uint slot = runs[1][lane];
-        for (uint e = first; e < last; e++) {
-            if (asked(e, k, m, i)) {
-                if (bits(at, 1u) == 1u) {
-                    atomicOr(known[i / 32u], 1u << (i % 32u));
-                    // The grid index for now; its packed position once its height is read.
-                    positions[d.out_word + slot] = i;
-                    slot++;
+        for (uint cj = first; cj < last; cj++) {
+            uint step = 2u - (cj & 1u);
+            for (uint ci = step - 1u; ci < m; ci += step) {
+                if (asked(ci << k, cj << k, k, i)) {
+                    if (bits(at, 1u) == 1u) {
+                        atomicOr(known[i / 32u], 1u << (i % 32u));
+                        // The grid index for now; its packed position once its height is read.
+                        positions[d.out_word + slot] = i;
+                        slot++;
+                    }
+                    at++;
                 }
-                at++;
+            }
+        }
+    }
+    memoryBarrierBuffer();
+    barrier();
+}
+
+// Bits of grid row y for columns x0 - 1 + shift .. + 32 (shift 0, 1 or 2: the columns left of,
+// at and right of x0), least significant first; 0 outside the grid.
+uint row_bits(int y, int x) {
+    if (y < 0 || y >= int(SIDE)) {
+        return 0u;
+    }
+    uint v;
+    if (x < 0) {
+        // Only x = -1: column -1 is outside, columns 0..30 are the window's bits 1..31.
+        v = bits_at_known(uint(y) * SIDE, 31u) << 1u;
+    } else {
+        v = bits_at_known(uint(y) * SIDE + uint(x), 32u);
+    }
+    // Columns past the row's end are the next row's.
+    int past = x + 32 - int(SIDE);
+    if (past > 0) {
+        v &= past >= 32 ? 0u : (0xffffffffu >> uint(past));
+    }
+    return v;
+}
+
+// The candidates of scale 1 in grid row y, columns x0 .. x0 + 31: points not known whose two
+// parents are (tools/tiles/src/compact.rs, `parents`, at scale 1: an edge's midpoint has the
+// edge's ends; a cell's centre (x, y) the diagonal through (x - 1, y - 1) and (x + 1, y + 1)
+// when x and y are alike modulo 4, the other one otherwise).
+uint finest_candidates(uint y, uint x0) {
+    int yi = int(y);
+    int xi = int(x0);
+    uint own = ~row_bits(yi, xi);
+    uint c;
+    if ((y & 1u) == 0u) {
+        // Odd columns: the midpoints of horizontal edges.
+        c = row_bits(yi, xi - 1) & row_bits(yi, xi + 1) & 0xaaaaaaaau;
+    } else {
+        uint vertical = row_bits(yi - 1, xi) & row_bits(yi + 1, xi) & 0x55555555u;
+        uint main_diagonal = row_bits(yi - 1, xi - 1) & row_bits(yi + 1, xi + 1);
+        uint other_diagonal = row_bits(yi - 1, xi + 1) & row_bits(yi + 1, xi - 1);
+        // Columns 1 mod 4 (bits 1, 5, ...) and 3 mod 4.
+        uint main_columns = (y & 3u) == 1u ? 0x22222222u : 0x88888888u;
+        uint other_columns = (y & 3u) == 1u ? 0x88888888u : 0x22222222u;
+        c = vertical | (main_diagonal & main_columns) | (other_diagonal & other_columns);
+    }
+    c &= own;
+    int past = xi + 32 - int(SIDE);
+    if (past > 0) {
+        c &= past >= 32 ? 0u : (0xffffffffu >> uint(past));
+    }
+    return c;
+}
+
+// The walk over scale 1, 32 columns at a time (the finest scale holds three quarters of the
+// grid's points): as walk_scale, each invocation a run of rows.
+void walk_finest(Decode d, uint lane) {
+    uint rows = (SIDE + LANES - 1u) / LANES;
+    uint first = min(lane * rows, SIDE);
+    uint last = min(first + rows, SIDE);
+    uint questions = 0u;
+    for (uint y = first; y < last; y++) {
+        for (uint x0 = 0u; x0 < SIDE; x0 += 32u) {
+            questions += uint(bitCount(finest_candidates(y, x0)));
+        }
+    }
+    runs[0][lane] = questions;
+    barrier();
+    if (lane == 0u) {
+        bit_at = prefix(0u, bit_at);
+        if (bit_at > d.end_bit) {
+            fail(ENDS_EARLY);
+        }
+    }
+    barrier();
+    runs[1][lane] = failure == 0u ? ones_in(runs[0][lane], questions) : 0u;
+    barrier();
+    if (lane == 0u && failure == 0u) {
+        placed = prefix(1u, placed);
+        if (placed > d.expected) {
+            fail(TOO_MANY);
+        }
+    }
+    barrier();
+    if (failure == 0u) {
+        uint at = runs[0][lane];
+        uint slot = runs[1][lane];
+        for (uint y = first; y < last; y++) {
+            for (uint x0 = 0u; x0 < SIDE; x0 += 32u) {
+                uint c = finest_candidates(y, x0);
+                while (c != 0u) {
+                    uint b = uint(findLSB(c));
+                    c &= c - 1u;
+                    if (bits(at, 1u) == 1u) {
+                        uint i = y * SIDE + x0 + b;
+                        atomicOr(known[i / 32u], 1u << (i % 32u));
+                        positions[d.out_word + slot] = i;
+                        slot++;
+                    }
+                    at++;
+                }
             }
         }
     }
@@ -296,7 +416,14 @@ void main() {
     barrier();
     for (uint v = lane; v < d.known_count; v += LANES) {
         uint packed = positions[d.known_word + v];
-        uint i = ((packed >> 9u) & 511u) * SIDE + (packed & 511u);
+        uint x = packed & 511u;
+        uint y = (packed >> 9u) & 511u;
+        if (x >= SIDE || y >= SIDE) {
+            // Not a position: the pool does not hold the tile's coarser blocks there.
+            failure = COARSER_BLOCKS;
+            continue;
+        }
+        uint i = y * SIDE + x;
         atomicOr(known[i / 32u], 1u << (i % 32u));
         codes[region + i] = packed >> 18u;
     }
@@ -308,9 +435,10 @@ void main() {
     memoryBarrierBuffer();
     barrier();
     uint raw = placed;
-    for (int k = 7; k >= 0; --k) {
+    for (int k = 7; k >= 1; --k) {
         walk_scale(d, uint(k), lane);
     }
+    walk_finest(d, lane);
     if (lane == 0u) {
         if (failure == 0u) {
             read_heights(d, raw);

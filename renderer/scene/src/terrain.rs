@@ -640,8 +640,9 @@ impl Terrain {
     /// take pool memory, only with `morph_rows`: the vertex shaders that read them are
     /// `--morph-shader two-levels` and `forward-differences`. The morph pass places every
     /// vertex from its parents' own heights and discrete levels read none, so by default a
-    /// level sends its positions alone.
-    pub fn costs(&self, morph_rows: bool) -> Vec<memory::TileCost> {
+    /// level sends its positions alone. With `decode` a compact set's levels travel as their
+    /// streams ([`Terrain::level_stream`]), decoded on the GPU into the positions.
+    pub fn costs(&self, morph_rows: bool, decode: bool) -> Vec<memory::TileCost> {
         self.tiles
             .iter()
             .map(|t| memory::TileCost {
@@ -658,6 +659,7 @@ impl Terrain {
                         },
                         indices: u64::from(l.index_count) * u64::from(l.index_width),
                         index_width: l.index_width,
+                        stream: t.streams.get(i).filter(|_| decode).map(|&n| u64::from(n)),
                     })
                     .collect(),
             })
@@ -694,6 +696,22 @@ impl Terrain {
         };
         let start = offset as usize;
         blob.get(start..start.checked_add(usize::try_from(len).ok()?)?)
+    }
+
+    /// Whether the set's levels can travel as compact streams (version 5 compact sets).
+    pub fn has_streams(&self) -> bool {
+        self.tiles.iter().any(|t| !t.streams.is_empty())
+    }
+
+    /// Level `level`'s compact stream of `tile` (version 5 compact sets), once the level has
+    /// passed its check (None before, or when the tile failed): the check decoded the whole
+    /// tile and found each level ending where its length says.
+    pub fn level_stream(&self, tile: usize, level: u32) -> Option<&[u8]> {
+        let info = self.tiles.get(tile)?;
+        if info.usable_at(level) != Some(true) {
+            return None;
+        }
+        self.set_of(info).level_stream(info.tx, info.ty, level)
     }
 
     /// The BC1 blocks of texture mip `mip` of `tile`, once the tile has passed its check.
@@ -909,7 +927,7 @@ fn distinct_levels(levels: &[LevelEntry]) -> usize {
 fn tile_info(set: &TileSet, tx: u32, ty: u32, layer: u32) -> Result<TileInfo, tiles::FormatError> {
     let h = *set.header();
     let (sx, sy) = (h.spacing_x, h.spacing_y);
-    let (th, mut levels) = set.tile_table(tx, ty)?;
+    let (th, mut levels, streams) = set.tile_table_and_streams(tx, ty)?;
     // A pyramid layer's tile: its levels' errors against the base grid's samples under it,
     // not its own subsampled grid's, so that it is chosen by the ground it stands for.
     if let Some(errors) = set.base_errors(tx, ty) {
@@ -946,6 +964,7 @@ fn tile_info(set: &TileSet, tx: u32, ty: u32, layer: u32) -> Result<TileInfo, ti
         layer,
         header: th,
         levels,
+        streams,
         min,
         max,
         tables: [own_table; 9],

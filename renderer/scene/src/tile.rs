@@ -27,6 +27,9 @@ pub struct TileInfo {
     pub layer: u32,
     pub header: TileHeader,
     pub levels: Vec<LevelEntry>,
+    /// Per level, the bytes of its compact stream (version 5 compact sets; empty otherwise):
+    /// what a refinement sends when the GPU decodes it.
+    pub streams: Vec<u32>,
     /// World box over all levels: x east, y north, z up (metres).
     pub min: DVec3,
     pub max: DVec3,

@@ -1,12 +1,13 @@
 //! Every GPU allocation the frame loop makes, at start: the tile pool (halved until device
-//! memory holds it), the texture slots, the index builder, the pipelines and one slot per frame
+//! memory holds it), the texture slots, the index builder, the compact levels' decoder, the
+//! pipelines and one slot per frame
 //! in flight. How the budget splits between them is decided in `memory::budget`; this file only
 //! asks the device for what was decided and undoes what it made when a later step fails.
 
 use ash::vk;
 use memory::budget::{self, Split, Textures};
 use memory::textures::{TextureConfig, TextureSlots};
-use memory::{Config, Manager, Victim};
+use memory::{Config, Manager, Scheme, Victim};
 
 use super::ring::{Slot, SlotSizes};
 use super::Renderer;
@@ -20,6 +21,7 @@ use crate::target::{COLOR_FORMAT, DEPTH_FORMAT};
 use crate::terrain::Terrain;
 use crate::tile::Side;
 use crate::vulkan::buffer::BufferDesc;
+use crate::vulkan::decode::{Decoder, MAX_DECODES_PER_DISPATCH};
 use crate::vulkan::indices::{self, IndexBuilder};
 use crate::vulkan::morph_pass::{MORPH_GROUPS, MORPH_REGION_BYTES};
 use crate::vulkan::pipeline::{SetBuffers, TerrainPipeline, TerrainSets};
@@ -40,6 +42,7 @@ struct Parts {
     pipeline: Option<TerrainPipeline>,
     slots: Vec<Slot>,
     builder: Option<IndexBuilder>,
+    decoder: Option<Decoder>,
     morph_scratch: Option<Buffer>,
     sets: Option<TerrainSets>,
 }
@@ -51,6 +54,7 @@ struct Made {
     pipeline: TerrainPipeline,
     slots: Vec<Slot>,
     builder: Option<IndexBuilder>,
+    decoder: Option<Decoder>,
     morph_scratch: Buffer,
     sets: Option<TerrainSets>,
 }
@@ -66,6 +70,7 @@ impl Parts {
                 pipeline: Some(pipeline),
                 slots,
                 builder,
+                decoder,
                 morph_scratch: Some(morph_scratch),
                 sets,
             } => Ok(Made {
@@ -74,6 +79,7 @@ impl Parts {
                 pipeline,
                 slots,
                 builder,
+                decoder,
                 morph_scratch,
                 sets,
             }),
@@ -88,6 +94,9 @@ impl Parts {
         }
         if let Some(b) = self.builder {
             b.destroy(gpu);
+        }
+        if let Some(d) = self.decoder {
+            d.destroy(gpu);
         }
         if let Some(b) = self.morph_scratch {
             b.destroy(gpu);
@@ -174,6 +183,7 @@ impl Renderer {
             collected: Vec::new(),
             prefetcher: Prefetcher::new(options.prefetch, terrain.tiles.len()),
             builder: made.builder,
+            decoder: made.decoder,
             parts: PartDraws::default(),
         })
     }
@@ -189,6 +199,9 @@ impl Renderer {
         self.pool.destroy(gpu);
         if let Some(b) = self.builder {
             b.destroy(gpu);
+        }
+        if let Some(d) = self.decoder {
+            d.destroy(gpu);
         }
         self.morph_scratch.destroy(gpu);
         self.textures.destroy(gpu);
@@ -232,6 +245,26 @@ fn make_parts(
         let (slots, builds) = (split.frame_slots, split.builds_per_frame);
         let builder = IndexBuilder::new(gpu, &pool.buffer, slots, builds, b.lookups)?;
         parts.builder = Some(builder);
+    }
+    if decodes_on_gpu(terrain, options) {
+        // At most every level of every tile a frame (a new tile sends its levels up to the
+        // one wanted whatever the budget).
+        let levels = terrain
+            .tiles
+            .iter()
+            .map(|t| t.levels.len())
+            .max()
+            .unwrap_or(1);
+        let capacity = terrain.tiles.len() * levels + 8;
+        let streams: Vec<&Buffer> = parts.slots.iter().map(|s| s.staging.buffer()).collect();
+        let decoder = Decoder::new(
+            gpu,
+            &pool.buffer,
+            &streams,
+            capacity,
+            MAX_DECODES_PER_DISPATCH,
+        )?;
+        parts.decoder = Some(decoder);
     }
     // The budget's regions; reading heights back (a diagnostic) morphs every frame, with one
     // region if the budget had none; without any, a placeholder for the set's binding (every
@@ -378,6 +411,13 @@ fn slot_sizes(
     }
 }
 
+/// Whether a compact set's levels travel as their streams, decoded on the GPU
+/// (`MemoryOptions::decode_on_gpu`, version 5 compact sets, and not the whole-tile scheme,
+/// which sends every level at once as the file's blocks).
+pub(super) fn decodes_on_gpu(terrain: &Terrain, options: &MemoryOptions) -> bool {
+    options.decode_on_gpu && terrain.has_streams() && options.scheme != Scheme::WholeTile
+}
+
 /// Vertices of every tile at its finest level: the most a frame can draw.
 fn finest_vertices(terrain: &Terrain) -> u64 {
     terrain
@@ -400,7 +440,8 @@ fn allocate_pool(
 ) -> VkResult<(Manager, TilePool)> {
     let mut first = None;
     loop {
-        let manager = Manager::new(terrain.costs(options.morph_rows), config);
+        let costs = terrain.costs(options.morph_rows, decodes_on_gpu(terrain, options));
+        let manager = Manager::new(costs, config);
         let bytes = manager.pool_bytes();
         let wanted = *first.get_or_insert(bytes);
         let result = match fault {

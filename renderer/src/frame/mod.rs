@@ -49,6 +49,7 @@ use crate::prefetch::{Predicted, Prefetcher};
 use crate::settings::{MemoryOptions, Settings, Shading};
 use crate::terrain::Terrain;
 use crate::textures::{self, TexturePlan};
+use crate::vulkan::decode::Decoder;
 use crate::vulkan::indices::IndexBuilder;
 use crate::vulkan::pipeline::{TerrainPipeline, TerrainSets};
 use crate::vulkan::pool::TilePool;
@@ -128,6 +129,8 @@ pub struct Renderer {
     prefetcher: Prefetcher,
     /// Builds index arrays on the GPU (None: they are sent from the file).
     builder: Option<IndexBuilder>,
+    /// Decodes a compact set's levels on the GPU (None: positions are sent).
+    decoder: Option<Decoder>,
     /// What drawing tiles part by part remembers between frames (with the builder only).
     parts: PartDraws,
 }

@@ -21,6 +21,7 @@ use crate::stitch::pulled;
 use crate::target::Target;
 use crate::terrain::Terrain;
 use crate::textures::TexturePlan;
+use crate::vulkan::decode::Decoder;
 use crate::vulkan::morph_pass::MorphPass;
 use crate::vulkan::pipeline::TerrainPipeline;
 use crate::vulkan::pool;
@@ -98,6 +99,13 @@ impl Renderer {
         );
         let copies = &uploads.texture_copies;
         texture::record_uploads(gpu, cmd, &self.textures, staging.raw(), copies);
+        if let Some(d) = self
+            .decoder
+            .as_ref()
+            .filter(|_| self.fault != Some(Fault::DecodeSkip))
+        {
+            d.record(gpu, cmd, (s, &uploads.decode_waves), Decoder::READERS);
+        }
         let groups = self.morph_groups();
         if let Some(b) = &self.builder {
             let pass_follows = MorphPass::records(scene.constants, groups);

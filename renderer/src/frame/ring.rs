@@ -193,6 +193,9 @@ impl Renderer {
             return Err(VkError::Unsupported("no frame pending".into()));
         };
         sync::wait_and_reset(gpu, slot.fence)?;
+        if let Some(f) = self.decoder.as_mut().and_then(|d| d.take_failure(s)) {
+            return Err(VkError::InvalidData(super::uploads::decode_failure(f)));
+        }
         if let Some(f) = self.builder.as_mut().and_then(|b| b.take_failure(s)) {
             return Err(VkError::InvalidData(super::uploads::build_failure(f)));
         }

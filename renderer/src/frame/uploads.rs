@@ -1,6 +1,7 @@
 //! A frame's uploads written where the GPU will read them: blocks and sent index arrays straight
 //! into the pool where that is safe (host-visible memory no frame in flight reads), else into
-//! the slot's staging memory; index arrays built on the GPU as the builder's list; texture mips
+//! the slot's staging memory; a compact set's levels as their streams into the staging memory,
+//! with the decoder's list; index arrays built on the GPU as the builder's list; texture mips
 //! through the staging memory.
 
 use ash::vk;
@@ -8,9 +9,11 @@ use memory::budget::TEXTURE_ALIGN;
 
 use super::Renderer;
 use crate::error::FrameError;
+use crate::fault::Fault;
 use crate::plan::Plan;
 use crate::terrain::Terrain;
 use crate::textures::TexturePlan;
+use crate::vulkan::decode::Decode;
 use crate::vulkan::indices;
 use crate::vulkan::texture;
 
@@ -24,6 +27,9 @@ pub(super) struct Uploads {
     /// part besides the manager's.
     pub builds: u32,
     pub part_builds: u32,
+    /// The decoder's list, in waves: how many decodes each holds (a tile's finer level in a
+    /// later wave than its coarser one).
+    pub decode_waves: Vec<u32>,
     /// Bytes of geometry that went through the staging memory.
     pub staged_geometry: u64,
     /// Copies from the staging memory into the texture array.
@@ -57,7 +63,8 @@ impl Renderer {
             check_file(terrain)?;
         }
         let (builds, part_builds) = self.write_builds(terrain, plan, s)?;
-        let staged = self.write_geometry(terrain, plan, s)?;
+        let (staged, decodes) = self.write_geometry(terrain, plan, s)?;
+        let decode_waves = self.write_decodes(decodes, s)?;
         let staged_geometry = self.slots[s].staging.sent();
         let texture_copies = self.write_texture_uploads(terrain, textures, s)?;
         Ok(Uploads {
@@ -65,21 +72,28 @@ impl Renderer {
             staged,
             builds,
             part_builds,
+            decode_waves,
             staged_geometry,
             texture_copies,
         })
     }
 
-    /// Writes the blocks and the index arrays sent from the file; returns the staged copies.
+    /// Writes the blocks and the index arrays sent from the file, and the compact levels'
+    /// streams; returns the staged copies and the levels to decode.
     fn write_geometry(
         &mut self,
         terrain: &Terrain,
         plan: &Plan,
         s: usize,
-    ) -> Result<Vec<vk::BufferCopy>, FrameError> {
+    ) -> Result<(Vec<vk::BufferCopy>, Vec<Decode>), FrameError> {
         let mut staged = Vec::new();
+        let mut decodes = Vec::new();
         for u in plan.uploads.iter().filter(|u| !u.built) {
             self.prefetcher.touched(terrain, u.tile as usize);
+            if let (Some(_), memory::Part::Positions(level)) = (u.stream, u.part) {
+                decodes.extend(self.stage_stream(terrain, u, level, s)?);
+                continue;
+            }
             let bytes = terrain
                 .part(u.tile as usize, u.part)
                 .ok_or(FrameError::MissingPart {
@@ -105,7 +119,83 @@ impl Renderer {
                     .size(bytes.len() as u64),
             );
         }
-        Ok(staged)
+        Ok((staged, decodes))
+    }
+
+    /// Puts level `level`'s compact stream of the upload's tile into slot `s`'s staging memory;
+    /// returns its decode into the upload's place (None for a level that adds no vertex).
+    fn stage_stream(
+        &mut self,
+        terrain: &Terrain,
+        u: &memory::Upload,
+        level: u32,
+        s: usize,
+    ) -> Result<Option<Decode>, FrameError> {
+        let l = &terrain.tiles[u.tile as usize].levels[level as usize];
+        if l.block_len == 0 {
+            return Ok(None);
+        }
+        let bytes =
+            terrain
+                .level_stream(u.tile as usize, level)
+                .ok_or(FrameError::MissingPart {
+                    tile: u.tile,
+                    part: u.part,
+                })?;
+        let staging = &mut self.slots[s].staging;
+        let at = staging.push(bytes).ok_or(FrameError::StagingFull {
+            used: staging.used(),
+            tile: u.tile,
+            what: "'s compact level",
+        })?;
+        let bit =
+            |bytes: u64| u32::try_from(8 * bytes).map_err(|_| FrameError::PastIndexing { bytes });
+        let word =
+            |bytes: u64| u32::try_from(bytes / 4).map_err(|_| FrameError::PastIndexing { bytes });
+        Ok(Some(Decode {
+            stream_bit: bit(at)?,
+            end_bit: bit(at + bytes.len() as u64)?,
+            known_word: word(u.chunk)?,
+            known_count: l.block_start,
+            out_word: word(u.dst)?,
+            expected: l.block_len + u32::from(self.fault == Some(Fault::DecodeCount)),
+            tile: u.tile,
+            level,
+        }))
+    }
+
+    /// Writes the frame's decodes into slot `s`'s list in waves (a tile's levels arrive in
+    /// order, each after the coarser ones it reads); returns each wave's length.
+    fn write_decodes(&mut self, decodes: Vec<Decode>, s: usize) -> Result<Vec<u32>, FrameError> {
+        let Some(decoder) = self.decoder.as_mut() else {
+            return Ok(Vec::new());
+        };
+        let mut seen: std::collections::HashMap<u32, u32> = std::collections::HashMap::new();
+        let mut waved: Vec<(u32, Decode)> = decodes
+            .into_iter()
+            .map(|d| {
+                let n = seen.entry(d.tile).or_insert(0);
+                *n += 1;
+                (*n - 1, d)
+            })
+            .collect();
+        waved.sort_by_key(|&(wave, _)| wave);
+        let waves = waved
+            .iter()
+            .fold(Vec::new(), |mut waves: Vec<u32>, &(w, _)| {
+                waves.resize(waves.len().max(w as usize + 1), 0);
+                waves[w as usize] += 1;
+                waves
+            });
+        let list: Vec<Decode> = waved.into_iter().map(|(_, d)| d).collect();
+
+        if !decoder.write(s, &list) {
+            return Err(FrameError::TooManyDecodes {
+                decodes: list.len(),
+                capacity: decoder.capacity(),
+            });
+        }
+        Ok(waves)
     }
 
     /// Writes the plan's index array builds ([`memory::gpu_builds`]: a build overlapped by a
@@ -238,5 +328,14 @@ pub(super) fn build_failure(f: indices::BuildFailure) -> String {
     format!(
         "tile #{}: the index array built from its vertices {got} where the tile set says {} ({} such builds in the frame): the file's vertices do not make the mesh it claims",
         f.tile, f.expected, f.failed
+    )
+}
+
+/// The error for a compact level the GPU refused to decode (a stream that passed the tile's
+/// check on the CPU: the two decoders disagree).
+pub(super) fn decode_failure(f: crate::vulkan::decode::DecodeFailure) -> String {
+    format!(
+        "tile #{} level {}: the GPU refused its compact stream ({:?}) that the CPU decoded ({} such levels in the frame)",
+        f.tile, f.level, f.reason, f.failed
     )
 }

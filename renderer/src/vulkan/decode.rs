@@ -59,6 +59,8 @@ pub enum Refusal {
     Count,
     /// Whole bytes left after the level's last code.
     BitsLeft,
+    /// The coarser blocks hold a point outside the grid (not the tile's blocks).
+    CoarserBlocks,
     Unknown(u32),
 }
 
@@ -72,6 +74,7 @@ impl Refusal {
             5 => Refusal::CodeRange,
             6 => Refusal::Count,
             7 => Refusal::BitsLeft,
+            8 => Refusal::CoarserBlocks,
             c => Refusal::Unknown(c),
         }
     }
@@ -102,12 +105,13 @@ pub struct Decoder {
 }
 
 impl Decoder {
-    /// A decoder reading `streams` and writing into `pool`, for `slots` frame slots of up to
-    /// `capacity` decodes each, `groups` (1 to [`MAX_DECODES_PER_DISPATCH`]) levels at once.
+    /// A decoder writing into `pool`, for as many frame slots as `streams` (each slot's
+    /// streams buffer, its staging memory in a frame) of up to `capacity` decodes each,
+    /// `groups` (1 to [`MAX_DECODES_PER_DISPATCH`]) levels at once.
     pub fn new(
         gpu: &Gpu,
-        (pool, streams): (&Buffer, &Buffer),
-        slots: usize,
+        pool: &Buffer,
+        streams: &[&Buffer],
         capacity: usize,
         groups: u32,
     ) -> VkResult<Self> {
@@ -146,7 +150,7 @@ impl Decoder {
             groups,
         };
         // On failure the partly made decoder is destroyed (null handles are skipped).
-        match decoder.create(gpu, (pool, streams), slots.max(1)) {
+        match decoder.create(gpu, pool, streams) {
             Ok(()) => Ok(decoder),
             Err(e) => {
                 decoder.destroy(gpu);
@@ -155,7 +159,7 @@ impl Decoder {
         }
     }
 
-    fn create(&mut self, gpu: &Gpu, buffers: (&Buffer, &Buffer), slots: usize) -> VkResult<()> {
+    fn create(&mut self, gpu: &Gpu, pool: &Buffer, streams: &[&Buffer]) -> VkResult<()> {
         let ranges = [vk::PushConstantRange::default()
             .stage_flags(vk::ShaderStageFlags::COMPUTE)
             .size(4)];
@@ -172,17 +176,13 @@ impl Decoder {
             self.layout,
             "decode pipeline",
         )?;
-        self.create_sets(gpu, buffers, slots)
+        self.create_sets(gpu, pool, streams)
     }
 
     /// The per-slot lists and status words, and a descriptor set per slot over them, the
     /// pool, the streams and the grids.
-    fn create_sets(
-        &mut self,
-        gpu: &Gpu,
-        (pool, streams): (&Buffer, &Buffer),
-        slots: usize,
-    ) -> VkResult<()> {
+    fn create_sets(&mut self, gpu: &Gpu, pool: &Buffer, streams: &[&Buffer]) -> VkResult<()> {
+        let slots = streams.len();
         let sizes = [vk::DescriptorPoolSize::default()
             .ty(vk::DescriptorType::STORAGE_BUFFER)
             .descriptor_count(5 * slots as u32)];
@@ -226,7 +226,7 @@ impl Decoder {
             };
             let infos = [
                 whole(pool, pool.size.min(limit)),
-                whole(streams, streams.size.min(limit)),
+                whole(streams[s], streams[s].size.min(limit)),
                 whole(&self.grids, vk::WHOLE_SIZE),
                 whole(&self.lists[s], vk::WHOLE_SIZE),
                 whole(&self.status[s], vk::WHOLE_SIZE),
@@ -265,17 +265,32 @@ impl Decoder {
         decodes.len() <= self.capacity && self.lists[s].write(0, bytemuck::cast_slice(decodes))
     }
 
-    /// Records slot `s`'s first `count` decodes: after the copies that brought their streams
-    /// and coarser blocks (and earlier frames' reads of the blocks they write), before
-    /// whatever reads the blocks (`readers`: stages and accesses).
+    /// Who reads the blocks the decodes write: the index builds and the morph pass, the
+    /// vertex shaders, and the copies (a chunk moved).
+    pub const READERS: sync::Scope = (
+        vk::PipelineStageFlags::from_raw(
+            vk::PipelineStageFlags::COMPUTE_SHADER.as_raw()
+                | vk::PipelineStageFlags::VERTEX_SHADER.as_raw()
+                | vk::PipelineStageFlags::TRANSFER.as_raw(),
+        ),
+        vk::AccessFlags::from_raw(
+            vk::AccessFlags::SHADER_READ.as_raw() | vk::AccessFlags::TRANSFER_READ.as_raw(),
+        ),
+    );
+
+    /// Records slot `s`'s decodes, listed in `waves` (how many in each, in the list's order):
+    /// after the copies that brought their coarser blocks (and earlier frames' reads of the
+    /// blocks they write), before whatever reads the blocks (`readers`: stages and accesses).
+    /// A wave's decodes run side by side; each wave sees the blocks the waves before it wrote,
+    /// so a tile's finer level goes in a later wave than its coarser one.
     pub fn record(
         &self,
         gpu: &Gpu,
         cmd: vk::CommandBuffer,
-        (s, count): (usize, u32),
+        (s, waves): (usize, &[u32]),
         readers: sync::Scope,
     ) {
-        if count == 0 {
+        if waves.iter().all(|&n| n == 0) {
             return;
         }
         let compute = vk::PipelineStageFlags::COMPUTE_SHADER;
@@ -290,25 +305,29 @@ impl Decoder {
             | vk::AccessFlags::HOST_WRITE;
         sync::memory_barrier(gpu, cmd, (earlier, written), (compute, shader));
         sync::bind_compute(gpu, cmd, (self.pipeline, self.layout), self.sets[s], &[]);
-        let mut first = 0;
-        while first < count {
-            if first > 0 {
-                // The next dispatch reuses the grids, and may read blocks this one wrote.
-                sync::memory_barrier(gpu, cmd, (compute, shader), (compute, shader));
+        let (mut first, mut dispatched) = (0, false);
+        for &wave in waves {
+            let end = first + wave;
+            while first < end {
+                if dispatched {
+                    // The next dispatch reuses the grids, and may read blocks this one wrote.
+                    sync::memory_barrier(gpu, cmd, (compute, shader), (compute, shader));
+                }
+                let n = (end - first).min(self.groups);
+                // SAFETY: as above; the pipeline and set are bound.
+                unsafe {
+                    gpu.device.cmd_push_constants(
+                        cmd,
+                        self.layout,
+                        vk::ShaderStageFlags::COMPUTE,
+                        0,
+                        bytemuck::bytes_of(&first),
+                    );
+                    gpu.device.cmd_dispatch(cmd, n, 1, 1);
+                }
+                first += n;
+                dispatched = true;
             }
-            let n = (count - first).min(self.groups);
-            // SAFETY: as above; the pipeline and set are bound.
-            unsafe {
-                gpu.device.cmd_push_constants(
-                    cmd,
-                    self.layout,
-                    vk::ShaderStageFlags::COMPUTE,
-                    0,
-                    bytemuck::bytes_of(&first),
-                );
-                gpu.device.cmd_dispatch(cmd, n, 1, 1);
-            }
-            first += n;
         }
         sync::memory_barrier(gpu, cmd, (compute, vk::AccessFlags::SHADER_WRITE), readers);
     }

@@ -102,7 +102,11 @@ impl Staging {
     pub fn new(gpu: &Gpu, bytes: u64, name: &str) -> VkResult<Staging> {
         let buffer = Buffer::new(
             gpu,
-            BufferDesc::upload(bytes.max(4), vk::BufferUsageFlags::TRANSFER_SRC),
+            // Copies read it; so does the compact levels' decoder (`vulkan::decode`).
+            BufferDesc::upload(
+                bytes.max(4),
+                vk::BufferUsageFlags::TRANSFER_SRC | vk::BufferUsageFlags::STORAGE_BUFFER,
+            ),
             name,
         )?;
         Ok(Staging {
@@ -142,6 +146,11 @@ impl Staging {
 
     pub fn used(&self) -> u64 {
         self.used
+    }
+
+    /// The buffer itself (the decoder binds it).
+    pub fn buffer(&self) -> &Buffer {
+        &self.buffer
     }
 
     /// The buffer copies read from.
