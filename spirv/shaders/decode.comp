@@ -17,10 +17,12 @@
 // codes into a grid of its own (scratch, never cleared: only points marked are read). Invocation
 // 0 reads the raw vertices. The walk goes a scale at a time: a point's parents are of coarser
 // scales, so which of a scale's points are asked about is known before any of its bits is
-// read. The invocations each take a run of the scale's rows, count the questions in it, and
-// after a prefix sum count the ones among their bits; a second prefix sum over those gives
-// each its place in the block, and each reads its answers. The residuals' codes are of varying length, so
-// invocation 0 reads them in order, each vertex's parents decoded before it.
+// read, and 32 columns are asked about at once (the bitmap's rows shifted by the scale give
+// each point's parents). The invocations each take a run of the scale's rows, count the
+// questions in it, and after a prefix sum count the ones among their bits; a second prefix
+// sum over those gives each its place in the block, and each reads its answers. The
+// residuals' codes are of varying length, so invocation 0 reads them in order, each vertex's
+// parents decoded before it (the stream through two words kept in registers).
 //
 // A stream that is not a level of this tile (it ends early or runs past its level's end, a
 // raw vertex is outside the grid or known, more vertices than the block holds or fewer, a
@@ -157,18 +159,6 @@ void read_raw(Decode d) {
     placed = raw;
 }
 
-// Whether the walk asks about grid point (x, y) of scale 2^k, with its grid index: a point not
-// known yet whose parents are.
-bool asked(uint x, uint y, uint k, out uint i) {
-    i = y * SIDE + x;
-    if (is_known(i)) {
-        return false;
-    }
-    uvec2 p, q;
-    parents_of(x, y, k, p, q);
-    return is_known(p.y * SIDE + p.x) && is_known(q.y * SIDE + q.x);
-}
-
 // Invocation 0: turns runs[r] into offsets from `base`, in place; returns the end.
 uint prefix(uint r, uint base) {
     uint end = base;
@@ -189,21 +179,90 @@ uint ones_in(uint at, uint count) {
     return n;
 }
 
-// The walk over the points of scale 2^k, row-major: each invocation takes a run of the
-// scale's lattice rows (m a side), in a row of even index its odd columns (the even ones are
-// coarser points), in an odd row every column. No point of a scale is a parent of another,
-// so the questions are known before any answer; the answers are counted from the stream.
-void walk_scale(Decode d, uint k, uint lane) {
+// Bits of grid row y for columns x .. x + 31 (x >= -32), least significant first; 0 outside
+// the grid.
+uint row_bits(int y, int x) {
+    if (y < 0 || y >= int(SIDE) || x <= -32) {
+        return 0u;
+    }
+    uint v;
+    if (x < 0) {
+        // Columns x .. -1 are outside: the row's first 32 + x columns, moved up.
+        v = bits_at_known(uint(y) * SIDE, uint(32 + x)) << uint(-x);
+    } else {
+        v = bits_at_known(uint(y) * SIDE + uint(x), 32u);
+    }
+    // Columns past the row's end are the next row's.
+    int past = x + 32 - int(SIDE);
+    if (past > 0) {
+        v &= past >= 32 ? 0u : (0xffffffffu >> uint(past));
+    }
+    return v;
+}
+
+// The bits b of the word of columns x0 .. x0 + 31 (x0 a multiple of 32) whose column is
+// `offset` modulo `period` (a power of two).
+uint columns(uint period, uint offset, uint x0) {
+    if (period > 32u) {
+        uint first = (offset + period - x0 % period) % period;
+        return first < 32u ? 1u << first : 0u;
+    }
+    uint m = 1u << offset;
+    for (uint p = period; p < 32u; p *= 2u) {
+        m |= m << p;
+    }
+    return m;
+}
+
+// The walk's questions of scale s = 2^k in grid row y (a multiple of s), columns x0 .. x0 + 31
+// (x0 a multiple of 32): the points of that scale not known whose two
+// parents are (tools/tiles/src/compact.rs, `parents`): an edge's midpoint has the edge's ends;
+// a cell's centre (x, y) the diagonal through (x - s, y - s) and (x + s, y + s) where x and y
+// are alike modulo 4 s (both s or both 3 s), the other diagonal otherwise (at s = 128 the one
+// cell centre, (128, 128), is alike).
+uint questions_in(uint y, uint x0, uint k) {
+    int s = 1 << k;
+    int yi = int(y);
+    int xi = int(x0);
+    uint odd_columns = columns(2u << k, 1u << k, x0);
+    uint c;
+    if (((y >> k) & 1u) == 0u) {
+        // A row of even multiples of s: its odd multiples are horizontal edges' midpoints.
+        c = row_bits(yi, xi - s) & row_bits(yi, xi + s) & odd_columns;
+    } else {
+        uint even_columns = columns(2u << k, 0u, x0);
+        uint vertical = row_bits(yi - s, xi) & row_bits(yi + s, xi) & even_columns;
+        uint main_diagonal = row_bits(yi - s, xi - s) & row_bits(yi + s, xi + s);
+        uint other_diagonal = row_bits(yi - s, xi + s) & row_bits(yi + s, xi - s);
+        // Columns s and 3 s modulo 4 s.
+        uint first = columns(4u << k, 1u << k, x0);
+        uint third = columns(4u << k, 3u << k, x0);
+        bool first_row = (y & ((4u << k) - 1u)) == (1u << k);
+        c = vertical | (main_diagonal & (first_row ? first : third))
+            | (other_diagonal & (first_row ? third : first));
+    }
+    c &= ~row_bits(yi, xi);
+    int past = xi + 32 - int(SIDE);
+    if (past > 0) {
+        c &= past >= 32 ? 0u : (0xffffffffu >> uint(past));
+    }
+    return c;
+}
+
+// The walk over scale 2^k, 32 columns at a time, row-major: each invocation takes a run of
+// the scale's rows (m a side). No point of a scale is a parent of another, so the questions
+// are known before any answer: each invocation counts its own, a prefix sum gives it its
+// first bit, the ones among its bits (counted from the stream) and a second prefix sum its
+// first place in the block, then it reads its answers.
+void walk_words(Decode d, uint k, uint lane) {
     uint m = (256u >> k) + 1u;
     uint rows = (m + LANES - 1u) / LANES;
     uint first = min(lane * rows, m);
     uint last = min(first + rows, m);
-    uint i;
     uint questions = 0u;
     for (uint cj = first; cj < last; cj++) {
-        uint step = 2u - (cj & 1u);
-        for (uint ci = step - 1u; ci < m; ci += step) {
-            questions += asked(ci << k, cj << k, k, i) ? 1u : 0u;
+        for (uint x0 = 0u; x0 < SIDE; x0 += 32u) {
+            questions += uint(bitCount(questions_in(cj << k, x0, k)));
         }
     }
     runs[0][lane] = questions;
@@ -228,10 +287,14 @@ void walk_scale(Decode d, uint k, uint lane) {
         uint at = runs[0][lane];
         uint slot = runs[1][lane];
         for (uint cj = first; cj < last; cj++) {
-            uint step = 2u - (cj & 1u);
-            for (uint ci = step - 1u; ci < m; ci += step) {
-                if (asked(ci << k, cj << k, k, i)) {
+            uint y = cj << k;
+            for (uint x0 = 0u; x0 < SIDE; x0 += 32u) {
+                uint c = questions_in(y, x0, k);
+                while (c != 0u) {
+                    uint b = uint(findLSB(c));
+                    c &= c - 1u;
                     if (bits(at, 1u) == 1u) {
+                        uint i = y * SIDE + x0 + b;
                         atomicOr(known[i / 32u], 1u << (i % 32u));
                         // The grid index for now; its packed position once its height is read.
                         positions[d.out_word + slot] = i;
@@ -246,108 +309,26 @@ void walk_scale(Decode d, uint k, uint lane) {
     barrier();
 }
 
-// Bits of grid row y for columns x0 - 1 + shift .. + 32 (shift 0, 1 or 2: the columns left of,
-// at and right of x0), least significant first; 0 outside the grid.
-uint row_bits(int y, int x) {
-    if (y < 0 || y >= int(SIDE)) {
-        return 0u;
-    }
-    uint v;
-    if (x < 0) {
-        // Only x = -1: column -1 is outside, columns 0..30 are the window's bits 1..31.
-        v = bits_at_known(uint(y) * SIDE, 31u) << 1u;
-    } else {
-        v = bits_at_known(uint(y) * SIDE + uint(x), 32u);
-    }
-    // Columns past the row's end are the next row's.
-    int past = x + 32 - int(SIDE);
-    if (past > 0) {
-        v &= past >= 32 ? 0u : (0xffffffffu >> uint(past));
-    }
-    return v;
-}
+// Invocation 0's reader of the residuals, which it reads in order: the stream's words
+// `window_word` and the next, kept in registers (a storage read is slow on some devices).
+uint window_word = 0xfffffffeu;  // none yet (one past it is no word either)
+uint window_lo;
+uint window_hi;
 
-// The candidates of scale 1 in grid row y, columns x0 .. x0 + 31: points not known whose two
-// parents are (tools/tiles/src/compact.rs, `parents`, at scale 1: an edge's midpoint has the
-// edge's ends; a cell's centre (x, y) the diagonal through (x - 1, y - 1) and (x + 1, y + 1)
-// when x and y are alike modulo 4, the other one otherwise).
-uint finest_candidates(uint y, uint x0) {
-    int yi = int(y);
-    int xi = int(x0);
-    uint own = ~row_bits(yi, xi);
-    uint c;
-    if ((y & 1u) == 0u) {
-        // Odd columns: the midpoints of horizontal edges.
-        c = row_bits(yi, xi - 1) & row_bits(yi, xi + 1) & 0xaaaaaaaau;
-    } else {
-        uint vertical = row_bits(yi - 1, xi) & row_bits(yi + 1, xi) & 0x55555555u;
-        uint main_diagonal = row_bits(yi - 1, xi - 1) & row_bits(yi + 1, xi + 1);
-        uint other_diagonal = row_bits(yi - 1, xi + 1) & row_bits(yi + 1, xi - 1);
-        // Columns 1 mod 4 (bits 1, 5, ...) and 3 mod 4.
-        uint main_columns = (y & 3u) == 1u ? 0x22222222u : 0x88888888u;
-        uint other_columns = (y & 3u) == 1u ? 0x88888888u : 0x22222222u;
-        c = vertical | (main_diagonal & main_columns) | (other_diagonal & other_columns);
+// `width` (at most 32) bits from bit `at`, through the window.
+uint next_bits(uint at, uint width) {
+    uint w = at >> 5u;
+    if (w != window_word) {
+        window_lo = w == window_word + 1u ? window_hi : word(w);
+        window_hi = word(w + 1u);
+        window_word = w;
     }
-    c &= own;
-    int past = xi + 32 - int(SIDE);
-    if (past > 0) {
-        c &= past >= 32 ? 0u : (0xffffffffu >> uint(past));
+    uint o = at & 31u;
+    uint v = window_lo >> o;
+    if (o != 0u) {
+        v |= window_hi << (32u - o);
     }
-    return c;
-}
-
-// The walk over scale 1, 32 columns at a time (the finest scale holds three quarters of the
-// grid's points): as walk_scale, each invocation a run of rows.
-void walk_finest(Decode d, uint lane) {
-    uint rows = (SIDE + LANES - 1u) / LANES;
-    uint first = min(lane * rows, SIDE);
-    uint last = min(first + rows, SIDE);
-    uint questions = 0u;
-    for (uint y = first; y < last; y++) {
-        for (uint x0 = 0u; x0 < SIDE; x0 += 32u) {
-            questions += uint(bitCount(finest_candidates(y, x0)));
-        }
-    }
-    runs[0][lane] = questions;
-    barrier();
-    if (lane == 0u) {
-        bit_at = prefix(0u, bit_at);
-        if (bit_at > d.end_bit) {
-            fail(ENDS_EARLY);
-        }
-    }
-    barrier();
-    runs[1][lane] = failure == 0u ? ones_in(runs[0][lane], questions) : 0u;
-    barrier();
-    if (lane == 0u && failure == 0u) {
-        placed = prefix(1u, placed);
-        if (placed > d.expected) {
-            fail(TOO_MANY);
-        }
-    }
-    barrier();
-    if (failure == 0u) {
-        uint at = runs[0][lane];
-        uint slot = runs[1][lane];
-        for (uint y = first; y < last; y++) {
-            for (uint x0 = 0u; x0 < SIDE; x0 += 32u) {
-                uint c = finest_candidates(y, x0);
-                while (c != 0u) {
-                    uint b = uint(findLSB(c));
-                    c &= c - 1u;
-                    if (bits(at, 1u) == 1u) {
-                        uint i = y * SIDE + x0 + b;
-                        atomicOr(known[i / 32u], 1u << (i % 32u));
-                        positions[d.out_word + slot] = i;
-                        slot++;
-                    }
-                    at++;
-                }
-            }
-        }
-    }
-    memoryBarrierBuffer();
-    barrier();
+    return width == 32u ? v : v & ((1u << width) - 1u);
 }
 
 // Invocation 0: the heights of the vertices the walk placed, in the block's order.
@@ -357,7 +338,7 @@ void read_heights(Decode d, uint raw) {
         fail(ENDS_EARLY);
         return;
     }
-    uint k = bits(at, 5u);
+    uint k = next_bits(at, 5u);
     at += 5u;
     if (k > 16u) {
         fail(RICE_PARAMETER);
@@ -370,15 +351,15 @@ void read_heights(Decode d, uint raw) {
         uvec2 p, q;
         parents_of(x, y, uint(findLSB(x | y)), p, q);
         // The unary quotient: the ones before the first zero, at most ESCAPE.
-        uint ones = uint(findLSB(~bits(at, ESCAPE)));
+        uint ones = uint(findLSB(~next_bits(at, ESCAPE)));
         uint z;
         uint len;
         if (ones >= ESCAPE) {
             len = ESCAPE + 17u;
-            z = bits(at + ESCAPE, 17u);
+            z = next_bits(at + ESCAPE, 17u);
         } else {
             len = ones + 1u + k;
-            z = (ones << k) | bits(at + ones + 1u, k);
+            z = (ones << k) | next_bits(at + ones + 1u, k);
         }
         if (at + len > d.end_bit) {
             fail(ENDS_EARLY);
@@ -435,10 +416,9 @@ void main() {
     memoryBarrierBuffer();
     barrier();
     uint raw = placed;
-    for (int k = 7; k >= 1; --k) {
-        walk_scale(d, uint(k), lane);
+    for (int k = 7; k >= 0; --k) {
+        walk_words(d, uint(k), lane);
     }
-    walk_finest(d, lane);
     if (lane == 0u) {
         if (failure == 0u) {
             read_heights(d, raw);
