@@ -26,6 +26,23 @@ fn compact_puget(dir: &Path) -> PathBuf {
     out
 }
 
+/// Three frames over `set` with `fault` injected: the exit code and stderr.
+fn three_frames(set: &Path, fault: &str) -> (Option<i32>, String) {
+    let args = [
+        common::s(set),
+        "--headless",
+        "--frames",
+        "3",
+        "--size",
+        "256x192",
+    ];
+    let o = common::vkterrain_with_env(&args, ("VKTERRAIN_FAULT", fault));
+    (
+        o.status.code(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
 fn column_sum(out: &Path, name: &str) -> f64 {
     common::log_column(&out.join("frames.csv"), name)
         .iter()
@@ -78,22 +95,9 @@ fn levels_decoded_on_the_gpu_draw_the_frames_their_positions_draw() {
     // The control: streams sent and never decoded leave the blocks' places unwritten. With
     // arrays built on the GPU, the builder finds vertices missing and the flight stops; with
     // the file's arrays nothing checks, and the frames differ.
-    let out = dir.path().join("skip");
-    std::fs::create_dir_all(&out).expect("dir");
-    let o = common::vkterrain_with_env(
-        &[
-            common::s(&set),
-            "--headless",
-            "--frames",
-            "3",
-            "--size",
-            "256x192",
-        ],
-        ("VKTERRAIN_FAULT", "decode-skip"),
-    );
-    let err = String::from_utf8_lossy(&o.stderr);
+    let (code, err) = three_frames(&set, "decode-skip");
     assert!(
-        o.status.code() == Some(1) && err.contains("the index array built from its vertices"),
+        code == Some(1) && err.contains("the index array built from its vertices"),
         "{err}"
     );
     let (_, skipped) = run("skip", &sent_arrays, Some("decode-skip"));
@@ -101,19 +105,8 @@ fn levels_decoded_on_the_gpu_draw_the_frames_their_positions_draw() {
     assert!(differing > 0, "undecoded streams drew the same frames");
 
     // A decode the GPU refuses stops the flight with one line naming the tile and level.
-    let o = common::vkterrain_with_env(
-        &[
-            common::s(&set),
-            "--headless",
-            "--frames",
-            "3",
-            "--size",
-            "256x192",
-        ],
-        ("VKTERRAIN_FAULT", "decode-count"),
-    );
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(1), "{err}");
+    let (code, err) = three_frames(&set, "decode-count");
+    assert_eq!(code, Some(1), "{err}");
     let line = err
         .lines()
         .find(|l| l.contains("refused its compact stream"))

@@ -16,13 +16,13 @@ use bytemuck::{Pod, Zeroable};
 use gpu_allocator::MemoryLocation;
 
 use super::buffer::BufferDesc;
+use super::compute::{self, StoragePass};
 use super::sync;
-use super::{Buffer, Gpu, VkError, VkResult};
+use super::{Buffer, Gpu, VkResult};
 
 /// Levels decoded at once at most, each with a grid of 257 x 257 codes.
 pub const MAX_DECODES_PER_DISPATCH: u32 = 8;
 const GRID_BYTES: u64 = 257 * 257 * 4;
-const STATUS_BYTES: u64 = 16;
 
 /// One level to decode (the shader's `Decode`).
 #[repr(C)]
@@ -90,12 +90,8 @@ pub struct DecodeFailure {
 }
 
 pub struct Decoder {
-    set_layout: vk::DescriptorSetLayout,
-    layout: vk::PipelineLayout,
-    pipeline: vk::Pipeline,
-    descriptors: vk::DescriptorPool,
+    pass: StoragePass,
     /// Per frame slot.
-    sets: Vec<vk::DescriptorSet>,
     lists: Vec<Buffer>,
     status: Vec<Buffer>,
     grids: Buffer,
@@ -116,136 +112,64 @@ impl Decoder {
         groups: u32,
     ) -> VkResult<Self> {
         let groups = groups.clamp(1, MAX_DECODES_PER_DISPATCH);
-        let bindings: Vec<_> = (0..5)
-            .map(|b| {
-                vk::DescriptorSetLayoutBinding::default()
-                    .binding(b)
-                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-                    .descriptor_count(1)
-                    .stage_flags(vk::ShaderStageFlags::COMPUTE)
-            })
-            .collect();
-        let set_info = vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings);
-        // SAFETY: valid create info.
-        let set_layout = unsafe { gpu.device.create_descriptor_set_layout(&set_info, None) }?;
-        gpu.name(set_layout, "decode set layout");
-        let mut decoder = Decoder {
-            set_layout,
-            layout: vk::PipelineLayout::null(),
-            pipeline: vk::Pipeline::null(),
-            descriptors: vk::DescriptorPool::null(),
-            sets: Vec::new(),
-            lists: Vec::new(),
-            status: Vec::new(),
-            grids: Buffer::new(
-                gpu,
-                BufferDesc {
-                    size: GRID_BYTES * u64::from(groups),
-                    usage: vk::BufferUsageFlags::STORAGE_BUFFER,
-                    location: MemoryLocation::GpuOnly,
-                },
-                "decode grids",
-            )?,
-            capacity: capacity.max(1),
-            groups,
-        };
-        // On failure the partly made decoder is destroyed (null handles are skipped).
-        match decoder.create(gpu, pool, streams) {
-            Ok(()) => Ok(decoder),
-            Err(e) => {
-                decoder.destroy(gpu);
-                Err(e)
-            }
-        }
-    }
-
-    fn create(&mut self, gpu: &Gpu, pool: &Buffer, streams: &[&Buffer]) -> VkResult<()> {
-        let ranges = [vk::PushConstantRange::default()
-            .stage_flags(vk::ShaderStageFlags::COMPUTE)
-            .size(4)];
-        let set_layouts = [self.set_layout];
-        let layout_info = vk::PipelineLayoutCreateInfo::default()
-            .set_layouts(&set_layouts)
-            .push_constant_ranges(&ranges);
-        // SAFETY: valid create info.
-        self.layout = unsafe { gpu.device.create_pipeline_layout(&layout_info, None) }?;
-        gpu.name(self.layout, "decode pipeline layout");
-        self.pipeline = super::pipeline::compute_pipeline(
-            gpu,
-            spirv::DECODE_COMP,
-            self.layout,
-            "decode pipeline",
-        )?;
-        self.create_sets(gpu, pool, streams)
-    }
-
-    /// The per-slot lists and status words, and a descriptor set per slot over them, the
-    /// pool, the streams and the grids.
-    fn create_sets(&mut self, gpu: &Gpu, pool: &Buffer, streams: &[&Buffer]) -> VkResult<()> {
-        let slots = streams.len();
-        let sizes = [vk::DescriptorPoolSize::default()
-            .ty(vk::DescriptorType::STORAGE_BUFFER)
-            .descriptor_count(5 * slots as u32)];
-        let info = vk::DescriptorPoolCreateInfo::default()
-            .max_sets(slots as u32)
-            .pool_sizes(&sizes);
-        // SAFETY: valid create info.
-        self.descriptors = unsafe { gpu.device.create_descriptor_pool(&info, None) }?;
-        gpu.name(self.descriptors, "decode descriptors");
-        let layouts = vec![self.set_layout; slots];
-        let alloc = vk::DescriptorSetAllocateInfo::default()
-            .descriptor_pool(self.descriptors)
-            .set_layouts(&layouts);
-        // SAFETY: the pool has room for these sets.
-        self.sets = unsafe { gpu.device.allocate_descriptor_sets(&alloc) }?;
-        let list_bytes = (self.capacity * std::mem::size_of::<Decode>()) as u64;
-        for s in 0..slots {
-            self.lists.push(Buffer::new(
-                gpu,
-                BufferDesc::upload(list_bytes, vk::BufferUsageFlags::STORAGE_BUFFER),
-                &format!("decodes, slot {s}"),
-            )?);
-            let mut status = Buffer::new(
-                gpu,
-                BufferDesc::readback_storage(STATUS_BYTES),
-                &format!("decode status, slot {s}"),
-            )?;
-            if !status.write(0, &[0; STATUS_BYTES as usize]) {
-                return Err(VkError::Unsupported(
-                    "the decode status is not host-visible".into(),
-                ));
-            }
-            self.status.push(status);
-        }
-        let limit = u64::from(gpu.properties.limits.max_storage_buffer_range);
-        for (s, &set) in self.sets.iter().enumerate() {
-            let whole = |buffer: &Buffer, range: u64| {
-                [vk::DescriptorBufferInfo::default()
-                    .buffer(buffer.raw)
-                    .range(range)]
+        let capacity = capacity.max(1);
+        let mut made: Vec<Buffer> = Vec::new();
+        let result = (|| {
+            let grids = BufferDesc {
+                size: GRID_BYTES * u64::from(groups),
+                usage: vk::BufferUsageFlags::STORAGE_BUFFER,
+                location: MemoryLocation::GpuOnly,
             };
-            let infos = [
-                whole(pool, pool.size.min(limit)),
-                whole(streams[s], streams[s].size.min(limit)),
-                whole(&self.grids, vk::WHOLE_SIZE),
-                whole(&self.lists[s], vk::WHOLE_SIZE),
-                whole(&self.status[s], vk::WHOLE_SIZE),
-            ];
-            let writes: Vec<_> = infos
+            made.push(Buffer::new(gpu, grids, "decode grids")?);
+            let list_bytes = (capacity * std::mem::size_of::<Decode>()) as u64;
+            for s in 0..streams.len() {
+                let list = BufferDesc::upload(list_bytes, vk::BufferUsageFlags::STORAGE_BUFFER);
+                made.push(Buffer::new(gpu, list, &format!("decodes, slot {s}"))?);
+                made.push(compute::status_buffer(
+                    gpu,
+                    &format!("decode status, slot {s}"),
+                )?);
+            }
+            let limit = u64::from(gpu.properties.limits.max_storage_buffer_range);
+            let slots: Vec<Vec<(&Buffer, u64)>> = streams
                 .iter()
                 .enumerate()
-                .map(|(b, info)| {
-                    vk::WriteDescriptorSet::default()
-                        .dst_set(set)
-                        .dst_binding(b as u32)
-                        .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-                        .buffer_info(info)
+                .map(|(s, &stream)| {
+                    vec![
+                        (pool, pool.size.min(limit)),
+                        (stream, stream.size.min(limit)),
+                        (&made[0], vk::WHOLE_SIZE),
+                        (&made[1 + 2 * s], vk::WHOLE_SIZE),
+                        (&made[2 + 2 * s], vk::WHOLE_SIZE),
+                    ]
                 })
                 .collect();
-            // SAFETY: the set is not in use; the buffers are live.
-            unsafe { gpu.device.update_descriptor_sets(&writes, &[]) };
+            StoragePass::new(gpu, (spirv::DECODE_COMP, "decode"), 4, &slots)
+        })();
+        let pass = match result {
+            Ok(pass) => pass,
+            Err(e) => {
+                for b in made {
+                    b.destroy(gpu);
+                }
+                return Err(e);
+            }
+        };
+        let mut buffers = made.into_iter();
+        let grids = buffers.next().expect("the grids");
+        let (mut lists, mut status) = (Vec::new(), Vec::new());
+        while let (Some(list), Some(word)) = (buffers.next(), buffers.next()) {
+            lists.push(list);
+            status.push(word);
         }
-        Ok(())
+        Ok(Decoder {
+            pass,
+            lists,
+            status,
+            grids,
+            capacity,
+            groups,
+        })
     }
 
     /// Decodes a slot's list holds.
@@ -304,7 +228,7 @@ impl Decoder {
             | vk::AccessFlags::SHADER_WRITE
             | vk::AccessFlags::HOST_WRITE;
         sync::memory_barrier(gpu, cmd, (earlier, written), (compute, shader));
-        sync::bind_compute(gpu, cmd, (self.pipeline, self.layout), self.sets[s], &[]);
+        self.pass.bind(gpu, cmd, s);
         let (mut first, mut dispatched) = (0, false);
         for &wave in waves {
             let end = first + wave;
@@ -314,17 +238,7 @@ impl Decoder {
                     sync::memory_barrier(gpu, cmd, (compute, shader), (compute, shader));
                 }
                 let n = (end - first).min(self.groups);
-                // SAFETY: as above; the pipeline and set are bound.
-                unsafe {
-                    gpu.device.cmd_push_constants(
-                        cmd,
-                        self.layout,
-                        vk::ShaderStageFlags::COMPUTE,
-                        0,
-                        bytemuck::bytes_of(&first),
-                    );
-                    gpu.device.cmd_dispatch(cmd, n, 1, 1);
-                }
+                self.pass.dispatch(gpu, cmd, bytemuck::bytes_of(&first), n);
                 first += n;
                 dispatched = true;
             }
@@ -335,10 +249,8 @@ impl Decoder {
     /// After slot `s`'s frame completed: its first failed decode, if any (and the status is
     /// cleared for the slot's next frame).
     pub fn take_failure(&mut self, s: usize) -> Option<DecodeFailure> {
-        let status = self.status[s].mapped()?;
-        let words: [u32; 4] = bytemuck::pod_read_unaligned(&status[..STATUS_BYTES as usize]);
-        status.fill(0);
-        (words[0] > 0).then_some(DecodeFailure {
+        let words = compute::take_status(&mut self.status[s])?;
+        Some(DecodeFailure {
             failed: words[0],
             tile: words[1],
             level: words[2],
@@ -347,14 +259,7 @@ impl Decoder {
     }
 
     pub fn destroy(self, gpu: &Gpu) {
-        // SAFETY: no command buffer in flight uses them; null handles are ignored.
-        unsafe {
-            gpu.device.destroy_pipeline(self.pipeline, None);
-            gpu.device.destroy_pipeline_layout(self.layout, None);
-            gpu.device.destroy_descriptor_pool(self.descriptors, None);
-            gpu.device
-                .destroy_descriptor_set_layout(self.set_layout, None);
-        }
+        self.pass.destroy(gpu);
         for b in self.lists.into_iter().chain(self.status) {
             b.destroy(gpu);
         }

@@ -11,13 +11,13 @@ use bytemuck::{Pod, Zeroable};
 use gpu_allocator::MemoryLocation;
 
 use super::buffer::BufferDesc;
+use super::compute::{self, StoragePass, STATUS_BYTES};
 use super::sync;
 use super::{Buffer, Gpu, VkError, VkResult};
 
 /// Workgroups (arrays) per dispatch at most, each with its own lookup of 257 x 257 words.
 pub const MAX_BUILDS_PER_DISPATCH: u32 = 8;
 const LOOKUP_BYTES: u64 = 257 * 257 * 4;
-const STATUS_BYTES: u64 = 16;
 
 /// One array to build (the shader's `Build`).
 #[repr(C)]
@@ -67,12 +67,8 @@ pub struct BuildFailure {
 }
 
 pub struct IndexBuilder {
-    set_layout: vk::DescriptorSetLayout,
-    layout: vk::PipelineLayout,
-    pipeline: vk::Pipeline,
-    descriptors: vk::DescriptorPool,
+    pass: StoragePass,
     /// Per frame slot.
-    sets: Vec<vk::DescriptorSet>,
     builds: Vec<Buffer>,
     status: Vec<Buffer>,
     scratch: Buffer,
@@ -98,143 +94,63 @@ impl IndexBuilder {
                 "building index arrays on the GPU needs storageBuffer16BitAccess".into(),
             ));
         }
-        let bindings: Vec<_> = (0..6)
-            .map(|b| {
-                vk::DescriptorSetLayoutBinding::default()
-                    .binding(b)
-                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-                    .descriptor_count(1)
-                    .stage_flags(vk::ShaderStageFlags::COMPUTE)
-            })
-            .collect();
-        let set_info = vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings);
-        // SAFETY: valid create info.
-        let set_layout = unsafe { gpu.device.create_descriptor_set_layout(&set_info, None) }?;
-        gpu.name(set_layout, "index build set layout");
-        let mut builder = IndexBuilder {
-            set_layout,
-            layout: vk::PipelineLayout::null(),
-            pipeline: vk::Pipeline::null(),
-            descriptors: vk::DescriptorPool::null(),
-            sets: Vec::new(),
-            builds: Vec::new(),
-            status: Vec::new(),
-            scratch: Buffer::new(
-                gpu,
-                BufferDesc {
-                    size: LOOKUP_BYTES * u64::from(lookups),
-                    usage: vk::BufferUsageFlags::STORAGE_BUFFER,
-                    location: MemoryLocation::GpuOnly,
-                },
-                "index build lookup",
-            )?,
-            capacity: capacity.max(1),
-            lookups,
-        };
-        // On failure the partly made builder is destroyed (null handles are skipped).
-        match builder.create(gpu, pool, slots.max(1)) {
-            Ok(()) => Ok(builder),
-            Err(e) => {
-                builder.destroy(gpu);
-                Err(e)
-            }
-        }
-    }
-
-    /// The compute pipeline and its layout, then the sets.
-    fn create(&mut self, gpu: &Gpu, pool: &Buffer, slots: usize) -> VkResult<()> {
-        let ranges = [vk::PushConstantRange::default()
-            .stage_flags(vk::ShaderStageFlags::COMPUTE)
-            .size(8)];
-        let set_layouts = [self.set_layout];
-        let layout_info = vk::PipelineLayoutCreateInfo::default()
-            .set_layouts(&set_layouts)
-            .push_constant_ranges(&ranges);
-        // SAFETY: valid create info.
-        self.layout = unsafe { gpu.device.create_pipeline_layout(&layout_info, None) }?;
-        gpu.name(self.layout, "index build pipeline layout");
-        self.pipeline = super::pipeline::compute_pipeline(
-            gpu,
-            spirv::INDICES_COMP,
-            self.layout,
-            "index build pipeline",
-        )?;
-        self.create_sets(gpu, pool, slots)
-    }
-
-    /// The per-slot build lists and status buffers, and a descriptor set per slot over them,
-    /// the pool and the lookups.
-    fn create_sets(&mut self, gpu: &Gpu, pool: &Buffer, slots: usize) -> VkResult<()> {
-        let sizes = [vk::DescriptorPoolSize::default()
-            .ty(vk::DescriptorType::STORAGE_BUFFER)
-            .descriptor_count(6 * slots as u32)];
-        let info = vk::DescriptorPoolCreateInfo::default()
-            .max_sets(slots as u32)
-            .pool_sizes(&sizes);
-        // SAFETY: valid create info.
-        self.descriptors = unsafe { gpu.device.create_descriptor_pool(&info, None) }?;
-        gpu.name(self.descriptors, "index build descriptors");
-        let layouts = vec![self.set_layout; slots];
-        let alloc = vk::DescriptorSetAllocateInfo::default()
-            .descriptor_pool(self.descriptors)
-            .set_layouts(&layouts);
-        // SAFETY: the pool has room for these sets.
-        self.sets = unsafe { gpu.device.allocate_descriptor_sets(&alloc) }?;
-        let list_bytes = (self.capacity * std::mem::size_of::<Build>()) as u64;
-        for s in 0..slots {
-            self.builds.push(Buffer::new(
-                gpu,
-                BufferDesc::upload(list_bytes, vk::BufferUsageFlags::STORAGE_BUFFER),
-                &format!("index builds, slot {s}"),
-            )?);
-            let mut status = Buffer::new(
-                gpu,
-                BufferDesc {
-                    size: STATUS_BYTES,
-                    usage: vk::BufferUsageFlags::STORAGE_BUFFER,
-                    location: MemoryLocation::GpuToCpu,
-                },
-                &format!("index build status, slot {s}"),
-            )?;
-            if !status.write(0, &[0; STATUS_BYTES as usize]) {
-                return Err(VkError::Unsupported(
-                    "the index build status is not host-visible".into(),
-                ));
-            }
-            self.status.push(status);
-        }
-        let range = pool
-            .size
-            .min(u64::from(gpu.properties.limits.max_storage_buffer_range));
-        for (s, &set) in self.sets.iter().enumerate() {
-            let whole = |buffer: &Buffer, range: u64| {
-                [vk::DescriptorBufferInfo::default()
-                    .buffer(buffer.raw)
-                    .range(range)]
+        let (slots, capacity) = (slots.max(1), capacity.max(1));
+        let mut made: Vec<Buffer> = Vec::new();
+        let result = (|| {
+            let scratch = BufferDesc {
+                size: LOOKUP_BYTES * u64::from(lookups),
+                usage: vk::BufferUsageFlags::STORAGE_BUFFER,
+                location: MemoryLocation::GpuOnly,
             };
-            let infos = [
-                whole(pool, range),
-                whole(pool, range),
-                whole(pool, range),
-                whole(&self.scratch, vk::WHOLE_SIZE),
-                whole(&self.builds[s], vk::WHOLE_SIZE),
-                whole(&self.status[s], vk::WHOLE_SIZE),
-            ];
-            let writes: Vec<_> = infos
-                .iter()
-                .enumerate()
-                .map(|(b, info)| {
-                    vk::WriteDescriptorSet::default()
-                        .dst_set(set)
-                        .dst_binding(b as u32)
-                        .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-                        .buffer_info(info)
+            made.push(Buffer::new(gpu, scratch, "index build lookup")?);
+            let list_bytes = (capacity * std::mem::size_of::<Build>()) as u64;
+            for s in 0..slots {
+                let list = BufferDesc::upload(list_bytes, vk::BufferUsageFlags::STORAGE_BUFFER);
+                made.push(Buffer::new(gpu, list, &format!("index builds, slot {s}"))?);
+                let name = format!("index build status, slot {s}");
+                made.push(compute::status_buffer(gpu, &name)?);
+            }
+            let range = pool
+                .size
+                .min(u64::from(gpu.properties.limits.max_storage_buffer_range));
+            let sets: Vec<Vec<(&Buffer, u64)>> = (0..slots)
+                .map(|s| {
+                    vec![
+                        (pool, range),
+                        (pool, range),
+                        (pool, range),
+                        (&made[0], vk::WHOLE_SIZE),
+                        (&made[1 + 2 * s], vk::WHOLE_SIZE),
+                        (&made[2 + 2 * s], vk::WHOLE_SIZE),
+                    ]
                 })
                 .collect();
-            // SAFETY: the set is not in use; the buffers are live.
-            unsafe { gpu.device.update_descriptor_sets(&writes, &[]) };
+            StoragePass::new(gpu, (spirv::INDICES_COMP, "index build"), 8, &sets)
+        })();
+        let pass = match result {
+            Ok(pass) => pass,
+            Err(e) => {
+                for b in made {
+                    b.destroy(gpu);
+                }
+                return Err(e);
+            }
+        };
+        let mut buffers = made.into_iter();
+        let scratch = buffers.next().expect("the lookups");
+        let (mut builds, mut status) = (Vec::new(), Vec::new());
+        while let (Some(list), Some(word)) = (buffers.next(), buffers.next()) {
+            builds.push(list);
+            status.push(word);
         }
-        Ok(())
+        Ok(IndexBuilder {
+            pass,
+            builds,
+            status,
+            scratch,
+            capacity,
+            lookups,
+        })
     }
 
     /// Builds a slot's list holds.
@@ -292,7 +208,7 @@ impl IndexBuilder {
             | compute;
         let written = vk::AccessFlags::TRANSFER_WRITE | vk::AccessFlags::SHADER_WRITE;
         sync::memory_barrier(gpu, cmd, (earlier, written), (compute, shader));
-        sync::bind_compute(gpu, cmd, (self.pipeline, self.layout), self.sets[s], &[]);
+        self.pass.bind(gpu, cmd, s);
         let mut first = 0;
         while first < count {
             if first > 0 {
@@ -300,17 +216,8 @@ impl IndexBuilder {
                 sync::memory_barrier(gpu, cmd, (compute, shader), (compute, shader));
             }
             let n = (count - first).min(self.lookups);
-            // SAFETY: as above; the pipeline and set are bound.
-            unsafe {
-                gpu.device.cmd_push_constants(
-                    cmd,
-                    self.layout,
-                    vk::ShaderStageFlags::COMPUTE,
-                    0,
-                    bytemuck::bytes_of(&[first, u32::MAX]),
-                );
-                gpu.device.cmd_dispatch(cmd, n, 1, 1);
-            }
+            let push = [first, u32::MAX];
+            self.pass.dispatch(gpu, cmd, bytemuck::bytes_of(&push), n);
             first += n;
         }
         if pass_follows {
@@ -328,10 +235,8 @@ impl IndexBuilder {
     /// After slot `s`'s frame completed: its first failed build, if any (and the status is
     /// cleared for the slot's next frame).
     pub fn take_failure(&mut self, s: usize) -> Option<BuildFailure> {
-        let status = self.status[s].mapped()?;
-        let words: [u32; 4] = bytemuck::pod_read_unaligned(&status[..STATUS_BYTES as usize]);
-        status.fill(0);
-        (words[0] > 0).then_some(BuildFailure {
+        let words = compute::take_status(&mut self.status[s])?;
+        Some(BuildFailure {
             failed: words[0],
             tile: words[1],
             got: words[2],
@@ -340,14 +245,7 @@ impl IndexBuilder {
     }
 
     pub fn destroy(self, gpu: &Gpu) {
-        // SAFETY: no command buffer in flight uses them; null handles are ignored.
-        unsafe {
-            gpu.device.destroy_pipeline(self.pipeline, None);
-            gpu.device.destroy_pipeline_layout(self.layout, None);
-            gpu.device.destroy_descriptor_pool(self.descriptors, None);
-            gpu.device
-                .destroy_descriptor_set_layout(self.set_layout, None);
-        }
+        self.pass.destroy(gpu);
         for b in self.builds.into_iter().chain(self.status) {
             b.destroy(gpu);
         }

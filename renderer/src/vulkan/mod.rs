@@ -2,6 +2,7 @@
 //! Nothing above this module calls raw `ash` to make resources.
 
 pub mod buffer;
+pub mod compute;
 pub mod context;
 pub mod decode;
 pub mod image;

@@ -15,6 +15,17 @@ fn srtm3_crop(x0: usize, y0: usize, w: usize, h: usize) -> Vec<f32> {
     common::hgt_crop("srtm/N55W003.hgt", 1201, (x0, y0), (w, h))
 }
 
+/// `grid` built with compact levels (default parameters) into `dir/compact.vkt`.
+fn compact_set(grid: &tiles::Grid, dir: &std::path::Path) -> std::path::PathBuf {
+    let path = dir.join("compact.vkt");
+    let meta = TileSetMeta {
+        compact: true,
+        ..TileSetMeta::default()
+    };
+    build_tileset(grid, &BuildParams::default(), &meta, &path, &|| {}).expect("compact");
+    path
+}
+
 #[test]
 fn compact_sets_read_back_as_built_and_refuse_a_damaged_stream() {
     // 2 x 2 tiles and a partial third column, with the pyramid: two layers of tiles.
@@ -132,12 +143,7 @@ fn version_4_compact_sets_still_read_in_first_use_order() {
     let heights = srtm3_crop(500, 300, w, h);
     let grid = common::srtm3_grid(&heights, (w, h));
     let dir = tempfile::tempdir().expect("temp dir");
-    let path = dir.path().join("compact.vkt");
-    let meta = TileSetMeta {
-        compact: true,
-        ..TileSetMeta::default()
-    };
-    build_tileset(&grid, &BuildParams::default(), &meta, &path, &|| {}).expect("compact");
+    let path = compact_set(&grid, dir.path());
     let built = TileSet::open(&path).expect("open");
     assert_eq!(built.header().version, COMPACT_VERSION);
     let levels = built.header().levels as usize;
@@ -210,12 +216,7 @@ fn level_lengths_locate_each_levels_stream() {
     let heights = srtm3_crop(200, 700, w, h);
     let grid = common::srtm3_grid(&heights, (w, h));
     let dir = tempfile::tempdir().expect("temp dir");
-    let path = dir.path().join("compact.vkt");
-    let meta = TileSetMeta {
-        compact: true,
-        ..TileSetMeta::default()
-    };
-    build_tileset(&grid, &BuildParams::default(), &meta, &path, &|| {}).expect("compact");
+    let path = compact_set(&grid, dir.path());
     let set = TileSet::open(&path).expect("open");
     let levels = set.header().levels;
     let tile = set.tile(0, 0).expect("tile");
