@@ -4,6 +4,7 @@
 //! it made is not what the file says.
 
 use ash::vk;
+use gpu_allocator::MemoryLocation;
 
 use super::buffer::BufferDesc;
 use super::sync;
@@ -176,4 +177,76 @@ pub fn take_status(status: &mut Buffer) -> Option<[u32; 4]> {
     let words: [u32; 4] = bytemuck::pod_read_unaligned(&bytes[..STATUS_BYTES as usize]);
     bytes.fill(0);
     (words[0] > 0).then_some(words)
+}
+
+/// A pass's own buffers: a scratch region on the GPU (its workgroups' grids), and per frame
+/// slot the list of work the CPU writes and a status word.
+pub struct PassBuffers {
+    pub scratch: Buffer,
+    pub lists: Vec<Buffer>,
+    pub status: Vec<Buffer>,
+}
+
+impl PassBuffers {
+    /// `scratch_bytes` of scratch and `slots` lists of `list_bytes`, named after the pass;
+    /// nothing is left behind on failure.
+    pub fn new(
+        gpu: &Gpu,
+        (scratch_bytes, list_bytes): (u64, u64),
+        slots: usize,
+        name: &str,
+    ) -> VkResult<PassBuffers> {
+        let scratch = BufferDesc {
+            size: scratch_bytes,
+            usage: vk::BufferUsageFlags::STORAGE_BUFFER,
+            location: MemoryLocation::GpuOnly,
+        };
+        let mut made = PassBuffers {
+            scratch: Buffer::new(gpu, scratch, &format!("{name} scratch"))?,
+            lists: Vec::new(),
+            status: Vec::new(),
+        };
+        for s in 0..slots {
+            let list = BufferDesc::upload(list_bytes, vk::BufferUsageFlags::STORAGE_BUFFER);
+            let made_slot =
+                Buffer::new(gpu, list, &format!("{name} list, slot {s}")).and_then(|list| {
+                    match status_buffer(gpu, &format!("{name} status, slot {s}")) {
+                        Ok(status) => Ok((list, status)),
+                        Err(e) => {
+                            list.destroy(gpu);
+                            Err(e)
+                        }
+                    }
+                });
+            match made_slot {
+                Ok((list, status)) => {
+                    made.lists.push(list);
+                    made.status.push(status);
+                }
+                Err(e) => {
+                    made.destroy(gpu);
+                    return Err(e);
+                }
+            }
+        }
+        Ok(made)
+    }
+
+    /// Bytes of GPU memory they hold.
+    pub fn bytes(&self) -> u64 {
+        self.scratch.size
+            + self
+                .lists
+                .iter()
+                .chain(&self.status)
+                .map(|b| b.size)
+                .sum::<u64>()
+    }
+
+    pub fn destroy(self, gpu: &Gpu) {
+        for b in self.lists.into_iter().chain(self.status) {
+            b.destroy(gpu);
+        }
+        self.scratch.destroy(gpu);
+    }
 }

@@ -13,10 +13,8 @@
 
 use ash::vk;
 use bytemuck::{Pod, Zeroable};
-use gpu_allocator::MemoryLocation;
 
-use super::buffer::BufferDesc;
-use super::compute::{self, StoragePass};
+use super::compute::{self, PassBuffers, StoragePass};
 use super::sync;
 use super::{Buffer, Gpu, VkResult};
 
@@ -91,12 +89,10 @@ pub struct DecodeFailure {
 
 pub struct Decoder {
     pass: StoragePass,
-    /// Per frame slot.
-    lists: Vec<Buffer>,
-    status: Vec<Buffer>,
-    grids: Buffer,
+    /// The grids (scratch), and per frame slot the decodes and the status.
+    buffers: PassBuffers,
     capacity: usize,
-    /// Grids in `grids`: workgroups per dispatch.
+    /// Grids in the scratch: workgroups per dispatch.
     groups: u32,
 }
 
@@ -113,63 +109,37 @@ impl Decoder {
     ) -> VkResult<Self> {
         let groups = groups.clamp(1, MAX_DECODES_PER_DISPATCH);
         let capacity = capacity.max(1);
-        let mut made: Vec<Buffer> = Vec::new();
-        let result = (|| {
-            let grids = BufferDesc {
-                size: GRID_BYTES * u64::from(groups),
-                usage: vk::BufferUsageFlags::STORAGE_BUFFER,
-                location: MemoryLocation::GpuOnly,
-            };
-            made.push(Buffer::new(gpu, grids, "decode grids")?);
-            let list_bytes = (capacity * std::mem::size_of::<Decode>()) as u64;
-            for s in 0..streams.len() {
-                let list = BufferDesc::upload(list_bytes, vk::BufferUsageFlags::STORAGE_BUFFER);
-                made.push(Buffer::new(gpu, list, &format!("decodes, slot {s}"))?);
-                made.push(compute::status_buffer(
-                    gpu,
-                    &format!("decode status, slot {s}"),
-                )?);
-            }
-            let limit = u64::from(gpu.properties.limits.max_storage_buffer_range);
-            let slots: Vec<Vec<(&Buffer, u64)>> = streams
-                .iter()
-                .enumerate()
-                .map(|(s, &stream)| {
-                    vec![
-                        (pool, pool.size.min(limit)),
-                        (stream, stream.size.min(limit)),
-                        (&made[0], vk::WHOLE_SIZE),
-                        (&made[1 + 2 * s], vk::WHOLE_SIZE),
-                        (&made[2 + 2 * s], vk::WHOLE_SIZE),
-                    ]
-                })
-                .collect();
-            StoragePass::new(gpu, (spirv::DECODE_COMP, "decode"), 4, &slots)
-        })();
-        let pass = match result {
-            Ok(pass) => pass,
+        let sizes = (
+            GRID_BYTES * u64::from(groups),
+            (capacity * std::mem::size_of::<Decode>()) as u64,
+        );
+        let buffers = PassBuffers::new(gpu, sizes, streams.len(), "decode")?;
+        let limit = u64::from(gpu.properties.limits.max_storage_buffer_range);
+        let slots: Vec<Vec<(&Buffer, u64)>> = streams
+            .iter()
+            .enumerate()
+            .map(|(s, &stream)| {
+                vec![
+                    (pool, pool.size.min(limit)),
+                    (stream, stream.size.min(limit)),
+                    (&buffers.scratch, vk::WHOLE_SIZE),
+                    (&buffers.lists[s], vk::WHOLE_SIZE),
+                    (&buffers.status[s], vk::WHOLE_SIZE),
+                ]
+            })
+            .collect();
+        match StoragePass::new(gpu, (spirv::DECODE_COMP, "decode"), 4, &slots) {
+            Ok(pass) => Ok(Decoder {
+                pass,
+                buffers,
+                capacity,
+                groups,
+            }),
             Err(e) => {
-                for b in made {
-                    b.destroy(gpu);
-                }
-                return Err(e);
+                buffers.destroy(gpu);
+                Err(e)
             }
-        };
-        let mut buffers = made.into_iter();
-        let grids = buffers.next().expect("the grids");
-        let (mut lists, mut status) = (Vec::new(), Vec::new());
-        while let (Some(list), Some(word)) = (buffers.next(), buffers.next()) {
-            lists.push(list);
-            status.push(word);
         }
-        Ok(Decoder {
-            pass,
-            lists,
-            status,
-            grids,
-            capacity,
-            groups,
-        })
     }
 
     /// Decodes a slot's list holds.
@@ -179,14 +149,13 @@ impl Decoder {
 
     /// Bytes of GPU memory the decoder holds beside the pool and the streams.
     pub fn bytes(&self) -> u64 {
-        self.grids.size
-            + self.lists.iter().map(|b| b.size).sum::<u64>()
-            + self.status.iter().map(|b| b.size).sum::<u64>()
+        self.buffers.bytes()
     }
 
     /// Writes slot `s`'s decodes (its previous frame has completed); false if they do not fit.
     pub fn write(&mut self, s: usize, decodes: &[Decode]) -> bool {
-        decodes.len() <= self.capacity && self.lists[s].write(0, bytemuck::cast_slice(decodes))
+        decodes.len() <= self.capacity
+            && self.buffers.lists[s].write(0, bytemuck::cast_slice(decodes))
     }
 
     /// Who reads the blocks the decodes write: the index builds and the morph pass, the
@@ -249,7 +218,7 @@ impl Decoder {
     /// After slot `s`'s frame completed: its first failed decode, if any (and the status is
     /// cleared for the slot's next frame).
     pub fn take_failure(&mut self, s: usize) -> Option<DecodeFailure> {
-        let words = compute::take_status(&mut self.status[s])?;
+        let words = compute::take_status(&mut self.buffers.status[s])?;
         Some(DecodeFailure {
             failed: words[0],
             tile: words[1],
@@ -260,9 +229,6 @@ impl Decoder {
 
     pub fn destroy(self, gpu: &Gpu) {
         self.pass.destroy(gpu);
-        for b in self.lists.into_iter().chain(self.status) {
-            b.destroy(gpu);
-        }
-        self.grids.destroy(gpu);
+        self.buffers.destroy(gpu);
     }
 }

@@ -8,10 +8,8 @@
 
 use ash::vk;
 use bytemuck::{Pod, Zeroable};
-use gpu_allocator::MemoryLocation;
 
-use super::buffer::BufferDesc;
-use super::compute::{self, StoragePass, STATUS_BYTES};
+use super::compute::{self, PassBuffers, StoragePass, STATUS_BYTES};
 use super::sync;
 use super::{Buffer, Gpu, VkError, VkResult};
 
@@ -68,13 +66,11 @@ pub struct BuildFailure {
 
 pub struct IndexBuilder {
     pass: StoragePass,
-    /// Per frame slot.
-    builds: Vec<Buffer>,
-    status: Vec<Buffer>,
-    scratch: Buffer,
+    /// The lookups (scratch), and per frame slot the builds and the status.
+    buffers: PassBuffers,
     /// Builds a slot's list holds.
     capacity: usize,
-    /// Lookups in `scratch`: workgroups per dispatch.
+    /// Lookups in the scratch: workgroups per dispatch.
     lookups: u32,
 }
 
@@ -95,62 +91,38 @@ impl IndexBuilder {
             ));
         }
         let (slots, capacity) = (slots.max(1), capacity.max(1));
-        let mut made: Vec<Buffer> = Vec::new();
-        let result = (|| {
-            let scratch = BufferDesc {
-                size: LOOKUP_BYTES * u64::from(lookups),
-                usage: vk::BufferUsageFlags::STORAGE_BUFFER,
-                location: MemoryLocation::GpuOnly,
-            };
-            made.push(Buffer::new(gpu, scratch, "index build lookup")?);
-            let list_bytes = (capacity * std::mem::size_of::<Build>()) as u64;
-            for s in 0..slots {
-                let list = BufferDesc::upload(list_bytes, vk::BufferUsageFlags::STORAGE_BUFFER);
-                made.push(Buffer::new(gpu, list, &format!("index builds, slot {s}"))?);
-                let name = format!("index build status, slot {s}");
-                made.push(compute::status_buffer(gpu, &name)?);
-            }
-            let range = pool
-                .size
-                .min(u64::from(gpu.properties.limits.max_storage_buffer_range));
-            let sets: Vec<Vec<(&Buffer, u64)>> = (0..slots)
-                .map(|s| {
-                    vec![
-                        (pool, range),
-                        (pool, range),
-                        (pool, range),
-                        (&made[0], vk::WHOLE_SIZE),
-                        (&made[1 + 2 * s], vk::WHOLE_SIZE),
-                        (&made[2 + 2 * s], vk::WHOLE_SIZE),
-                    ]
-                })
-                .collect();
-            StoragePass::new(gpu, (spirv::INDICES_COMP, "index build"), 8, &sets)
-        })();
-        let pass = match result {
-            Ok(pass) => pass,
+        let sizes = (
+            LOOKUP_BYTES * u64::from(lookups),
+            (capacity * std::mem::size_of::<Build>()) as u64,
+        );
+        let buffers = PassBuffers::new(gpu, sizes, slots, "index build")?;
+        let range = pool
+            .size
+            .min(u64::from(gpu.properties.limits.max_storage_buffer_range));
+        let sets: Vec<Vec<(&Buffer, u64)>> = (0..slots)
+            .map(|s| {
+                vec![
+                    (pool, range),
+                    (pool, range),
+                    (pool, range),
+                    (&buffers.scratch, vk::WHOLE_SIZE),
+                    (&buffers.lists[s], vk::WHOLE_SIZE),
+                    (&buffers.status[s], vk::WHOLE_SIZE),
+                ]
+            })
+            .collect();
+        match StoragePass::new(gpu, (spirv::INDICES_COMP, "index build"), 8, &sets) {
+            Ok(pass) => Ok(IndexBuilder {
+                pass,
+                buffers,
+                capacity,
+                lookups,
+            }),
             Err(e) => {
-                for b in made {
-                    b.destroy(gpu);
-                }
-                return Err(e);
+                buffers.destroy(gpu);
+                Err(e)
             }
-        };
-        let mut buffers = made.into_iter();
-        let scratch = buffers.next().expect("the lookups");
-        let (mut builds, mut status) = (Vec::new(), Vec::new());
-        while let (Some(list), Some(word)) = (buffers.next(), buffers.next()) {
-            builds.push(list);
-            status.push(word);
         }
-        Ok(IndexBuilder {
-            pass,
-            builds,
-            status,
-            scratch,
-            capacity,
-            lookups,
-        })
     }
 
     /// Builds a slot's list holds.
@@ -160,14 +132,13 @@ impl IndexBuilder {
 
     /// Bytes of GPU memory the builder holds beside the pool (lookups, lists, status).
     pub fn bytes(&self) -> u64 {
-        self.scratch.size
-            + self.builds.iter().map(|b| b.size).sum::<u64>()
-            + self.status.iter().map(|b| b.size).sum::<u64>()
+        self.buffers.bytes()
     }
 
     /// Writes slot `s`'s builds (its previous frame has completed); false if they do not fit.
     pub fn write(&mut self, s: usize, builds: &[Build]) -> bool {
-        builds.len() <= self.capacity && self.builds[s].write(0, bytemuck::cast_slice(builds))
+        builds.len() <= self.capacity
+            && self.buffers.lists[s].write(0, bytemuck::cast_slice(builds))
     }
 
     /// Who reads what the builds write: the draws' index reads, the copies (a chunk moved) and
@@ -235,7 +206,7 @@ impl IndexBuilder {
     /// After slot `s`'s frame completed: its first failed build, if any (and the status is
     /// cleared for the slot's next frame).
     pub fn take_failure(&mut self, s: usize) -> Option<BuildFailure> {
-        let words = compute::take_status(&mut self.status[s])?;
+        let words = compute::take_status(&mut self.buffers.status[s])?;
         Some(BuildFailure {
             failed: words[0],
             tile: words[1],
@@ -246,10 +217,7 @@ impl IndexBuilder {
 
     pub fn destroy(self, gpu: &Gpu) {
         self.pass.destroy(gpu);
-        for b in self.builds.into_iter().chain(self.status) {
-            b.destroy(gpu);
-        }
-        self.scratch.destroy(gpu);
+        self.buffers.destroy(gpu);
     }
 }
 
