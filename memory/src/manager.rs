@@ -253,8 +253,9 @@ struct Chunk {
     /// The last frame whose in-pool copies wrote into it (a tile moves once per frame: the
     /// copies of one frame are one command, whose regions must not chain).
     copied_in: Option<u64>,
-    /// The last frame that builds an index array into it on the GPU.
-    built_in: Option<u64>,
+    /// The last frame whose commands write into it on the GPU (an index array built, a block
+    /// decoded), besides its in-pool copies.
+    gpu_written_in: Option<u64>,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -349,7 +350,7 @@ impl Manager {
                     last_used: 0,
                     drawn: None,
                     copied_in: None,
-                    built_in: None,
+                    gpu_written_in: None,
                 });
                 offset += size;
             }
@@ -971,11 +972,7 @@ impl Manager {
     fn index_upload(&mut self, tile: TileId, level: u32, dst: u64, chunk: usize) -> Upload {
         let built = self.config.index_arrays == IndexArrays::Built;
         if built {
-            // The GPU writes the chunk (and reads its blocks) when this frame runs: it is used
-            // by this frame, so it is not evicted or reused before the frame completes (a
-            // prefetch builds into chunks no frame draws).
-            self.touch(chunk);
-            self.chunks[chunk].built_in = Some(self.frame);
+            self.written_on_gpu(chunk);
         }
         Upload {
             tile,
@@ -1261,12 +1258,7 @@ impl Manager {
             .stream
             .is_some()
         {
-            // Decoded on the GPU when this frame runs (and its coarser blocks read): as for an
-            // index array built there, the chunk is used by this frame, so it is not evicted
-            // or reused before the frame completes (a prefetch decodes into chunks no frame
-            // draws).
-            self.touch(chunk);
-            self.chunks[chunk].built_in = Some(self.frame);
+            self.written_on_gpu(chunk);
         }
         let t = &self.tiles[tile as usize];
         let l = &t.levels[j as usize];
@@ -1355,6 +1347,14 @@ impl Manager {
         used < self.frame && self.completed.is_some_and(|f| used <= f)
     }
 
+    /// This frame's commands write `chunk` on the GPU (an index array built, a block decoded)
+    /// and read the tile's blocks there: it is used by this frame, so it is not evicted or
+    /// reused before the frame completes (a prefetch writes into chunks no frame draws).
+    fn written_on_gpu(&mut self, chunk: usize) {
+        self.touch(chunk);
+        self.chunks[chunk].gpu_written_in = Some(self.frame);
+    }
+
     fn touch(&mut self, chunk: usize) {
         let c = self.chunks[chunk];
         if c.owner.is_some() {
@@ -1379,7 +1379,7 @@ impl Manager {
         if self.chunks[chunk].owner.take().is_some() {
             self.owned -= 1;
         }
-        let gpu_writes = c.copied_in == Some(self.frame) || c.built_in == Some(self.frame);
+        let gpu_writes = c.copied_in == Some(self.frame) || c.gpu_written_in == Some(self.frame);
         if c.drawn.is_none() && c.last_used == self.frame && !gpu_writes {
             // Never drawn (taken this frame and given back), and nothing this frame's commands
             // write goes there: nobody reads it, and whoever takes it next may write it now.
