@@ -186,7 +186,8 @@ pub struct Mesher<'a> {
     nodes: Vec<Node>,
     /// Midpoint presence per lattice point.
     present: Vec<bool>,
-    /// Cached fan-triangle errors per cell (NaN = not computed yet).
+    /// Cached fan-triangle errors per cell (NaN = not computed yet; none made until the first
+    /// is asked for).
     errors: Vec<[f64; 12]>,
     min_spacing: f64,
     mesh_max: (u32, u32),
@@ -210,7 +211,8 @@ impl<'a> Mesher<'a> {
             mesh_heights,
             nodes: vec![Node::Absent; NODE_COUNT],
             present: vec![false; TILE_SIZE * TILE_SIZE],
-            errors: vec![[f64::NAN; 12]; NODE_COUNT],
+            // Made on the first error asked for: a decoder's mesher asks none.
+            errors: Vec::new(),
             min_spacing,
             mesh_max: samples.mesh_max(),
         };
@@ -355,6 +357,9 @@ impl<'a> Mesher<'a> {
 
     /// Max deviation of fan triangle `t` of `q` from the source samples, cached.
     pub fn triangle_error(&mut self, q: Quad, t: usize) -> f64 {
+        if self.errors.is_empty() {
+            self.errors = vec![[f64::NAN; 12]; NODE_COUNT];
+        }
         let cached = self.errors[q.index()][t];
         if !cached.is_nan() {
             return cached;
