@@ -531,6 +531,12 @@ pub fn fans_from_vertices(samples: &TileSamples, sets: &[Vec<(u32, u32)>]) -> Ve
 /// (for their measured figures and morph units, which need the source to compute). The fans,
 /// the vertices' order, the border lists, the height ranges and the morph offsets follow
 /// ([`Mesher::from_vertices`], and the same assembly as the build's).
+///
+/// With fewer `sets` than `entries` (the first levels only), the blob is the full blob's first
+/// bytes, through the last of those levels' sections: a level's sections, and its entry, follow
+/// from its own and the coarser levels' vertices alone, and the blob lays the levels out in
+/// order after a table with room for every entry. The table's entries past the given levels are
+/// left zero. So a reader that draws a tile's coarse levels rebuilds those alone.
 pub fn rebuild_tile(
     header: &TileHeader,
     entries: &[LevelEntry],
@@ -571,7 +577,7 @@ pub fn rebuild_tile(
         assembly.add_level(&mesher, &leaves, errors, &|l| code[l]);
     }
     let units: Vec<f64> = entries.iter().map(|e| f64::from(e.morph_unit)).collect();
-    let (blob, _) = assembly.seal(header, mesher.quantised_heights(), &units);
+    let (blob, _) = assembly.seal(header, mesher.quantised_heights(), &units, entries.len());
     blob
 }
 
@@ -790,7 +796,7 @@ fn mesh_tile(
         height_base: quantiser.base,
     };
     let surfaces = assembly.interleaved_surfaces();
-    let (blob, stats) = assembly.seal(&header, heights, &units);
+    let (blob, stats) = assembly.seal(&header, heights, &units, n);
     Ok(BuiltTile {
         tx,
         ty,
@@ -961,6 +967,7 @@ impl Assembly {
         header: &TileHeader,
         heights: &[f32],
         units: &[f64],
+        table_levels: usize,
     ) -> (Vec<u8>, Vec<LevelStats>) {
         let morph = morph_offsets(
             &mut self.levels,
@@ -969,7 +976,7 @@ impl Assembly {
             heights,
             units,
         );
-        serialise(header, &mut self.levels, &morph)
+        serialise(header, &mut self.levels, &morph, table_levels)
     }
 }
 
@@ -1086,9 +1093,11 @@ fn serialise(
     header: &TileHeader,
     levels: &mut [LevelOut],
     morph: &[Vec<i8>],
+    table_levels: usize,
 ) -> (Vec<u8>, Vec<LevelStats>) {
+    debug_assert!(table_levels >= levels.len());
     let table =
-        std::mem::size_of::<TileHeader>() + levels.len() * std::mem::size_of::<LevelEntry>();
+        std::mem::size_of::<TileHeader>() + table_levels * std::mem::size_of::<LevelEntry>();
     let mut blob = vec![0u8; table];
     let mut stats = Vec::with_capacity(levels.len());
     let mut block_bytes = 0u64;
@@ -1123,7 +1132,8 @@ fn serialise(
     }
     blob[..std::mem::size_of::<TileHeader>()].copy_from_slice(bytemuck::bytes_of(header));
     let entries: Vec<LevelEntry> = levels.iter().map(|l| l.entry).collect();
-    blob[std::mem::size_of::<TileHeader>()..table].copy_from_slice(bytemuck::cast_slice(&entries));
+    let given = std::mem::size_of::<TileHeader>() + std::mem::size_of_val(&entries[..]);
+    blob[std::mem::size_of::<TileHeader>()..given].copy_from_slice(bytemuck::cast_slice(&entries));
     (blob, stats)
 }
 

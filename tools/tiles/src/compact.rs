@@ -362,17 +362,20 @@ pub fn rebuild(
     bytes: &[u8],
     numbering: crate::build::Numbering,
 ) -> Result<Vec<u8>, String> {
-    rebuild_levels(header, entries, bytes, numbering).map(|(blob, _)| blob)
+    rebuild_levels(header, entries, bytes, header.levels, numbering).map(|(blob, _)| blob)
 }
 
-/// [`rebuild`], with each level's bytes in the stream.
+/// [`rebuild`] of the tile's first `count` levels, `bytes` holding their streams alone (all of
+/// them with `count` the tile's level count), with each level's bytes in the stream. With
+/// fewer levels the blob is the full blob's first bytes ([`crate::build::rebuild_tile`]).
 pub fn rebuild_levels(
     header: &TileHeader,
     entries: &[LevelEntry],
     bytes: &[u8],
+    count: u32,
     numbering: crate::build::Numbering,
 ) -> Result<(Vec<u8>, Vec<std::ops::Range<usize>>), String> {
-    let (sets, ranges) = decode_levels(bytes, header.levels)?;
+    let (sets, ranges) = decode_levels(bytes, count)?;
     let blob = crate::build::rebuild_tile(header, entries, &sets, numbering);
     Ok((blob, ranges))
 }

@@ -159,11 +159,17 @@ fn stored_lengths(stored: &[u8], levels: u32) -> Vec<u32> {
 /// [`crate::compact::decode`] does, each level ending where its length says, and the blob
 /// rebuilt must have the stored table and checksum (the file's own checksum covers the stored
 /// bytes; this one, what a decoder made of them).
+///
+/// With `count` below the tile's level count (version 5: the levels' lengths say where the
+/// first levels' streams end), the blob of its first `count` levels alone: the full blob's
+/// first bytes, through those levels' sections, under the stored table. Their rebuilt entries
+/// must be the stored ones; the checksum, which covers every level, waits for the whole tile.
 fn rebuilt(
     stored: &[u8],
     (tx, ty): (u32, u32),
     (levels, step): (u32, f32),
     version: u32,
+    count: u32,
 ) -> Result<Vec<u8>, String> {
     let table = table_len(levels);
     let start = stream_start(levels, version);
@@ -178,21 +184,48 @@ fn rebuilt(
     let entries = stored_entries(stored, levels);
     check_table(&header, &entries)?;
     let crc = u32::from_le_bytes(stored[table..table + 4].try_into().expect("4 bytes"));
-    let (blob, ranges) =
-        crate::compact::rebuild_levels(&header, &entries, &stored[start..], numbering(version))?;
-    if version != FIRST_COMPACT_VERSION {
-        let lengths = stored_lengths(stored, levels);
-        if let Some(j) = ranges
-            .iter()
-            .zip(&lengths)
-            .position(|(r, &n)| r.len() != n as usize)
-        {
-            return Err(format!(
-                "level {j}'s stream is {} bytes, its length says {}",
-                ranges[j].len(),
-                lengths[j]
-            ));
+    let lengths = match version {
+        FIRST_COMPACT_VERSION => Vec::new(),
+        _ => stored_lengths(stored, levels),
+    };
+    let count = match lengths.is_empty() {
+        true => levels,
+        false => count.clamp(1, levels),
+    };
+    let end = match count < levels {
+        true => {
+            start as u64
+                + lengths[..count as usize]
+                    .iter()
+                    .map(|&n| u64::from(n))
+                    .sum::<u64>()
         }
+        false => stored.len() as u64,
+    };
+    let streams = usize::try_from(end)
+        .ok()
+        .and_then(|end| stored.get(start..end))
+        .ok_or("its levels' lengths run past its stream")?;
+    let (mut blob, ranges) =
+        crate::compact::rebuild_levels(&header, &entries, streams, count, numbering(version))?;
+    if let Some(j) = ranges
+        .iter()
+        .zip(&lengths)
+        .position(|(r, &n)| r.len() != n as usize)
+    {
+        return Err(format!(
+            "level {j}'s stream is {} bytes, its length says {}",
+            ranges[j].len(),
+            lengths[j]
+        ));
+    }
+    if count < levels {
+        let given = table_len(count);
+        if blob.get(..given) != Some(&stored[..given]) {
+            return Err("its compact levels do not rebuild its level table".into());
+        }
+        blob[..table].copy_from_slice(&stored[..table]);
+        return Ok(blob);
     }
     if blob.get(..table) != Some(&stored[..table]) {
         return Err("its compact levels do not rebuild its level table".into());
@@ -709,7 +742,13 @@ impl TileSetWriter {
         let (stream, lengths) = crate::compact::encode_levels(&tile);
         out.extend(bytemuck::cast_slice(&lengths));
         out.extend(stream);
-        let made = rebuilt(&out, (tx, ty), (self.header.levels, step), COMPACT_VERSION);
+        let made = rebuilt(
+            &out,
+            (tx, ty),
+            (self.header.levels, step),
+            COMPACT_VERSION,
+            self.header.levels,
+        );
         if made.map_err(internal)? != blob {
             return Err(internal("its compact levels do not rebuild it".into()));
         }
@@ -946,8 +985,14 @@ pub struct TileSet {
     rebuilt: std::sync::Arc<RebuiltTiles>,
 }
 
-/// Per tile of a view, its rebuilt version 3 blob or why there is none, once asked for.
-type RebuiltTiles = Vec<std::sync::OnceLock<Result<Box<[u8]>, String>>>;
+/// Per tile of a view, once it is first read: per count of levels `1..=levels`, the blob
+/// rebuilt from its first levels (see [`rebuilt`]) or why there is none, once asked for. A
+/// reader asks for the levels it checks, so a tile first drawn coarse rebuilds its coarse
+/// levels alone; every blob made stays while the view does (readers hold slices of them).
+type RebuiltTiles = Vec<std::sync::OnceLock<Box<[Rebuilt]>>>;
+
+/// One tile's blob rebuilt from some count of its levels, or why it could not be.
+type Rebuilt = std::sync::OnceLock<Result<Box<[u8]>, String>>;
 
 /// The cache of rebuilt tiles for a view of `tiles` tiles (empty without compact levels).
 fn rebuilt_cache(header: &FileHeader, tiles: u64) -> std::sync::Arc<RebuiltTiles> {
@@ -1491,8 +1536,15 @@ impl TileSet {
     /// Tile `(tx, ty)`'s stored bytes, not re-checked: for readers that validated the tile once
     /// with [`tile`](Self::tile) and then fetch parts of it often (the renderer's uploads).
     pub fn blob(&self, tx: u32, ty: u32) -> Option<&[u8]> {
+        self.blob_through(tx, ty, self.header.levels)
+    }
+
+    /// [`blob`](Self::blob), holding at least the sections of the tile's first `count` levels
+    /// (with compact levels, the blob rebuilt from those: see
+    /// [`tile_levels`](Self::tile_levels); otherwise the whole stored blob).
+    pub fn blob_through(&self, tx: u32, ty: u32, count: u32) -> Option<&[u8]> {
         if self.compact() {
-            return self.rebuilt_blob(tx, ty, true).ok();
+            return self.rebuilt_blob(tx, ty, true, count).ok();
         }
         let e = self.dir_entry(tx, ty)?;
         self.bytes_at(e.offset, e.len)
@@ -1520,15 +1572,100 @@ impl TileSet {
     /// With compact levels the outline is the tile rebuilt (checksum first: the bit stream is
     /// decoded), and costs what [`tile`](Self::tile) does.
     pub fn tile_outline(&self, tx: u32, ty: u32) -> Result<Tile<'_>, FormatError> {
+        self.tile_outline_through(tx, ty, self.header.levels)
+    }
+
+    /// Every vertex of tile `(tx, ty)` as `(x, y, height in metres)`, unchecked beyond what
+    /// reading them needs (for readers that only place things over the ground, such as
+    /// cameras): with compact levels, decoded from the tile's stream without rebuilding it.
+    pub fn tile_points(&self, tx: u32, ty: u32) -> Result<Vec<(u32, u32, f32)>, FormatError> {
+        if !self.compact() {
+            return self.tile_outline(tx, ty).map(|t| t.vertices());
+        }
+        let invalid = |what: String| self.tile_error(tx, ty, what);
+        let (header, _) = self.tile_table(tx, ty)?;
+        let e = self.checked_entry(tx, ty)?;
+        let stream = self
+            .bytes_at(e.offset, e.len)
+            .and_then(|stored| stored.get(stream_start(header.levels, self.header.version)..))
+            .ok_or_else(|| invalid("the tile runs past the end of the file".into()))?;
+        let sets = crate::compact::decode(stream, header.levels).map_err(invalid)?;
+        let q = Quantiser {
+            base: header.height_base,
+            step: header.height_step,
+        };
+        Ok(sets
+            .iter()
+            .flatten()
+            .map(|&(x, y, c)| (x, y, q.height(c)))
+            .collect())
+    }
+
+    /// Tile `(tx, ty)`'s sides at each of its first `count` levels, as stored and unchecked
+    /// ([`Tile::side_points`] of its outline): for a reader that compares them with a
+    /// neighbour's before, or without, checking the tile. A compact tile's come from its first
+    /// levels' streams decoded, without rebuilding the tile: a level's side holds every vertex
+    /// of it and the coarser levels on that side of the mesh, in order along it.
+    pub fn stored_sides(
+        &self,
+        tx: u32,
+        ty: u32,
+        count: u32,
+    ) -> Result<Vec<[Vec<u32>; 4]>, FormatError> {
+        let invalid = |what: String| self.tile_error(tx, ty, what);
+        let unreadable = || invalid("a side names a vertex no block holds".into());
+        if !self.compact() || self.header.version == FIRST_COMPACT_VERSION {
+            let tile = self.tile_outline_through(tx, ty, count)?;
+            return tile.side_points(count).ok_or_else(unreadable);
+        }
+        let (header, _, lengths) = self.tile_table_and_streams(tx, ty)?;
+        let count = count.clamp(1, header.levels);
+        let e = self.checked_entry(tx, ty)?;
+        let start = stream_start(header.levels, self.header.version);
+        let end = start + lengths[..count as usize].iter().sum::<u32>() as usize;
+        let stream = self
+            .bytes_at(e.offset, e.len)
+            .and_then(|stored| stored.get(start..end))
+            .ok_or_else(|| invalid("the tile runs past the end of the file".into()))?;
+        let (sets, _) = crate::compact::decode_levels(stream, count).map_err(invalid)?;
+        let mesh_max = (header.mesh_max_x, header.mesh_max_y);
+        let mut along: [Vec<(u32, u32)>; 4] = Default::default();
+        Ok(sets
+            .iter()
+            .map(|set| {
+                for &(x, y, c) in set {
+                    let on = [y == 0, x == mesh_max.0, y == mesh_max.1, x == 0];
+                    for k in (0..4).filter(|&k| on[k]) {
+                        let at = if k % 2 == 0 { x } else { y };
+                        along[k].push((at, crate::pack::pack(x, y, c)));
+                    }
+                }
+                std::array::from_fn(|k| {
+                    along[k].sort_unstable();
+                    along[k].iter().map(|&(_, p)| p).collect()
+                })
+            })
+            .collect())
+    }
+
+    /// [`tile_outline`](Self::tile_outline) for a reader of the tile's first `count` levels:
+    /// with compact levels, a tile of those levels alone ([`tile_levels`](Self::tile_levels)),
+    /// rebuilt from their streams; otherwise every level's outline, as `tile_outline` reads it.
+    pub fn tile_outline_through(
+        &self,
+        tx: u32,
+        ty: u32,
+        count: u32,
+    ) -> Result<Tile<'_>, FormatError> {
         let invalid = |what: String| self.tile_error(tx, ty, what);
         let e = self.checked_entry(tx, ty)?;
-        let blob = &self.map[e.offset as usize..(e.offset + e.len) as usize];
+        let (levels, step) = (self.header.levels, self.header.height_step);
         if self.compact() {
-            let blob = self.rebuilt_blob(tx, ty, true).map_err(invalid)?;
-            return Tile::outline(blob, tx, ty, self.header.levels, self.header.height_step)
-                .map_err(invalid);
+            let blob = self.rebuilt_blob(tx, ty, true, count).map_err(invalid)?;
+            return Tile::outline_through(blob, (tx, ty), (levels, step), count).map_err(invalid);
         }
-        Tile::outline(blob, tx, ty, self.header.levels, self.header.height_step).map_err(invalid)
+        let blob = &self.map[e.offset as usize..(e.offset + e.len) as usize];
+        Tile::outline(blob, tx, ty, levels, step).map_err(invalid)
     }
 
     /// Tile `(tx, ty)`'s header and level table, checked as [`tile_outline`](Self::tile_outline)
@@ -1632,6 +1769,12 @@ impl TileSet {
     /// [`tile`](Self::tile) with the structure of levels `levels` alone checked (the checksum
     /// covers every level): a reader that reads a tile's finer levels later checks each first
     /// ([`Tile::check_levels`]).
+    ///
+    /// With compact levels (version 5) the tile is rebuilt from its levels through
+    /// `levels.end` alone and holds those alone ([`Tile::level`] is None past them): a tile
+    /// first drawn coarse is decoded and assembled only as far as it is drawn, and each
+    /// rebuilt level's entry must be the stored one. The checksum of the whole tile rebuilt is
+    /// compared when every level is asked for.
     pub fn tile_levels(
         &self,
         tx: u32,
@@ -1647,13 +1790,16 @@ impl TileSet {
         if crc != e.crc {
             return Err(invalid("checksum mismatch (corrupted file)".into()));
         }
-        let blob = if self.compact() {
-            self.rebuilt_blob(tx, ty, false).map_err(invalid)?
+        let (all, step) = (self.header.levels, self.header.height_step);
+        let tile = if self.compact() {
+            let blob = self
+                .rebuilt_blob(tx, ty, false, levels.end)
+                .map_err(invalid)?;
+            Tile::outline_through(blob, (tx, ty), (all, step), levels.end)
         } else {
-            blob
-        };
-        let tile = Tile::outline(blob, tx, ty, self.header.levels, self.header.height_step)
-            .map_err(invalid)?;
+            Tile::outline(blob, tx, ty, all, step)
+        }
+        .map_err(invalid)?;
         tile.check_levels(levels).map_err(invalid)?;
         Ok(tile)
     }
@@ -1682,26 +1828,43 @@ impl TileSet {
         self.header.flags & FLAG_COMPACT_LEVELS != 0
     }
 
-    /// A compact tile's version 3 blob, rebuilt once and kept; `check` first compares the
-    /// stored bytes with their checksum (a decoder is not handed bytes nothing vouches for).
-    fn rebuilt_blob(&self, tx: u32, ty: u32, check: bool) -> Result<&[u8], String> {
+    /// A compact tile's version 3 blob, rebuilt from its first `count` levels (all of them in
+    /// version 4) once and kept (see [`rebuilt`]): a blob already made from as many levels or
+    /// more serves too. `check` first compares the stored bytes with their checksum (a decoder
+    /// is not handed bytes nothing vouches for).
+    fn rebuilt_blob(&self, tx: u32, ty: u32, check: bool, count: u32) -> Result<&[u8], String> {
         let e = self.dir_entry(tx, ty).ok_or("outside the tile set")?;
         let slot = ty as usize * self.header.tiles_x as usize + tx as usize;
-        let cell = self.rebuilt.get(slot).ok_or("outside the tile set")?;
-        let made = cell.get_or_init(|| {
-            let stored = self
-                .bytes_at(e.offset, e.len)
-                .ok_or("the tile runs past the end of the file")?;
-            if check && crc32fast::hash(stored) != e.crc {
-                return Err("checksum mismatch (corrupted file)".into());
-            }
-            rebuilt(
-                stored,
-                (tx, ty),
-                (self.header.levels, self.header.height_step),
-                self.header.version,
-            )
-            .map(Vec::into_boxed_slice)
+        let levels = self.header.levels;
+        let count = match self.header.version {
+            FIRST_COMPACT_VERSION => levels,
+            _ => count.clamp(1, levels),
+        };
+        let cells = self
+            .rebuilt
+            .get(slot)
+            .ok_or("outside the tile set")?
+            .get_or_init(|| (0..levels).map(|_| Rebuilt::new()).collect());
+        let made = (count..=levels)
+            .filter_map(|c| cells[c as usize - 1].get())
+            .find(|made| made.is_ok());
+        let made = made.unwrap_or_else(|| {
+            cells[count as usize - 1].get_or_init(|| {
+                let stored = self
+                    .bytes_at(e.offset, e.len)
+                    .ok_or("the tile runs past the end of the file")?;
+                if check && crc32fast::hash(stored) != e.crc {
+                    return Err("checksum mismatch (corrupted file)".into());
+                }
+                rebuilt(
+                    stored,
+                    (tx, ty),
+                    (levels, self.header.height_step),
+                    self.header.version,
+                    count,
+                )
+                .map(Vec::into_boxed_slice)
+            })
         });
         made.as_deref().map_err(Clone::clone)
     }
@@ -1948,6 +2111,18 @@ impl<'a> Tile<'a> {
         levels: u32,
         step: f32,
     ) -> Result<Tile<'a>, String> {
+        Tile::outline_through(blob, (tx, ty), (levels, step), levels)
+    }
+
+    /// [`outline`](Self::outline) of a blob that may hold the sections of the first `count`
+    /// levels alone (a compact tile rebuilt that far): the whole table is checked, and the
+    /// tile holds those levels alone.
+    fn outline_through(
+        blob: &'a [u8],
+        (tx, ty): (u32, u32),
+        (levels, step): (u32, f32),
+        count: u32,
+    ) -> Result<Tile<'a>, String> {
         let header: TileHeader = *section::<TileHeader>(blob, 0, 1, "tile header")?
             .first()
             .ok_or("empty tile")?;
@@ -1958,13 +2133,13 @@ impl<'a> Tile<'a> {
             levels as u64,
             "level table",
         )?;
+        check_table(&header, entries)?;
         let tile = Tile {
             blob,
             header,
-            levels: entries,
+            levels: &entries[..count.clamp(1, levels) as usize],
         };
-        check_table(&header, entries)?;
-        for i in 0..entries.len() {
+        for i in 0..tile.levels.len() {
             let err = |what: String| format!("level {i}: {what}");
             tile.level_unchecked(i as u32).map_err(err)?;
         }
@@ -2091,6 +2266,34 @@ impl<'a> Tile<'a> {
     /// Every vertex of the tile, decoded: (x, y, height in metres), in index order.
     pub fn vertices(&self) -> Vec<(u32, u32, f32)> {
         self.vertices_through(self.header.levels)
+    }
+
+    /// The tile's sides at each of its first `levels` levels as packed vertices (per side, N,
+    /// E, S, W, in order along it), each looked up in the block that holds it; None where a
+    /// side names a vertex no block holds, or a level the tile does not hold (data not
+    /// checked).
+    pub fn side_points(&self, levels: u32) -> Option<Vec<[Vec<u32>; 4]>> {
+        let blocks: Vec<(u32, &[u32])> = (0..levels)
+            .filter_map(|j| self.level(j))
+            .map(|l| (l.entry.block_start, l.positions))
+            .collect();
+        let at = |v: u32| -> Option<u32> {
+            let j = blocks
+                .partition_point(|&(start, _)| start <= v)
+                .checked_sub(1)?;
+            let (start, positions) = blocks[j];
+            positions.get((v - start) as usize).copied()
+        };
+        (0..levels)
+            .map(|i| {
+                let l = self.level(i)?;
+                let mut sides: [Vec<u32>; 4] = Default::default();
+                for (side, stored) in sides.iter_mut().zip(l.border) {
+                    *side = stored.iter().map(|&v| at(v)).collect::<Option<_>>()?;
+                }
+                Some(sides)
+            })
+            .collect()
     }
 
     /// The vertices of blocks `0..levels`, decoded as [`vertices`](Self::vertices) decodes them.

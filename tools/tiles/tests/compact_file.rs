@@ -251,3 +251,78 @@ fn level_lengths_locate_each_levels_stream() {
     );
     assert!(d.tile(0, 0).is_err());
 }
+
+/// A compact tile read through its first levels is rebuilt from those alone: its blob is the
+/// whole tile's first bytes, through the last of those levels' sections, and the tile holds
+/// those levels (every tile of a 2 x 2 SRTM3 crop, every count of levels, each from a fresh
+/// open so that nothing rebuilt from more levels serves it); its sides as decoded from those
+/// levels' streams are the rebuilt tile's. A changed byte in the finest
+/// level's stream (resealed) is refused when that level is read, not before: the control that
+/// the first levels were rebuilt without it.
+#[test]
+fn a_compact_tiles_first_levels_rebuild_alone() {
+    let (w, h) = (400, 380);
+    let heights = srtm3_crop(400, 200, w, h);
+    let grid = common::srtm3_grid(&heights, (w, h));
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = compact_set(&grid, dir.path());
+    let whole = TileSet::open(&path).expect("open");
+    let (levels, tiles_x, tiles_y) = (
+        whole.header().levels,
+        whole.header().tiles_x,
+        whole.header().tiles_y,
+    );
+    assert_eq!((tiles_x, tiles_y), (2, 2));
+    let mut shorter = 0;
+    for (tx, ty) in (0..tiles_y).flat_map(|ty| (0..tiles_x).map(move |tx| (tx, ty))) {
+        let full = whole.tile(tx, ty).expect("tile");
+        let blob = whole.blob(tx, ty).expect("blob");
+        for count in 1..levels {
+            let set = TileSet::open(&path).expect("open");
+            let tile = set.tile_levels(tx, ty, 0..count).expect("first levels");
+            assert_eq!(tile.levels().len(), count as usize);
+            assert!(tile.level(count).is_none());
+            let last = full.levels()[count as usize - 1];
+            let end =
+                last.border_offset as usize + 4 * last.border_len.iter().sum::<u32>() as usize;
+            let first = set.blob_through(tx, ty, count).expect("first levels' blob");
+            assert_eq!(first, &blob[..end], "tile {tx},{ty}, {count} levels");
+            // Its sides as decoded, without the rebuild, are the rebuilt tile's.
+            let sides = set.stored_sides(tx, ty, count).expect("sides");
+            assert_eq!(Some(sides), full.side_points(count), "tile {tx},{ty}");
+            shorter += usize::from(end < blob.len());
+        }
+    }
+    assert!(
+        shorter > 0,
+        "some tile's first levels are fewer bytes than the tile"
+    );
+
+    // The finest level's stream of tile 1,0 changed, the file resealed.
+    let (_, entries, lengths) = whole.tile_table_and_streams(1, 0).expect("table");
+    let finest = levels as usize - 1;
+    let at = whole.dir_entry(1, 0).expect("entry").offset as usize
+        + std::mem::size_of::<tiles::format::TileHeader>()
+        + entries.len() * std::mem::size_of::<tiles::format::LevelEntry>()
+        + 4
+        + 4 * lengths.len()
+        + lengths[..finest].iter().sum::<u32>() as usize;
+    assert!(lengths[finest] > 0);
+    let mut bytes = std::fs::read(&path).expect("read");
+    bytes[at] ^= 0x01;
+    reseal(&mut bytes).expect("reseal");
+    let damaged = dir.path().join("finest.vkt");
+    std::fs::write(&damaged, &bytes).expect("write");
+    let d = TileSet::open(&damaged).expect("open");
+    d.tile_levels(1, 0, 0..levels - 1)
+        .expect("the first levels read without the finest");
+    let error = d
+        .tile_levels(1, 0, 0..levels)
+        .expect_err("the finest level is refused")
+        .to_string();
+    assert!(
+        error.contains("finest.vkt") && error.contains("1,0"),
+        "{error}"
+    );
+    assert!(d.tile(1, 0).is_err() && d.tile(0, 0).is_ok());
+}

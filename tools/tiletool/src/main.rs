@@ -61,9 +61,10 @@ enum Command {
         #[arg(long)]
         pyramid: bool,
         /// Store each tile's levels compact: which vertices each level adds and their heights,
-        /// the fans, vertex order and morph offsets rebuilt when read (format version 4, about
+        /// the fans, vertex order and morph offsets rebuilt when read (format version 5, about
         /// 1 byte a sample on rough terrain instead of 18-32; see the README, "Compact levels").
-        /// Readers rebuild a tile on the CPU the first time they read it.
+        /// Readers rebuild a tile's levels on the CPU as far as they first read them;
+        /// `vkterrain` decodes the levels it draws on the GPU.
         #[arg(long)]
         compact: bool,
         /// No progress bar or summary.
