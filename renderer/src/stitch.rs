@@ -96,9 +96,10 @@ pub fn stitch_side(
     let (Some(paged_a), Some(paged_b)) = (a.tile.paged(), b.tile.paged()) else {
         return false;
     };
-    let mine = &paged_a.borders[a.level as usize][side.index()];
+    let (sides_a, sides_b) = (paged_a.sides(), paged_b.sides());
+    let mine = &sides_a.borders[a.level as usize][side.index()];
     let far = side.opposite();
-    let theirs: Option<Vec<u32>> = paged_b.borders[b.level as usize][far.index()]
+    let theirs: Option<Vec<u32>> = sides_b.borders[b.level as usize][far.index()]
         .iter()
         .map(|&p| rebase(p, side, b.tile, a.tile))
         .collect();
@@ -116,8 +117,8 @@ pub fn stitch_side(
     let base = out.vertices.len() as u32;
     out.vertices.extend_from_slice(mine);
     out.vertices.extend_from_slice(&theirs);
-    for (drawn, paged, s) in [(a, paged_a, side), (b, paged_b, far)] {
-        let indices = &paged.border_indices[drawn.level as usize][s.index()];
+    for (drawn, sides, s) in [(a, &sides_a, side), (b, &sides_b, far)] {
+        let indices = &sides.border_indices[drawn.level as usize][s.index()];
         out.pulled
             .extend(indices.iter().map(|&i| pulled(drawn.record, i)));
     }
@@ -152,9 +153,9 @@ struct Line {
 impl Line {
     /// `drawn`'s side `side` at its level: positions along it times `scale`, plus `offset`.
     fn of(drawn: &DrawnSide, step: f32, side: Side, scale: u32, offset: u32) -> Option<Line> {
-        let paged = drawn.tile.paged()?;
-        let border = &paged.borders[drawn.level as usize][side.index()];
-        let indices = &paged.border_indices[drawn.level as usize][side.index()];
+        let sides = drawn.tile.paged()?.sides();
+        let border = &sides.borders[drawn.level as usize][side.index()];
+        let indices = &sides.border_indices[drawn.level as usize][side.index()];
         let base = drawn.tile.header.height_base;
         Some(Line {
             along: border

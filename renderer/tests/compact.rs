@@ -116,3 +116,98 @@ fn levels_decoded_on_the_gpu_draw_the_frames_their_positions_draw() {
         "{line}"
     );
 }
+
+/// A compact tile is rebuilt and checked through the levels a frame wants, as a version 3 tile
+/// is checked: a byte of tile 1,2's level 2 stream changed, the file resealed (so that only the
+/// decoder can tell), leaves the frames that draw the tile coarser as the sound file's; the
+/// frame that first wants level 2 or finer finds it, with one line naming the file and the
+/// tile, and the flight goes on without the tile and exits 4. The control: the sound file
+/// draws every visible tile and exits 0, and asks for tile 1,2 coarser than level 2 first
+/// (were the whole tile rebuilt at its first check, the damage would stop it at once).
+#[test]
+fn a_damaged_compact_level_is_found_when_it_is_first_needed() {
+    use tiles::format::{LevelEntry, TileHeader};
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = compact_puget(dir.path());
+    let level = 2usize;
+    let ts = tiles::TileSet::open(&set).expect("open");
+    let (_, entries, lengths) = ts.tile_table_and_streams(1, 2).expect("table");
+    let at = ts.dir_entry(1, 2).expect("entry").offset as usize
+        + size_of::<TileHeader>()
+        + entries.len() * size_of::<LevelEntry>()
+        + 4
+        + 4 * lengths.len()
+        + lengths[..level].iter().sum::<u32>() as usize;
+    assert!(lengths[level] > 0, "level {level} has a stream");
+    drop(ts);
+    let fly = |p: &Path, name: &str| {
+        let (log, trace) = (
+            dir.path().join(format!("{name}.csv")),
+            dir.path().join(name),
+        );
+        let args = [
+            common::s(p),
+            "--headless",
+            "--frames",
+            "4",
+            "--size",
+            "256x192",
+        ];
+        let more = [
+            "--validation",
+            "--log",
+            common::s(&log),
+            "--trace",
+            common::s(&trace),
+        ];
+        let o = common::vkterrain(&[&args[..], &more[..]].concat());
+        let parsed = frametimes::log::read(&log).expect("the log reads");
+        let column = |c: &str| parsed.column(c).expect(c).to_vec();
+        let trace = std::fs::read_to_string(&trace).expect("trace");
+        let trace = memory::trace::Trace::parse(&trace).expect("trace parses");
+        // Per frame: the level tile 1,2 (index 2 * 4 + 1) was asked for at, if it was.
+        let asked: Vec<Option<u32>> = trace
+            .frames
+            .iter()
+            .map(|f| f.iter().find(|r| r.tile == 9).map(|r| r.wanted))
+            .collect();
+        (o, [column("tiles_visible"), column("tiles_drawn")], asked)
+    };
+    let (control, [visible, drawn], asked) = fly(&set, "control");
+    let err = String::from_utf8_lossy(&control.stderr);
+    assert_eq!(control.status.code(), Some(0), "{err}");
+    assert_eq!(visible, drawn, "the control draws every visible tile");
+    assert!(
+        asked[0].is_some_and(|l| l < level as u32),
+        "tile 1,2 is in the first view, coarser than level {level}: {asked:?}"
+    );
+    let finer = asked
+        .iter()
+        .position(|a| a.is_some_and(|l| l >= level as u32))
+        .expect("a frame wants tile 1,2 at level 2 or finer");
+
+    let mut bytes = std::fs::read(&set).expect("read");
+    bytes[at] ^= 0x01;
+    tiles::format::reseal(&mut bytes).expect("reseal");
+    let damaged = dir.path().join("damaged.vkt");
+    std::fs::write(&damaged, &bytes).expect("write");
+    let (o, [v, d], asked_damaged) = fly(&damaged, "damaged");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(4), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(
+        err.contains("damaged.vkt") && err.contains("tile 1,2") && err.contains("not drawn"),
+        "{err}"
+    );
+    assert_eq!(v, visible);
+    assert_eq!(asked_damaged[..finer], asked[..finer]);
+    assert_eq!(
+        d[..finer],
+        drawn[..finer],
+        "drawn coarse as the sound file's"
+    );
+    assert!(
+        asked_damaged[finer..].iter().all(Option::is_none),
+        "tile 1,2 was asked for after it failed: {asked_damaged:?}"
+    );
+}

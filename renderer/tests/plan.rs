@@ -240,7 +240,7 @@ fn stitches_close_every_seam_at_every_level_pair() {
                     );
                     // Each vertex is pulled from its own tile: a's first, then b's, each the
                     // border vertex it stands for.
-                    let n = a.paged().expect("checked").borders[la as usize][k].len();
+                    let n = a.paged().expect("checked").sides().borders[la as usize][k].len();
                     assert_eq!(s.pulled.len(), s.vertices.len());
                     for (i, &p) in s.pulled.iter().enumerate() {
                         let (record, local) = (p >> LOCAL_BITS, p & ((1 << LOCAL_BITS) - 1));
@@ -251,15 +251,16 @@ fn stitches_close_every_seam_at_every_level_pair() {
                         };
                         assert_eq!(record, u32::from(i >= n));
                         assert_eq!(
-                            tile.paged().expect("checked").border_indices[level as usize][side][at],
+                            tile.paged().expect("checked").sides().border_indices[level as usize]
+                                [side][at],
                             local
                         );
                     }
                     if morph {
                         // Morphing keeps the triangles at shared vertices: one per segment
                         // of either polyline.
-                        let m = a.paged().expect("checked").borders[la as usize][k].len()
-                            + b.paged().expect("checked").borders[lb as usize]
+                        let m = a.paged().expect("checked").sides().borders[la as usize][k].len()
+                            + b.paged().expect("checked").sides().borders[lb as usize]
                                 [side.opposite().index()]
                             .len();
                         assert_eq!(s.triangles as usize, m - 2, "levels {la}/{lb}");
@@ -273,7 +274,7 @@ fn stitches_close_every_seam_at_every_level_pair() {
                         }
                     };
                     assert!(s.vertices.iter().all(|&p| on_edge(p)));
-                    let mine = &a.paged().expect("checked").borders[la as usize][k];
+                    let mine = a.paged().expect("checked").sides().borders[la as usize][k].clone();
                     let theirs: Vec<u32> = s.vertices[mine.len().min(s.vertices.len())..].to_vec();
                     let open = |edges: &std::collections::HashSet<(u32, u32)>| {
                         let segs = |line: &[u32]| -> Vec<(u32, u32)> {
@@ -281,7 +282,7 @@ fn stitches_close_every_seam_at_every_level_pair() {
                                 .map(|w| (w[0].min(w[1]), w[0].max(w[1])))
                                 .collect()
                         };
-                        let (m, t) = (segs(mine), segs(&theirs));
+                        let (m, t) = (segs(&mine), segs(&theirs));
                         m.iter()
                             .filter(|e| !t.contains(e))
                             .chain(t.iter().filter(|e| !m.contains(e)))

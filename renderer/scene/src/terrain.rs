@@ -18,7 +18,7 @@ use tiles::format::{LevelEntry, TileSet};
 use tiles::mesh::{TILE_CELLS, TILE_SIZE};
 
 use crate::levels::LevelTable;
-use crate::tile::{rebase, Paged, Side, TileInfo, HEIGHT_CELLS};
+use crate::tile::{rebase, Paged, Side, Sides, TileInfo, HEIGHT_CELLS};
 
 /// Bytes at the start of a tile that hold its outline, in practice (header, level table and
 /// section bounds, well under a page).
@@ -247,13 +247,16 @@ impl Terrain {
     /// another thread makes it waits for it): its checksum, structure and texture, and
     /// `tiletool verify`'s semantic checks without a source (fans, coverage, nesting, blocks,
     /// borders, morph offsets) of levels `0..=level`; and where the set shares sides, that each
-    /// side holds the same vertices as the neighbour's at every level (a neighbour that failed
+    /// side holds the same vertices as the neighbour's at every level read (every level of a
+    /// version 3 tile; a compact tile is rebuilt through `level` alone, and each finer level's
+    /// sides are compared when it is checked; a neighbour that failed
     /// its own check, or whose data do not read, is never drawn, so no seam joins them and no
     /// side is compared; a neighbour not checked yet gives its sides as stored, read again
     /// with its checksum only where they differ, without the semantic checks: a pyramid's cut
     /// rarely draws a tile's neighbours in its own layer, and checking each whole doubled the
-    /// checks' cost over a flight). A later call for a finer level checks the levels in
-    /// between; one that fails then takes the tile out of the flight from then on. A tile is
+    /// checks' cost over a flight; a compact neighbour's sides are decoded, not rebuilt). A
+    /// later call for a finer level checks the levels in between; one that fails then takes the
+    /// tile out of the flight from then on. A tile is
     /// mostly first drawn at a coarse level, and its finer levels hold most of its vertices:
     /// the 16K mirror set's first flyover view checks its 96 tiles through the levels it draws
     /// them at in a seventh of the time all nine levels take (bench/README, "A tile's levels
@@ -308,9 +311,10 @@ impl Terrain {
             return;
         }
         // Its checksum passed its own check, over these same bytes (a file cut since is refused
-        // before this): the outline, and the new levels' structure.
+        // before this): the outline (a compact tile rebuilt through `level`), and the new
+        // levels' structure.
         let set = self.set_of(tile);
-        let problem = match set.tile_outline(tile.tx, tile.ty) {
+        let problem = match set.tile_outline_through(tile.tx, tile.ty, level + 1) {
             Ok(data) => {
                 let problem = match data.check_levels(from..level + 1) {
                     Err(what) => Some(set.tile_error(tile.tx, tile.ty, what).to_string()),
@@ -318,14 +322,10 @@ impl Terrain {
                         .into_iter()
                         .next(),
                 };
-                // The part tables of the levels now checked, before they may be drawn.
-                if let (None, Some(paged)) = (&problem, tile.paged()) {
-                    let held = paged.parts();
-                    let counts = tiles::parts::counts_through(&data, &held.1, level + 1);
-                    *paged.parts.write().unwrap_or_else(|p| p.into_inner()) =
-                        Arc::new((held.0, counts));
+                match (problem, tile.paged()) {
+                    (None, Some(paged)) => self.extend_paged(tile, paged, &data, level).err(),
+                    (problem, _) => problem,
                 }
-                problem
             }
             Err(e) => Some(e.to_string()),
         };
@@ -336,6 +336,38 @@ impl Terrain {
                 self.failed_at(i);
             }
         }
+    }
+
+    /// What a check of `tile`'s levels through `level` adds to what its first check read,
+    /// before those levels may be drawn: their part tables, and the sides of a tile whose
+    /// first check read fewer levels (a compact tile rebuilt that far), compared with the
+    /// neighbours' at those levels.
+    fn extend_paged(
+        &self,
+        tile: &TileInfo,
+        paged: &Paged,
+        data: &tiles::format::Tile,
+        level: u32,
+    ) -> Result<(), String> {
+        let known = paged.sides().borders.len();
+        let held = paged.parts();
+        // The tables' centres and lines come from every block the tile held when they were
+        // made: made again where it holds more now.
+        let tables = match data.levels().len() > known {
+            true => tiles::parts::tables_through(data, level + 1),
+            false => (
+                held.0,
+                tiles::parts::counts_through(data, &held.1, level + 1),
+            ),
+        };
+        *paged.parts.write().unwrap_or_else(|p| p.into_inner()) = Arc::new(tables);
+        if known > level as usize {
+            return Ok(());
+        }
+        let sides = sides(data).ok_or("a border names a vertex outside its blocks")?;
+        self.sides_agree(tile, &sides.borders, known..sides.borders.len())?;
+        *paged.sides.write().unwrap_or_else(|p| p.into_inner()) = Arc::new(sides);
+        Ok(())
     }
 
     /// Whether the file on disk is shorter now than when it was opened (its length, as the
@@ -518,15 +550,28 @@ impl Terrain {
     }
 
     /// Whether `tile` may be drawn: its own check (through `level` if made now), then its sides
-    /// against its neighbours'.
+    /// against its neighbours' at the levels that check read.
     fn usable(&self, tile: &TileInfo, level: u32) -> Result<(), String> {
         let mine = self.own(tile, level).as_ref().map_err(Clone::clone)?;
-        if !self.sides_claimed {
+        let borders = &mine.sides().borders;
+        self.sides_agree(tile, borders, 0..borders.len())
+    }
+
+    /// Where the set shares sides: whether `tile`'s sides at `levels` (`mine`, per level) are
+    /// its neighbours' at those levels, and the tiles' morph units the same.
+    fn sides_agree(
+        &self,
+        tile: &TileInfo,
+        mine: &Borders,
+        levels: std::ops::Range<usize>,
+    ) -> Result<(), String> {
+        if !self.sides_claimed || levels.is_empty() {
             return Ok(());
         }
         let units = |t: &TileInfo| -> Vec<u32> {
             t.levels.iter().map(|l| l.morph_unit.to_bits()).collect()
         };
+        let count = levels.end as u32;
         for side in Side::ALL {
             let Some(j) = self.neighbour(tile, side) else {
                 continue;
@@ -534,34 +579,32 @@ impl Terrain {
             let b = &self.tiles[j];
             let differs = |theirs: &Borders| {
                 units(tile) != units(b)
-                    || (0..self.levels as usize).any(|level| {
+                    || levels.clone().any(|level| {
                         let rebased: Option<Vec<u32>> = theirs
                             .get(level)
                             .map_or(&[][..], |t| &t[side.opposite().index()])
                             .iter()
                             .map(|&p| rebase(p, side, b, tile))
                             .collect();
-                        rebased.as_ref() != Some(&mine.borders[level][side.index()])
+                        rebased.as_ref() != Some(&mine[level][side.index()])
                     })
             };
-            // The neighbour's sides: from its own check where it has had one, else read from
-            // its data alone (a neighbour the cut never draws need not be checked whole): as
-            // stored, unchecked (its sides' few pages); only where those differ from this
-            // tile's, again with its checksum and structure, so that damage to the neighbour is
-            // not taken for this tile's (a neighbour whose data do not read is never drawn).
+            // The neighbour's sides: from its own check where it has had one that read these
+            // levels, else read from its data alone (a neighbour the cut never draws need not
+            // be checked whole): as stored, unchecked (its sides' few pages; a compact tile's
+            // levels decoded, not rebuilt); only where those differ from this tile's, again
+            // with its checksum and structure, so that damage to the neighbour is not taken
+            // for this tile's (a neighbour whose data do not read is never drawn).
             let set = self.set_of(b);
-            let differs = match b.own.get() {
-                Some(Ok(paged)) => differs(&paged.borders),
+            let differs = match b.own.get().map(|own| own.as_ref().map(Paged::sides)) {
                 Some(Err(_)) => false,
-                None => {
-                    let stored = set
-                        .tile_outline(b.tx, b.ty)
-                        .ok()
-                        .and_then(|data| side_vertices(&data, self.levels));
+                Some(Ok(theirs)) if theirs.borders.len() >= levels.end => differs(&theirs.borders),
+                _ => {
+                    let stored = set.stored_sides(b.tx, b.ty, count).ok();
                     stored.is_none_or(|s| differs(&s))
-                        && set.tile(b.tx, b.ty).is_ok_and(|data| {
-                            side_vertices(&data, self.levels).is_none_or(|s| differs(&s))
-                        })
+                        && set
+                            .tile_levels(b.tx, b.ty, 0..count)
+                            .is_ok_and(|data| data.side_points(count).is_none_or(|s| differs(&s)))
                 }
             };
             if differs {
@@ -676,7 +719,9 @@ impl Terrain {
         if info.usable_at(level) != Some(true) {
             return None;
         }
-        let blob = self.set_of(info).blob(info.tx, info.ty)?;
+        let blob = self
+            .set_of(info)
+            .blob_through(info.tx, info.ty, level + 1)?;
         let (offset, len) = match part {
             memory::Part::Positions(j) => {
                 let l = info.levels.get(j as usize)?;
@@ -704,8 +749,8 @@ impl Terrain {
     }
 
     /// Level `level`'s compact stream of `tile` (version 5 compact sets), once the level has
-    /// passed its check (None before, or when the tile failed): the check decoded the whole
-    /// tile and found each level ending where its length says.
+    /// passed its check (None before, or when the tile failed): the check decoded the tile's
+    /// levels through it and found each ending where its length says.
     pub fn level_stream(&self, tile: usize, level: u32) -> Option<&[u8]> {
         let info = self.tiles.get(tile)?;
         if info.usable_at(level) != Some(true) {
@@ -982,7 +1027,6 @@ fn tile_info(set: &TileSet, tx: u32, ty: u32, layer: u32) -> Result<TileInfo, ti
 /// `tiletool verify` (without a source) would report at levels `0..=level`, the texture, and
 /// the level table read at open still the one stored.
 fn paged(set: &TileSet, info: &TileInfo, level: u32) -> Result<Paged, String> {
-    let h = *set.header();
     let (tx, ty) = (info.tx, info.ty);
     let tile = set
         .tile_levels(tx, ty, 0..level + 1)
@@ -999,11 +1043,9 @@ fn paged(set: &TileSet, info: &TileInfo, level: u32) -> Result<Paged, String> {
             .collect(),
         None => Vec::new(),
     };
-    let (border_indices, borders) =
-        borders(&tile, h.levels).ok_or("a border names a vertex outside its blocks")?;
+    let sides = sides(&tile).ok_or("a border names a vertex outside its blocks")?;
     Ok(Paged {
-        borders,
-        border_indices,
+        sides: RwLock::new(Arc::new(sides)),
         texture_mips,
         parts: RwLock::new(Arc::new(tiles::parts::tables_through(&tile, level + 1))),
     })
@@ -1012,58 +1054,32 @@ fn paged(set: &TileSet, info: &TileInfo, level: u32) -> Result<Paged, String> {
 /// Per level, the vertex indices on the tile's N, E, S, W sides and the packed vertices there.
 type Borders = Vec<[Vec<u32>; 4]>;
 
-/// A tile's sides at each of its `levels` levels: [`Borders`] as indices, then as vertices
-/// (None where a side names a vertex no block holds: data not checked).
-fn borders(tile: &tiles::format::Tile, levels: u32) -> Option<(Borders, Borders)> {
-    let indices: Borders = (0..levels)
+/// A tile's sides at each level it holds (every level, or a compact tile's levels rebuilt so
+/// far): [`Borders`] as vertices and as indices (None where a side names a vertex no block
+/// holds: data not checked).
+fn sides(tile: &tiles::format::Tile) -> Option<Sides> {
+    let levels = tile.levels().len() as u32;
+    let border_indices: Borders = (0..levels)
         .filter_map(|i| tile.level(i))
         .map(|l| l.border.map(|side| side.to_vec()))
         .collect();
-    Some((indices, side_vertices(tile, levels)?))
-}
-
-/// A tile's sides at each of its `levels` levels as packed vertices, each looked up in the
-/// block that holds it (no copy of the tile's vertices); None where a side names a vertex no
-/// block holds (data not checked).
-fn side_vertices(tile: &tiles::format::Tile, levels: u32) -> Option<Borders> {
-    let blocks: Vec<(u32, &[u32])> = (0..levels)
-        .filter_map(|j| tile.level(j))
-        .map(|l| (l.entry.block_start, l.positions))
-        .collect();
-    let at = |v: u32| -> Option<u32> {
-        let j = blocks
-            .partition_point(|&(start, _)| start <= v)
-            .checked_sub(1)?;
-        let (start, positions) = blocks[j];
-        positions.get((v - start) as usize).copied()
-    };
-    (0..levels)
-        .map(|i| {
-            let l = tile.level(i)?;
-            let mut sides: [Vec<u32>; 4] = Default::default();
-            for (side, stored) in sides.iter_mut().zip(l.border) {
-                *side = stored.iter().map(|&v| at(v)).collect::<Option<_>>()?;
-            }
-            Some(sides)
-        })
-        .collect()
+    Some(Sides {
+        borders: tile.side_points(levels)?,
+        border_indices,
+    })
 }
 
 /// A tile's coarse height map: the highest vertex in each cell, from its positions as stored
-/// (unchecked: the map only places cameras).
+/// (unchecked: the map only places cameras; a compact tile's decoded, not rebuilt).
 fn coarse_heights(set: &TileSet, tx: u32, ty: u32) -> [f32; HEIGHT_CELLS * HEIGHT_CELLS] {
     let mut heights = [f32::NEG_INFINITY; HEIGHT_CELLS * HEIGHT_CELLS];
-    let Ok(tile) = set.tile_outline(tx, ty) else {
+    let Ok(points) = set.tile_points(tx, ty) else {
         return heights;
     };
-    let q = tile.quantiser();
-    for level in (0..set.header().levels).filter_map(|i| tile.level(i)) {
-        for &p in level.positions {
-            let (x, y, code) = tiles::pack::unpack(p);
-            let (x, y) = ((x as usize).min(256), (y as usize).min(256));
-            let cell = (y * HEIGHT_CELLS / 257) * HEIGHT_CELLS + x * HEIGHT_CELLS / 257;
-            heights[cell] = heights[cell].max(q.height(code));
-        }
+    for (x, y, h) in points {
+        let (x, y) = ((x as usize).min(256), (y as usize).min(256));
+        let cell = (y * HEIGHT_CELLS / 257) * HEIGHT_CELLS + x * HEIGHT_CELLS / 257;
+        heights[cell] = heights[cell].max(h);
     }
     heights
 }

@@ -63,10 +63,10 @@ pub struct TileInfo {
 
 /// What a tile's check reads from its data, for stitching and texturing.
 pub struct Paged {
-    /// Per level, per [`Side`] (N, E, S, W): the packed border vertices in order along the side.
-    pub borders: Vec<[Vec<u32>; 4]>,
-    /// The same vertices as indices into the tile's vertex array (blocks 0.. in order).
-    pub border_indices: Vec<[Vec<u32>; 4]>,
+    /// The tile's sides at the levels read so far: every level of a version 3 tile; those
+    /// checked so far of a compact one, whose levels are rebuilt as they are first checked
+    /// (each check of finer levels replaces it).
+    pub(crate) sides: RwLock<Arc<Sides>>,
     /// Per texture mip, finest first: its BC1 blocks' place in the tile's texture blob (empty
     /// when the set has no textures).
     pub(crate) texture_mips: Vec<std::ops::Range<usize>>,
@@ -78,7 +78,21 @@ pub struct Paged {
 /// A tile's part tables: its parts' centres, and its checked levels' counts.
 pub type PartTables = (tiles::parts::Centres, tiles::parts::Counts);
 
+/// A tile's sides, per level it holds, per [`Side`] (N, E, S, W).
+#[derive(Default)]
+pub struct Sides {
+    /// The packed border vertices in order along the side.
+    pub borders: Vec<[Vec<u32>; 4]>,
+    /// The same vertices as indices into the tile's vertex array (blocks 0.. in order).
+    pub border_indices: Vec<[Vec<u32>; 4]>,
+}
+
 impl Paged {
+    /// The tile's sides, at every level drawn so far (drawn levels are checked).
+    pub fn sides(&self) -> Arc<Sides> {
+        Arc::clone(&self.sides.read().unwrap_or_else(|p| p.into_inner()))
+    }
+
     /// What drawing the tile part by part needs, for the levels checked so far.
     pub fn parts(&self) -> Arc<PartTables> {
         Arc::clone(&self.parts.read().unwrap_or_else(|p| p.into_inner()))
