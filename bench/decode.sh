@@ -4,7 +4,7 @@
 #   rows:  --decode cpu --morph-rows  each block as positions and morph rows (the blocks of
 #          83b01c5, the baseline)
 #   cpu:   --decode cpu               positions alone (the CPU rebuilt them at the tile's check)
-#   gpu:   --decode gpu               each level's compact stream, decoded on the GPU (default)
+#   gpu:   --decode gpu               each level's compact stream, decoded on the GPU (the default on a GPU)
 # at the default upload budget, and cpu and gpu again at tight budgets: block bytes sent,
 # tile-frames drawn coarser than wanted, the pool's largest resident set, triangles, median
 # frame, and the GPU time outside the draws (copies, decodes, index builds, morph pass).

@@ -130,9 +130,11 @@ pub struct Cli {
     pub morph_rows: bool,
     /// How a compact tile set's levels (tiletool build --compact, format version 5) travel:
     /// gpu (each level's compact stream, about a third of its positions' bytes, decoded by a
-    /// compute pass into the pool) or cpu (the positions the CPU rebuilt when it checked the
-    /// tile). Other sets send positions either way.
-    #[arg(long, value_enum, default_value_t = DecodeArg::Gpu)]
+    /// compute pass into the pool), cpu (the positions the CPU rebuilt when it checked the
+    /// tile), or auto: gpu on a GPU, cpu on a software rasteriser such as lavapipe, whose
+    /// compute runs on the same cores, slower than the native decoder. Other sets send
+    /// positions either way.
+    #[arg(long, value_enum, default_value_t = DecodeArg::Auto)]
     pub decode: DecodeArg,
     /// How tile levels travel: progressive (new blocks and one index array per refinement),
     /// per-level (each level from scratch) or whole-tile (every level at once, the old scheme).
@@ -425,6 +427,7 @@ pub enum IndexArraysArg {
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum DecodeArg {
+    Auto,
     Gpu,
     Cpu,
 }
@@ -486,6 +489,12 @@ impl Cli {
         !(self.whole_tiles || self.part_by_part || self.draw_only)
     }
 
+    /// Whether the device decides where a compact set's levels are decoded
+    /// ([`renderer::settings::decode_pays_on`]): `--decode auto`.
+    pub fn decode_by_device(&self) -> bool {
+        self.decode == DecodeArg::Auto
+    }
+
     /// GPU memory, uploads and prefetching; `textures`: whether texture slots are wanted.
     pub fn memory(&self, textures: bool) -> Result<MemoryOptions> {
         let upload_budget = match self.upload_budget_mb {
@@ -525,7 +534,9 @@ impl Cli {
             read_back_heights: self.read_back_heights,
             // Whether geomorphing is on or not: the window's key switches it.
             morph_rows: self.morph_rows || self.morph_shader != MorphShaderArg::Hierarchical,
-            decode_on_gpu: self.decode == DecodeArg::Gpu,
+            // Where the user did not choose, the device does once it is known
+            // (`Cli::decode_by_device`).
+            decode_on_gpu: self.decode != DecodeArg::Cpu,
         })
     }
 

@@ -95,6 +95,8 @@ pub struct FlightResult {
     pub staging: bool,
     /// Index arrays were built on the GPU (else sent from the file).
     pub built_indices: bool,
+    /// A compact set's levels were sent as their streams and decoded on the GPU.
+    pub decoded_levels: bool,
     /// How long drawing the first view before the flight took (ms; None: not primed).
     pub prime_ms: Option<f64>,
     /// Checking the first view's tiles before the first frame (ms).
@@ -146,6 +148,7 @@ pub fn fly(
     let texture_bytes = renderer.texture_bytes();
     let staging = !renderer.pool().direct();
     let built_indices = renderer.builds_indices();
+    let decoded_levels = renderer.decodes_levels();
     renderer.destroy(gpu);
     Ok(FlightResult {
         records,
@@ -154,6 +157,7 @@ pub fn fly(
         texture_bytes,
         staging,
         built_indices,
+        decoded_levels,
         prime_ms,
         first_view_check_ms,
         error,

@@ -211,6 +211,7 @@ fn fly_path(
             size: cli.size,
             settings,
             parts_by_device,
+            decode_by_device: cli.decode_by_device(),
             memory,
             trace: cli.trace.is_some(),
             frames: cli.frames,
@@ -233,9 +234,12 @@ fn fly_path(
             .with_context(|| format!("{}: cannot write", record.display()))?;
     }
     let gpu = Gpu::new(&gpu_options(cli))?;
-    let mut settings = settings;
+    let (mut settings, mut memory) = (settings, memory);
     if parts_by_device {
         settings.part_by_part = settings::parts_pay_on(gpu.properties.device_type);
+    }
+    if cli.decode_by_device() {
+        memory.decode_on_gpu = settings::decode_pays_on(gpu.properties.device_type);
     }
     let part_by_part = settings.geomorph && settings.part_by_part;
     let flight = Flight {
@@ -312,6 +316,11 @@ fn finish(
             "built"
         } else {
             "sent"
+        },
+        levels_decoded_on: match (terrain.has_streams(), result.decoded_levels) {
+            (false, _) => "none",
+            (true, true) => "gpu",
+            (true, false) => "cpu",
         },
     };
     let records = &result.records;

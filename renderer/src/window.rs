@@ -32,6 +32,8 @@ pub struct WindowOptions {
     pub settings: Settings,
     /// The device decides `settings.part_by_part` ([`crate::settings::parts_pay_on`]).
     pub parts_by_device: bool,
+    /// The device decides `memory.decode_on_gpu` ([`crate::settings::decode_pays_on`]).
+    pub decode_by_device: bool,
     pub memory: MemoryOptions,
     /// Keep every frame's requests (`--trace`).
     pub trace: bool,
@@ -73,6 +75,7 @@ struct App<'a> {
     texture_bytes: u64,
     staging: bool,
     built_indices: bool,
+    decoded_levels: bool,
 }
 
 /// Runs the window until it closes; returns the flight, the device's name and the number of
@@ -92,6 +95,9 @@ pub fn run(
     let gpu = Gpu::new(&options.gpu).map_err(|e| e.to_string())?;
     if options.parts_by_device {
         options.settings.part_by_part = settings::parts_pay_on(gpu.properties.device_type);
+    }
+    if options.decode_by_device {
+        options.memory.decode_on_gpu = settings::decode_pays_on(gpu.properties.device_type);
     }
     let camera = options.start;
     let mut app = App {
@@ -117,6 +123,7 @@ pub fn run(
         texture_bytes: 0,
         staging: false,
         built_indices: false,
+        decoded_levels: false,
     };
     let result = terrain.with_checks_ahead(|| event_loop.run_app(&mut app));
     app.shutdown();
@@ -156,6 +163,7 @@ pub fn run(
         texture_bytes: app.texture_bytes,
         staging: app.staging,
         built_indices: app.built_indices,
+        decoded_levels: app.decoded_levels,
         prime_ms: None,
         first_view_check_ms: 0.0,
         error: None,
@@ -177,6 +185,7 @@ impl App<'_> {
             self.texture_bytes = r.texture_bytes();
             self.staging = !r.pool().direct();
             self.built_indices = r.builds_indices();
+            self.decoded_levels = r.decodes_levels();
             r.destroy(&self.gpu);
         }
         self.gpu.wait_idle();

@@ -26,7 +26,8 @@ fn compact_puget(dir: &Path) -> PathBuf {
     out
 }
 
-/// Three frames over `set` with `fault` injected: the exit code and stderr.
+/// Three frames over `set`, its levels decoded on the GPU, with `fault` injected: the exit
+/// code and stderr.
 fn three_frames(set: &Path, fault: &str) -> (Option<i32>, String) {
     let args = [
         common::s(set),
@@ -35,6 +36,8 @@ fn three_frames(set: &Path, fault: &str) -> (Option<i32>, String) {
         "3",
         "--size",
         "256x192",
+        "--decode",
+        "gpu",
     ];
     let o = common::vkterrain_with_env(&args, ("VKTERRAIN_FAULT", fault));
     (
@@ -69,6 +72,21 @@ fn levels_decoded_on_the_gpu_draw_the_frames_their_positions_draw() {
         }
     };
     same(&gpu, &cpu, "decoded on the GPU");
+    // Where the user does not choose, the device does: the CPU's decoder on a software
+    // rasteriser, whose compute runs on the same cores (settings::decode_pays_on).
+    let (auto_out, auto) = run("auto", &[], None);
+    same(&auto, &cpu, "decoded where the device decides");
+    let summary = |out: &Path| -> serde_json::Value {
+        let json = std::fs::read(out.join("frames.json")).expect("summary");
+        serde_json::from_slice(&json).expect("summary parses")
+    };
+    let software = summary(&auto_out)["device"]
+        .as_str()
+        .is_some_and(|d| d.contains("llvmpipe"));
+    let chosen = if software { "cpu" } else { "gpu" };
+    assert_eq!(summary(&auto_out)["levels_decoded_on"], chosen);
+    assert_eq!(summary(&gpu_out)["levels_decoded_on"], "gpu");
+    assert_eq!(summary(&cpu_out)["levels_decoded_on"], "cpu");
     let triangles = |out: &Path| common::log_column(&out.join("frames.csv"), "triangles");
     assert_eq!(triangles(&gpu_out), triangles(&cpu_out));
     let (sent, rebuilt) = (

@@ -155,6 +155,11 @@ impl Renderer {
         self.builder.is_some()
     }
 
+    /// Whether a compact set's levels are sent as their streams and decoded on the GPU.
+    pub fn decodes_levels(&self) -> bool {
+        self.decoder.is_some()
+    }
+
     pub fn manager(&self) -> &Manager {
         &self.manager
     }

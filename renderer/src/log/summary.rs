@@ -23,6 +23,9 @@ pub struct RunInfo {
     pub upload_scheme: &'static str,
     /// Where index arrays came from: "built" on the GPU or "sent" from the file.
     pub index_arrays: &'static str,
+    /// Where a compact set's levels were decoded: "gpu" (sent as their streams) or "cpu"
+    /// (sent as the positions the CPU rebuilt); "none" for other sets.
+    pub levels_decoded_on: &'static str,
     /// Geomorphing tiles drawn part by part (chosen, or the device's default; arrays built).
     pub part_by_part: bool,
     /// Device memory of the texture slots (0: none).
@@ -99,6 +102,7 @@ pub struct Summary {
     pub staging: bool,
     pub upload_scheme: &'static str,
     pub index_arrays: &'static str,
+    pub levels_decoded_on: &'static str,
     pub part_by_part: bool,
     /// Index arrays built on the GPU, and their megabytes (written in GPU memory, not sent).
     pub index_builds: u64,
@@ -228,6 +232,7 @@ impl Summary {
             staging: run.staging,
             upload_scheme: run.upload_scheme,
             index_arrays: run.index_arrays,
+            levels_decoded_on: run.levels_decoded_on,
             part_by_part: run.part_by_part,
             index_builds: sum(|r| r.index_builds),
             index_build_mb: sum(|r| r.index_build_bytes) as f64 / 1e6,
