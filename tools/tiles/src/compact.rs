@@ -100,6 +100,83 @@ fn walk() -> &'static [[u32; 3]] {
     })
 }
 
+/// Where each grid point is in the walk ([`NOT_WALKED`]: a corner), and the walk's entries
+/// each point is a parent of (`children[child_start[p]..child_start[p + 1]]`, as indices in
+/// the walk): what a decoder follows to ask about the points whose parents it has just met,
+/// instead of going through the whole walk once a level.
+struct WalkIndex {
+    index_of: Vec<u32>,
+    child_start: Vec<u32>,
+    children: Vec<u32>,
+}
+
+const NOT_WALKED: u32 = u32::MAX;
+
+fn walk_index() -> &'static WalkIndex {
+    static INDEX: std::sync::OnceLock<WalkIndex> = std::sync::OnceLock::new();
+    INDEX.get_or_init(|| {
+        let table = walk();
+        let mut index_of = vec![NOT_WALKED; TILE_SIZE * TILE_SIZE];
+        let mut count = vec![0u32; TILE_SIZE * TILE_SIZE + 1];
+        for (i, &[p, a, b]) in table.iter().enumerate() {
+            index_of[p as usize] = i as u32;
+            count[a as usize + 1] += 1;
+            count[b as usize + 1] += 1;
+        }
+        for k in 1..count.len() {
+            count[k] += count[k - 1];
+        }
+        let mut next = count.clone();
+        let mut children = vec![0u32; 2 * table.len()];
+        for (i, &[_, a, b]) in table.iter().enumerate() {
+            for parent in [a, b] {
+                children[next[parent as usize] as usize] = i as u32;
+                next[parent as usize] += 1;
+            }
+        }
+        WalkIndex {
+            index_of,
+            child_start: count,
+            children,
+        }
+    })
+}
+
+/// A decoder's grid as it learns a tile's vertices: which points are known, and which walk
+/// entries are asked about (their point not known, both parents known), as a bitmap over the
+/// walk; an entry not added stays asked about at the next level.
+struct Learnt {
+    known: Vec<bool>,
+    asked: Vec<u64>,
+}
+
+impl Learnt {
+    fn new() -> Learnt {
+        Learnt {
+            known: vec![false; TILE_SIZE * TILE_SIZE],
+            asked: vec![0; walk().len().div_ceil(64)],
+        }
+    }
+
+    /// Point `p` is a vertex from now on: it is asked about no more, and each point it is a
+    /// parent of whose other parent is known is asked about.
+    fn learn(&mut self, p: usize) {
+        let (table, index) = (walk(), walk_index());
+        self.known[p] = true;
+        let i = index.index_of[p];
+        if i != NOT_WALKED {
+            self.asked[i as usize / 64] &= !(1 << (i % 64));
+        }
+        let children = index.child_start[p] as usize..index.child_start[p + 1] as usize;
+        for &i in &index.children[children] {
+            let [c, a, b] = table[i as usize].map(|v| v as usize);
+            if !self.known[c] && self.known[a] && self.known[b] {
+                self.asked[i as usize / 64] |= 1 << (i % 64);
+            }
+        }
+    }
+}
+
 /// The grid point at flat index `i`.
 fn point(i: u32) -> (u32, u32) {
     (i % TILE_SIZE as u32, i / TILE_SIZE as u32)
@@ -289,8 +366,9 @@ pub fn decode_levels(
     let mut reader = Reader { bytes, at: 0 };
     let mut ranges = Vec::with_capacity(levels as usize);
     let mut code = vec![0u16; TILE_SIZE * TILE_SIZE];
-    let mut known = vec![false; TILE_SIZE * TILE_SIZE];
+    let mut learnt = Learnt::new();
     let mut sets = Vec::with_capacity(levels as usize);
+    let table = walk();
     for j in 0..levels {
         let start = reader.at / 8;
         let mut set = Vec::new();
@@ -298,21 +376,28 @@ pub fn decode_levels(
         for _ in 0..raw {
             let (x, y) = (reader.read(9)?, reader.read(9)?);
             let c = reader.read(14)? as u16;
-            if x >= TILE_SIZE as u32 || y >= TILE_SIZE as u32 || known[at((x, y))] {
+            if x >= TILE_SIZE as u32 || y >= TILE_SIZE as u32 || learnt.known[at((x, y))] {
                 return Err(format!(
                     "level {j}: vertex ({x}, {y}) outside the tile or twice"
                 ));
             }
-            known[at((x, y))] = true;
+            learnt.learn(at((x, y)));
             code[at((x, y))] = c;
             set.push((x, y, c));
         }
+        // The walk, over the entries asked about alone, in the walk's order: a point added
+        // asks about entries after it (its children are of finer scales).
         let mut added: Vec<Walked> = Vec::new();
-        for &[p, a, b] in walk() {
-            let (p, a, b) = (p as usize, a as usize, b as usize);
-            if !known[p] && known[a] && known[b] && reader.bit()? {
-                known[p] = true;
-                added.push((p, a, b));
+        for word in 0..learnt.asked.len() {
+            let mut bits = learnt.asked[word];
+            while bits != 0 {
+                let bit = bits.trailing_zeros();
+                let [p, a, b] = table[word * 64 + bit as usize].map(|v| v as usize);
+                if reader.bit()? {
+                    learnt.learn(p);
+                    added.push((p, a, b));
+                }
+                bits = learnt.asked[word] & (!0u64).checked_shl(bit + 1).unwrap_or(0);
             }
         }
         let k = reader.read(5)?;
