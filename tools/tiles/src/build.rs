@@ -557,7 +557,7 @@ pub fn rebuild_tile(
         samples.heights[lattice(x, y)] = quantiser.height(c);
         code[lattice(x, y)] = c;
     }
-    let mut mesher = Mesher::new(&samples, &quantiser, 1.0);
+    let mut mesher = Mesher::of_quantised(&samples);
     let mut assembly = Assembly::new(sets.len(), samples.mesh_max(), Output::Tile, numbering);
     let mut vertex = vec![false; TILE_SIZE * TILE_SIZE];
     for (set, stored) in sets.iter().zip(entries) {

@@ -206,6 +206,16 @@ impl<'a> Mesher<'a> {
             .iter()
             .map(|&h| quantiser.height(quantiser.quantise(h)))
             .collect();
+        Mesher::with_heights(samples, mesh_heights, min_spacing)
+    }
+
+    /// [`Mesher::new`] for samples that are heights on the quantiser's lattice already (a
+    /// decoder's, each `quantiser.height(code)`), which quantising would give back.
+    pub fn of_quantised(samples: &'a TileSamples) -> Self {
+        Mesher::with_heights(samples, samples.heights.clone(), 1.0)
+    }
+
+    fn with_heights(samples: &'a TileSamples, mesh_heights: Vec<f32>, min_spacing: f64) -> Self {
         let mut mesher = Mesher {
             samples,
             mesh_heights,
