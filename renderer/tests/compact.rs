@@ -76,6 +76,14 @@ fn levels_decoded_on_the_gpu_draw_the_frames_their_positions_draw() {
     // rasteriser, whose compute runs on the same cores (settings::decode_pays_on).
     let (auto_out, auto) = run("auto", &[], None);
     same(&auto, &cpu, "decoded where the device decides");
+    // The version 3 build of the same sample draws the same frames: a compact tile rebuilt
+    // only through the levels its checks read, with its sides and part tables grown level by
+    // level, is drawn as the whole tile is.
+    let whole = common::puget(dir.path());
+    let out = dir.path().join("version3");
+    std::fs::create_dir_all(&out).expect("dir");
+    let v3 = common::flight_with_fault(&whole, &out, "flyover", 30, &["--tau", "1"], None);
+    same(&v3, &cpu, "drawn from the version 3 build");
     let summary = |out: &Path| -> serde_json::Value {
         let json = std::fs::read(out.join("frames.json")).expect("summary");
         serde_json::from_slice(&json).expect("summary parses")
