@@ -166,40 +166,9 @@ fn a_damaged_compact_level_is_found_when_it_is_first_needed() {
         + lengths[..level].iter().sum::<u32>() as usize;
     assert!(lengths[level] > 0, "level {level} has a stream");
     drop(ts);
-    let fly = |p: &Path, name: &str| {
-        let (log, trace) = (
-            dir.path().join(format!("{name}.csv")),
-            dir.path().join(name),
-        );
-        let args = [
-            common::s(p),
-            "--headless",
-            "--frames",
-            "4",
-            "--size",
-            "256x192",
-        ];
-        let more = [
-            "--validation",
-            "--log",
-            common::s(&log),
-            "--trace",
-            common::s(&trace),
-        ];
-        let o = common::vkterrain(&[&args[..], &more[..]].concat());
-        let parsed = frametimes::log::read(&log).expect("the log reads");
-        let column = |c: &str| parsed.column(c).expect(c).to_vec();
-        let trace = std::fs::read_to_string(&trace).expect("trace");
-        let trace = memory::trace::Trace::parse(&trace).expect("trace parses");
-        // Per frame: the level tile 1,2 (index 2 * 4 + 1) was asked for at, if it was.
-        let asked: Vec<Option<u32>> = trace
-            .frames
-            .iter()
-            .map(|f| f.iter().find(|r| r.tile == 9).map(|r| r.wanted))
-            .collect();
-        (o, [column("tiles_visible"), column("tiles_drawn")], asked)
-    };
-    let (control, [visible, drawn], asked) = fly(&set, "control");
+    // Tile 1,2 is index 2 * 4 + 1.
+    let fly = |p: &Path, name: &str| common::four_traced_frames(dir.path(), p, name, 9);
+    let (control, [visible, drawn, _], asked) = fly(&set, "control");
     let err = String::from_utf8_lossy(&control.stderr);
     assert_eq!(control.status.code(), Some(0), "{err}");
     assert_eq!(visible, drawn, "the control draws every visible tile");
@@ -217,7 +186,7 @@ fn a_damaged_compact_level_is_found_when_it_is_first_needed() {
     tiles::format::reseal(&mut bytes).expect("reseal");
     let damaged = dir.path().join("damaged.vkt");
     std::fs::write(&damaged, &bytes).expect("write");
-    let (o, [v, d], asked_damaged) = fly(&damaged, "damaged");
+    let (o, [v, d, _], asked_damaged) = fly(&damaged, "damaged");
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(4), "{err}");
     assert_eq!(err.lines().count(), 1, "{err}");

@@ -956,36 +956,9 @@ fn resealed_broken_fans_are_reported_when_their_level_is_first_needed() {
     reversed[b..b + 2].copy_from_slice(&x);
     let mut restarts = bytes.clone();
     restarts[indices..indices + 2 * count].fill(0xff);
-    let fly = |p: &Path, name: &str| {
-        let log = dir.path().join(format!("{name}.csv"));
-        let trace = dir.path().join(format!("{name}.trace"));
-        let o = vkterrain(&[
-            s(p),
-            "--headless",
-            "--frames",
-            "4",
-            "--size",
-            "256x192",
-            "--validation",
-            "--log",
-            s(&log),
-            "--trace",
-            s(&trace),
-        ]);
-        let parsed = frametimes::log::read(&log).expect("the log reads");
-        let column = |c: &str| parsed.column(c).expect(c).to_vec();
-        let trace = std::fs::read_to_string(&trace).expect("trace");
-        let trace = memory::trace::Trace::parse(&trace).expect("trace parses");
-        // Per frame: the level tile 1,2 (index 2 * 4 + 1) was asked for at, if it was.
-        let broken: Vec<Option<u32>> = trace
-            .frames
-            .iter()
-            .map(|f| f.iter().find(|r| r.tile == 9).map(|r| r.wanted))
-            .collect();
-        let columns = [column("tiles_visible"), column("tiles_drawn")];
-        (o, columns, column("tiles_failed"), broken)
-    };
-    let (control, [visible, drawn], failed, asked) = fly(&set, "control");
+    // Per frame: the level tile 1,2 (index 2 * 4 + 1) was asked for at, if it was.
+    let fly = |p: &Path, name: &str| common::four_traced_frames(dir.path(), p, name, 9);
+    let (control, [visible, drawn, failed], asked) = fly(&set, "control");
     let err = String::from_utf8_lossy(&control.stderr);
     assert_eq!(control.status.code(), Some(0), "{err}");
     assert_eq!(visible, drawn, "the control draws every visible tile");
@@ -1005,7 +978,7 @@ fn resealed_broken_fans_are_reported_when_their_level_is_first_needed() {
         tiles::format::reseal(&mut content).expect("reseal");
         let p = dir.path().join(name);
         std::fs::write(&p, &content).expect("write");
-        let (o, [v, d], f, drawn_for) = fly(&p, name);
+        let (o, [v, d, f], drawn_for) = fly(&p, name);
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(4), "{name}: {err}");
         assert_eq!(err.lines().count(), 1, "{name}: {err}");

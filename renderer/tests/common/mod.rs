@@ -351,3 +351,39 @@ pub fn widen(bytes: &[u8], width: u32) -> Vec<u32> {
             .collect(),
     }
 }
+
+/// What [`four_traced_frames`] reads back: the process, the log's `tiles_visible`,
+/// `tiles_drawn` and `tiles_failed` per frame, and per frame the level one tile was asked for
+/// at (None: not asked for).
+pub type Traced = (Output, [Vec<f64>; 3], Vec<Option<u32>>);
+
+/// Four frames over `set` at 256 x 192, validation on, logged and traced into `dir` under
+/// `name`: for the tests that follow one tile (`tile`, its index in the set) through a flight.
+pub fn four_traced_frames(dir: &Path, set: &Path, name: &str, tile: u32) -> Traced {
+    let log = dir.join(format!("{name}.csv"));
+    let trace = dir.join(format!("{name}.trace"));
+    let o = vkterrain(&[
+        s(set),
+        "--headless",
+        "--frames",
+        "4",
+        "--size",
+        "256x192",
+        "--validation",
+        "--log",
+        s(&log),
+        "--trace",
+        s(&trace),
+    ]);
+    let parsed = frametimes::log::read(&log).expect("the log reads");
+    let column = |c: &str| parsed.column(c).expect(c).to_vec();
+    let trace = std::fs::read_to_string(&trace).expect("trace");
+    let trace = memory::trace::Trace::parse(&trace).expect("trace parses");
+    let asked = trace
+        .frames
+        .iter()
+        .map(|f| f.iter().find(|r| r.tile == tile).map(|r| r.wanted))
+        .collect();
+    let columns = ["tiles_visible", "tiles_drawn", "tiles_failed"].map(column);
+    (o, columns, asked)
+}
