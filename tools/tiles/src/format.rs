@@ -981,7 +981,8 @@ pub struct TileSet {
     layer: u32,
     layers: std::sync::Arc<Vec<LayerHeader>>,
     /// With compact levels ([`FLAG_COMPACT_LEVELS`]): each of this view's tiles' version 3
-    /// blob, rebuilt the first time the tile is read and kept (or why it could not be).
+    /// blob, rebuilt through the levels first read, and again through more as more are read,
+    /// each kept (or why it could not be).
     rebuilt: std::sync::Arc<RebuiltTiles>,
 }
 
