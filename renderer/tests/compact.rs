@@ -168,18 +168,8 @@ fn a_damaged_compact_level_is_found_when_it_is_first_needed() {
     drop(ts);
     // Tile 1,2 is index 2 * 4 + 1.
     let fly = |p: &Path, name: &str| common::four_traced_frames(dir.path(), p, name, 9);
-    let (control, [visible, drawn, _], asked) = fly(&set, "control");
-    let err = String::from_utf8_lossy(&control.stderr);
-    assert_eq!(control.status.code(), Some(0), "{err}");
-    assert_eq!(visible, drawn, "the control draws every visible tile");
-    assert!(
-        asked[0].is_some_and(|l| l < level as u32),
-        "tile 1,2 is in the first view, coarser than level {level}: {asked:?}"
-    );
-    let finer = asked
-        .iter()
-        .position(|a| a.is_some_and(|l| l >= level as u32))
-        .expect("a frame wants tile 1,2 at level 2 or finer");
+    let ((_, [visible, drawn, _], asked), finer) =
+        common::sound_flight(dir.path(), &set, level as u32);
 
     let mut bytes = std::fs::read(&set).expect("read");
     bytes[at] ^= 0x01;

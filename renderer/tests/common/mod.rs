@@ -352,6 +352,26 @@ pub fn widen(bytes: &[u8], width: u32) -> Vec<u32> {
     }
 }
 
+/// The control flight of a test that breaks tile 1,2 (index 9) at `level`: four traced
+/// frames over the sound `set` exit 0 and draw every visible tile, and ask for tile 1,2 in
+/// the first view coarser than `level`. Returns the flight and the first frame that asks for
+/// the tile at `level` or finer.
+pub fn sound_flight(dir: &Path, set: &Path, level: u32) -> (Traced, usize) {
+    let (o, [visible, drawn, failed], asked) = four_traced_frames(dir, set, "control", 9);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "{err}");
+    assert_eq!(visible, drawn, "the control draws every visible tile");
+    assert!(
+        asked[0].is_some_and(|l| l < level),
+        "tile 1,2 is in the first view, coarser than level {level}: {asked:?}"
+    );
+    let finer = asked
+        .iter()
+        .position(|a| a.is_some_and(|l| l >= level))
+        .unwrap_or_else(|| panic!("a frame wants tile 1,2 at level {level} or finer"));
+    ((o, [visible, drawn, failed], asked), finer)
+}
+
 /// What [`four_traced_frames`] reads back: the process, the log's `tiles_visible`,
 /// `tiles_drawn` and `tiles_failed` per frame, and per frame the level one tile was asked for
 /// at (None: not asked for).
