@@ -148,6 +148,8 @@ fn walk_index() -> &'static WalkIndex {
 struct Learnt {
     known: Vec<bool>,
     asked: Vec<u64>,
+    table: &'static [[u32; 3]],
+    index: &'static WalkIndex,
 }
 
 impl Learnt {
@@ -155,13 +157,15 @@ impl Learnt {
         Learnt {
             known: vec![false; TILE_SIZE * TILE_SIZE],
             asked: vec![0; walk().len().div_ceil(64)],
+            table: walk(),
+            index: walk_index(),
         }
     }
 
     /// Point `p` is a vertex from now on: it is asked about no more, and each point it is a
     /// parent of whose other parent is known is asked about.
     fn learn(&mut self, p: usize) {
-        let (table, index) = (walk(), walk_index());
+        let (table, index) = (self.table, self.index);
         self.known[p] = true;
         let i = index.index_of[p];
         if i != NOT_WALKED {
