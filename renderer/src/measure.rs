@@ -193,11 +193,9 @@ impl ErrorMeter {
             };
             Some((grid.as_slice(), footprint(terrain, was)))
         };
-        let view = camera.view(extent.0, extent.1);
-        let (w, h) = (f64::from(extent.0), f64::from(extent.1));
-        let on_image = |p: DVec3| {
-            view.project(p - camera.position)
-                .filter(|&(u, v)| (0.0..=w).contains(&u) && (0.0..=h).contains(&v))
+        let sight = Sight {
+            view: camera.view(extent.0, extent.1),
+            eye: camera.position,
         };
         let measured: Vec<(usize, Drawn, f64, f64)> = draws
             .par_iter()
@@ -207,7 +205,7 @@ impl ErrorMeter {
                     .as_ref()
                     .unwrap_or_else(|| &surfaces[&(tile, state.level)]);
                 let then = |b: usize| before(b, tile, state);
-                let (error, pop) = compare(terrain, tile, samples, now, &then, &on_image);
+                let (error, pop) = compare(terrain, tile, samples, now, &then, &sight);
                 (tile, (state, morphed_now), error, pop)
             })
             .collect();
@@ -233,6 +231,25 @@ impl ErrorMeter {
     }
 }
 
+/// Where a frame's camera shows points on its image.
+struct Sight {
+    view: crate::camera::View,
+    eye: DVec3,
+}
+
+impl Sight {
+    /// The points above and below world `(x, y)`, in pixels where they are on the image: a
+    /// sample's drawn, true and previous heights share the horizontal part of the projection.
+    fn vertical(&self, x: f64, y: f64) -> impl Fn(f32) -> Option<(f64, f64)> + '_ {
+        let line = self.view.vertical(x - self.eye.x, y - self.eye.y);
+        let (w, h) = (f64::from(self.view.width), f64::from(self.view.height));
+        move |z| {
+            line.project(f64::from(z) - self.eye.z)
+                .filter(|&(u, v)| (0.0..=w).contains(&u) && (0.0..=h).contains(&v))
+        }
+    }
+}
+
 /// What the previous frame drew over a base tile, where it differs: a tile's surface and its
 /// [`footprint`].
 type Before<'a> = Option<(&'a [f32], (u32, u32, usize))>;
@@ -247,7 +264,7 @@ fn compare<'a>(
     samples: &[(Vec<f32>, u32, u32)],
     now: &[f32],
     then: &impl Fn(usize) -> Before<'a>,
-    on_image: &(impl Fn(DVec3) -> Option<(f64, f64)> + Sync),
+    sight: &Sight,
 ) -> (f64, f64) {
     let (c0, r0, side) = footprint(terrain, tile);
     let (sx, sy) = terrain.spacing;
@@ -272,13 +289,10 @@ fn compare<'a>(
                     if z.is_nan() {
                         continue;
                     }
-                    let at = |z: f32| {
-                        on_image(DVec3::new(
-                            (f64::from(bc) + x as f64) * sx,
-                            -(f64::from(br) + y as f64) * sy,
-                            f64::from(z),
-                        ))
-                    };
+                    let at = sight.vertical(
+                        (f64::from(bc) + x as f64) * sx,
+                        -(f64::from(br) + y as f64) * sy,
+                    );
                     let Some(drawn) = at(z) else { continue };
                     if let Some(truth) = at(source[y * TILE_SIZE + x]) {
                         error = error.max(distance(drawn, truth));
@@ -309,7 +323,9 @@ fn surface(terrain: &Terrain, tile: usize, state: State) -> Vec<f32> {
     let (_, _, side) = footprint(terrain, tile);
     let mut grid = vec![f32::NAN; side * side];
     let info = &terrain.tiles[tile];
-    let Ok(t) = terrain.set_of(info).tile(info.tx, info.ty) else {
+    // The renderer checked the levels it drew (and a tile that failed is not drawn): read the
+    // tile as it does, without checking every level of it again for every frame it is drawn in.
+    let Ok(t) = terrain.set_of(info).tile_outline(info.tx, info.ty) else {
         return grid;
     };
     let p = info.layer;
@@ -383,7 +399,8 @@ pub fn check_heights(terrain: &Terrain, read_back: &ReadBack, bias: i8) -> Heigh
     let mut check = HeightCheck::default();
     for &(tile, level, start, morph, parts) in &read_back.draws {
         let info = &terrain.tiles[tile];
-        let Ok(t) = terrain.set_of(info).tile(info.tx, info.ty) else {
+        // Levels the renderer checked before it drew them (as in `surface`).
+        let Ok(t) = terrain.set_of(info).tile_outline(info.tx, info.ty) else {
             continue;
         };
         let mirror = morph::tile_heights(&t, level, morph.as_ref(), bias);

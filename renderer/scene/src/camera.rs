@@ -92,6 +92,26 @@ impl Camera {
     }
 }
 
+/// One vertical line of points relative to the camera: [`View::vertical`].
+#[derive(Clone, Copy, Debug)]
+pub struct Vertical<'a> {
+    view: &'a View,
+    /// Each view axis' dot product with the line's horizontal coordinates.
+    horizontal: DVec3,
+}
+
+impl Vertical<'_> {
+    /// [`View::project`] of the line's point at height `z` (relative to the camera).
+    pub fn project(&self, z: f64) -> Option<(f64, f64)> {
+        let (v, h) = (self.view, self.horizontal);
+        self.view.on_image(DVec3::new(
+            h.x + v.right.z * z,
+            h.y + v.up.z * z,
+            h.z + v.back.z * z,
+        ))
+    }
+}
+
 impl View {
     /// View-space coordinates of a point relative to the camera.
     pub fn to_view(&self, p: DVec3) -> DVec3 {
@@ -100,7 +120,28 @@ impl View {
 
     /// Pixel coordinates of a point relative to the camera, if it is in front of the near plane.
     pub fn project(&self, p: DVec3) -> Option<(f64, f64)> {
-        let v = self.to_view(p);
+        self.on_image(self.to_view(p))
+    }
+
+    /// The points above and below `(x, y)` (relative to the camera) as seen by
+    /// [`project`](Self::project), bit for bit: the horizontal coordinates' part of the view
+    /// transform is summed once for every height asked about. For readers that project many
+    /// heights of one sample (the error meter: the drawn, the true and the previous height).
+    pub fn vertical(&self, x: f64, y: f64) -> Vertical<'_> {
+        // `to_view`'s dot products sum x, y, z in that order: the first two terms, now.
+        let horizontal = |axis: DVec3| axis.x * x + axis.y * y;
+        Vertical {
+            view: self,
+            horizontal: DVec3::new(
+                horizontal(self.right),
+                horizontal(self.up),
+                horizontal(self.back),
+            ),
+        }
+    }
+
+    /// Pixel coordinates of view-space `v`, if it is in front of the near plane.
+    fn on_image(&self, v: DVec3) -> Option<(f64, f64)> {
         let d = -v.z;
         (d >= NEAR).then(|| {
             (
@@ -164,6 +205,34 @@ mod tests {
         assert!(((f64::from(ny) + 1.0) * 300.0 - sy).abs() < 1e-2);
         let depth = clip.z / clip.w;
         assert!(depth > 0.0 && depth < 1.0);
+    }
+
+    /// A vertical line's projections are `project`'s, bit for bit (the error meter's values
+    /// must not move with the way it projects), including behind the near plane.
+    #[test]
+    fn a_vertical_projects_as_project_does() {
+        let c = cam();
+        let v = c.view(1024, 768);
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        let mut behind = 0;
+        for _ in 0..10_000 {
+            let p = DVec3::new(next() * 5e4, next() * 5e4, next() * 3e3);
+            let line = v.vertical(p.x, p.y);
+            let (a, b) = (v.project(p), line.project(p.z));
+            behind += usize::from(a.is_none());
+            assert_eq!(
+                a.map(|(x, y)| (x.to_bits(), y.to_bits())),
+                b.map(|(x, y)| (x.to_bits(), y.to_bits())),
+                "{p}"
+            );
+        }
+        assert!(behind > 1000 && behind < 9000, "{behind} behind the camera");
     }
 
     #[test]
