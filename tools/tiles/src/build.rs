@@ -581,6 +581,29 @@ pub fn rebuild_tile(
     blob
 }
 
+/// A level's entry as far as its measured errors fill it ([`measure_level`]), under the
+/// bound `e`; the cell of a triangle over `e` that could have been refined (a mesher bug).
+fn level_errors(
+    mesher: &mut Mesher,
+    leaves: &[Quad],
+    e: f64,
+    mesh_max: (u32, u32),
+) -> Result<LevelEntry, Quad> {
+    let measured = measure_level(mesher, leaves, e, mesh_max)?;
+    let max_error = round_up_f32(measured.max_error);
+    Ok(LevelEntry {
+        error_bound: e as f32,
+        // Rounded up so the stored figures are never below the measured ones.
+        max_error,
+        side_errors: measured
+            .side_errors
+            .map(|side| side_error_code(max_error, side)),
+        limited_excess: round_up_f32(measured.limited_excess),
+        limited_triangles: measured.limited_triangles,
+        ..LevelEntry::default()
+    })
+}
+
 /// What [`measure_level`] finds of a level.
 struct Measured {
     max_error: f64,
@@ -727,22 +750,18 @@ fn mesh_tile(
         // In P-order either way: the surfaces below are written leaf by leaf, and points on
         // shared edges take the last leaf's rounding.
         let leaves = p_order(mesher.leaves());
-        let measured = measure_level(&mut mesher, &leaves, e, mesh_max).map_err(|q| {
-            BuildError::Internal(format!(
-                "tile {tx},{ty} level {level}: a triangle of cell {q:?} exceeds {e} m"
-            ))
-        })?;
-        let max_error = round_up_f32(measured.max_error);
-        let errors = LevelEntry {
-            error_bound: e as f32,
-            // Rounded up so the stored figures are never below the measured ones.
-            max_error,
-            side_errors: measured
-                .side_errors
-                .map(|side| side_error_code(max_error, side)),
-            limited_excess: round_up_f32(measured.limited_excess),
-            limited_triangles: measured.limited_triangles,
-            ..LevelEntry::default()
+        // What the agreement reads (sides, deviations) does not depend on the measured
+        // errors, and its last mesh of each tile is the mesh the build measures (a tile is
+        // built with the forced sides it was last meshed with): the agreement's meshes skip
+        // the walk over every triangle of every level.
+        let errors = if output == Output::Sides {
+            LevelEntry::default()
+        } else {
+            level_errors(&mut mesher, &leaves, e, mesh_max).map_err(|q| {
+                BuildError::Internal(format!(
+                    "tile {tx},{ty} level {level}: a triangle of cell {q:?} exceeds {e} m"
+                ))
+            })?
         };
         assembly.add_level(&mesher, &leaves, errors, &code_of);
     }
