@@ -15,7 +15,7 @@ use tiff::ColorType;
 
 use crate::error::{label, one_line};
 use crate::placement::{Crs, Placement};
-use crate::raster::{check_dimensions, Georef, Raster, MAX_COMPRESSION_RATIO};
+use crate::raster::{check_dimensions, Georef, Raster, Reading, MAX_COMPRESSION_RATIO};
 use crate::{DemError, ReadOptions};
 
 // GeoKey ids and values from the GeoTIFF 1.1 spec (OGC 19-008r4), section 7.
@@ -54,7 +54,7 @@ fn compression_name(code: u16) -> Result<&'static str, String> {
 }
 
 pub fn read(path: &Path, opts: &ReadOptions) -> Result<Raster, DemError> {
-    let tiff = layout(path, opts)?;
+    let tiff = layout_for(path, opts, Reading::Whole)?;
     let samples = tiff.rows(0, tiff.height)?;
     Ok(Raster {
         width: tiff.width,
@@ -85,8 +85,17 @@ pub struct GeoTiff {
     scale: f64,
 }
 
-/// Reads and checks a GeoTIFF's tags, decoding no samples.
+/// Reads and checks a GeoTIFF's tags, decoding no samples, for reading in bands.
 pub fn layout(path: &Path, opts: &ReadOptions) -> Result<GeoTiff, DemError> {
+    layout_for(path, opts, Reading::Banded)
+}
+
+/// [`layout`], for the grid to be read as `reading` says.
+pub(crate) fn layout_for(
+    path: &Path,
+    opts: &ReadOptions,
+    reading: Reading,
+) -> Result<GeoTiff, DemError> {
     let file = label(path);
     let io = |source| DemError::Io {
         file: file.clone(),
@@ -159,10 +168,10 @@ pub fn layout(path: &Path, opts: &ReadOptions) -> Result<GeoTiff, DemError> {
     };
     check_dimensions(
         &file,
-        width.into(),
-        height.into(),
+        (width.into(), height.into()),
         bytes_per_sample,
         max_bytes,
+        reading,
     )?;
     let chunks = chunk_grid(&mut decoder, width, height).map_err(|e| match e {
         ChunkError::Tiff(e) => malformed(e),

@@ -34,7 +34,7 @@ pub use geo::{metres_per_degree_lat, metres_per_degree_lon};
 pub use geotiff::read_placement as read_tiff_placement;
 pub use options::{parse_size, Crop, Encoding, ReadOptions};
 pub use placement::{Crs, Mapping, Placement};
-pub use raster::MAX_SAMPLES;
+pub use raster::{MAX_BANDED_SAMPLES, MAX_SAMPLES};
 pub use stream::{open, open_unscanned, scan_rows, RowsScan, Stream, BAND_FORMATS};
 
 use error::label;
@@ -169,7 +169,7 @@ pub fn read(paths: &[PathBuf], opts: &ReadOptions) -> Result<HeightGrid, DemErro
     let raster = match kind {
         Kind::Hgt => srtm::read(paths, opts)?,
         Kind::Tiff if paths.len() > 1 => {
-            let m = tiff_mosaic::layout(paths, opts)?;
+            let m = tiff_mosaic::layout_for(paths, opts, raster::Reading::Whole)?;
             let samples = m.rows(0, m.height)?;
             Raster {
                 width: m.width,

@@ -12,7 +12,7 @@ use image::{DynamicImage, ImageDecoder, ImageFormat, ImageReader, Limits};
 use crate::error::{label, one_line};
 use crate::geo::{self, tile_address};
 use crate::placement::Placement;
-use crate::raster::{check_dimensions, Georef, Raster, MAX_COMPRESSION_RATIO};
+use crate::raster::{check_dimensions, Georef, Raster, Reading, MAX_COMPRESSION_RATIO};
 use crate::{DemError, Encoding, ReadOptions};
 
 /// JPEG decoders turn a grey picture saved as YCbCr into RGB with small chroma noise; more than
@@ -53,10 +53,10 @@ pub fn read(path: &Path, format: ImageFormat, opts: &ReadOptions) -> Result<Rast
     let max_bytes = file_len.saturating_mul(MAX_COMPRESSION_RATIO);
     let pixels = check_dimensions(
         &file,
-        width.into(),
-        height.into(),
+        (width.into(), height.into()),
         bytes_per_pixel,
         max_bytes,
+        Reading::Whole,
     )?;
     let needed = pixels as u64 * bytes_per_pixel;
     // Room for the picture plus the decoder's own row buffers.

@@ -5,8 +5,33 @@
 use crate::placement::Placement;
 use crate::DemError;
 
-/// Largest grid we accept, in samples (8 GiB of f32 heights already).
+/// Largest grid read whole, in samples (8 GiB of f32 heights already): pictures, and any
+/// format read into one grid (`dem::read`: the error meter's and `verify --source`'s source).
 pub const MAX_SAMPLES: u64 = 1 << 31;
+
+/// Largest grid read a band of rows at a time (`dem::stream`, what `tiletool build` reads),
+/// in samples: what is held is a band, so the grid may be far larger than memory (a 65537² grid
+/// is 4.3 G samples). 2^36 keeps every row, column and tile count well inside the format's
+/// 32-bit fields.
+pub const MAX_BANDED_SAMPLES: u64 = 1 << 36;
+
+/// How a grid is to be read: whole, or a band of rows at a time; each has its limit on
+/// samples.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Reading {
+    Whole,
+    Banded,
+}
+
+impl Reading {
+    /// The most samples a grid read this way may have.
+    pub fn limit(self) -> u64 {
+        match self {
+            Reading::Whole => MAX_SAMPLES,
+            Reading::Banded => MAX_BANDED_SAMPLES,
+        }
+    }
+}
 
 /// No lossless codec we read (deflate ~1032:1, LZW ~2700:1 at best) expands a file by more than
 /// this; a header claiming more samples than `file length * ratio` can hold is lying.
@@ -60,15 +85,15 @@ impl Raster {
     }
 }
 
-/// Refuses dimensions that are zero, beyond [`MAX_SAMPLES`], or that need more than
-/// `max_bytes` of decoded data (what the file can hold), before any buffer is sized from them.
-/// Returns the sample count.
+/// Refuses dimensions that are zero, beyond the limit of the way the grid is read (see
+/// [`Reading`]), or that need more than `max_bytes` of decoded data (what the file can hold),
+/// before any buffer is sized from them. Returns the sample count.
 pub fn check_dimensions(
     file: &str,
-    width: u64,
-    height: u64,
+    (width, height): (u64, u64),
     bytes_per_sample: u64,
     max_bytes: u64,
+    reading: Reading,
 ) -> Result<usize, DemError> {
     let too_large = |problem: String| DemError::TooLarge {
         file: file.to_string(),
@@ -83,10 +108,15 @@ pub fn check_dimensions(
         });
     }
     let samples = width.saturating_mul(height);
-    if samples > MAX_SAMPLES {
-        return Err(too_large(format!(
-            "more than the limit of {MAX_SAMPLES} samples"
-        )));
+    let limit = reading.limit();
+    if samples > limit {
+        return Err(too_large(match reading {
+            Reading::Whole => format!(
+                "more than the limit of {limit} samples for a grid read whole (`tiletool \
+                 build` reads one a band of rows at a time, up to {MAX_BANDED_SAMPLES})"
+            ),
+            Reading::Banded => format!("more than the limit of {limit} samples"),
+        }));
     }
     let bytes = samples.saturating_mul(bytes_per_sample);
     if bytes > max_bytes {

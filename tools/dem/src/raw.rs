@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use crate::error::label;
-use crate::raster::{check_dimensions, Georef, Raster};
+use crate::raster::{check_dimensions, Georef, Raster, Reading};
 use crate::{DemError, ReadOptions};
 
 /// Sample type of a raw file, from its extension.
@@ -26,7 +26,7 @@ impl RawKind {
 }
 
 pub fn read(path: &Path, kind: RawKind, opts: &ReadOptions) -> Result<Raster, DemError> {
-    let raw = layout(path, kind, opts)?;
+    let raw = layout_for(path, kind, opts, Reading::Whole)?;
     let samples = raw.rows(0, raw.height)?;
     Ok(Raster {
         width: raw.width,
@@ -50,8 +50,18 @@ pub struct RawRows {
     scale: f64,
 }
 
-/// Checks a raw file's size against `--size`, reading nothing.
+/// Checks a raw file's size against `--size`, reading nothing, for reading in bands.
 pub fn layout(path: &Path, kind: RawKind, opts: &ReadOptions) -> Result<RawRows, DemError> {
+    layout_for(path, kind, opts, Reading::Banded)
+}
+
+/// [`layout`], for the grid to be read as `reading` says.
+fn layout_for(
+    path: &Path,
+    kind: RawKind,
+    opts: &ReadOptions,
+    reading: Reading,
+) -> Result<RawRows, DemError> {
     let file = label(path);
     let ext = match kind {
         RawKind::U16 => ".r16",
@@ -85,7 +95,13 @@ pub fn layout(path: &Path, kind: RawKind, opts: &ReadOptions) -> Result<RawRows,
         });
     }
     // The length matched, so this only enforces the sample limit.
-    check_dimensions(&file, width as u64, height as u64, kind.bytes(), actual)?;
+    check_dimensions(
+        &file,
+        (width as u64, height as u64),
+        kind.bytes(),
+        actual,
+        reading,
+    )?;
     let kind_name = match kind {
         RawKind::U16 => "raw u16 (.r16)",
         RawKind::F32 => "raw f32 (.f32)",

@@ -12,7 +12,7 @@ use std::path::PathBuf;
 use crate::error::label;
 use crate::geotiff::{self, GeoTiff};
 use crate::placement::Placement;
-use crate::raster::{Georef, MAX_SAMPLES};
+use crate::raster::{Georef, Reading};
 use crate::{DemError, ReadOptions};
 
 /// How far from a whole number of samples a file's offset may be (rounding in the tags).
@@ -30,8 +30,17 @@ pub struct TiffMosaic {
     files: Vec<(usize, usize, GeoTiff)>,
 }
 
-/// Lays out the GeoTIFFs `paths` as one grid, reading no samples.
+/// Lays out the GeoTIFFs `paths` as one grid, reading no samples, for reading in bands.
 pub fn layout(paths: &[PathBuf], opts: &ReadOptions) -> Result<TiffMosaic, DemError> {
+    layout_for(paths, opts, Reading::Banded)
+}
+
+/// [`layout`], for the grid to be read as `reading` says.
+pub(crate) fn layout_for(
+    paths: &[PathBuf],
+    opts: &ReadOptions,
+    reading: Reading,
+) -> Result<TiffMosaic, DemError> {
     let refuse = |path: &PathBuf, problem: String| DemError::Mosaic {
         file: label(path),
         problem,
@@ -99,10 +108,11 @@ pub fn layout(paths: &[PathBuf], opts: &ReadOptions) -> Result<TiffMosaic, DemEr
         .max()
         .unwrap_or(0);
     let (width, height) = ((col_max - col_min) as usize, (row_max - row_min) as usize);
-    if (width as u64).saturating_mul(height as u64) > MAX_SAMPLES {
+    let limit = reading.limit();
+    if (width as u64).saturating_mul(height as u64) > limit {
         return Err(refuse(
             first_path,
-            format!("together {width}x{height} samples, more than the limit of {MAX_SAMPLES}"),
+            format!("together {width}x{height} samples, more than the limit of {limit}"),
         ));
     }
     let mut files: Vec<(usize, usize, GeoTiff, &PathBuf)> = placed

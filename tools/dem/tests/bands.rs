@@ -262,3 +262,46 @@ fn geotiff_mosaics_are_the_grid_they_were_cut_from() {
     let e = dem::read(&[p("nw.tif"), p("nw.tif")], &opts).expect_err("twice");
     assert!(e.to_string().contains("lies where"), "{e}");
 }
+
+/// A grid read in bands may be far larger than one read whole: a raw 65537² file (4.3 G
+/// samples, the scale issue's 64K set; sparse, so nothing is written to disk) opens as a
+/// stream and reads a band, while reading it whole is refused with one line that names the
+/// limit and the way round it; past the banded limit, the stream is refused too.
+#[test]
+fn a_grid_larger_than_one_read_whole_streams_in_bands() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let sparse = |name: &str, side: usize| {
+        let path = dir.path().join(name);
+        let file = std::fs::File::create(&path).expect("create");
+        file.set_len(2 * (side * side) as u64)
+            .expect("a sparse file");
+        let opts = ReadOptions {
+            size: Some((side, side)),
+            spacing: Some(90.0),
+            ..Default::default()
+        };
+        (vec![path], opts)
+    };
+    let (paths, opts) = sparse("big.r16", 65537);
+    assert!((65537u64 * 65537) > dem::MAX_SAMPLES);
+    let stream = dem::open_unscanned(&paths, &opts, (0.0, 0.0)).expect("opens in bands");
+    assert_eq!((stream.width, stream.height), (65537, 65537));
+    let band = stream.rows(40_000, 40_002).expect("a band");
+    assert!(band.len() == 2 * 65537 && band.iter().all(|&h| h == 0.0));
+    let whole = dem::read(&paths, &opts).expect_err("too large to read whole");
+    let line = whole.to_string();
+    assert!(
+        line.contains("big.r16")
+            && line.contains("more than the limit of 2147483648 samples for a grid read whole")
+            && !line.contains('\n'),
+        "{line}"
+    );
+    // One past the banded limit's square root (2^18 = 262144 a side).
+    let (paths, opts) = sparse("huge.r16", 262_145);
+    let refused = dem::open_unscanned(&paths, &opts, (0.0, 0.0)).err();
+    let line = refused.expect("past the banded limit").to_string();
+    assert!(
+        line.contains("more than the limit of 68719476736 samples"),
+        "{line}"
+    );
+}
