@@ -128,6 +128,15 @@ void main() {
         uvec2 parts = uvec2(records.tiles[r].parts_lo, records.tiles[r].parts_hi);
         uvec4 last = records.tiles[r].blocks[min(level, 8u)];
         uint count = last.x + last.y;
+        if (level == 0u) {
+            // Block 0 alone, every vertex at its own height: no grid, no lists, no barrier
+            // (the same for the whole group). Most far tiles of a view are drawn so.
+            for (uint i = lane; i < count; i += LANES) {
+                uint v = pool.words[positions + i];
+                morphed.values[out_at + i] = float(height_base + int(v >> 18)) * height_step;
+            }
+            continue;
+        }
         if (lane < 8u) {
             listed[lane] = 0u;
         }
