@@ -113,7 +113,8 @@ pub fn check_dimensions(
         return Err(too_large(match reading {
             Reading::Whole => format!(
                 "more than the limit of {limit} samples for a grid read whole (`tiletool \
-                 build` reads one a band of rows at a time, up to {MAX_BANDED_SAMPLES})"
+                 build` without a photo texture reads one a band of rows at a time, up to \
+                 {MAX_BANDED_SAMPLES})"
             ),
             Reading::Banded => format!("more than the limit of {limit} samples"),
         }));
