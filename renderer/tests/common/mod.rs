@@ -3,8 +3,10 @@
 
 #![allow(dead_code)] // each test file uses its own subset
 
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
+use std::sync::{Arc, Mutex, OnceLock};
 
 use tiles::{build_tileset, BuildParams, Grid, TileSetMeta};
 
@@ -29,11 +31,68 @@ pub fn tileset_with(
     opts: dem::ReadOptions,
     params: &BuildParams,
 ) -> PathBuf {
-    let grid = dem::read(inputs, &opts).unwrap_or_else(|e| panic!("{e}"));
-    let view = grid_view(&grid);
-    let out = dir.join("set.vkt");
-    build_tileset(&view, params, &TileSetMeta::default(), &out, &|| {}).expect("build");
+    let key = format!("{inputs:?} {opts:?} {params:?}");
+    built_once(key, dir, "set.vkt", |out| {
+        let grid = dem::read(inputs, &opts).unwrap_or_else(|e| panic!("{e}"));
+        let view = grid_view(&grid);
+        build_tileset(&view, params, &TileSetMeta::default(), out, &|| {}).expect("build");
+    })
+}
+
+/// `dir/name`: a copy of the tile set `build` makes, built once per test process for each
+/// `key` (what the set is built from). A build of the same input with the same options is the
+/// same bytes (`tiletool`'s test `builds_are_reproducible_byte_for_byte`), and most tests fly
+/// the Puget sample: a process built it up to 24 times. Each test gets a copy of its own, as
+/// it did its own build: a test may damage its set, or cut it while it is flown.
+pub fn built_once(key: String, dir: &Path, name: &str, build: impl FnOnce(&Path)) -> PathBuf {
+    // Per key: its number (its folder) and the set once built.
+    type Slots = HashMap<String, Arc<(usize, OnceLock<PathBuf>)>>;
+    static BUILT: OnceLock<Mutex<Slots>> = OnceLock::new();
+    let slot = {
+        let mut built = BUILT
+            .get_or_init(Default::default)
+            .lock()
+            .unwrap_or_else(|p| p.into_inner());
+        let n = built.len();
+        Arc::clone(
+            built
+                .entry(key)
+                .or_insert_with(|| Arc::new((n, OnceLock::new()))),
+        )
+    };
+    let cached = slot.1.get_or_init(|| {
+        let dir = cache_dir().join(slot.0.to_string());
+        std::fs::create_dir_all(&dir).expect("cache dir");
+        let out = dir.join(name);
+        build(&out);
+        out
+    });
+    // Copied beside, then renamed over `name`, as a build writes: a set already there that a
+    // test still has open keeps its bytes.
+    let out = dir.join(name);
+    let copy = dir.join(format!(".{name}.copy"));
+    std::fs::copy(cached, &copy).unwrap_or_else(|e| panic!("{}: {e}", cached.display()));
+    std::fs::rename(&copy, &out).unwrap_or_else(|e| panic!("{}: {e}", out.display()));
     out
+}
+
+/// This process's folder of built sets, under the target folder's scratch space (the sets of
+/// test processes that have ended are removed first: a process cannot remove its own at exit).
+fn cache_dir() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let root = Path::new(env!("CARGO_TARGET_TMPDIR")).join("test-sets");
+        for entry in std::fs::read_dir(&root).into_iter().flatten().flatten() {
+            let pid = entry.file_name().to_string_lossy().parse::<u32>();
+            if pid.is_ok_and(|pid| !Path::new(&format!("/proc/{pid}")).exists()) {
+                let _ = std::fs::remove_dir_all(entry.path());
+            }
+        }
+        let dir = root.join(std::process::id().to_string());
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("test-sets dir");
+        dir
+    })
 }
 
 /// The builder's view of a DEM read by `dem`.
@@ -136,6 +195,15 @@ pub fn puget(dir: &Path) -> PathBuf {
 /// The Puget sample with texture tiles: its photo (`sample/ps_texture_1k.png`, one texel per
 /// cell) or, with `photo` false, the shaded relief tiletool bakes (two texels per cell).
 pub fn puget_textured(dir: &Path, photo: bool) -> PathBuf {
+    built_once(
+        format!("puget textured, photo {photo}"),
+        dir,
+        "textured.vkt",
+        |out| build_textured(out, photo),
+    )
+}
+
+fn build_textured(out: &Path, photo: bool) {
     use tiles::texture::{interior_for, relief::Relief, Layout, Photo, Source, Texturing};
     let grid = dem::read(&[sample()], &puget_options()).unwrap_or_else(|e| panic!("{e}"));
     let view = grid_view(&grid);
@@ -160,17 +228,15 @@ pub fn puget_textured(dir: &Path, photo: bool) -> PathBuf {
         source,
         layout: Layout::new(interior_for(density)).expect("layout"),
     };
-    let out = dir.join("textured.vkt");
     tiles::build_tileset_textured(
         &view,
         &BuildParams::default(),
         Some(&texturing),
         &TileSetMeta::default(),
-        &out,
+        out,
         &|| {},
     )
     .expect("build");
-    out
 }
 
 /// The Puget sample built with its tiles' sides independent (no agreement between neighbours).
