@@ -935,12 +935,30 @@ fn layer_tiles(set: &TileSet, p: u32) -> Result<Vec<TileInfo>, tiles::FormatErro
     let mut tiles = Vec::with_capacity((h.tiles_x * h.tiles_y) as usize);
     // Ask for every outline's page first: from a cold cache the reads then queue together
     // instead of one seek at a time (advice only; a kernel that ignores it is just slower).
+    // Outlines less than a page apart go in one request: a set of small tiles (a coarse
+    // build's, a pyramid's top layers) holds many in a page, and a request a tile was a
+    // quarter of the 16K coarse set's open.
+    let mut pending: Option<std::ops::Range<u64>> = None;
     for ty in 0..h.tiles_y {
         for tx in 0..h.tiles_x {
-            if let Some(r) = set.blob_range(tx, ty) {
-                let _ = set.will_need(r.start..r.end.min(r.start + OUTLINE_BYTES));
-            }
+            let Some(r) = set.blob_range(tx, ty) else {
+                continue;
+            };
+            let outline = r.start..r.end.min(r.start + OUTLINE_BYTES);
+            pending = match pending {
+                Some(p) if outline.start >= p.start && outline.start <= p.end + OUTLINE_BYTES => {
+                    Some(p.start..p.end.max(outline.end))
+                }
+                Some(p) => {
+                    let _ = set.will_need(p);
+                    Some(outline)
+                }
+                None => Some(outline),
+            };
         }
+    }
+    if let Some(p) = pending {
+        let _ = set.will_need(p);
     }
     // Each table is read from the file (no page of the mapping), so the reads run on every
     // core.
