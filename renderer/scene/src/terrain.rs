@@ -936,8 +936,8 @@ fn layer_tiles(set: &TileSet, p: u32) -> Result<Vec<TileInfo>, tiles::FormatErro
     // Ask for every outline's page first: from a cold cache the reads then queue together
     // instead of one seek at a time (advice only; a kernel that ignores it is just slower).
     // Outlines less than a page apart go in one request: a set of small tiles (a coarse
-    // build's, a pyramid's top layers) holds many in a page, and a request a tile was a
-    // quarter of the 16K coarse set's open.
+    // build's, a pyramid's top layers) holds many in a page, and a request a tile took about
+    // a sixth of the 16K coarse set's open (perf).
     let mut pending: Option<std::ops::Range<u64>> = None;
     for ty in 0..h.tiles_y {
         for tx in 0..h.tiles_x {
