@@ -230,8 +230,9 @@ mod tests {
 
     /// `max` answers with one of the two tables where that table covers the other, and the
     /// answer is the merge's, bit for bit, over random tables of 1 to 9 levels with copies,
-    /// equal and near-equal errors. Both ways are taken many times: where neither table
-    /// covers the other, the merge is neither.
+    /// equal and near-equal errors, and of each table with itself. Between two different
+    /// tables both ways are taken many times: where neither covers the other, the merge is
+    /// neither.
     #[test]
     fn the_larger_table_as_it_stands_is_the_merge() {
         let bits = |t: &LevelTable| {
@@ -262,6 +263,9 @@ mod tests {
             for (x, y) in [(a, b), (b, a), (a, a)] {
                 let fast = x.max(&y);
                 assert_eq!(bits(&fast), bits(&x.merged(&y)), "{x:?}\n{y:?}");
+                if bits(&x) == bits(&y) {
+                    continue;
+                }
                 if bits(&fast) == bits(&x) || bits(&fast) == bits(&y) {
                     quick += 1;
                 } else {
@@ -269,6 +273,6 @@ mod tests {
                 }
             }
         }
-        assert!(quick > 10_000 && merged > 1_000, "{quick} {merged}");
+        assert!(quick > 5_000 && merged > 1_000, "{quick} {merged}");
     }
 }
