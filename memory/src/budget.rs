@@ -332,12 +332,24 @@ fn texture_slots(device: &DeviceLimits, wishes: &Wishes, set: &TileSet) -> Textu
 /// goes alone, covers more). The progressive and per-level schemes only: under the whole-tile
 /// scheme a new tile's presence is the whole tile, which the presence term does not cover.
 pub fn staging_bound<'a>(costs: impl IntoIterator<Item = &'a TileCost>, upload_budget: u64) -> u64 {
+    staging_estimate(costs, 1, upload_budget)
+}
+
+/// [`staging_bound`] from a sample of a set's tiles, each standing for `weight` tiles: an
+/// estimate, not a bound, for a set too large to read every tile's costs (the manager then
+/// holds a frame's uploads to it, `Manager::set_staging_cap`). With a weight of 1, the bound
+/// over exactly these tiles.
+pub fn staging_estimate<'a>(
+    costs: impl IntoIterator<Item = &'a TileCost>,
+    weight: u64,
+    upload_budget: u64,
+) -> u64 {
     let (mut tiles, mut presence, mut step, mut everything) = (0u64, 0, 0, 0);
     for c in costs {
-        tiles += 1;
-        everything += c.whole();
+        tiles += weight;
+        everything += weight * c.whole();
         if let Some(level_0) = c.levels.first() {
-            presence += c.block_bytes(0) + level_0.indices;
+            presence += weight * (c.block_bytes(0) + level_0.indices);
             step = step.max(c.need(c.finest()));
         }
     }

@@ -34,6 +34,13 @@ impl ClassPlan {
     /// Plans classes for tiles that need `needs[t][l]` bytes to hold levels `0..=l`, within
     /// `budget` bytes.
     pub fn new(needs: &[Vec<u64>], budget: u64, ratio: f64) -> ClassPlan {
+        ClassPlan::weighted(needs, 1, budget, ratio)
+    }
+
+    /// [`ClassPlan::new`] for a sample of a set's tiles, each standing for `weight` tiles: its
+    /// votes, and its tiles' level-0 chunks, count `weight` times (with a weight of 1, the
+    /// plan of exactly these tiles).
+    pub fn weighted(needs: &[Vec<u64>], weight: u64, budget: u64, ratio: f64) -> ClassPlan {
         let largest = needs.iter().flatten().copied().max().unwrap_or(0);
         let ratio = ratio.max(1.1);
         let mut sizes = vec![MIN_CLASS];
@@ -44,7 +51,7 @@ impl ClassPlan {
         }
         let mut votes = vec![0u64; sizes.len()];
         for &need in needs.iter().flatten() {
-            votes[class_for(&sizes, need).unwrap_or(sizes.len() - 1)] += 1;
+            votes[class_for(&sizes, need).unwrap_or(sizes.len() - 1)] += weight;
         }
         let everything: u64 = votes.iter().zip(&sizes).map(|(v, s)| v * s).sum();
         let counts = if budget >= everything {
@@ -52,15 +59,17 @@ impl ClassPlan {
         } else {
             let mut counts = vec![0u32; sizes.len()];
             let mut reserved = 0;
-            for t in needs {
+            'presence: for t in needs {
                 let Some(c) = t.first().and_then(|&n| class_for(&sizes, n)) else {
                     continue;
                 };
-                if reserved + sizes[c] > budget / 2 {
-                    break;
+                for _ in 0..weight {
+                    if reserved + sizes[c] > budget / 2 {
+                        break 'presence;
+                    }
+                    counts[c] += 1;
+                    reserved += sizes[c];
                 }
-                counts[c] += 1;
-                reserved += sizes[c];
             }
             dhondt(&sizes, &votes, counts, budget - reserved)
         };
@@ -155,6 +164,31 @@ mod tests {
                 .map(|c| small.counts[c])
                 .sum();
             assert!(presence >= 5, "{small:?}");
+        }
+    }
+
+    /// A sample whose tiles each stand for `weight` tiles plans as the tiles repeated that
+    /// many times would: the same classes, votes and counts, at every budget.
+    #[test]
+    fn a_weighted_sample_plans_as_its_tiles_repeated() {
+        let tiles: Vec<TileCost> = (1..8).map(|s| tile(9, s * 30)).collect();
+        let repeated: Vec<TileCost> = tiles
+            .iter()
+            .flat_map(|t| std::iter::repeat_n(t.clone(), 3))
+            .collect();
+        for budget in [1 << 20, 5 << 20, 20 << 20, 1 << 40] {
+            let weighted = ClassPlan::weighted(&needs(&tiles), 3, budget, 2.0);
+            assert_eq!(
+                weighted,
+                ClassPlan::new(&needs(&repeated), budget, 2.0),
+                "{budget}"
+            );
+            // The control: unweighted, a third of the votes.
+            let plain = ClassPlan::new(&needs(&tiles), budget, 2.0);
+            assert_eq!(
+                3 * plain.votes.iter().sum::<u64>(),
+                weighted.votes.iter().sum::<u64>()
+            );
         }
     }
 }

@@ -61,6 +61,7 @@
 pub mod budget;
 pub mod classes;
 pub mod cost;
+pub mod costs;
 mod lru;
 pub mod manager;
 pub mod sim;

@@ -4,6 +4,7 @@
 
 use crate::classes::ClassPlan;
 use crate::cost::{align, Layout, TileCost};
+use crate::costs::{CostSource, Costs};
 use crate::lru::LruLists;
 
 pub type TileId = u32;
@@ -290,10 +291,13 @@ struct Speculation {
 /// The chunk pool and who holds what.
 pub struct Manager {
     config: Config,
-    tiles: Vec<TileCost>,
-    /// Per tile and level: bytes a chunk needs to hold it (the scheme's view).
-    needs: Vec<Vec<u64>>,
+    /// Per tile: its costs, and per level the bytes a chunk needs to hold it (the scheme's
+    /// view); given at start or read as first needed.
+    tiles: Costs,
     classes: ClassPlan,
+    /// Bytes a frame's uploads may stage at most (the renderer's staging memory): a new
+    /// tile's level 0 that would pass it waits for a later frame.
+    staging_cap: u64,
     chunks: Vec<Chunk>,
     /// Per class: free chunks nobody may still read, and free chunks waiting for a frame.
     free: Vec<Vec<usize>>,
@@ -319,6 +323,22 @@ impl Manager {
         Self::with_classes(tiles, config, classes)
     }
 
+    /// Plans the pool for `count` tiles whose costs `source` gives the first time the manager
+    /// needs them: size classes and counts from the histogram of a sample of them
+    /// ([`crate::costs`]; every tile of a set of up to [`crate::costs::SAMPLE_TILES`], as
+    /// [`Manager::new`] plans). A tile of a larger set that outgrows every class the sample
+    /// planned is drawn at the finest level that fits one (counted as coarser).
+    pub fn from_source(count: usize, source: CostSource, config: Config) -> Manager {
+        let tiles = Costs::from_source(count, source, config.scheme);
+        let (sample, weight) = tiles.sample();
+        let needs: Vec<Vec<u64>> = sample
+            .iter()
+            .map(|&t| tiles.needs(t as usize).to_vec())
+            .collect();
+        let classes = ClassPlan::weighted(&needs, weight, config.pool_bytes, config.class_ratio);
+        Self::carved(tiles, config, classes)
+    }
+
     /// Bytes a chunk needs for each tile and level under `scheme`.
     pub fn needs(tiles: &[TileCost], scheme: Scheme) -> Vec<Vec<u64>> {
         tiles
@@ -336,7 +356,11 @@ impl Manager {
 
     /// A pool carved as `classes` says.
     pub fn with_classes(tiles: Vec<TileCost>, config: Config, classes: ClassPlan) -> Manager {
-        let needs = Self::needs(&tiles, config.scheme);
+        let tiles = Costs::given(tiles, config.scheme);
+        Self::carved(tiles, config, classes)
+    }
+
+    fn carved(tiles: Costs, config: Config, classes: ClassPlan) -> Manager {
         let mut chunks = Vec::new();
         let mut free = vec![Vec::new(); classes.sizes.len()];
         let mut offset = 0;
@@ -363,7 +387,7 @@ impl Manager {
         Manager {
             config,
             tiles,
-            needs,
+            staging_cap: u64::MAX,
             lru: LruLists::new(classes.sizes.len(), chunks.len()),
             classes,
             chunks,
@@ -376,6 +400,18 @@ impl Manager {
             speculating: false,
             owned: 0,
         }
+    }
+
+    /// Forgets every tile: the pool as at start, carved into the same classes, with the
+    /// costs known so far kept.
+    pub fn forget_all(&mut self) {
+        let tiles = std::mem::replace(
+            &mut self.tiles,
+            Costs::given(Vec::new(), self.config.scheme),
+        );
+        let cap = self.staging_cap;
+        *self = Manager::carved(tiles, self.config, self.classes.clone());
+        self.staging_cap = cap;
     }
 
     /// Bytes of device memory the pool needs (allocate this once, at start).
@@ -395,8 +431,23 @@ impl Manager {
         self.tiles.len()
     }
 
+    /// Tile `tile`'s costs (read from the source if the manager had not needed them yet).
     pub fn tile_cost(&self, tile: TileId) -> &TileCost {
         &self.tiles[tile as usize]
+    }
+
+    /// The tiles the pool's classes were planned from, and how many tiles each stands for
+    /// (every tile, each for itself, unless planned from a source: [`Manager::from_source`]).
+    pub fn planned_from(&self) -> (Vec<TileId>, u64) {
+        self.tiles.sample()
+    }
+
+    /// Caps the bytes a frame's uploads stage: past it, a new tile's level 0 waits for a
+    /// later frame (the tile is missing until then). The staging memory's size, where it was
+    /// sized from a sample of the tiles (`budget::staging_bound` over
+    /// [`Manager::planned_from`]) rather than from every tile.
+    pub fn set_staging_cap(&mut self, bytes: u64) {
+        self.staging_cap = bytes;
     }
 
     /// Gives Belady's rule its knowledge of the future: `next(tile, frame)` is the first frame
@@ -467,6 +518,9 @@ impl Manager {
                     continue;
                 }
                 let wanted = r.wanted.min(self.tiles[r.tile as usize].finest());
+                if spent.saturating_add(self.presence_bound(r.tile)) > self.staging_cap {
+                    continue;
+                }
                 let Some(res) = self.admit(r.tile, wanted, &mut plan) else {
                     continue;
                 };
@@ -679,7 +733,7 @@ impl Manager {
     ) {
         let t = &self.tiles[tile as usize];
         // Room for the drawn array at the index region's start and `level`'s at the end.
-        let need = self.needs[tile as usize][level as usize];
+        let need = self.tiles.needs(tile as usize)[level as usize];
         let room = t.layout(level).index
             + align(t.levels[index as usize].indices, 4)
             + t.levels[level as usize].indices;
@@ -1134,7 +1188,7 @@ impl Manager {
         {
             return None;
         }
-        let bytes = self.needs[tile as usize][level as usize];
+        let bytes = self.tiles.needs(tile as usize)[level as usize];
         let chunk = self.obtain(bytes, plan)?;
         let t = &self.tiles[tile as usize];
         let size = self.classes.sizes[self.chunks[chunk].class];
@@ -1169,7 +1223,7 @@ impl Manager {
     /// A chunk for a new tile: the tightest class for its wanted level, else any that holds
     /// level 0.
     fn admit(&mut self, tile: TileId, wanted: u32, plan: &mut FramePlan) -> Option<Resident> {
-        let needs = &self.needs[tile as usize];
+        let needs = self.tiles.needs(tile as usize);
         let (want, least) = (needs[wanted as usize], needs[0]);
         let chunk = self
             .obtain(want, plan)
@@ -1387,6 +1441,19 @@ impl Manager {
         } else {
             self.retiring.push(chunk);
         }
+    }
+
+    /// At least the bytes a new tile's presence sends: its level 0 (every level under the
+    /// whole-tile scheme), positions or streams, morph rows and index arrays.
+    fn presence_bound(&self, tile: TileId) -> u64 {
+        let t = &self.tiles[tile as usize];
+        let levels = match self.config.scheme {
+            Scheme::WholeTile => t.finest() + 1,
+            _ => 1,
+        };
+        (0..levels)
+            .map(|j| t.block_sent(j).max(t.block_bytes(j)) + t.levels[j as usize].indices)
+            .sum()
     }
 
     /// A chunk of at least `bytes`: the tightest free class, else a victim.

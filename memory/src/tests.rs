@@ -852,3 +852,102 @@ proptest! {
         }
     }
 }
+
+/// A manager whose costs come from a source plans exactly as one given every tile's costs
+/// where the set has at most `costs::SAMPLE_TILES` tiles: the same classes and counts, and the
+/// same frames. The source is asked for no tile before the plan and, after it, only for the
+/// tiles a frame requests.
+#[test]
+fn costs_from_a_source_plan_a_small_set_as_costs_given_whole() {
+    use std::cell::Cell;
+    use std::rc::Rc;
+    let costs: Vec<TileCost> = (0..300)
+        .map(|t| tile(5 + t % 4, 20 + 7 * u64::from(t % 13)))
+        .collect();
+    for pool in [2 << 20, 40 << 20, 1 << 34] {
+        let given = Manager::new(costs.clone(), config(pool, 64 << 10));
+        let asked = Rc::new(Cell::new(0u32));
+        let (counted, held) = (Rc::clone(&asked), costs.clone());
+        let source = move |t: TileId| {
+            counted.set(counted.get() + 1);
+            held[t as usize].clone()
+        };
+        let from = Manager::from_source(costs.len(), Box::new(source), config(pool, 64 << 10));
+        assert_eq!(from.classes(), given.classes(), "pool {pool}");
+        assert_eq!(asked.get(), 300, "the plan reads every tile of a small set");
+        let (mut a, mut b) = (given, from);
+        for frame in 0..6u64 {
+            let requests: Vec<Request> = (0..40)
+                .map(|k| req(((frame * 37 + k * 11) % 300) as TileId, (k % 6) as u32))
+                .collect();
+            let done = frame.checked_sub(1);
+            let (pa, pb) = (
+                a.plan_frame(frame, done, &requests, true),
+                b.plan_frame(frame, done, &requests, true),
+            );
+            assert_eq!(pa.grants, pb.grants, "frame {frame}");
+            assert_eq!(pa.uploads.len(), pb.uploads.len(), "frame {frame}");
+        }
+    }
+}
+
+/// Above `costs::SAMPLE_TILES` tiles the plan reads a stride sample, each sampled tile standing
+/// for `stride` tiles, and a tile outside the sample is read when a frame first requests it.
+/// A set of 20,000 tiles of fifteen kinds in a period of 15 tiles gets the classes of the plan
+/// over every tile, and votes within a fifth of its (every `stride`-th tile alone would see
+/// one kind in three: `costs::sample`).
+#[test]
+fn a_large_set_is_planned_from_a_sample_and_read_as_requested() {
+    use std::cell::RefCell;
+    use std::rc::Rc;
+    let kind = |t: u32| tile(4 + t % 3, 30 + 20 * u64::from(t % 5));
+    let n = 20_000;
+    let asked = Rc::new(RefCell::new(Vec::new()));
+    let log = Rc::clone(&asked);
+    let source = move |t: TileId| {
+        log.borrow_mut().push(t);
+        kind(t)
+    };
+    let cfg = config(64 << 20, 256 << 10);
+    let mut m = Manager::from_source(n, Box::new(source), cfg);
+    let (sample, stride) = costs::sample(n);
+    assert_eq!((sample.len(), stride), (1000, 20));
+    assert_eq!(
+        *asked.borrow(),
+        sample,
+        "the plan reads the sample alone, once each"
+    );
+    let whole = Manager::new((0..n as u32).map(kind).collect(), cfg);
+    assert_eq!(m.classes().sizes, whole.classes().sizes);
+    let (mine, all) = (&m.classes().votes, &whole.classes().votes);
+    for (a, b) in mine.iter().zip(all) {
+        assert!(a.abs_diff(*b) * 5 <= *b, "votes {mine:?} against {all:?}");
+    }
+    assert!(m.pool_bytes() <= cfg.pool_bytes);
+    // A tile the sample skipped is read when first requested, and drawn.
+    let outside = 12_345;
+    assert!(!sample.contains(&outside));
+    let p = m.plan_frame(0, None, &[req(outside, 2)], true);
+    assert!(p.grants[0].level.is_some());
+    assert_eq!(asked.borrow().last(), Some(&outside));
+}
+
+/// The staging cap holds a frame's new tiles back once their level 0 would pass it: the tiles
+/// held back are missing this frame and come in the next. The control: without a cap the same
+/// frame takes every tile in.
+#[test]
+fn the_staging_cap_holds_new_tiles_back_to_a_later_frame() {
+    let costs: Vec<TileCost> = (0..20).map(|_| tile(4, 100)).collect();
+    let presence = costs[0].block_bytes(0) + costs[0].levels[0].indices;
+    let requests: Vec<Request> = (0..20).map(|t| req(t, 0)).collect();
+    let mut free = Manager::new(costs.clone(), config(64 << 20, 0));
+    let p = free.plan_frame(0, None, &requests, true);
+    assert_eq!(p.stats.tiles_missing, 0, "the control takes every tile in");
+    let mut capped = Manager::new(costs, config(64 << 20, 0));
+    capped.set_staging_cap(5 * presence + presence / 2);
+    let p = capped.plan_frame(0, None, &requests, true);
+    let sent: u64 = p.uploads.iter().map(Upload::sent).sum();
+    assert_eq!((p.stats.tiles_missing, sent), (15, 5 * presence));
+    let p = capped.plan_frame(1, Some(0), &requests, true);
+    assert_eq!(p.stats.tiles_missing, 10, "five more the next frame");
+}
