@@ -9,9 +9,10 @@
 # (likewise 1025 and 16385). For each set: three processes that open it and draw one frame
 # (orbit), then the orbit and the flyover, 60 frames at 1024 x 768 through the pyramid
 # (`--pyramid`, tau 1, geomorphing), medians after frame 5.
-# usage: bench/scale64.sh SET.vkt...     (run from the repository root after cargo build --release)
+# usage: bench/scale64.sh SET.vkt...     (run from the repository root after cargo build --release;
+#        V=path/to/vkterrain for another binary)
 set -euo pipefail
-V=target/release/vkterrain
+V=${V:-target/release/vkterrain}
 out=${OUT:-/tmp/scale64}; mkdir -p "$out"
 for vkt in "$@"; do
   name=$(basename "$vkt" .vkt)

@@ -311,6 +311,8 @@ fn finish(
         open_ms,
         first_view_check_ms: result.first_view_check_ms,
         tiles_failed: terrain.failed_count() as u64,
+        outlines_read: terrain.tiles.outlines_read() as u64,
+        tiles: terrain.tiles.len() as u64,
         part_by_part: *part_by_part && result.built_indices,
         index_arrays: if result.built_indices {
             "built"

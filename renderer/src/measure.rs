@@ -97,7 +97,6 @@ impl ErrorMeter {
         }
         let samples = terrain
             .base()
-            .iter()
             .map(|t| {
                 let s = tile_samples(grid, t.tx, t.ty);
                 (s.heights, s.data_max_x, s.data_max_y)

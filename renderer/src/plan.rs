@@ -429,7 +429,6 @@ pub fn visible_tiles(terrain: &Terrain, view: &View, camera: DVec3) -> Vec<usize
     let planes = view.frustum();
     let mut visible: Vec<(f64, usize)> = terrain
         .base()
-        .iter()
         .enumerate()
         .filter(|(_, tile)| cull::visible(&planes, camera, tile))
         .map(|(i, tile)| {

@@ -106,6 +106,51 @@ fn the_cut_covers_what_the_base_grid_sees_each_tile_once() {
     );
 }
 
+/// A cut reads the outlines of the tiles it reaches and of their neighbours, not the set's:
+/// over the GENERATED 2049² mirror set (85 tiles with its pyramid), a view of all of it from
+/// far above reads the top layers alone (5 outlines when written), and a view down onto one
+/// corner the tiles from the top down to it with their neighbours (23). The control: the base
+/// grid without its pyramid finds the tiles in view by testing every base tile, and reads all
+/// 64.
+#[test]
+fn a_cut_reads_the_tiles_it_reaches_not_the_set() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = common::mirror_with(dir.path(), 2049, &common::with_pyramid());
+    let open = || Terrain::open_pyramid(&set).expect("open");
+    let pyramid = open();
+    assert_eq!(pyramid.tiles.outlines_read(), 0, "the open reads no tile");
+    let (lo, hi) = pyramid.bounds();
+    let centre = (lo + hi) * 0.5;
+    let extent = hi.x - lo.x;
+    let far = Camera {
+        position: DVec3::new(centre.x, centre.y, hi.z + 3.0 * extent),
+        yaw: 0.0,
+        pitch: -std::f64::consts::FRAC_PI_2 + 1e-3,
+        fov_y: 0.8,
+    };
+    let near = Camera {
+        position: DVec3::new(lo.x + 0.05 * extent, lo.y + 0.05 * extent, hi.z + 500.0),
+        yaw: std::f64::consts::FRAC_PI_4,
+        pitch: -1.2,
+        fov_y: 1.0,
+    };
+    for (name, camera, most) in [("far", far, 10), ("near", near, 30)] {
+        let pyramid = open();
+        let view = camera.view(EXTENT.0, EXTENT.1);
+        let c = cut(&pyramid, &view, camera.position, 1.0);
+        let read = pyramid.tiles.outlines_read();
+        assert!(
+            read >= c.nodes.len() && read <= most,
+            "{name}: {read} outlines read of {} for a cut of {}",
+            pyramid.tiles.len(),
+            c.nodes.len()
+        );
+        let base = Terrain::open(&set).expect("open");
+        let _ = renderer::plan::visible_tiles(&base, &view, camera.position);
+        assert_eq!(base.tiles.outlines_read(), 64, "{name}: the control");
+    }
+}
+
 #[test]
 fn far_views_take_the_top_tile_and_near_views_the_base_grid() {
     let dir = tempfile::tempdir().expect("temp dir");

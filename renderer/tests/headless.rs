@@ -1004,6 +1004,52 @@ fn resealed_broken_fans_are_reported_when_their_level_is_first_needed() {
     }
 }
 
+/// A tile whose outline does not read (its header names tile 3,2; checksums resealed) in a
+/// set the open no longer reads whole: the set opens, the tile fails its check in the first
+/// view, with one line naming the file, the tile and the problem, and is never asked for or
+/// drawn; every other tile is drawn as in the sound file's flight, the log goes on and the
+/// exit code is 4. The control is that flight (`common::sound_flight`), which draws the tile.
+#[test]
+fn a_tile_whose_outline_does_not_read_is_reported_and_never_drawn() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = puget(dir.path());
+    let ((_, [visible, drawn, _], asked), _) = common::sound_flight(dir.path(), &set, 2);
+    let mut bytes = std::fs::read(&set).expect("read");
+    let ts = tiles::TileSet::open(&set).expect("open");
+    let at = ts.dir_entry(1, 2).expect("entry").offset as usize + 4;
+    drop(ts);
+    bytes[at..at + 4].copy_from_slice(&3u32.to_le_bytes());
+    tiles::format::reseal(&mut bytes).expect("reseal");
+    let damaged = dir.path().join("outline.vkt");
+    std::fs::write(&damaged, &bytes).expect("write");
+    let (o, [v, d, f], asked_damaged) =
+        common::four_traced_frames(dir.path(), &damaged, "outline", 9);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(4), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(
+        err.contains("outline.vkt")
+            && err.contains("tile 1,2")
+            && err.contains("directory points at tile 3,2")
+            && err.contains("not drawn"),
+        "{err}"
+    );
+    assert_eq!(v, visible);
+    assert!(
+        asked_damaged.iter().all(Option::is_none),
+        "{asked_damaged:?}"
+    );
+    let seen: Vec<f64> = asked
+        .iter()
+        .map(|a| f64::from(u8::from(a.is_some())))
+        .collect();
+    let short: Vec<f64> = drawn.iter().zip(&seen).map(|(d, s)| d - s).collect();
+    assert_eq!(d, short, "one tile fewer drawn where the control draws it");
+    assert_eq!(f, vec![1.0; 4]);
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).expect("summary");
+    assert_eq!(summary["tiles_failed"], 1);
+}
+
 /// A device lost mid-flight (injected: `VKTERRAIN_FAULT=device-lost-at-5`): one line naming
 /// the frame, exit 1, and the log of the frames completed before is written whole and stays
 /// readable (the same reader `frametimes` uses).

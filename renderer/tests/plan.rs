@@ -212,7 +212,7 @@ fn stitches_close_every_seam_at_every_level_pair() {
     let (_dir, terrain) = puget();
     let mut checked = 0;
     let mut control_failed = 0;
-    for a in &terrain.tiles {
+    for a in terrain.tiles.iter() {
         for side in Side::FORWARD {
             let k = side.index();
             let Some(j) = terrain.neighbour(a, side) else {
@@ -665,6 +665,137 @@ fn a_damaged_tile_opens_and_fails_its_check_when_first_needed() {
     assert!(whole.check(broken).is_ok());
 }
 
+/// A tile whose outline does not read (its header names another tile; checksums resealed)
+/// does not stop the open, which reads no tile: the tile holds its place in the grid, and its
+/// check, the first time it is asked for, fails naming the file, the tile and the problem. Its
+/// neighbours, whose side tables would have taken its table in, read and pass. The control:
+/// the sound file's tile passes.
+#[test]
+fn a_tile_whose_outline_does_not_read_fails_its_check_when_first_needed() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let set = common::puget(dir.path());
+    let mut bytes = std::fs::read(&set).expect("read");
+    let ts = tiles::TileSet::open(&set).expect("open");
+    let e = ts.dir_entry(2, 1).expect("entry");
+    drop(ts);
+    // The tile header's column (after its 4-byte magic).
+    let at = e.offset as usize + 4;
+    bytes[at..at + 4].copy_from_slice(&3u32.to_le_bytes());
+    tiles::format::reseal(&mut bytes).expect("reseal");
+    let damaged = dir.path().join("outline.vkt");
+    std::fs::write(&damaged, &bytes).expect("write");
+    let terrain = Terrain::open(&damaged).expect("a damaged outline does not stop the open");
+    assert_eq!(terrain.tiles.outlines_read(), 0, "the open reads no tile");
+    let broken = terrain.tile_index(2, 1).expect("tile 2,1");
+    let tile = &terrain.tiles[broken];
+    assert_eq!((tile.tx, tile.ty), (2, 1));
+    assert!(
+        tile.min.x < tile.max.x && tile.min.y < tile.max.y,
+        "it holds its place"
+    );
+    let problem = terrain.check(broken).err().expect("it fails").to_string();
+    assert!(
+        problem.contains("outline.vkt")
+            && problem.contains("tile 2,1")
+            && problem.contains("directory points at tile 3,1"),
+        "{problem}"
+    );
+    assert_eq!(problem.matches("outline.vkt").count(), 1, "{problem}");
+    for side in Side::ALL {
+        if let Some(j) = terrain.neighbour(&terrain.tiles[broken], side) {
+            assert!(terrain.check(j).is_ok(), "{side:?} neighbour");
+        }
+    }
+    assert_eq!(terrain.failed_count(), 1);
+    let (_dir, whole) = puget();
+    assert!(whole.check(broken).is_ok(), "the control");
+}
+
+/// The set's bounds come from its header alone, and hold every tile's box: the grid's extent
+/// exactly (the tiles' boxes reach its edges), the heights within a height step (the tiles'
+/// vertices are on the height lattice). The control: the tiles reach the header's range, so
+/// the bounds are not merely loose.
+#[test]
+fn the_bounds_from_the_header_hold_every_tile() {
+    let (_dir, terrain) = puget();
+    let (lo, hi) = terrain.bounds();
+    let step = f64::from(terrain.height_step);
+    let (mut tlo, mut thi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+    for t in terrain.tiles.iter() {
+        (tlo, thi) = (tlo.min(t.min), thi.max(t.max));
+    }
+    assert_eq!((lo.x, lo.y, hi.x, hi.y), (tlo.x, tlo.y, thi.x, thi.y));
+    assert!(
+        tlo.z >= lo.z - step && thi.z <= hi.z + step,
+        "{tlo} {thi} in {lo} {hi}"
+    );
+    assert!(
+        tlo.z <= lo.z + 2.0 * step && thi.z >= hi.z - 2.0 * step,
+        "{tlo} {thi} in {lo} {hi}"
+    );
+}
+
+/// Tiles read in any order get the same tables, and the tiles that hold a side or a corner
+/// hold the same table for it (the larger errors of them all): the side tables of a tile and
+/// its neighbour across a side are one, and so are the corner tables of the four tiles around
+/// a corner. Each tile reads its outline and its neighbours' once, when first asked for. The
+/// control: the tiles' own tables differ, so the sharing is not of equal tables.
+#[test]
+fn tiles_read_as_asked_for_share_their_side_and_corner_tables() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let set = common::puget(dir.path());
+    let forward = Terrain::open(&set).expect("open");
+    let backward = Terrain::open(&set).expect("open");
+    let n = forward.tiles.len();
+    let inner = forward.tile_index(1, 1).expect("tile 1,1");
+    let _ = &backward.tiles[inner];
+    assert_eq!(
+        backward.tiles.outlines_read(),
+        9,
+        "a tile and its eight neighbours"
+    );
+    for i in (0..n).rev() {
+        let _ = &backward.tiles[i];
+    }
+    assert_eq!(backward.tiles.outlines_read(), n, "each outline once");
+    let mut own = std::collections::HashSet::new();
+    for i in 0..n {
+        let (a, b) = (&forward.tiles[i], &backward.tiles[i]);
+        assert_eq!(a.tables, b.tables, "tile {i}");
+        assert_eq!(a.drawn_table, b.drawn_table, "tile {i}");
+        own.insert(format!("{:?}", a.tables[0]));
+        for side in [Side::East, Side::South] {
+            if let Some(j) = forward.neighbour(a, side) {
+                let c = &forward.tiles[j];
+                assert_eq!(
+                    a.tables[1 + side.index()],
+                    c.tables[1 + side.opposite().index()],
+                    "tile {i} and its {side:?} neighbour"
+                );
+            }
+        }
+        // The SE corner of (x, y) is the SW of (x + 1, y), the NE of (x, y + 1) and the NW of
+        // (x + 1, y + 1).
+        let (x, y) = (a.tx, a.ty);
+        let corner = [
+            forward.tile_index(x + 1, y).map(|j| (j, 7)),
+            forward.tile_index(x, y + 1).map(|j| (j, 6)),
+            forward.tile_index(x + 1, y + 1).map(|j| (j, 5)),
+        ];
+        for (j, k) in corner.into_iter().flatten() {
+            assert_eq!(
+                a.tables[8], forward.tiles[j].tables[k],
+                "tile {i}'s SE corner"
+            );
+        }
+    }
+    assert!(
+        own.len() > n / 2,
+        "{} distinct own tables of {n}",
+        own.len()
+    );
+}
+
 /// A tile's levels are checked as they are first needed ([`Terrain::check_through`]): a tile
 /// whose level 6 holds a broken fan (checksums resealed, so only the semantic checks can tell)
 /// passes its check through level 2 and hands out the bytes of levels 0-2, not level 6's;
@@ -903,7 +1034,7 @@ fn every_vertex_has_its_parents_in_its_block_or_before() {
     let mut control = None;
     for set in [common::puget(a.path()), srtm] {
         let terrain = Terrain::open(&set).expect("open");
-        for info in &terrain.tiles {
+        for info in terrain.tiles.iter() {
             let tile = terrain.set.tile(info.tx, info.ty).expect("tile");
             for level in 0..terrain.levels {
                 let points = block_points(&tile, level);

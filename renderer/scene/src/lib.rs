@@ -7,5 +7,6 @@
 pub mod camera;
 pub mod levels;
 pub mod path;
+pub mod store;
 pub mod terrain;
 pub mod tile;

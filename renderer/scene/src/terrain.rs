@@ -1,7 +1,8 @@
-//! A mapped tile set as the renderer sees it. Opening reads the header, the directory (both
-//! checksummed) and each tile's header and level table: every tile's world box, level tables
-//! and memory costs are known at once, for culling, LOD and the memory manager, while the tiles'
-//! data stay on disk. A tile is checked the first time it is needed
+//! A mapped tile set as the renderer sees it. Opening reads the header and the directory (both
+//! checksummed), whatever the number of tiles; each tile's header and level table (its world
+//! box, level tables and memory costs, for culling, LOD and the memory manager) is read the
+//! first time the tile is asked for ([`crate::store`]), while its data stay on disk. A tile is
+//! checked the first time it is needed
 //! ([`Terrain::check_through`]): its checksum, structure and `tiletool verify`'s semantic checks
 //! of the levels wanted, and of each finer level when first wanted, before any of their bytes
 //! reach the GPU. A tile that fails is never drawn; the flight goes on without it and
@@ -9,27 +10,24 @@
 
 use std::collections::{HashMap, VecDeque};
 use std::path::Path;
-use std::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize, Ordering};
-use std::sync::{Arc, Condvar, Mutex, OnceLock, RwLock};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Arc, Condvar, Mutex, RwLock};
 use std::time::Duration;
 
 use glam::DVec3;
 use tiles::format::{LevelEntry, TileSet};
 use tiles::mesh::{TILE_CELLS, TILE_SIZE};
 
-use crate::levels::LevelTable;
+use crate::store::{Grid, Tiles};
 use crate::tile::{rebase, Paged, Side, Sides, TileInfo, HEIGHT_CELLS};
-
-/// Bytes at the start of a tile that hold its outline, in practice (header, level table and
-/// section bounds, well under a page).
-const OUTLINE_BYTES: u64 = 4096;
 
 pub struct Terrain {
     /// The base grid's view of the file.
     pub set: TileSet,
     /// The base grid's tiles (row-major), then, when opened with its pyramid
-    /// ([`Terrain::open_pyramid`]), each layer's above it ([`Terrain::layers`]).
-    pub tiles: Vec<TileInfo>,
+    /// ([`Terrain::open_pyramid`]), each layer's above it ([`Terrain::layers`]); each read
+    /// when first asked for.
+    pub tiles: Arc<Tiles>,
     /// The base grid's tiles per row and column.
     pub tiles_x: u32,
     pub tiles_y: u32,
@@ -87,9 +85,10 @@ impl Layer {
 }
 
 impl Terrain {
-    /// Opens the tile set: the header and directory with their checksum, and every tile's
-    /// header and level table (one page of the file per tile). Tiles' data are checked later,
-    /// one tile at a time ([`Terrain::check`]).
+    /// Opens the tile set: the header and directory with their checksum. Each tile's header
+    /// and level table (its outline, a page of the file) is read the first time the tile is
+    /// asked for ([`Tiles`]), and its data are checked when first needed
+    /// ([`Terrain::check`]): the open costs the same whatever the set's size.
     pub fn open(path: &Path) -> Result<Terrain, tiles::FormatError> {
         Terrain::open_layer(path, 0)
     }
@@ -107,7 +106,7 @@ impl Terrain {
                     file.pyramid_layers()
                 ),
             })?;
-        Terrain::of_layer(set)
+        Ok(Terrain::of_layers(vec![set]))
     }
 
     /// [`Terrain::open`] with every pyramid layer of the set above the base grid, their tiles
@@ -115,29 +114,49 @@ impl Terrain {
     /// `renderer::cut`). A set without a pyramid opens as [`Terrain::open`] does.
     pub fn open_pyramid(path: &Path) -> Result<Terrain, tiles::FormatError> {
         let file = TileSet::open(path)?;
-        let mut terrain = Terrain::of_layer(file.clone())?;
-        for p in 1..=file.pyramid_layers() {
-            let Some(set) = file.layer(p) else { break };
-            terrain.add_layer(set)?;
-        }
-        Ok(terrain)
+        let layers = (0..=file.pyramid_layers()).map_while(|p| file.layer(p));
+        Ok(Terrain::of_layers(layers.collect()))
     }
 
     /// The terrain of a tile set already open (a layer's view, [`TileSet::layer`], or the
-    /// base grid): every tile's header and level table.
+    /// base grid).
     pub fn of_layer(set: TileSet) -> Result<Terrain, tiles::FormatError> {
+        Ok(Terrain::of_layers(vec![set]))
+    }
+
+    /// The terrain of `sets`: the first as its base grid, each next one the layer above.
+    fn of_layers(sets: Vec<TileSet>) -> Terrain {
+        let mut first = 0;
+        let layers: Vec<Layer> = sets
+            .into_iter()
+            .map(|set| {
+                let h = *set.header();
+                let layer = Layer {
+                    first,
+                    tiles_x: h.tiles_x,
+                    tiles_y: h.tiles_y,
+                    set,
+                };
+                first += layer.len();
+                layer
+            })
+            .collect();
+        let grids = layers
+            .iter()
+            .map(|l| Grid {
+                first: l.first,
+                tiles_x: l.tiles_x,
+                tiles_y: l.tiles_y,
+                set: l.set.clone(),
+            })
+            .collect();
+        let set = layers[0].set.clone();
         let h = *set.header();
-        let tiles = layer_tiles(&set, 0)?;
-        let texture = set.texture_layout();
-        let mut terrain = Terrain {
-            layers: vec![Layer {
-                first: 0,
-                tiles_x: h.tiles_x,
-                tiles_y: h.tiles_y,
-                set: set.clone(),
-            }],
+        Terrain {
+            tiles: Arc::new(Tiles::new(grids)),
+            texture: set.texture_layout(),
             set,
-            tiles,
+            layers,
             tiles_x: h.tiles_x,
             tiles_y: h.tiles_y,
             levels: h.levels,
@@ -147,7 +166,6 @@ impl Terrain {
             // the tiles whose sides differ, when they are checked.
             shared_sides: h.flags & tiles::format::FLAG_SHARED_SIDES != 0,
             sides_claimed: h.flags & tiles::format::FLAG_SHARED_SIDES != 0,
-            texture,
             texture_source: h.texture_source,
             failures: Mutex::new(Vec::new()),
             failed: AtomicUsize::new(0),
@@ -155,25 +173,7 @@ impl Terrain {
             ahead_ready: Condvar::new(),
             reading: RwLock::new(()),
             layer_heights: Mutex::new(HashMap::new()),
-        };
-        terrain.share_tables(0);
-        Ok(terrain)
-    }
-
-    /// Appends the next pyramid layer's tiles (the layer's view of the same file).
-    fn add_layer(&mut self, set: TileSet) -> Result<(), tiles::FormatError> {
-        let p = self.layers.len() as u32;
-        let h = *set.header();
-        let first = self.tiles.len();
-        self.tiles.extend(layer_tiles(&set, p)?);
-        self.layers.push(Layer {
-            first,
-            tiles_x: h.tiles_x,
-            tiles_y: h.tiles_y,
-            set,
-        });
-        self.share_tables(p);
-        Ok(())
+        }
     }
 
     /// The index of the top layer opened (0: the base grid alone).
@@ -181,9 +181,10 @@ impl Terrain {
         self.layers.len() as u32 - 1
     }
 
-    /// The base grid's tiles: the first of [`Terrain::tiles`].
-    pub fn base(&self) -> &[TileInfo] {
-        &self.tiles[..self.layers[0].len()]
+    /// The base grid's tiles: the first of [`Terrain::tiles`], each read as the iteration
+    /// reaches it (a sweep of the base grid).
+    pub fn base(&self) -> impl ExactSizeIterator<Item = &TileInfo> + '_ {
+        (0..self.layers[0].len()).map(|i| &self.tiles[i])
     }
 
     /// Tile `i` of layer `p`'s index in [`Terrain::tiles`].
@@ -541,7 +542,11 @@ impl Terrain {
     /// checks of levels `0..=level` if it is made now.
     fn own<'a>(&self, tile: &'a TileInfo, level: u32) -> &'a Result<Paged, String> {
         tile.own.get_or_init(|| {
-            let paged = paged(self.set_of(tile), tile, level).map_err(|what| self.named(what));
+            let paged = match &tile.broken {
+                Some(problem) => Err(problem.clone()),
+                None => paged(self.set_of(tile), tile, level),
+            };
+            let paged = paged.map_err(|what| self.named(what));
             if paged.is_ok() {
                 tile.checked.store(level + 1, Ordering::Release);
             }
@@ -621,54 +626,6 @@ impl Terrain {
         Ok(())
     }
 
-    /// Gives every tile its side and corner level tables: the larger errors of the tiles that
-    /// hold the side or corner, the same table in each of them.
-    fn share_tables(&mut self, p: u32) {
-        use rayon::prelude::*;
-        let layer = &self.layers[p as usize];
-        let range = layer.first..layer.first + layer.len();
-        // The layer's own tables, by index within the layer.
-        let own: Vec<LevelTable> = self.tiles[range.clone()]
-            .iter()
-            .map(|t| t.tables[0])
-            .collect();
-        let index = |tx: u32, ty: u32| {
-            (tx < layer.tiles_x && ty < layer.tiles_y).then(|| (ty * layer.tiles_x + tx) as usize)
-        };
-        let at = |tx: i64, ty: i64| {
-            (tx >= 0 && ty >= 0)
-                .then(|| index(tx as u32, ty as u32))
-                .flatten()
-                .map(|i| own[i])
-        };
-        let around = |t: &TileInfo, cells: &[(i64, i64)]| {
-            cells
-                .iter()
-                .filter_map(|&(dx, dy)| at(i64::from(t.tx) + dx, i64::from(t.ty) + dy))
-                .fold(own[index(t.tx, t.ty).unwrap_or(0)], |a, b| a.max(&b))
-        };
-        let tables: Vec<[LevelTable; 9]> = self.tiles[range.clone()]
-            .par_iter()
-            .map(|t| {
-                [
-                    own[index(t.tx, t.ty).unwrap_or(0)],
-                    around(t, &[Side::North.step()]),
-                    around(t, &[Side::East.step()]),
-                    around(t, &[Side::South.step()]),
-                    around(t, &[Side::West.step()]),
-                    around(t, &[(-1, -1), (0, -1), (-1, 0)]),
-                    around(t, &[(1, -1), (0, -1), (1, 0)]),
-                    around(t, &[(-1, 1), (0, 1), (-1, 0)]),
-                    around(t, &[(1, 1), (0, 1), (1, 0)]),
-                ]
-            })
-            .collect();
-        for (t, tables) in self.tiles[range].iter_mut().zip(tables) {
-            t.drawn_table = tables[1..].iter().fold(tables[0], |a, b| a.max(b));
-            t.tables = tables;
-        }
-    }
-
     /// The tile across `side` of `tile`, if the set has one.
     pub fn neighbour(&self, tile: &TileInfo, side: Side) -> Option<usize> {
         let (dx, dy) = side.step();
@@ -686,25 +643,10 @@ impl Terrain {
     /// level sends its positions alone. With `decode` a compact set's levels travel as their
     /// streams ([`Terrain::level_stream`]), decoded on the GPU into the positions.
     pub fn costs(&self, morph_rows: bool, decode: bool) -> Vec<memory::TileCost> {
-        self.tiles
-            .iter()
-            .map(|t| memory::TileCost {
-                levels: t
-                    .levels
-                    .iter()
-                    .enumerate()
-                    .map(|(i, l)| memory::LevelCost {
-                        positions: 4 * u64::from(l.block_len),
-                        morph: if morph_rows {
-                            i as u64 * u64::from(l.block_len)
-                        } else {
-                            0
-                        },
-                        indices: u64::from(l.index_count) * u64::from(l.index_width),
-                        index_width: l.index_width,
-                        stream: t.streams.get(i).filter(|_| decode).map(|&n| u64::from(n)),
-                    })
-                    .collect(),
+        (0..self.tiles.len())
+            .map(|i| {
+                let t = self.tiles.outline(i);
+                cost_of(&t.levels, &t.streams, morph_rows, decode)
             })
             .collect()
     }
@@ -745,7 +687,7 @@ impl Terrain {
 
     /// Whether the set's levels can travel as compact streams (version 5 compact sets).
     pub fn has_streams(&self) -> bool {
-        self.tiles.iter().any(|t| !t.streams.is_empty())
+        self.set.has_level_streams()
     }
 
     /// Level `level`'s compact stream of `tile` (version 5 compact sets), once the level has
@@ -798,13 +740,19 @@ impl Terrain {
         self.tile_in(0, tx, ty)
     }
 
-    /// World bounds of the whole dataset.
+    /// World bounds of the whole dataset: its grid's extent, and the heights its header
+    /// records (the source's range after void filling, which every level's surface keeps
+    /// within its error of), without reading a tile.
     pub fn bounds(&self) -> (DVec3, DVec3) {
-        self.base()
-            .iter()
-            .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), t| {
-                (lo.min(t.min), hi.max(t.max))
-            })
+        let h = self.set.header();
+        let (w, n) = (
+            f64::from(h.grid_width.max(1) - 1),
+            f64::from(h.grid_height.max(1) - 1),
+        );
+        (
+            DVec3::new(0.0, -n * h.spacing_y, f64::from(h.height_min)),
+            DVec3::new(w * h.spacing_x, 0.0, f64::from(h.height_max)),
+        )
     }
 
     /// The highest ground within `radius` metres of (x, y), from the coarse height maps of the
@@ -929,116 +877,31 @@ impl Terrain {
     }
 }
 
-/// Every tile of `set`'s layer `p` (row-major), from their outlines.
-fn layer_tiles(set: &TileSet, p: u32) -> Result<Vec<TileInfo>, tiles::FormatError> {
-    let h = *set.header();
-    let mut tiles = Vec::with_capacity((h.tiles_x * h.tiles_y) as usize);
-    // Ask for every outline's page first: from a cold cache the reads then queue together
-    // instead of one seek at a time (advice only; a kernel that ignores it is just slower).
-    // Outlines less than a page apart go in one request: a set of small tiles (a coarse
-    // build's, a pyramid's top layers) holds many in a page, and a request a tile took about
-    // a sixth of the 16K coarse set's open (perf).
-    let mut pending: Option<std::ops::Range<u64>> = None;
-    for ty in 0..h.tiles_y {
-        for tx in 0..h.tiles_x {
-            let Some(r) = set.blob_range(tx, ty) else {
-                continue;
-            };
-            let outline = r.start..r.end.min(r.start + OUTLINE_BYTES);
-            pending = match pending {
-                Some(p) if outline.start >= p.start && outline.start <= p.end + OUTLINE_BYTES => {
-                    Some(p.start..p.end.max(outline.end))
-                }
-                Some(p) => {
-                    let _ = set.will_need(p);
-                    Some(outline)
-                }
-                None => Some(outline),
-            };
-        }
+/// What a tile of levels `levels` (compact streams `streams`) costs in GPU memory, level by
+/// level (see [`Terrain::costs`]).
+pub fn cost_of(
+    levels: &[LevelEntry],
+    streams: &[u32],
+    morph_rows: bool,
+    decode: bool,
+) -> memory::TileCost {
+    memory::TileCost {
+        levels: levels
+            .iter()
+            .enumerate()
+            .map(|(i, l)| memory::LevelCost {
+                positions: 4 * u64::from(l.block_len),
+                morph: if morph_rows {
+                    i as u64 * u64::from(l.block_len)
+                } else {
+                    0
+                },
+                indices: u64::from(l.index_count) * u64::from(l.index_width),
+                index_width: l.index_width,
+                stream: streams.get(i).filter(|_| decode).map(|&n| u64::from(n)),
+            })
+            .collect(),
     }
-    if let Some(p) = pending {
-        let _ = set.will_need(p);
-    }
-    // Each table is read from the file (no page of the mapping), so the reads run on every
-    // core.
-    use rayon::prelude::*;
-    (0..h.tiles_x * h.tiles_y)
-        .into_par_iter()
-        .map(|i| tile_info(set, i % h.tiles_x, i / h.tiles_x, p))
-        .collect_into_vec(&mut tiles);
-    tiles.into_iter().collect()
-}
-
-/// How many of a tile's levels draw surfaces of their own: a level that adds no vertex to the
-/// one before draws the same triangles, so it is the same surface with the same error. A
-/// pyramid layer's tile is built no finer than a floor ([`tiles::pyramid::level_floor`]), and
-/// its levels past that floor are such copies: up to 7 of 9 in the mirror sets' top layers.
-/// A level table over them would fall by the least ratio across copies of one surface, and
-/// make the tile's real levels look up to `MIN_RATIO^6` times worse than they are; the table
-/// stops at the last level of its own instead. Levels past it draw the same triangles, and
-/// the same surface, as that level.
-fn distinct_levels(levels: &[LevelEntry]) -> usize {
-    let adds = |k: usize| {
-        levels[k].block_len > 0 || levels[k].triangle_count != levels[k - 1].triangle_count
-    };
-    1 + (1..levels.len()).rev().find(|&k| adds(k)).unwrap_or(0)
-}
-
-/// One tile's header, level table, box and own level table, from its outline (no checksum:
-/// the tile's check comes when it is first needed).
-fn tile_info(set: &TileSet, tx: u32, ty: u32, layer: u32) -> Result<TileInfo, tiles::FormatError> {
-    let h = *set.header();
-    let (sx, sy) = (h.spacing_x, h.spacing_y);
-    let (th, mut levels, streams) = set.tile_table_and_streams(tx, ty)?;
-    // A pyramid layer's tile: its levels' errors against the base grid's samples under it,
-    // not its own subsampled grid's, so that it is chosen by the ground it stands for.
-    if let Some(errors) = set.base_errors(tx, ty) {
-        for (l, e) in levels.iter_mut().zip(errors) {
-            l.max_error = e;
-        }
-    }
-    let z_min = levels.iter().map(|l| l.z_min).fold(f32::INFINITY, f32::min);
-    let z_max = levels
-        .iter()
-        .map(|l| l.z_max)
-        .fold(f32::NEG_INFINITY, f32::max);
-    let (c0, r0) = (f64::from(tx * TILE_CELLS), f64::from(ty * TILE_CELLS));
-    let min = DVec3::new(
-        c0 * sx,
-        -(r0 + f64::from(th.mesh_max_y)) * sy,
-        f64::from(z_min),
-    );
-    let max = DVec3::new(
-        (c0 + f64::from(th.mesh_max_x)) * sx,
-        -r0 * sy,
-        f64::from(z_max),
-    );
-    // Its levels' errors as the morph sees them: measured, plus half a morph unit
-    // (the stored offsets are rounded to whole units).
-    let errors: Vec<f32> = levels
-        .iter()
-        .map(|l| l.max_error.max(0.0) + 0.5 * l.morph_unit.max(0.0))
-        .collect();
-    let own_table = LevelTable::over(&errors, distinct_levels(&levels));
-    Ok(TileInfo {
-        tx,
-        ty,
-        layer,
-        header: th,
-        levels,
-        streams,
-        min,
-        max,
-        tables: [own_table; 9],
-        drawn_table: own_table,
-        own: OnceLock::new(),
-        usable: OnceLock::new(),
-        checked: AtomicU32::new(0),
-        late: OnceLock::new(),
-        extending: Mutex::new(()),
-        heights: OnceLock::new(),
-    })
 }
 
 /// A tile's own check, and what it reads: the tile's checksum, its structure and the problems

@@ -15,9 +15,9 @@ use crate::levels::LevelTable;
 /// Cells per side of each tile's coarse height map (for ground-following paths).
 pub(crate) const HEIGHT_CELLS: usize = 8;
 
-/// What the renderer knows of a tile from the moment the set is opened: its header and level
-/// table (read without touching the tile's data, [`tiles::TileSet::tile_outline`]), its box and
-/// its level tables. What needs the tile's data, its borders and texture mips, comes with its
+/// What the renderer knows of a tile from the moment anything first asks for it
+/// ([`crate::store`]): its header and level table (read without touching the tile's data,
+/// [`tiles::TileSet::tile_table_and_streams`]), its box and its level tables. What needs the tile's data, its borders and texture mips, comes with its
 /// check ([`Paged`]), the first time the tile is needed ([`crate::terrain::Terrain::check`]).
 pub struct TileInfo {
     /// Its column and row in its layer's grid of tiles.
@@ -41,6 +41,9 @@ pub struct TileInfo {
     /// tile may be drawn at level 0 (the drawn level itself takes each part's table over that
     /// part, `renderer::lod::morph_level`).
     pub drawn_table: LevelTable,
+    /// Why its outline does not read, where it does not (`crate::store`): the tile holds its
+    /// place in the grid, and its check fails with this problem.
+    pub broken: Option<String>,
     /// The tile's own check: its checksum, its structure, `tiletool verify`'s semantic checks
     /// of the levels it is first drawn at, and its texture; on success, what was read from its
     /// data.

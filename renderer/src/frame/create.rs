@@ -18,7 +18,7 @@ use crate::prefetch::Prefetcher;
 use crate::settings::MemoryOptions;
 use crate::stitch::MAX_RECORDS;
 use crate::target::{COLOR_FORMAT, DEPTH_FORMAT};
-use crate::terrain::Terrain;
+use crate::terrain::{cost_of, Terrain};
 use crate::tile::Side;
 use crate::vulkan::buffer::BufferDesc;
 use crate::vulkan::decode::{Decoder, MAX_DECODES_PER_DISPATCH};
@@ -137,7 +137,12 @@ impl Renderer {
             index_arrays: split.index_arrays,
         };
         let fault = Fault::from_env();
-        let (manager, pool) = allocate_pool(gpu, terrain, config, &options, fault)?;
+        let (mut manager, pool) = allocate_pool(gpu, terrain, config, &options, fault)?;
+        if !pool.direct() {
+            // Every upload goes through the slot's staging memory (a direct pool is written
+            // in place, and only streams decoded on the GPU are staged).
+            manager.set_staging_cap(geometry_staging(&manager, &options).1);
+        }
         let mut parts = Parts::default();
         let made = make_parts(
             &mut parts,
@@ -249,13 +254,8 @@ fn make_parts(
     if decodes_on_gpu(terrain, options) {
         // At most every level of every tile a frame (a new tile sends its levels up to the
         // one wanted whatever the budget).
-        let levels = terrain
-            .tiles
-            .iter()
-            .map(|t| t.levels.len())
-            .max()
-            .unwrap_or(1);
-        let capacity = terrain.tiles.len() * levels + 8;
+        let levels = terrain.levels.max(1) as usize;
+        let capacity = terrain.tiles.len().min(MAX_RECORDS) * levels + 8;
         let streams: Vec<&Buffer> = parts.slots.iter().map(|s| s.staging.buffer()).collect();
         let decoder = Decoder::new(
             gpu,
@@ -385,7 +385,6 @@ fn slot_sizes(
     split: &Split,
     extent: (u32, u32),
 ) -> SlotSizes {
-    let costs = tile_costs(manager);
     let textures = split.textures.config();
     SlotSizes {
         stitch: stitch_bound(terrain),
@@ -403,12 +402,25 @@ fn slot_sizes(
         } else {
             split.morph.map_or(4, |m| m.slot_bytes)
         },
-        staging: budget::staging_bound(&costs, options.upload_budget)
+        staging: geometry_staging(manager, options).0
             + textures.map_or(0, |c: &TextureConfig| {
                 budget::texture_staging_bound(c, options.upload_budget)
             }),
         extent,
     }
+}
+
+/// Bytes of a slot's staging memory for tile geometry (`budget::staging_bound`; estimated from
+/// the tiles the pool was planned from, exact up to `memory::costs::SAMPLE_TILES` tiles), and
+/// what a frame's uploads may send within it: less the padding the uploads' alignment may
+/// take (the manager holds new tiles back past it, which the bound over every tile never
+/// makes it do).
+fn geometry_staging(manager: &Manager, options: &MemoryOptions) -> (u64, u64) {
+    let (sample, weight) = manager.planned_from();
+    let costs = sample.iter().map(|&t| manager.tile_cost(t));
+    let bytes = budget::staging_estimate(costs, weight, options.upload_budget);
+    let padding = 4 * 8 * (sample.len() as u64 * weight + 1);
+    (bytes, bytes.saturating_sub(padding))
 }
 
 /// Whether a compact set's levels travel as their streams, decoded on the GPU
@@ -418,13 +430,15 @@ pub(super) fn decodes_on_gpu(terrain: &Terrain, options: &MemoryOptions) -> bool
     options.decode_on_gpu && terrain.has_streams() && options.scheme != Scheme::WholeTile
 }
 
-/// Vertices of every tile at its finest level: the most a frame can draw.
+/// Vertices of every tile at its finest level: the most a frame can draw (estimated from the
+/// sample of tiles the pool is planned from, `memory::costs`: exact up to
+/// `memory::costs::SAMPLE_TILES` tiles).
 fn finest_vertices(terrain: &Terrain) -> u64 {
-    terrain
-        .tiles
+    let (sample, weight) = memory::costs::sample(terrain.tiles.len());
+    sample
         .iter()
-        .filter_map(|t| t.levels.last())
-        .map(|l| u64::from(l.vertex_count()))
+        .filter_map(|&t| terrain.tiles.outline(t as usize).levels.last())
+        .map(|l| weight * u64::from(l.vertex_count()))
         .sum()
 }
 
@@ -440,8 +454,13 @@ fn allocate_pool(
 ) -> VkResult<(Manager, TilePool)> {
     let mut first = None;
     loop {
-        let costs = terrain.costs(options.morph_rows, decodes_on_gpu(terrain, options));
-        let manager = Manager::new(costs, config);
+        let (morph_rows, decode) = (options.morph_rows, decodes_on_gpu(terrain, options));
+        let tiles = std::sync::Arc::clone(&terrain.tiles);
+        let source = move |t: memory::TileId| {
+            let o = tiles.outline(t as usize);
+            cost_of(&o.levels, &o.streams, morph_rows, decode)
+        };
+        let manager = Manager::from_source(terrain.tiles.len(), Box::new(source), config);
         let bytes = manager.pool_bytes();
         let wanted = *first.get_or_insert(bytes);
         let result = match fault {
@@ -476,10 +495,13 @@ pub(super) fn tile_costs(manager: &Manager) -> Vec<memory::TileCost> {
 
 /// Bytes of stitch geometry a frame can need at most: every pair of neighbouring tiles, each
 /// side at its longest border (a 4-index fan per triangle, fewer triangles than vertices), as
-/// the level tables read at open say.
+/// the level tables say: summed over the tiles the pool is planned from, each for the tiles it
+/// stands for (`memory::costs`; every tile of a set of up to `memory::costs::SAMPLE_TILES`).
 fn stitch_bound(terrain: &Terrain) -> u64 {
     let longest = |t: usize, side: Side| {
-        terrain.tiles[t]
+        terrain
+            .tiles
+            .outline(t)
             .levels
             .iter()
             .map(|l| u64::from(l.border_len[side.index()]))
@@ -488,21 +510,24 @@ fn stitch_bound(terrain: &Terrain) -> u64 {
             // A side holds at most a vertex per sample (a tile not checked yet may say more).
             .min(u64::from(tiles::mesh::TILE_CELLS) + 1)
     };
+    let (sample, weight) = memory::costs::sample(terrain.tiles.len());
     let mut bytes = 0;
-    for (i, a) in terrain.tiles.iter().enumerate() {
+    for i in sample.into_iter().map(|t| t as usize) {
+        let (layer, tx, ty) = terrain.tiles.place(i);
         for side in Side::FORWARD {
-            if let Some(j) = terrain.neighbour(a, side) {
-                bytes += 16 * (longest(i, side) + longest(j, side.opposite()));
+            if let Some(j) = terrain.tiles.at(layer, tx, ty, side.step()) {
+                bytes += weight * 16 * (longest(i, side) + longest(j, side.opposite()));
             }
         }
         // A pyramid layer's tile may meet the two tiles of the layer below on any side
         // instead (`stitch::stitch_across`), each side of them at most a vertex per sample.
-        if a.layer > 0 {
+        if layer > 0 {
             let finer = 2 * (u64::from(tiles::mesh::TILE_CELLS) + 1);
-            bytes += Side::ALL
-                .iter()
-                .map(|&side| 16 * (longest(i, side) + finer))
-                .sum::<u64>();
+            bytes += weight
+                * Side::ALL
+                    .iter()
+                    .map(|&side| 16 * (longest(i, side) + finer))
+                    .sum::<u64>();
         }
     }
     bytes.max(4)

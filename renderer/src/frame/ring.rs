@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use ash::vk;
 
-use super::{create, DrawnTile, Finished, ReadBack, Renderer};
+use super::{DrawnTile, Finished, ReadBack, Renderer};
 use crate::log::FrameRecord;
 use crate::target::Target;
 use crate::vulkan::buffer::BufferDesc;
@@ -260,8 +260,7 @@ impl Renderer {
     /// start, while the driver keeps whatever it warmed up (`vkterrain --warmup-driver`).
     pub fn forget_tiles(&mut self, gpu: &Gpu) -> VkResult<()> {
         self.finish_all(gpu)?;
-        let config = *self.manager.config();
-        self.manager = memory::Manager::new(create::tile_costs(&self.manager), config);
+        self.manager.forget_all();
         if let Some(slots) = &mut self.texture_slots {
             *slots = memory::textures::TextureSlots::new(slots.config().clone());
         }

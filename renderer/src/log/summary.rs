@@ -37,12 +37,17 @@ pub struct RunInfo {
     pub file_released_at_open_bytes: u64,
     /// Drawing the first view once before the timed flight (ms; None: not primed).
     pub prime_ms: Option<f64>,
-    /// Opening the tile set (header, directory, tile outlines), and checking the tiles of the
+    /// Opening the tile set (its header and directory), and checking the tiles of the
     /// first view before the first frame (ms).
     pub open_ms: f64,
     pub first_view_check_ms: f64,
     /// Tiles that failed their checks (never drawn; exit code 4).
     pub tiles_failed: u64,
+    /// Tile outlines (header and level table) read over the run: each tile is read when
+    /// first asked for, with its neighbours' (`scene::store`), not at open.
+    pub outlines_read: u64,
+    /// Tiles in the set as opened (every pyramid layer's with `--pyramid`).
+    pub tiles: u64,
 }
 
 #[derive(Serialize, Debug)]
@@ -72,6 +77,9 @@ pub struct Summary {
     pub check_ms_in_frames: f64,
     /// Tiles that failed their checks and were not drawn.
     pub tiles_failed: u64,
+    /// Tile outlines read over the run, of the tiles in the set as opened.
+    pub outlines_read: u64,
+    pub tiles: u64,
     pub gpu_ms_median: Option<f64>,
     pub gpu_draw_ms_median: Option<f64>,
     pub cpu_ms_median: f64,
@@ -207,6 +215,8 @@ impl Summary {
             tiles_checked_in_frames: sum(|r| r.tiles_checked),
             check_ms_in_frames: records.iter().map(|r| r.cpu_check_ms).sum(),
             tiles_failed: run.tiles_failed,
+            outlines_read: run.outlines_read,
+            tiles: run.tiles,
             gpu_ms_median: (!gpu.is_empty()).then(|| percentile(&gpu, 50.0)),
             gpu_draw_ms_median: (!draw.is_empty()).then(|| percentile(&draw, 50.0)),
             cpu_ms_median: percentile(&cpu, 50.0),

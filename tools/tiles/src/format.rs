@@ -1700,7 +1700,7 @@ impl TileSet {
         let e = self.checked_entry(tx, ty)?;
         let levels = self.header.levels;
         let (header_len, table) = (size_of::<TileHeader>(), table_len(levels));
-        let streams = self.compact() && self.header.version != FIRST_COMPACT_VERSION;
+        let streams = self.has_level_streams();
         let read = match streams {
             true => stream_start(levels, self.header.version),
             false => table,
@@ -1827,6 +1827,12 @@ impl TileSet {
     /// Whether the tiles hold compact levels ([`FLAG_COMPACT_LEVELS`]).
     pub fn compact(&self) -> bool {
         self.header.flags & FLAG_COMPACT_LEVELS != 0
+    }
+
+    /// Whether each tile's levels are stored as separate compact streams, which a reader may
+    /// send as they are ([`TileSet::level_stream`]; compact sets after version 4).
+    pub fn has_level_streams(&self) -> bool {
+        self.compact() && self.header.version != FIRST_COMPACT_VERSION
     }
 
     /// A compact tile's version 3 blob, rebuilt from its first `count` levels (all of them in
