@@ -1787,68 +1787,102 @@ pub(crate) fn settle(
             sides.len()
         )));
     }
-    let mut dirty: Vec<(usize, CompactSides)> = (0..count)
-        .map(|t| (t, forced(t, &sides)))
-        .filter(|(t, f)| meshed_with[*t].as_ref() != Some(f))
+    // The tiles to mesh in the next pass: every tile not meshed with its forced sides as they
+    // are (all of them from nothing).
+    let stale = |t: usize, sides: &[CompactSides], meshed_with: &[Option<CompactSides>]| {
+        meshed_with[t].as_ref() != Some(&forced(t, sides))
+    };
+    let mut dirty: Vec<usize> = (0..count)
+        .filter(|&t| stale(t, &sides, &meshed_with))
         .collect();
     let (mut passes, mut rebuilt) = (0u32, 0u64);
     while !dirty.is_empty() {
         passes += 1;
-        rebuilt += dirty.len() as u64;
         if passes > MAX_PASSES {
             return Err(BuildError::Internal(format!(
                 "tile sides still changing after {MAX_PASSES} passes"
             )));
         }
-        // Band by band, in row-major order as `dirty` is: each band read only when one of
-        // its tiles is to be meshed again.
-        let mut built: Vec<(usize, CompactSides, Vec<f64>)> = Vec::with_capacity(dirty.len());
+        let mut next = vec![false; count];
+        // Band by band, in row-major order: each band read only when one of its tiles is to
+        // be meshed again (dirty when the pass began, or next to a change made since). Within a band, the tiles of one colour of a
+        // checkerboard, then the other's with the first colour's new sides forced: no tile
+        // has a neighbour of its own colour, so each colour's tiles mesh in parallel, and the
+        // second waits for nothing it could have had. Meshing is monotone in what is
+        // forced, so any order of the updates climbs to the same least fixed point (see
+        // `crate::shard`); this one meshes each tile fewer times than passes that mesh every
+        // tile from the state before the pass.
+        let mut pending = vec![false; count];
+        for &t in &dirty {
+            pending[t] = true;
+        }
+        // The tests' reference order: every tile of the pass from the state before it.
+        let jacobi = remesh == Remesh::FromThePassBefore;
+        let before = jacobi.then(|| sides.clone());
+        let phases: &[Option<usize>] = if jacobi { &[None] } else { &[Some(0), Some(1)] };
         for b in 0..bands.count() {
+            // The band's tiles of the window, and of them those to look at: dirty when the
+            // pass began, or next to a change made since.
             let band_rows = bands.tile_rows(b);
-            let here: Vec<&(usize, CompactSides)> = dirty
-                .iter()
-                .filter(|(t, _)| band_rows.contains(&((first + *t) as u32 / tiles_x)))
-                .collect();
-            if here.is_empty() {
+            let (r0, r1) = (band_rows.start.max(rows.start), band_rows.end.min(rows.end));
+            if r0 >= r1 {
+                continue;
+            }
+            let span =
+                (r0 as usize * tiles_x as usize - first)..(r1 as usize * tiles_x as usize - first);
+            let looked_at = |t: usize, next: &[bool]| pending[t] || (!jacobi && next[t]);
+            if !span.clone().any(|t| looked_at(t, &next)) {
                 continue;
             }
             let band = bands.load(b, 0)?;
             let grid = band.grid(&bands.shape);
-            let meshed: Vec<(usize, CompactSides, Vec<f64>)> = here
-                .par_iter()
-                .map(|(t, forced)| {
-                    let g = first + *t;
-                    let (tx, ty) = (g as u32 % tiles_x, g as u32 / tiles_x);
-                    let agreement = Agreement {
-                        forced: expand(forced),
-                        units: None,
-                        floor: floors.map_or(0.0, |d| level_floor(d[g])),
-                    };
-                    mesh_tile(&grid, (tx, ty), params, step, &agreement, Output::Sides)
-                        .map(|b| (*t, compact(&b.sides), b.deviation))
-                })
-                .collect::<Result<_, _>>()?;
-            built.extend(meshed);
-        }
-        let mut next = vec![false; count];
-        for ((t, new, d), (_, used)) in built.into_iter().zip(dirty) {
-            deviation[t] = d;
-            meshed_with[t] = Some(used);
-            if new != sides[t] {
-                sides[t] = new;
-                next[t] = true;
-                for k in 0..4 {
-                    if let Some(n) = neighbour(t, k) {
-                        next[n] = true;
+            for &colour in phases {
+                let state = before.as_deref().unwrap_or(&sides);
+                let batch: Vec<(usize, CompactSides)> = span
+                    .clone()
+                    .filter(|&t| looked_at(t, &next))
+                    .filter(|&t| {
+                        let g = first + t;
+                        colour
+                            .is_none_or(|c| (g % tiles_x as usize + g / tiles_x as usize) % 2 == c)
+                    })
+                    .filter(|&t| remesh == Remesh::NextToChange || stale(t, state, &meshed_with))
+                    .map(|t| (t, forced(t, state)))
+                    .collect();
+                rebuilt += batch.len() as u64;
+                let meshed: Vec<(usize, CompactSides, Vec<f64>)> = batch
+                    .par_iter()
+                    .map(|(t, forced)| {
+                        let g = first + *t;
+                        let (tx, ty) = (g as u32 % tiles_x, g as u32 / tiles_x);
+                        let agreement = Agreement {
+                            forced: expand(forced),
+                            units: None,
+                            floor: floors.map_or(0.0, |d| level_floor(d[g])),
+                        };
+                        mesh_tile(&grid, (tx, ty), params, step, &agreement, Output::Sides)
+                            .map(|b| (*t, compact(&b.sides), b.deviation))
+                    })
+                    .collect::<Result<_, _>>()?;
+                for ((t, new, d), (_, used)) in meshed.into_iter().zip(batch) {
+                    deviation[t] = d;
+                    meshed_with[t] = Some(used);
+                    if new != sides[t] {
+                        sides[t] = new;
+                        next[t] = true;
+                        for k in 0..4 {
+                            if let Some(n) = neighbour(t, k) {
+                                next[n] = true;
+                            }
+                        }
                     }
                 }
             }
         }
-        // Of the tiles next to a change, those whose forced sides did change.
+        // Of the tiles next to a change, those whose forced sides changed since their mesh.
         dirty = (0..count)
             .filter(|&t| next[t])
-            .map(|t| (t, forced(t, &sides)))
-            .filter(|(t, f)| remesh == Remesh::NextToChange || meshed_with[*t].as_ref() != Some(f))
+            .filter(|&t| remesh == Remesh::NextToChange || stale(t, &sides, &meshed_with))
             .collect();
     }
     // Each tile now holds its neighbour's side and the neighbour holds its: they are equal.
@@ -1929,6 +1963,11 @@ pub(crate) enum Remesh {
     /// Every tile next to a change (the rule before; the tests' reference).
     #[cfg_attr(not(test), allow(dead_code))]
     NextToChange,
+    /// Those whose forced sides changed, every tile of a pass meshed from the state before
+    /// the pass rather than in the checkerboard's order (the order before; the tests'
+    /// reference for it).
+    #[cfg_attr(not(test), allow(dead_code))]
+    FromThePassBefore,
 }
 
 /// One side's vertices at one level: bit `i` for position `i` (0..=256).
@@ -2056,8 +2095,9 @@ mod tests {
     }
 
     /// Meshing again only the tiles whose forced sides changed settles on the same sides
-    /// and agreements as meshing every tile next to a change, with fewer meshes (real SRTM3
-    /// heights, 4 x 4 tiles).
+    /// and agreements as meshing every tile next to a change, with fewer meshes; and so does
+    /// meshing each pass's tiles from the state before the pass, the order before the
+    /// checkerboard, with more (real SRTM3 heights, 4 x 4 tiles).
     #[test]
     fn agreement_remeshes_only_what_changed_and_settles_the_same() {
         let side = 4 * 256 + 1;
@@ -2068,6 +2108,7 @@ mod tests {
         let bands = Bands::new(&grid, (4, 4));
         let agree = |remesh| agree_sides(&bands, &params, step, None, remesh).expect("agreed");
         let (fewer, every) = (agree(Remesh::Changed), agree(Remesh::NextToChange));
+        let jacobi = agree(Remesh::FromThePassBefore);
         assert!(fewer.passes > 1, "the sides did not need agreeing: no test");
         assert!(
             fewer.meshes < every.meshes,
@@ -2075,11 +2116,21 @@ mod tests {
             fewer.meshes,
             every.meshes
         );
-        assert_eq!(fewer.units, every.units, "morph units");
-        assert_eq!(fewer.forced.len(), every.forced.len());
-        for t in 0..fewer.forced.len() {
-            assert_eq!(fewer.forced[t], every.forced[t], "tile {t}: forced sides");
-            assert_eq!(fewer.sides[t], every.sides[t], "tile {t}: sides");
+        // The checkerboard's order: the same point in fewer meshes than passes from the
+        // state before each.
+        assert!(
+            fewer.meshes < jacobi.meshes,
+            "{} >= {}",
+            fewer.meshes,
+            jacobi.meshes
+        );
+        for other in [&every, &jacobi] {
+            assert_eq!(fewer.units, other.units, "morph units");
+            assert_eq!(fewer.forced.len(), other.forced.len());
+            for t in 0..fewer.forced.len() {
+                assert_eq!(fewer.forced[t], other.forced[t], "tile {t}: forced sides");
+                assert_eq!(fewer.sides[t], other.sides[t], "tile {t}: sides");
+            }
         }
     }
 
