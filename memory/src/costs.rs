@@ -30,6 +30,8 @@ pub(crate) struct Costs {
     known: Box<[OnceLock<Known>]>,
     source: Option<CostSource>,
     scheme: Scheme,
+    /// The most tiles a plan reads ([`sample`]).
+    at_most: usize,
 }
 
 impl Costs {
@@ -43,15 +45,23 @@ impl Costs {
             known,
             source: None,
             scheme,
+            at_most: usize::MAX,
         }
     }
 
-    /// `count` tiles whose costs `source` gives when first needed.
-    pub(crate) fn from_source(count: usize, source: CostSource, scheme: Scheme) -> Costs {
+    /// `count` tiles whose costs `source` gives when first needed, planned from a sample of
+    /// at most about `at_most` of them.
+    pub(crate) fn from_source(
+        count: usize,
+        source: CostSource,
+        scheme: Scheme,
+        at_most: usize,
+    ) -> Costs {
         Costs {
             known: (0..count).map(|_| OnceLock::new()).collect(),
             source: Some(source),
             scheme,
+            at_most,
         }
     }
 
@@ -84,17 +94,18 @@ impl Costs {
     pub(crate) fn sample(&self) -> (Vec<TileId>, u64) {
         match self.source {
             None => ((0..self.len() as TileId).collect(), 1),
-            Some(_) => sample(self.len()),
+            Some(_) => sample(self.len(), self.at_most),
         }
     }
 }
 
 /// The tiles of a set of `count` that a plan reads, and how many tiles each stands for: every
-/// tile up to [`SAMPLE_TILES`], else one tile of each run of `stride` tiles, at an offset in the
+/// tile up to `at_most` ([`SAMPLE_TILES`] by default), else one tile of each run of `stride`
+/// tiles, at an offset in the
 /// run drawn from a fixed hash of the run (a tile grid is often periodic, a mirror tiling
 /// always, and every `stride`-th tile alone can fall on one column of the period).
-pub fn sample(count: usize) -> (Vec<TileId>, u64) {
-    let stride = count.div_ceil(SAMPLE_TILES).max(1);
+pub fn sample(count: usize, at_most: usize) -> (Vec<TileId>, u64) {
+    let stride = count.div_ceil(at_most.max(1)).max(1);
     let tiles = (0..count)
         .step_by(stride)
         .enumerate()
@@ -143,11 +154,11 @@ mod tests {
 
     #[test]
     fn a_small_set_is_sampled_whole_and_a_large_one_by_stride() {
-        let (all, weight) = sample(SAMPLE_TILES);
+        let (all, weight) = sample(SAMPLE_TILES, SAMPLE_TILES);
         assert_eq!((all.len(), weight), (SAMPLE_TILES, 1));
         assert_eq!(all, (0..SAMPLE_TILES as TileId).collect::<Vec<_>>());
         let n = 87_381;
-        let (some, weight) = sample(n);
+        let (some, weight) = sample(n, SAMPLE_TILES);
         assert_eq!(weight, 86);
         assert!(some.len() <= SAMPLE_TILES && some.len() as u64 * weight >= n as u64);
         // One tile in each run of 86, at offsets that do not repeat with any short period.
@@ -173,6 +184,7 @@ mod tests {
                 tile(3, 10 + u64::from(t))
             }),
             Scheme::Progressive,
+            SAMPLE_TILES,
         );
         assert_eq!(asked.get(), 0, "nothing read before it is needed");
         let given = Costs::given(

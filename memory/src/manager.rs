@@ -324,12 +324,17 @@ impl Manager {
     }
 
     /// Plans the pool for `count` tiles whose costs `source` gives the first time the manager
-    /// needs them: size classes and counts from the histogram of a sample of them
-    /// ([`crate::costs`]; every tile of a set of up to [`crate::costs::SAMPLE_TILES`], as
-    /// [`Manager::new`] plans). A tile of a larger set that outgrows every class the sample
+    /// needs them: size classes and counts from the histogram of a sample of about `at_most`
+    /// of them ([`crate::costs::sample`]; every tile of a set of up to `at_most`, as
+    /// [`Manager::new`] plans; [`crate::costs::SAMPLE_TILES`] by default). A tile of a larger set that outgrows every class the sample
     /// planned is drawn at the finest level that fits one (counted as coarser).
-    pub fn from_source(count: usize, source: CostSource, config: Config) -> Manager {
-        let tiles = Costs::from_source(count, source, config.scheme);
+    pub fn from_source(
+        count: usize,
+        source: CostSource,
+        config: Config,
+        at_most: usize,
+    ) -> Manager {
+        let tiles = Costs::from_source(count, source, config.scheme, at_most);
         let (sample, weight) = tiles.sample();
         let needs: Vec<Vec<u64>> = sample
             .iter()

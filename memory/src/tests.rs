@@ -872,7 +872,12 @@ fn costs_from_a_source_plan_a_small_set_as_costs_given_whole() {
             counted.set(counted.get() + 1);
             held[t as usize].clone()
         };
-        let from = Manager::from_source(costs.len(), Box::new(source), config(pool, 64 << 10));
+        let from = Manager::from_source(
+            costs.len(),
+            Box::new(source),
+            config(pool, 64 << 10),
+            costs::SAMPLE_TILES,
+        );
         assert_eq!(from.classes(), given.classes(), "pool {pool}");
         assert_eq!(asked.get(), 300, "the plan reads every tile of a small set");
         let (mut a, mut b) = (given, from);
@@ -909,8 +914,8 @@ fn a_large_set_is_planned_from_a_sample_and_read_as_requested() {
         kind(t)
     };
     let cfg = config(64 << 20, 256 << 10);
-    let mut m = Manager::from_source(n, Box::new(source), cfg);
-    let (sample, stride) = costs::sample(n);
+    let mut m = Manager::from_source(n, Box::new(source), cfg, costs::SAMPLE_TILES);
+    let (sample, stride) = costs::sample(n, costs::SAMPLE_TILES);
     assert_eq!((sample.len(), stride), (1000, 20));
     assert_eq!(
         *asked.borrow(),

@@ -77,6 +77,12 @@ pub struct Cli {
     /// Send every upload through the staging ring, even where GPU memory is host-visible.
     #[arg(long)]
     pub force_staging: bool,
+    /// Size the GPU pool's chunk classes, the staging memory and the stitch buffer from at
+    /// most about this many tiles' tables: every tile of a set of up to N, else one in each
+    /// run of tiles / N (a larger N reads more tables before the first frame, and plans
+    /// closer to the whole set's sizes).
+    #[arg(long, default_value_t = memory::costs::SAMPLE_TILES, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=(1 << 24)))]
+    pub plan_sample: usize,
     /// Eviction: how much one doubling of wasted chunk space weighs against age (0: pure LRU).
     #[arg(long, default_value_t = memory::DEFAULT_WEIGHT)]
     pub evict_weight: f64,
@@ -537,6 +543,7 @@ impl Cli {
             // Where the user did not choose, the device does once it is known
             // (`Cli::decode_by_device`).
             decode_on_gpu: self.decode != DecodeArg::Cpu,
+            plan_sample: self.plan_sample,
         })
     }
 

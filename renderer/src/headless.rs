@@ -89,6 +89,9 @@ pub struct FlightResult {
     /// The requests of every frame (with `Flight::trace`).
     pub trace: Option<String>,
     pub pool_bytes: u64,
+    /// Tiles whose tables the pool, its staging and the stitch buffer were sized from
+    /// (`MemoryOptions::plan_sample`).
+    pub planned_from: u64,
     /// Device memory of the texture slots.
     pub texture_bytes: u64,
     /// Uploads went through the staging ring.
@@ -145,6 +148,7 @@ pub fn fly(
     }
     let trace = renderer.take_trace();
     let pool_bytes = renderer.manager().pool_bytes();
+    let planned_from = renderer.manager().planned_from().0.len() as u64;
     let texture_bytes = renderer.texture_bytes();
     let staging = !renderer.pool().direct();
     let built_indices = renderer.builds_indices();
@@ -154,6 +158,7 @@ pub fn fly(
         records,
         trace,
         pool_bytes,
+        planned_from,
         texture_bytes,
         staging,
         built_indices,

@@ -313,6 +313,7 @@ fn finish(
         tiles_failed: terrain.failed_count() as u64,
         outlines_read: terrain.tiles.outlines_read() as u64,
         tiles: terrain.tiles.len() as u64,
+        pool_planned_from: result.planned_from,
         part_by_part: *part_by_part && result.built_indices,
         index_arrays: if result.built_indices {
             "built"

@@ -173,6 +173,11 @@ pub struct MemoryOptions {
     /// the tile's check are sent, as for other sets. Where the user did not choose, the device
     /// decides ([`decode_pays_on`]).
     pub decode_on_gpu: bool,
+    /// The most tiles the GPU pool, the staging memory and the stitch buffer are sized from:
+    /// every tile of a set of up to this many, else one in each run of `tiles / plan_sample`
+    /// (`memory::costs::sample`), so that a set of any size opens without reading every
+    /// tile's table.
+    pub plan_sample: usize,
 }
 
 impl Default for MemoryOptions {
@@ -193,6 +198,7 @@ impl Default for MemoryOptions {
             read_back_heights: false,
             morph_rows: false,
             decode_on_gpu: true,
+            plan_sample: memory::costs::SAMPLE_TILES,
         }
     }
 }

@@ -72,6 +72,7 @@ struct App<'a> {
     error: Option<String>,
     trace: Option<String>,
     pool_bytes: u64,
+    planned_from: u64,
     texture_bytes: u64,
     staging: bool,
     built_indices: bool,
@@ -120,6 +121,7 @@ pub fn run(
         error: None,
         trace: None,
         pool_bytes: 0,
+        planned_from: 0,
         texture_bytes: 0,
         staging: false,
         built_indices: false,
@@ -160,6 +162,7 @@ pub fn run(
         records: std::mem::take(&mut app.records),
         trace: app.trace.take(),
         pool_bytes: app.pool_bytes,
+        planned_from: app.planned_from,
         texture_bytes: app.texture_bytes,
         staging: app.staging,
         built_indices: app.built_indices,
@@ -182,6 +185,7 @@ impl App<'_> {
             }
             self.trace = r.take_trace();
             self.pool_bytes = r.manager().pool_bytes();
+            self.planned_from = r.manager().planned_from().0.len() as u64;
             self.texture_bytes = r.texture_bytes();
             self.staging = !r.pool().direct();
             self.built_indices = r.builds_indices();

@@ -1784,6 +1784,50 @@ fn a_mirror_set_flies_clean_drawing_only_what_is_in_view() {
     assert!(drawn.iter().all(|&d| d > 0.0 && d < 64.0), "{drawn:?}");
 }
 
+/// `--plan-sample 8`: the GPU pool, the staging memory (every upload through it,
+/// `--force-staging`) and the stitch buffer sized from 8 of the GENERATED 2049² mirror set's 85
+/// tiles (with its pyramid), each standing for 11, as a set of over 1,024 tiles is by default.
+/// The flight draws the same tiles and triangles, frame by frame, as the plan from every tile
+/// (the default for a set this small; the summary's `pool_planned_from` says which ran), none
+/// missing or coarser, validation silent.
+#[test]
+fn a_pool_planned_from_a_sample_flies_as_one_planned_from_every_tile() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = common::mirror_with(dir.path(), 2049, &common::with_pyramid());
+    let fly = |name: &str, extra: &[&str]| {
+        let log = dir.path().join(format!("{name}.csv"));
+        let args = [
+            &[
+                s(&set),
+                "--headless",
+                "--validation",
+                "--pyramid",
+                "--force-staging",
+                "--path",
+                "flyover",
+                "--frames",
+                "12",
+                "--size",
+                "320x240",
+                "--log",
+                s(&log),
+            ][..],
+            extra,
+        ]
+        .concat();
+        let v = common::summary(&args);
+        let columns = ["tiles_drawn", "triangles", "tiles_missing", "tiles_coarser"]
+            .map(|c| common::log_column(&log, c));
+        (v, columns)
+    };
+    let (whole, [drawn, triangles, ..]) = fly("whole", &[]);
+    let (sampled, [d, t, missing, coarser]) = fly("sampled", &["--plan-sample", "8"]);
+    assert_eq!(whole["pool_planned_from"], 85, "{whole}");
+    assert_eq!(sampled["pool_planned_from"], 8, "{sampled}");
+    assert_eq!((d, t), (drawn, triangles));
+    assert!(missing.iter().chain(&coarser).all(|&n| n == 0.0));
+}
+
 /// `--layer N` flies a pyramid layer of a set built with `--pyramid` as a terrain of its own:
 /// validation-clean, over the same ground as the base grid. Each frame's silhouette (sky or
 /// not, per pixel) agrees with the base grid's in all but 1 pixel in 1,000 (measured: 2 to 3

@@ -349,7 +349,7 @@ fn split_budget(gpu: &Gpu, terrain: &Terrain, options: &MemoryOptions) -> Split 
             region_bytes: MORPH_REGION_BYTES,
             max_groups: MORPH_GROUPS,
             vertex_bytes: 4,
-            max_vertices: finest_vertices(terrain),
+            max_vertices: finest_vertices(terrain, options),
         }),
     };
     let set = budget::TileSet {
@@ -387,18 +387,18 @@ fn slot_sizes(
 ) -> SlotSizes {
     let textures = split.textures.config();
     SlotSizes {
-        stitch: stitch_bound(terrain),
+        stitch: stitch_bound(terrain, options),
         records: RECORDS_OFFSET + RECORD_BYTES * terrain.tiles.len().clamp(1, MAX_RECORDS) as u64,
         // Every tile at most once a frame, at its finest level at most.
         heights: if options.read_back_heights {
-            4 * finest_vertices(terrain).max(1)
+            4 * finest_vertices(terrain, options).max(1)
         } else {
             16
         },
         // The split's share (a placeholder without one: frames are drawn unmorphed); reading
         // heights back (a diagnostic) morphs every draw, past it.
         morphed: if options.read_back_heights {
-            4 * finest_vertices(terrain).max(1)
+            4 * finest_vertices(terrain, options).max(1)
         } else {
             split.morph.map_or(4, |m| m.slot_bytes)
         },
@@ -411,7 +411,7 @@ fn slot_sizes(
 }
 
 /// Bytes of a slot's staging memory for tile geometry (`budget::staging_bound`; estimated from
-/// the tiles the pool was planned from, exact up to `memory::costs::SAMPLE_TILES` tiles), and
+/// the tiles the pool was planned from, exact up to `MemoryOptions::plan_sample` tiles), and
 /// what a frame's uploads may send within it: less the padding the uploads' alignment may
 /// take (the manager holds new tiles back past it, which the bound over every tile never
 /// makes it do).
@@ -432,9 +432,9 @@ pub(super) fn decodes_on_gpu(terrain: &Terrain, options: &MemoryOptions) -> bool
 
 /// Vertices of every tile at its finest level: the most a frame can draw (estimated from the
 /// sample of tiles the pool is planned from, `memory::costs`: exact up to
-/// `memory::costs::SAMPLE_TILES` tiles).
-fn finest_vertices(terrain: &Terrain) -> u64 {
-    let (sample, weight) = memory::costs::sample(terrain.tiles.len());
+/// `MemoryOptions::plan_sample` tiles).
+fn finest_vertices(terrain: &Terrain, options: &MemoryOptions) -> u64 {
+    let (sample, weight) = memory::costs::sample(terrain.tiles.len(), options.plan_sample);
     sample
         .iter()
         .filter_map(|&t| terrain.tiles.outline(t as usize).levels.last())
@@ -460,7 +460,12 @@ fn allocate_pool(
             let o = tiles.outline(t as usize);
             cost_of(&o.levels, &o.streams, morph_rows, decode)
         };
-        let manager = Manager::from_source(terrain.tiles.len(), Box::new(source), config);
+        let manager = Manager::from_source(
+            terrain.tiles.len(),
+            Box::new(source),
+            config,
+            options.plan_sample,
+        );
         let bytes = manager.pool_bytes();
         let wanted = *first.get_or_insert(bytes);
         let result = match fault {
@@ -496,8 +501,8 @@ pub(super) fn tile_costs(manager: &Manager) -> Vec<memory::TileCost> {
 /// Bytes of stitch geometry a frame can need at most: every pair of neighbouring tiles, each
 /// side at its longest border (a 4-index fan per triangle, fewer triangles than vertices), as
 /// the level tables say: summed over the tiles the pool is planned from, each for the tiles it
-/// stands for (`memory::costs`; every tile of a set of up to `memory::costs::SAMPLE_TILES`).
-fn stitch_bound(terrain: &Terrain) -> u64 {
+/// stands for (`memory::costs`; every tile of a set of up to `MemoryOptions::plan_sample`).
+fn stitch_bound(terrain: &Terrain, options: &MemoryOptions) -> u64 {
     let longest = |t: usize, side: Side| {
         terrain
             .tiles
@@ -510,7 +515,7 @@ fn stitch_bound(terrain: &Terrain) -> u64 {
             // A side holds at most a vertex per sample (a tile not checked yet may say more).
             .min(u64::from(tiles::mesh::TILE_CELLS) + 1)
     };
-    let (sample, weight) = memory::costs::sample(terrain.tiles.len());
+    let (sample, weight) = memory::costs::sample(terrain.tiles.len(), options.plan_sample);
     let mut bytes = 0;
     for i in sample.into_iter().map(|t| t as usize) {
         let (layer, tx, ty) = terrain.tiles.place(i);

@@ -48,6 +48,8 @@ pub struct RunInfo {
     pub outlines_read: u64,
     /// Tiles in the set as opened (every pyramid layer's with `--pyramid`).
     pub tiles: u64,
+    /// Tiles whose tables the GPU pool was planned from (`--plan-sample`).
+    pub pool_planned_from: u64,
 }
 
 #[derive(Serialize, Debug)]
@@ -80,6 +82,7 @@ pub struct Summary {
     /// Tile outlines read over the run, of the tiles in the set as opened.
     pub outlines_read: u64,
     pub tiles: u64,
+    pub pool_planned_from: u64,
     pub gpu_ms_median: Option<f64>,
     pub gpu_draw_ms_median: Option<f64>,
     pub cpu_ms_median: f64,
@@ -217,6 +220,7 @@ impl Summary {
             tiles_failed: run.tiles_failed,
             outlines_read: run.outlines_read,
             tiles: run.tiles,
+            pool_planned_from: run.pool_planned_from,
             gpu_ms_median: (!gpu.is_empty()).then(|| percentile(&gpu, 50.0)),
             gpu_draw_ms_median: (!draw.is_empty()).then(|| percentile(&draw, 50.0)),
             cpu_ms_median: percentile(&cpu, 50.0),
