@@ -171,6 +171,16 @@ fn max_measured(records: &[FrameRecord], f: fn(&FrameRecord) -> f64) -> Option<f
 }
 
 /// A per-frame measure over the frames that measured it, in increasing order.
+/// The frames a flight took to warm up, and the tile-frames drawn coarser after them
+/// (`memory::sim::cold_start`).
+fn cold_start(records: &[FrameRecord]) -> (u64, u64) {
+    let per_frame: Vec<(u64, u64)> = records
+        .iter()
+        .map(|r| (r.tiles_coarser, r.tiles_missing))
+        .collect();
+    memory::sim::cold_start(&per_frame)
+}
+
 fn sorted_by(records: &[FrameRecord], f: fn(&FrameRecord) -> f64) -> Vec<f64> {
     let mut v: Vec<f64> = records.iter().map(f).filter(|x| !x.is_nan()).collect();
     v.sort_by(f64::total_cmp);
@@ -192,11 +202,7 @@ impl Summary {
             .sum();
         let sum = |f: fn(&FrameRecord) -> u64| records.iter().map(f).sum::<u64>();
         let median = percentile(&ms, 50.0);
-        let per_frame: Vec<(u64, u64)> = records
-            .iter()
-            .map(|r| (r.tiles_coarser, r.tiles_missing))
-            .collect();
-        let (warmup_frames, tiles_coarser_warm) = memory::sim::cold_start(&per_frame);
+        let (warmup_frames, tiles_coarser_warm) = cold_start(records);
         Summary {
             frames: records.len(),
             device: run.device.clone(),
