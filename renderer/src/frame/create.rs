@@ -253,7 +253,8 @@ fn make_parts(
     }
     if decodes_on_gpu(terrain, options) {
         // At most every level of every tile a frame (a new tile sends its levels up to the
-        // one wanted whatever the budget).
+        // one wanted whatever the budget), and of no more tiles than a frame may draw: a set
+        // larger than that reaches it only through prefetching, which the budget bounds.
         let levels = terrain.levels.max(1) as usize;
         let capacity = terrain.tiles.len().min(MAX_RECORDS) * levels + 8;
         let streams: Vec<&Buffer> = parts.slots.iter().map(|s| s.staging.buffer()).collect();
