@@ -59,6 +59,18 @@ fn cameras(terrain: &Terrain, rng: &mut splitmix::Rng) -> Vec<Camera> {
     out
 }
 
+/// A camera `up` times the set's width above the middle of it, looking straight down.
+fn straight_down(terrain: &Terrain, up: f64, fov_y: f64) -> Camera {
+    let (lo, hi) = terrain.bounds();
+    let centre = (lo + hi) * 0.5;
+    Camera {
+        position: DVec3::new(centre.x, centre.y, hi.z + up * (hi.x - lo.x)),
+        yaw: 0.0,
+        pitch: -std::f64::consts::FRAC_PI_2 + 1e-3,
+        fov_y,
+    }
+}
+
 /// For each base tile (row-major), how many of the cut's tiles cover it.
 fn cover(pyramid: &Terrain, c: &Cut) -> Vec<u32> {
     let mut covered = vec![0u32; pyramid.base().len()];
@@ -120,14 +132,8 @@ fn a_cut_reads_the_tiles_it_reaches_not_the_set() {
     let pyramid = open();
     assert_eq!(pyramid.tiles.outlines_read(), 0, "the open reads no tile");
     let (lo, hi) = pyramid.bounds();
-    let centre = (lo + hi) * 0.5;
     let extent = hi.x - lo.x;
-    let far = Camera {
-        position: DVec3::new(centre.x, centre.y, hi.z + 3.0 * extent),
-        yaw: 0.0,
-        pitch: -std::f64::consts::FRAC_PI_2 + 1e-3,
-        fov_y: 0.8,
-    };
+    let far = straight_down(&pyramid, 3.0, 0.8);
     let near = Camera {
         position: DVec3::new(lo.x + 0.05 * extent, lo.y + 0.05 * extent, hi.z + 500.0),
         yaw: std::f64::consts::FRAC_PI_4,
@@ -158,14 +164,8 @@ fn far_views_take_the_top_tile_and_near_views_the_base_grid() {
     let pyramid = Terrain::open_pyramid(&set).expect("open");
     let (lo, hi) = pyramid.bounds();
     let centre = (lo + hi) * 0.5;
-    let extent = hi.x - lo.x;
     // High above the middle, looking straight down at all of it: one tile, the top one.
-    let far = Camera {
-        position: DVec3::new(centre.x, centre.y, hi.z + 40.0 * extent),
-        yaw: 0.0,
-        pitch: -std::f64::consts::FRAC_PI_2 + 1e-3,
-        fov_y: 0.5,
-    };
+    let far = straight_down(&pyramid, 40.0, 0.5);
     let c = cut(&pyramid, &far.view(EXTENT.0, EXTENT.1), far.position, 1.0);
     assert_eq!(c.nodes.len(), 1, "{:?}", c.nodes);
     assert_eq!(c.nodes[0].layer, pyramid.top());

@@ -26,6 +26,30 @@ fn puget() -> (tempfile::TempDir, Terrain) {
     (dir, terrain)
 }
 
+/// The Puget sample built in `dir`, and a copy of it named `name` whose bytes `damage` changed,
+/// given the sample opened and tile `at`'s directory entry, then resealed where `reseal` says
+/// (its checksums recomputed, so that only the semantic checks can see the damage).
+fn damaged_puget(
+    dir: &Path,
+    name: &str,
+    at: (u32, u32),
+    reseal: bool,
+    damage: impl FnOnce(&mut [u8], &tiles::TileSet, tiles::format::DirEntry),
+) -> (std::path::PathBuf, std::path::PathBuf) {
+    let set = common::puget(dir);
+    let mut bytes = std::fs::read(&set).expect("read");
+    let ts = tiles::TileSet::open(&set).expect("open");
+    let entry = ts.dir_entry(at.0, at.1).expect("entry");
+    damage(&mut bytes, &ts, entry);
+    drop(ts);
+    if reseal {
+        tiles::format::reseal(&mut bytes).expect("reseal");
+    }
+    let damaged = dir.join(name);
+    std::fs::write(&damaged, &bytes).expect("write");
+    (set, damaged)
+}
+
 /// Cameras along both generated paths, and a few looking straight down and away.
 fn cameras(terrain: &Terrain) -> Vec<Camera> {
     let mut out = Vec::new();
@@ -616,16 +640,10 @@ fn the_placed_level_stays_within_every_part_that_draws_the_vertex() {
 #[test]
 fn a_damaged_tile_opens_and_fails_its_check_when_first_needed() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let set = common::puget(dir.path());
-    let mut bytes = std::fs::read(&set).expect("read");
-    let ts = tiles::TileSet::open(&set).expect("open");
-    let e = ts.dir_entry(2, 1).expect("entry");
-    drop(ts);
-    // A byte near the end of the blob: the finest level's data, far from the outline.
-    let at = (e.offset + e.len - 64) as usize;
-    bytes[at] ^= 0x5a;
-    let damaged = dir.path().join("damaged.vkt");
-    std::fs::write(&damaged, &bytes).expect("write");
+    let (_, damaged) = damaged_puget(dir.path(), "damaged.vkt", (2, 1), false, |bytes, _, e| {
+        // A byte near the end of the blob: the finest level's data, far from the outline.
+        bytes[(e.offset + e.len - 64) as usize] ^= 0x5a;
+    });
     let terrain = Terrain::open(&damaged).expect("a damaged tile's data does not stop the open");
     assert!(
         terrain.tiles.iter().all(|t| t.usable().is_none()),
@@ -673,17 +691,11 @@ fn a_damaged_tile_opens_and_fails_its_check_when_first_needed() {
 #[test]
 fn a_tile_whose_outline_does_not_read_fails_its_check_when_first_needed() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let set = common::puget(dir.path());
-    let mut bytes = std::fs::read(&set).expect("read");
-    let ts = tiles::TileSet::open(&set).expect("open");
-    let e = ts.dir_entry(2, 1).expect("entry");
-    drop(ts);
-    // The tile header's column (after its 4-byte magic).
-    let at = e.offset as usize + 4;
-    bytes[at..at + 4].copy_from_slice(&3u32.to_le_bytes());
-    tiles::format::reseal(&mut bytes).expect("reseal");
-    let damaged = dir.path().join("outline.vkt");
-    std::fs::write(&damaged, &bytes).expect("write");
+    let (_, damaged) = damaged_puget(dir.path(), "outline.vkt", (2, 1), true, |bytes, _, e| {
+        // The tile header's column (after its 4-byte magic).
+        let at = e.offset as usize + 4;
+        bytes[at..at + 4].copy_from_slice(&3u32.to_le_bytes());
+    });
     let terrain = Terrain::open(&damaged).expect("a damaged outline does not stop the open");
     assert_eq!(terrain.tiles.outlines_read(), 0, "the open reads no tile");
     let broken = terrain.tile_index(2, 1).expect("tile 2,1");
@@ -805,24 +817,20 @@ fn tiles_read_as_asked_for_share_their_side_and_corner_tables() {
 #[test]
 fn a_tiles_finer_levels_are_checked_when_first_needed() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let set = common::puget(dir.path());
-    let mut bytes = std::fs::read(&set).expect("read");
-    let ts = tiles::TileSet::open(&set).expect("open");
-    let entry = ts.dir_entry(2, 1).expect("entry");
-    let level = ts
-        .tile(2, 1)
-        .expect("tile")
-        .level(6)
-        .expect("level 6")
-        .entry;
-    drop(ts);
-    // Swap the first fan's second and third ring entries: the ring no longer walks its cell.
-    let w = level.index_width as usize;
-    let at = entry.offset as usize + level.index_offset as usize;
-    bytes[at + 2 * w..at + 4 * w].rotate_left(w);
-    tiles::format::reseal(&mut bytes).expect("reseal");
-    let broken_set = dir.path().join("broken.vkt");
-    std::fs::write(&broken_set, &bytes).expect("write");
+    let (set, broken_set) =
+        damaged_puget(dir.path(), "broken.vkt", (2, 1), true, |bytes, ts, e| {
+            let level = ts
+                .tile(2, 1)
+                .expect("tile")
+                .level(6)
+                .expect("level 6")
+                .entry;
+            // Swap the first fan's second and third ring entries: the ring no longer walks its
+            // cell.
+            let w = level.index_width as usize;
+            let at = e.offset as usize + level.index_offset as usize;
+            bytes[at + 2 * w..at + 4 * w].rotate_left(w);
+        });
 
     let terrain = Terrain::open(&broken_set).expect("open");
     let broken = terrain.tile_index(2, 1).expect("tile 2,1");
