@@ -33,15 +33,21 @@ pub struct ClassPlan {
 impl ClassPlan {
     /// Plans classes for tiles that need `needs[t][l]` bytes to hold levels `0..=l`, within
     /// `budget` bytes.
-    pub fn new(needs: &[Vec<u64>], budget: u64, ratio: f64) -> ClassPlan {
+    pub fn new<N: AsRef<[u64]>>(needs: &[N], budget: u64, ratio: f64) -> ClassPlan {
         ClassPlan::weighted(needs, 1, budget, ratio)
     }
 
     /// [`ClassPlan::new`] for a sample of a set's tiles, each standing for `weight` tiles: its
     /// votes, and its tiles' level-0 chunks, count `weight` times (with a weight of 1, the
     /// plan of exactly these tiles).
-    pub fn weighted(needs: &[Vec<u64>], weight: u64, budget: u64, ratio: f64) -> ClassPlan {
-        let largest = needs.iter().flatten().copied().max().unwrap_or(0);
+    pub fn weighted<N: AsRef<[u64]>>(
+        needs: &[N],
+        weight: u64,
+        budget: u64,
+        ratio: f64,
+    ) -> ClassPlan {
+        let all = || needs.iter().flat_map(|t| t.as_ref().iter().copied());
+        let largest = all().max().unwrap_or(0);
         let ratio = ratio.max(1.1);
         let mut sizes = vec![MIN_CLASS];
         while sizes[sizes.len() - 1] < largest {
@@ -50,7 +56,7 @@ impl ClassPlan {
             sizes.push(next);
         }
         let mut votes = vec![0u64; sizes.len()];
-        for &need in needs.iter().flatten() {
+        for need in all() {
             votes[class_for(&sizes, need).unwrap_or(sizes.len() - 1)] += weight;
         }
         let everything: u64 = votes.iter().zip(&sizes).map(|(v, s)| v * s).sum();
@@ -60,7 +66,7 @@ impl ClassPlan {
             let mut counts = vec![0u32; sizes.len()];
             let mut reserved = 0;
             'presence: for t in needs {
-                let Some(c) = t.first().and_then(|&n| class_for(&sizes, n)) else {
+                let Some(c) = t.as_ref().first().and_then(|&n| class_for(&sizes, n)) else {
                     continue;
                 };
                 for _ in 0..weight {

@@ -3,10 +3,10 @@
 //! mirror set with its pyramid) is too large to read every tile's level table before the first
 //! frame, and a flight needs the few hundred its cuts reach.
 //!
-//! The pool's size classes are planned from a sample of the tiles ([`Costs::sample`]): every
-//! tile of a set of at most [`SAMPLE_TILES`], which plans exactly what the whole set does;
-//! beyond that, tiles at a regular stride through the index space (every pyramid layer in
-//! proportion), each standing for `stride` tiles.
+//! The pool's size classes are planned from a sample of the tiles ([`sample`]): every tile of a
+//! set of at most [`SAMPLE_TILES`] (by default), which plans exactly what the whole set does;
+//! beyond that, one tile in each run of `stride` tiles through the index space (every pyramid
+//! layer in proportion), each standing for its run.
 
 use std::ops::Index;
 use std::sync::OnceLock;
@@ -101,9 +101,9 @@ impl Costs {
 
 /// The tiles of a set of `count` that a plan reads, and how many tiles each stands for: every
 /// tile up to `at_most` ([`SAMPLE_TILES`] by default), else one tile of each run of `stride`
-/// tiles, at an offset in the
-/// run drawn from a fixed hash of the run (a tile grid is often periodic, a mirror tiling
-/// always, and every `stride`-th tile alone can fall on one column of the period).
+/// tiles, at an offset in the run drawn from a fixed hash of the run (a tile grid is often
+/// periodic, a mirror tiling always, and every `stride`-th tile alone can fall on one column
+/// of the period).
 pub fn sample(count: usize, at_most: usize) -> (Vec<TileId>, u64) {
     let stride = count.div_ceil(at_most.max(1)).max(1);
     let tiles = (0..count)
@@ -127,14 +127,21 @@ fn mix(k: u64) -> u64 {
 
 impl Known {
     fn new(cost: TileCost, scheme: Scheme) -> Known {
-        let needs = (0..=cost.finest())
-            .map(|l| match scheme {
-                Scheme::WholeTile => cost.whole_layout().bytes,
-                _ => cost.need(l),
-            })
-            .collect();
-        Known { cost, needs }
+        Known {
+            needs: needs_of(&cost, scheme),
+            cost,
+        }
     }
+}
+
+/// Bytes a chunk needs to hold `cost`'s tile up to each level under `scheme`.
+pub(crate) fn needs_of(cost: &TileCost, scheme: Scheme) -> Vec<u64> {
+    (0..=cost.finest())
+        .map(|l| match scheme {
+            Scheme::WholeTile => cost.whole_layout().bytes,
+            _ => cost.need(l),
+        })
+        .collect()
 }
 
 impl Index<usize> for Costs {

@@ -318,28 +318,32 @@ pub struct Manager {
 impl Manager {
     /// Plans the pool for `tiles` (size classes and counts from their size histogram).
     pub fn new(tiles: Vec<TileCost>, config: Config) -> Manager {
-        let needs = Self::needs(&tiles, config.scheme);
-        let classes = ClassPlan::new(&needs, config.pool_bytes, config.class_ratio);
-        Self::with_classes(tiles, config, classes)
+        Self::planned(Costs::given(tiles, config.scheme), config)
     }
 
     /// Plans the pool for `count` tiles whose costs `source` gives the first time the manager
     /// needs them: size classes and counts from the histogram of a sample of about `at_most`
     /// of them ([`crate::costs::sample`]; every tile of a set of up to `at_most`, as
-    /// [`Manager::new`] plans; [`crate::costs::SAMPLE_TILES`] by default). A tile of a larger set that outgrows every class the sample
-    /// planned is drawn at the finest level that fits one (counted as coarser).
+    /// [`Manager::new`] plans; [`crate::costs::SAMPLE_TILES`] by default). A tile of a larger
+    /// set that outgrows every class the sample planned is drawn at the finest level that fits
+    /// one (counted as coarser).
     pub fn from_source(
         count: usize,
         source: CostSource,
         config: Config,
         at_most: usize,
     ) -> Manager {
-        let tiles = Costs::from_source(count, source, config.scheme, at_most);
+        Self::planned(
+            Costs::from_source(count, source, config.scheme, at_most),
+            config,
+        )
+    }
+
+    /// The pool for `tiles`, its classes planned from the tiles' sample (all of them where
+    /// their costs were given).
+    fn planned(tiles: Costs, config: Config) -> Manager {
         let (sample, weight) = tiles.sample();
-        let needs: Vec<Vec<u64>> = sample
-            .iter()
-            .map(|&t| tiles.needs(t as usize).to_vec())
-            .collect();
+        let needs: Vec<&[u64]> = sample.iter().map(|&t| tiles.needs(t as usize)).collect();
         let classes = ClassPlan::weighted(&needs, weight, config.pool_bytes, config.class_ratio);
         Self::carved(tiles, config, classes)
     }
@@ -348,14 +352,7 @@ impl Manager {
     pub fn needs(tiles: &[TileCost], scheme: Scheme) -> Vec<Vec<u64>> {
         tiles
             .iter()
-            .map(|t| {
-                (0..=t.finest())
-                    .map(|l| match scheme {
-                        Scheme::WholeTile => t.whole_layout().bytes,
-                        _ => t.need(l),
-                    })
-                    .collect()
-            })
+            .map(|t| crate::costs::needs_of(t, scheme))
             .collect()
     }
 
@@ -523,7 +520,9 @@ impl Manager {
                     continue;
                 }
                 let wanted = r.wanted.min(self.tiles[r.tile as usize].finest());
-                if spent.saturating_add(self.presence_bound(r.tile)) > self.staging_cap {
+                if self.staging_cap < u64::MAX
+                    && spent.saturating_add(self.presence_bound(r.tile)) > self.staging_cap
+                {
                     continue;
                 }
                 let Some(res) = self.admit(r.tile, wanted, &mut plan) else {

@@ -18,19 +18,25 @@ use tiles::mesh::TILE_CELLS;
 use crate::levels::LevelTable;
 use crate::tile::{Side, TileInfo};
 
-/// One layer of the tiles: where its tiles start in the index space, its grid and its view of
-/// the file.
+/// One layer of the tiles a terrain holds.
 #[derive(Clone)]
-pub(crate) struct Grid {
+pub struct Layer {
+    /// Its first tile's index in [`crate::terrain::Terrain::tiles`]; its tiles follow,
+    /// row-major.
     pub first: usize,
     pub tiles_x: u32,
     pub tiles_y: u32,
+    /// The layer's view of the file (its directory, spacing and height lattice).
     pub set: TileSet,
 }
 
-impl Grid {
-    fn len(&self) -> usize {
+impl Layer {
+    pub fn len(&self) -> usize {
         (self.tiles_x * self.tiles_y) as usize
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
     }
 }
 
@@ -51,7 +57,7 @@ pub struct Outline {
 /// The tiles of every layer opened, in one index space (the base grid's first, row-major, then
 /// each pyramid layer's), read as they are first asked for.
 pub struct Tiles {
-    grids: Vec<Grid>,
+    layers: Vec<Layer>,
     infos: Box<[OnceLock<Box<TileInfo>>]>,
     /// Outlines read so far, kept: a tile's neighbours' level tables go into its side tables,
     /// so most outlines are asked for by up to nine tiles.
@@ -60,10 +66,10 @@ pub struct Tiles {
 }
 
 impl Tiles {
-    pub(crate) fn new(grids: Vec<Grid>) -> Tiles {
-        let n = grids.iter().map(Grid::len).sum();
+    pub(crate) fn new(layers: Vec<Layer>) -> Tiles {
+        let n = layers.iter().map(Layer::len).sum();
         Tiles {
-            grids,
+            layers,
             infos: (0..n).map(|_| OnceLock::new()).collect(),
             outlines: (0..n).map(|_| OnceLock::new()).collect(),
             read: AtomicUsize::new(0),
@@ -103,18 +109,18 @@ impl Tiles {
     /// The layer holding tile `i`, and the tile's column and row in it.
     pub fn place(&self, i: usize) -> (u32, u32, u32) {
         let p = self
-            .grids
+            .layers
             .iter()
             .rposition(|g| g.first <= i)
             .expect("layer 0 starts at 0");
-        let g = &self.grids[p];
+        let g = &self.layers[p];
         let k = (i - g.first) as u32;
         (p as u32, k % g.tiles_x, k / g.tiles_x)
     }
 
     /// The index of layer `p`'s tile at column `tx + dx`, row `ty + dy`, if there is one.
     pub fn at(&self, p: u32, tx: u32, ty: u32, (dx, dy): (i64, i64)) -> Option<usize> {
-        let g = &self.grids[p as usize];
+        let g = &self.layers[p as usize];
         let x = u32::try_from(i64::from(tx) + dx).ok()?;
         let y = u32::try_from(i64::from(ty) + dy).ok()?;
         (x < g.tiles_x && y < g.tiles_y).then(|| g.first + (y * g.tiles_x + x) as usize)
@@ -126,7 +132,7 @@ impl Tiles {
         self.outlines[i].get_or_init(|| {
             self.read.fetch_add(1, Ordering::Relaxed);
             let (p, tx, ty) = self.place(i);
-            let set = &self.grids[p as usize].set;
+            let set = &self.layers[p as usize].set;
             Box::new(read_outline(set, tx, ty).unwrap_or_else(|e| placeholder(set, tx, ty, e)))
         })
     }

@@ -18,7 +18,8 @@ use glam::DVec3;
 use tiles::format::{LevelEntry, TileSet};
 use tiles::mesh::{TILE_CELLS, TILE_SIZE};
 
-use crate::store::{Grid, Tiles};
+pub use crate::store::Layer;
+use crate::store::Tiles;
 use crate::tile::{rebase, Paged, Side, Sides, TileInfo, HEIGHT_CELLS};
 
 pub struct Terrain {
@@ -62,26 +63,6 @@ pub struct Terrain {
     /// Pyramid layers' coarse height maps read so far, by layer, column and row
     /// ([`Terrain::max_height_near`]; the base grid's are its tiles').
     layer_heights: Mutex<HashMap<(u32, u32, u32), [f32; HEIGHT_CELLS * HEIGHT_CELLS]>>,
-}
-
-/// One layer of the tiles a terrain holds.
-pub struct Layer {
-    /// Its first tile's index in [`Terrain::tiles`]; its tiles follow, row-major.
-    pub first: usize,
-    pub tiles_x: u32,
-    pub tiles_y: u32,
-    /// The layer's view of the file (its directory, spacing and height lattice).
-    pub set: TileSet,
-}
-
-impl Layer {
-    pub fn len(&self) -> usize {
-        (self.tiles_x * self.tiles_y) as usize
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
 }
 
 impl Terrain {
@@ -141,19 +122,10 @@ impl Terrain {
                 layer
             })
             .collect();
-        let grids = layers
-            .iter()
-            .map(|l| Grid {
-                first: l.first,
-                tiles_x: l.tiles_x,
-                tiles_y: l.tiles_y,
-                set: l.set.clone(),
-            })
-            .collect();
         let set = layers[0].set.clone();
         let h = *set.header();
         Terrain {
-            tiles: Arc::new(Tiles::new(grids)),
+            tiles: Arc::new(Tiles::new(layers.clone())),
             texture: set.texture_layout(),
             set,
             layers,
@@ -628,11 +600,7 @@ impl Terrain {
 
     /// The tile across `side` of `tile`, if the set has one.
     pub fn neighbour(&self, tile: &TileInfo, side: Side) -> Option<usize> {
-        let (dx, dy) = side.step();
-        let (x, y) = (i64::from(tile.tx) + dx, i64::from(tile.ty) + dy);
-        let x = u32::try_from(x).ok()?;
-        let y = u32::try_from(y).ok()?;
-        self.tile_in(tile.layer, x, y)
+        self.tiles.at(tile.layer, tile.tx, tile.ty, side.step())
     }
 
     /// What each tile costs in GPU memory, level by level (the memory manager's view). A

@@ -388,7 +388,7 @@ fn slot_sizes(
 ) -> SlotSizes {
     let textures = split.textures.config();
     SlotSizes {
-        stitch: stitch_bound(terrain, options),
+        stitch: stitch_bound(terrain, manager),
         records: RECORDS_OFFSET + RECORD_BYTES * terrain.tiles.len().clamp(1, MAX_RECORDS) as u64,
         // Every tile at most once a frame, at its finest level at most.
         heights: if options.read_back_heights {
@@ -501,9 +501,10 @@ pub(super) fn tile_costs(manager: &Manager) -> Vec<memory::TileCost> {
 
 /// Bytes of stitch geometry a frame can need at most: every pair of neighbouring tiles, each
 /// side at its longest border (a 4-index fan per triangle, fewer triangles than vertices), as
-/// the level tables say: summed over the tiles the pool is planned from, each for the tiles it
-/// stands for (`memory::costs`; every tile of a set of up to `MemoryOptions::plan_sample`).
-fn stitch_bound(terrain: &Terrain, options: &MemoryOptions) -> u64 {
+/// the level tables say: summed over the tiles the pool was planned from, each for the tiles it
+/// stands for (`Manager::planned_from`; every tile of a set of up to
+/// `MemoryOptions::plan_sample`).
+fn stitch_bound(terrain: &Terrain, manager: &Manager) -> u64 {
     let longest = |t: usize, side: Side| {
         terrain
             .tiles
@@ -516,7 +517,7 @@ fn stitch_bound(terrain: &Terrain, options: &MemoryOptions) -> u64 {
             // A side holds at most a vertex per sample (a tile not checked yet may say more).
             .min(u64::from(tiles::mesh::TILE_CELLS) + 1)
     };
-    let (sample, weight) = memory::costs::sample(terrain.tiles.len(), options.plan_sample);
+    let (sample, weight) = manager.planned_from();
     let mut bytes = 0;
     for i in sample.into_iter().map(|t| t as usize) {
         let (layer, tx, ty) = terrain.tiles.place(i);

@@ -1846,8 +1846,10 @@ pub(crate) fn settle(
                         colour
                             .is_none_or(|c| (g % tiles_x as usize + g / tiles_x as usize) % 2 == c)
                     })
-                    .filter(|&t| remesh == Remesh::NextToChange || stale(t, state, &meshed_with))
                     .map(|t| (t, forced(t, state)))
+                    .filter(|(t, f)| {
+                        remesh == Remesh::NextToChange || meshed_with[*t].as_ref() != Some(f)
+                    })
                     .collect();
                 rebuilt += batch.len() as u64;
                 let meshed: Vec<(usize, CompactSides, Vec<f64>)> = batch
