@@ -140,8 +140,8 @@ pub struct Cli {
     /// tile), or auto: gpu on a GPU, cpu on a software rasteriser such as lavapipe, whose
     /// compute runs on the same cores, slower than the native decoder. Other sets send
     /// positions either way.
-    #[arg(long, value_enum, default_value_t = DecodeArg::Auto)]
-    pub decode: DecodeArg,
+    #[arg(long, value_enum, default_value_t = Where::Auto)]
+    pub decode: Where,
     /// How tile levels travel: progressive (new blocks and one index array per refinement),
     /// per-level (each level from scratch) or whole-tile (every level at once, the old scheme).
     /// --draw-only uses whole-tile, so that every pre-recorded frame finds its levels.
@@ -152,6 +152,13 @@ pub struct Cli {
     /// from the file like the blocks (the comparison).
     #[arg(long, value_enum, default_value_t = IndexArraysArg::Built)]
     pub index_arrays: IndexArraysArg,
+    /// Who builds the built index arrays: gpu (a compute pass from the resident vertex
+    /// blocks), cpu (the renderer makes each from the tile's checked levels and the frame
+    /// copies it into place), or auto: gpu on a GPU, cpu on a software rasteriser such as
+    /// lavapipe, whose compute runs each build on one of the same cores, slower than the
+    /// native code.
+    #[arg(long, value_enum, default_value_t = Where::Auto)]
+    pub index_builder: Where,
     /// Measure each frame's screen-space error against this DEM (the one the tile set was
     /// built from; with --source-spacing / --source-vertical-scale as given to tiletool):
     /// log column max_error_px. Slow (every sample of the drawn tiles, on the CPU); headless.
@@ -431,8 +438,9 @@ pub enum IndexArraysArg {
     Sent,
 }
 
+/// Where a step runs: on the GPU, on the CPU, or where the device says it pays.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum DecodeArg {
+pub enum Where {
     Auto,
     Gpu,
     Cpu,
@@ -498,7 +506,13 @@ impl Cli {
     /// Whether the device decides where a compact set's levels are decoded
     /// ([`renderer::settings::decode_pays_on`]): `--decode auto`.
     pub fn decode_by_device(&self) -> bool {
-        self.decode == DecodeArg::Auto
+        self.decode == Where::Auto
+    }
+
+    /// Whether the device decides who builds index arrays
+    /// ([`renderer::settings::builds_pay_on`]): `--index-builder auto`.
+    pub fn builder_by_device(&self) -> bool {
+        self.index_builder == Where::Auto
     }
 
     /// GPU memory, uploads and prefetching; `textures`: whether texture slots are wanted.
@@ -542,7 +556,8 @@ impl Cli {
             morph_rows: self.morph_rows || self.morph_shader != MorphShaderArg::Hierarchical,
             // Where the user did not choose, the device does once it is known
             // (`Cli::decode_by_device`).
-            decode_on_gpu: self.decode != DecodeArg::Cpu,
+            decode_on_gpu: self.decode != Where::Cpu,
+            build_on_gpu: self.index_builder != Where::Cpu,
             plan_sample: self.plan_sample,
         })
     }

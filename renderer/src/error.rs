@@ -40,6 +40,9 @@ pub enum FrameError {
     /// The index builder addresses the pool in 32-bit words.
     #[error("pool offset {bytes} past 32-bit indexing")]
     PastIndexing { bytes: u64 },
+    /// An index array made on the CPU did not come out as the tile's tables say.
+    #[error("tile #{tile}: the index array made from its checked levels: {what}")]
+    MadeArray { tile: usize, what: String },
     #[error("{builds} index builds in one frame (room for {capacity})")]
     TooManyBuilds { builds: usize, capacity: usize },
     #[error("{decodes} compact levels to decode in one frame (room for {capacity})")]

@@ -48,6 +48,10 @@ pub enum Fault {
     /// `decode-count`: every compact level the GPU decodes is said to hold one vertex more
     /// than it does, which the decoder refuses (the refusal path's test).
     DecodeCount,
+    /// `made-skip`: the index arrays made on the CPU are never copied into the pool, so their
+    /// draws read whatever their regions held before (the control of the made arrays' pixel
+    /// test).
+    MadeSkip,
 }
 
 impl Fault {
@@ -69,6 +73,7 @@ impl Fault {
             "no-stand-in-balance" => Some(Fault::NoStandInBalance),
             "decode-skip" => Some(Fault::DecodeSkip),
             "decode-count" => Some(Fault::DecodeCount),
+            "made-skip" => Some(Fault::MadeSkip),
             _ => {
                 let number = |prefix: &str| v.strip_prefix(prefix).and_then(|n| n.parse().ok());
                 number("device-lost-at-")

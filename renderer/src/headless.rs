@@ -96,8 +96,10 @@ pub struct FlightResult {
     pub texture_bytes: u64,
     /// Uploads went through the staging ring.
     pub staging: bool,
-    /// Index arrays were built on the GPU (else sent from the file).
+    /// Index arrays were built (else sent from the file), and made on the CPU rather than by
+    /// the GPU's builder.
     pub built_indices: bool,
+    pub made_indices: bool,
     /// A compact set's levels were sent as their streams and decoded on the GPU.
     pub decoded_levels: bool,
     /// How long drawing the first view before the flight took (ms; None: not primed).
@@ -152,6 +154,7 @@ pub fn fly(
     let texture_bytes = renderer.texture_bytes();
     let staging = !renderer.pool().direct();
     let built_indices = renderer.builds_indices();
+    let made_indices = renderer.makes_indices();
     let decoded_levels = renderer.decodes_levels();
     renderer.destroy(gpu);
     Ok(FlightResult {
@@ -162,6 +165,7 @@ pub fn fly(
         texture_bytes,
         staging,
         built_indices,
+        made_indices,
         decoded_levels,
         prime_ms,
         first_view_check_ms,

@@ -212,6 +212,7 @@ fn fly_path(
             settings,
             parts_by_device,
             decode_by_device: cli.decode_by_device(),
+            builder_by_device: cli.builder_by_device(),
             memory,
             trace: cli.trace.is_some(),
             frames: cli.frames,
@@ -240,6 +241,9 @@ fn fly_path(
     }
     if cli.decode_by_device() {
         memory.decode_on_gpu = settings::decode_pays_on(gpu.properties.device_type);
+    }
+    if cli.builder_by_device() {
+        memory.build_on_gpu = settings::builds_pay_on(gpu.properties.device_type);
     }
     let part_by_part = settings.geomorph && settings.part_by_part;
     let flight = Flight {
@@ -319,6 +323,11 @@ fn finish(
             "built"
         } else {
             "sent"
+        },
+        index_builder: match (result.built_indices, result.made_indices) {
+            (false, _) => "none",
+            (true, false) => "gpu",
+            (true, true) => "cpu",
         },
         levels_decoded_on: match (terrain.has_streams(), result.decoded_levels) {
             (false, _) => "none",

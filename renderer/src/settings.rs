@@ -173,6 +173,11 @@ pub struct MemoryOptions {
     /// the tile's check are sent, as for other sets. Where the user did not choose, the device
     /// decides ([`decode_pays_on`]).
     pub decode_on_gpu: bool,
+    /// Built index arrays (`index_arrays`) are made by the GPU's builder, a compute pass over
+    /// the resident blocks (`vulkan::indices`); false: the CPU makes each from the tile's
+    /// checked levels and the frame copies it into place (`frame::made`). Where the user did
+    /// not choose, the device decides ([`builds_pay_on`]).
+    pub build_on_gpu: bool,
     /// The most tiles the GPU pool, the staging memory and the stitch buffer are sized from:
     /// every tile of a set of up to this many, else one in each run of `tiles / plan_sample`
     /// (`memory::costs::sample`), so that a set of any size opens without reading every
@@ -198,9 +203,20 @@ impl Default for MemoryOptions {
             read_back_heights: false,
             morph_rows: false,
             decode_on_gpu: true,
+            build_on_gpu: true,
             plan_sample: memory::costs::SAMPLE_TILES,
         }
     }
+}
+/// Whether index arrays are best built by the GPU's builder on a device of this type, when the
+/// user has not chosen (`--index-builder`). On a GPU a build is a dispatch over the blocks
+/// already resident, and no index crosses the bus. On a software rasteriser the "GPU" is the
+/// same cores, and the builder's workgroup (one per array) runs on one of them: on lavapipe a
+/// build took 6-13 ms of the frame's GPU time on the demo flight (7-21 ms a frame, 7-17% of
+/// it), where the CPU makes the same array from the tile's checked levels in well under a
+/// millisecond and a copy puts it in place (bench/README.md, "Index arrays made on the CPU").
+pub fn builds_pay_on(device: ash::vk::PhysicalDeviceType) -> bool {
+    device != ash::vk::PhysicalDeviceType::CPU
 }
 
 /// The share of the GPU budget texture slots take by default.
@@ -210,7 +226,15 @@ pub const DEFAULT_TEXTURE_SHARE: f64 = 0.25;
 mod tests {
     use ash::vk::PhysicalDeviceType as Kind;
 
-    use super::{decode_pays_on, parts_pay_on};
+    use super::{builds_pay_on, decode_pays_on, parts_pay_on};
+
+    #[test]
+    fn index_arrays_are_built_on_the_gpu_except_on_a_software_rasteriser() {
+        assert!(!builds_pay_on(Kind::CPU));
+        for gpu in [Kind::DISCRETE_GPU, Kind::INTEGRATED_GPU, Kind::VIRTUAL_GPU] {
+            assert!(builds_pay_on(gpu), "{gpu:?}");
+        }
+    }
 
     #[test]
     fn compact_levels_decode_on_the_gpu_except_on_a_software_rasteriser() {

@@ -34,6 +34,8 @@ pub struct WindowOptions {
     pub parts_by_device: bool,
     /// The device decides `memory.decode_on_gpu` ([`crate::settings::decode_pays_on`]).
     pub decode_by_device: bool,
+    /// The device decides `memory.build_on_gpu` ([`crate::settings::builds_pay_on`]).
+    pub builder_by_device: bool,
     pub memory: MemoryOptions,
     /// Keep every frame's requests (`--trace`).
     pub trace: bool,
@@ -76,6 +78,7 @@ struct App<'a> {
     texture_bytes: u64,
     staging: bool,
     built_indices: bool,
+    made_indices: bool,
     decoded_levels: bool,
 }
 
@@ -99,6 +102,9 @@ pub fn run(
     }
     if options.decode_by_device {
         options.memory.decode_on_gpu = settings::decode_pays_on(gpu.properties.device_type);
+    }
+    if options.builder_by_device {
+        options.memory.build_on_gpu = settings::builds_pay_on(gpu.properties.device_type);
     }
     let camera = options.start;
     let mut app = App {
@@ -125,6 +131,7 @@ pub fn run(
         texture_bytes: 0,
         staging: false,
         built_indices: false,
+        made_indices: false,
         decoded_levels: false,
     };
     let result = terrain.with_checks_ahead(|| event_loop.run_app(&mut app));
@@ -166,6 +173,7 @@ pub fn run(
         texture_bytes: app.texture_bytes,
         staging: app.staging,
         built_indices: app.built_indices,
+        made_indices: app.made_indices,
         decoded_levels: app.decoded_levels,
         prime_ms: None,
         first_view_check_ms: 0.0,
@@ -189,6 +197,7 @@ impl App<'_> {
             self.texture_bytes = r.texture_bytes();
             self.staging = !r.pool().direct();
             self.built_indices = r.builds_indices();
+            self.made_indices = r.makes_indices();
             self.decoded_levels = r.decodes_levels();
             r.destroy(&self.gpu);
         }

@@ -26,8 +26,8 @@ fn compact_puget(dir: &Path) -> PathBuf {
     out
 }
 
-/// Three frames over `set`, its levels decoded on the GPU, with `fault` injected: the exit
-/// code and stderr.
+/// Three frames over `set`, its levels decoded on the GPU and its index arrays built there,
+/// with `fault` injected: the exit code and stderr.
 fn three_frames(set: &Path, fault: &str) -> (Option<i32>, String) {
     let args = [
         common::s(set),
@@ -37,6 +37,10 @@ fn three_frames(set: &Path, fault: &str) -> (Option<i32>, String) {
         "--size",
         "256x192",
         "--decode",
+        "gpu",
+        // The GPU's builder reads the decoded blocks (the CPU makes arrays from the positions
+        // it rebuilt, which a skipped decode does not touch).
+        "--index-builder",
         "gpu",
     ];
     let o = common::vkterrain_with_env(&args, ("VKTERRAIN_FAULT", fault));

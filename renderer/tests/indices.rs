@@ -4,7 +4,8 @@
 //! starts each ring where its cache model says, the GPU where the previous fan's cell is).
 //! Tiles past the data's edge (meshes that stop inside the tile) and both index widths are
 //! covered; a wrong mesh extent, a missing vertex and a wrong expected count are caught. On
-//! another device the test says on stderr whether it applies (see [`Bench::new`]).
+//! another device the test says on stderr whether it applies (see [`Bench::new`]). And the
+//! arrays the CPU makes instead (`--index-builder cpu`) draw the builder's frames.
 
 use std::io::Write as _;
 
@@ -375,4 +376,79 @@ fn tiles_drawn_part_by_part_build_as_the_cpu_mesher_says() {
     bench.builder.destroy(&bench.gpu);
     bench.pool.destroy(&bench.gpu);
     assert_eq!(bench.gpu.validation_messages(), 0);
+}
+
+/// Index arrays made on the CPU (`--index-builder cpu`, the default on a software rasteriser:
+/// `settings::builds_pay_on`) draw what the GPU's builder draws: the Puget sample's orbit and
+/// flyover, geomorphing part by part (mixes and whole levels) and with discrete levels, every
+/// frame the same pixels and triangles, with the CPU's arrays counted in the log and none of
+/// the builder's left; where the device decides, a software rasteriser makes them on the CPU.
+/// The control: arrays made and never copied into the pool (`made-skip`) draw other frames.
+#[test]
+fn index_arrays_made_on_the_cpu_draw_what_the_gpus_builder_draws() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = common::puget(dir.path());
+    let run = |name: &str, path: &str, extra: &[&str], fault: Option<&str>| {
+        let out = dir.path().join(name);
+        std::fs::create_dir_all(&out).expect("dir");
+        let frames = common::flight_with_fault(&set, &out, path, 20, extra, fault);
+        let json = std::fs::read(out.join("frames.json")).expect("summary");
+        let summary: serde_json::Value = serde_json::from_slice(&json).expect("summary parses");
+        let column = |c: &str| common::log_column(&out.join("frames.csv"), c);
+        (
+            frames,
+            summary,
+            column("triangles"),
+            column("index_arrays_made"),
+        )
+    };
+    for (path, mode) in [
+        ("orbit", "--part-by-part"),
+        ("flyover", "--part-by-part"),
+        ("flyover", "--no-geomorph"),
+    ] {
+        let what = format!("{path} {mode}");
+        let gpu = run("gpu", path, &[mode, "--index-builder", "gpu"], None);
+        let cpu = run("cpu", path, &[mode, "--index-builder", "cpu"], None);
+        for (k, (a, b)) in gpu.0.iter().zip(&cpu.0).enumerate() {
+            assert!(
+                a == b,
+                "{what}: frame {k} differs with the arrays made on the CPU"
+            );
+        }
+        assert_eq!(gpu.2, cpu.2, "{what}: triangles");
+        assert_eq!(gpu.1["index_builder"], "gpu", "{what}");
+        assert_eq!(cpu.1["index_builder"], "cpu", "{what}");
+        let made: f64 = cpu.3.iter().sum();
+        assert_eq!(
+            gpu.3.iter().sum::<f64>(),
+            0.0,
+            "{what}: the builder's flight made arrays"
+        );
+        assert!(
+            made >= 10.0,
+            "{what}: {made} arrays made: the comparison is weak"
+        );
+        eprintln!("{what}: {made} arrays made on the CPU over 20 frames");
+    }
+    let auto = run("auto", "flyover", &[], None);
+    let software = auto.1["device"]
+        .as_str()
+        .is_some_and(|d| d.contains("llvmpipe"));
+    let chosen = if software { "cpu" } else { "gpu" };
+    assert_eq!(auto.1["index_builder"], chosen);
+
+    // The control.
+    let cpu = run("cpu", "orbit", &["--index-builder", "cpu"], None);
+    let skipped = run(
+        "skip",
+        "orbit",
+        &["--index-builder", "cpu"],
+        Some("made-skip"),
+    );
+    let differing = cpu.0.iter().zip(&skipped.0).filter(|(a, b)| a != b).count();
+    assert!(
+        differing >= 10,
+        "arrays never copied drew {differing} of 20 frames otherwise"
+    );
 }

@@ -127,6 +127,10 @@ fn along(path: &CameraPath, k: u64, n: u64) -> (Camera, f64) {
 }
 
 fn fly(force_staging: bool, index_arrays: IndexArrays, morph_rows: bool) {
+    fly_with(force_staging, index_arrays, morph_rows, true);
+}
+
+fn fly_with(force_staging: bool, index_arrays: IndexArrays, morph_rows: bool, build_on_gpu: bool) {
     let (_dir, terrain, gpu) = puget_on_a_device();
     let memory = MemoryOptions {
         gpu_budget_bytes: 3 << 20,
@@ -135,6 +139,7 @@ fn fly(force_staging: bool, index_arrays: IndexArrays, morph_rows: bool) {
         force_staging,
         index_arrays,
         morph_rows,
+        build_on_gpu,
         ..Default::default()
     };
     let mut renderer = Renderer::new(&gpu, &terrain, (128, 96), memory).expect("renderer");
@@ -185,6 +190,14 @@ fn fly(force_staging: bool, index_arrays: IndexArrays, morph_rows: bool) {
             "few builds: the check is weak"
         );
         assert_eq!(sum(|r| r.upload_bytes_indices), 0, "built arrays were sent");
+        let made = sum(|r| r.index_arrays_made);
+        match build_on_gpu {
+            true => assert_eq!(made, 0, "arrays made on the CPU"),
+            false => assert!(
+                made > 10,
+                "{made} arrays made on the CPU: the check is weak"
+            ),
+        }
     } else {
         assert_eq!(sum(|r| r.index_builds), 0);
     }
@@ -221,6 +234,13 @@ fn direct_writes_and_built_index_arrays_read_back_from_the_pool() {
 #[test]
 fn staged_copies_chunk_moves_morph_rows_and_built_index_arrays_read_back_from_the_pool() {
     fly(true, IndexArrays::Built, true);
+}
+
+/// Arrays made on the CPU (`MemoryOptions::build_on_gpu` false) copied through the staging
+/// memory into chunks that move: each level's array in the pool is the file's.
+#[test]
+fn staged_copies_chunk_moves_and_index_arrays_made_on_the_cpu_read_back_from_the_pool() {
+    fly_with(true, IndexArrays::Built, false, false);
 }
 
 #[test]

@@ -22,6 +22,7 @@
 //! ring before the pass.
 
 mod create;
+mod made;
 mod pass;
 mod records;
 mod replay;
@@ -153,6 +154,12 @@ impl Renderer {
     /// Whether index arrays are built on the GPU (else sent from the file).
     pub fn builds_indices(&self) -> bool {
         self.builder.is_some()
+    }
+
+    /// Whether built index arrays are made on the CPU and copied into place
+    /// (`MemoryOptions::build_on_gpu` false) rather than built by the GPU's builder.
+    pub fn makes_indices(&self) -> bool {
+        self.builder.is_some() && !self.options.build_on_gpu
     }
 
     /// Whether a compact set's levels are sent as their streams and decoded on the GPU.
@@ -291,6 +298,7 @@ impl Renderer {
         record.cpu_record_ms = cpu_record_ms;
         record.staged_bytes = uploads.staged_geometry;
         record.part_builds = u64::from(uploads.part_builds);
+        record.index_arrays_made = uploads.made.len() as u64;
         record.tiles_part_by_part = plan.draws.iter().filter(|d| d.key.is_some()).count() as u64;
         record.tiles_unmorphed = written.unmorphed;
         record.tiles_above_base = plan

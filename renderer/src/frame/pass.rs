@@ -106,10 +106,13 @@ impl Renderer {
         {
             d.record(gpu, cmd, (s, &uploads.decode_waves), Decoder::READERS);
         }
+        if self.fault != Some(Fault::MadeSkip) {
+            pool::record_made(gpu, cmd, &self.pool, staging, &uploads.made);
+        }
         let groups = self.morph_groups();
         if let Some(b) = &self.builder {
             let pass_follows = MorphPass::records(scene.constants, groups);
-            b.record(gpu, cmd, (s, uploads.builds), pass_follows);
+            b.record(gpu, cmd, (s, uploads.on_gpu), pass_follows);
         }
         let set = self
             .sets

@@ -7,6 +7,7 @@
 use ash::vk;
 use memory::budget::TEXTURE_ALIGN;
 
+use super::made::Array;
 use super::Renderer;
 use crate::error::FrameError;
 use crate::fault::Fault;
@@ -23,10 +24,13 @@ pub(super) struct Uploads {
     pub moves: Vec<vk::BufferCopy>,
     /// Copies from the slot's staging memory into the pool.
     pub staged: Vec<vk::BufferCopy>,
-    /// Index arrays the builder makes this frame, and of them those for tiles drawn part by
-    /// part besides the manager's.
-    pub builds: u32,
+    /// Index arrays built this frame for tiles drawn part by part, besides the manager's.
     pub part_builds: u32,
+    /// Of the frame's builds, those the GPU's builder makes (the first in its list).
+    pub on_gpu: u32,
+    /// Copies of the index arrays made on the CPU ([`super::made`]) from the staging memory
+    /// into the pool (of `builds`, those the GPU's builder does not make).
+    pub made: Vec<vk::BufferCopy>,
     /// The decoder's list, in waves: how many decodes each holds (a tile's finer level in a
     /// later wave than its coarser one).
     pub decode_waves: Vec<u32>,
@@ -62,16 +66,18 @@ impl Renderer {
         if !plan.uploads.is_empty() {
             check_file(terrain)?;
         }
-        let (builds, part_builds) = self.write_builds(terrain, plan, s)?;
         let (staged, decodes) = self.write_geometry(terrain, plan, s)?;
         let decode_waves = self.write_decodes(decodes, s)?;
         let staged_geometry = self.slots[s].staging.sent();
         let texture_copies = self.write_texture_uploads(terrain, textures, s)?;
+        // Last: arrays made on the CPU take what room the uploads left in the staging memory.
+        let (part_builds, on_gpu, made) = self.write_builds(terrain, plan, s)?;
         Ok(Uploads {
             moves,
             staged,
-            builds,
             part_builds,
+            on_gpu,
+            made,
             decode_waves,
             staged_geometry,
             texture_copies,
@@ -199,16 +205,19 @@ impl Renderer {
     }
 
     /// Writes the plan's index array builds ([`memory::gpu_builds`]: a build overlapped by a
-    /// later one is left out) into slot `s`'s list; returns how many.
+    /// later one is left out) into slot `s`'s list, or with arrays made on the CPU
+    /// ([`super::made`]) into its staging memory as far as it has room; returns how many
+    /// builds are for part by part, how many the GPU's builder makes, and the copies of the
+    /// arrays made.
     fn write_builds(
         &mut self,
         terrain: &Terrain,
         plan: &Plan,
         s: usize,
-    ) -> Result<(u32, u32), FrameError> {
-        let Some(builder) = self.builder.as_mut() else {
-            return Ok((0, 0));
-        };
+    ) -> Result<(u32, u32, Vec<vk::BufferCopy>), FrameError> {
+        if self.builder.is_none() {
+            return Ok((0, 0, Vec::new()));
+        }
         // Part by part (crate::parts): the draws whose arrays are built here, replacing the
         // manager's build where it builds at the same place.
         let rebuilds = self.parts.rebuilds(plan);
@@ -232,7 +241,7 @@ impl Renderer {
             };
             let tile = &terrain.tiles[u.tile as usize];
             let l = &tile.levels[level as usize];
-            builds.push(indices::Build {
+            let build = indices::Build {
                 vertex_word: word(u.chunk, 4)?,
                 vertex_count: l.vertex_count(),
                 index_at: word(u.dst, u64::from(l.index_width))?,
@@ -242,7 +251,8 @@ impl Renderer {
                 mesh_max_y: tile.header.mesh_max_y,
                 tile: u.tile,
                 ..Default::default()
-            });
+            };
+            builds.push((build, u.tile as usize, Array::Level(level)));
         }
         let part_builds = rebuilds.len() as u32;
         for d in rebuilds.into_iter().map(|k| &plan.draws[k]) {
@@ -258,18 +268,29 @@ impl Renderer {
                 tile: d.tile as u32,
                 ..Default::default()
             };
-            if let Some(key) = &d.key {
-                b.part_by_part(key, tile.levels.iter().map(|l| l.block_start + l.block_len));
-            }
-            builds.push(b);
+            let array = match &d.key {
+                Some(key) => {
+                    b.part_by_part(key, tile.levels.iter().map(|l| l.block_start + l.block_len));
+                    Array::Mix(*key)
+                }
+                None => Array::Level(d.level),
+            };
+            builds.push((b, d.tile, array));
         }
-        if !builder.write(s, &builds) {
+        let (made, on_gpu) = match self.options.build_on_gpu {
+            true => (Vec::new(), builds.into_iter().map(|b| b.0).collect()),
+            false => super::made::make(terrain, builds, &mut self.slots[s].staging)?,
+        };
+        let Some(builder) = self.builder.as_mut() else {
+            return Ok((0, 0, Vec::new()));
+        };
+        if !builder.write(s, &on_gpu) {
             return Err(FrameError::TooManyBuilds {
-                builds: builds.len(),
+                builds: on_gpu.len(),
                 capacity: builder.capacity(),
             });
         }
-        Ok((builds.len() as u32, part_builds))
+        Ok((part_builds, on_gpu.len() as u32, made))
     }
 
     /// Writes the frame's texture mips into the slot's staging memory; returns the copies.

@@ -16,7 +16,8 @@
 //! `cpu_check_ms, tiles_checked, tiles_failed`, drawing part by part
 //! `tiles_part_by_part, part_builds`, the morph pass's `tiles_unmorphed`, the tiles drawn from
 //! the pyramid's layers above the base grid `tiles_above_base` and the tiles of its cut an
-//! ancestor (or a coarser checked level) stood in for `tiles_stood_in` (`--pyramid`), and last
+//! ancestor (or a coarser checked level) stood in for `tiles_stood_in` (`--pyramid`), the index
+//! arrays made on the CPU rather than built on the GPU `index_arrays_made`, and last
 //! `tiles_level_0 .. tiles_level_{n-1}`.
 
 use std::path::Path;
@@ -131,10 +132,13 @@ pub struct FrameRecord {
     /// or beside a tile two layers coarser; or held at a coarser level of their own until the
     /// finer one passes its check (`--checks behind`) (`--pyramid`; 0 otherwise).
     pub tiles_stood_in: u64,
+    /// Of the frame's index arrays (`index_builds` and `part_builds`), those made on the CPU
+    /// and copied into place rather than built on the GPU (`--index-builder`).
+    pub index_arrays_made: u64,
     pub tiles_per_level: Vec<u64>,
 }
 
-pub const BASE_COLUMNS: [&str; 58] = [
+pub const BASE_COLUMNS: [&str; 59] = [
     "frame",
     "time_s",
     "frame_ms",
@@ -193,6 +197,7 @@ pub const BASE_COLUMNS: [&str; 58] = [
     "tiles_unmorphed",
     "tiles_above_base",
     "tiles_stood_in",
+    "index_arrays_made",
 ];
 
 pub fn header(levels: u32) -> String {
@@ -282,6 +287,7 @@ impl FrameRecord {
             n(self.tiles_unmorphed),
             n(self.tiles_above_base),
             n(self.tiles_stood_in),
+            n(self.index_arrays_made),
         ];
         let levels = self.tiles_per_level.iter().map(|&v| n(v));
         cells

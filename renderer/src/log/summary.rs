@@ -26,6 +26,10 @@ pub struct RunInfo {
     /// Where a compact set's levels were decoded: "gpu" (sent as their streams) or "cpu"
     /// (sent as the positions the CPU rebuilt); "none" for other sets.
     pub levels_decoded_on: &'static str,
+    /// Who made the built index arrays: "gpu" (the builder's compute pass) or "cpu" (made
+    /// from the tiles' checked levels and copied into place, as far as the staging memory
+    /// held them; the log's `index_arrays_made`); "none" where they were sent.
+    pub index_builder: &'static str,
     /// Geomorphing tiles drawn part by part (chosen, or the device's default; arrays built).
     pub part_by_part: bool,
     /// Device memory of the texture slots (0: none).
@@ -114,6 +118,7 @@ pub struct Summary {
     pub upload_scheme: &'static str,
     pub index_arrays: &'static str,
     pub levels_decoded_on: &'static str,
+    pub index_builder: &'static str,
     pub part_by_part: bool,
     /// Index arrays built on the GPU, and their megabytes (written in GPU memory, not sent).
     pub index_builds: u64,
@@ -253,6 +258,7 @@ impl Summary {
             upload_scheme: run.upload_scheme,
             index_arrays: run.index_arrays,
             levels_decoded_on: run.levels_decoded_on,
+            index_builder: run.index_builder,
             part_by_part: run.part_by_part,
             index_builds: sum(|r| r.index_builds),
             index_build_mb: sum(|r| r.index_build_bytes) as f64 / 1e6,

@@ -171,6 +171,47 @@ impl Staging {
 /// Records this frame's pool transfers: in-pool moves, then copies from the staging slot, with
 /// a barrier before them (earlier frames' reads and writes of the pool come first) and after
 /// them (the draws read what they wrote).
+/// Records the copies of index arrays made on the CPU (`frame::made`) from the slot's staging
+/// memory into the pool, where the GPU's builder would have written them: after earlier
+/// frames' reads and the frame's own copies of the regions they rewrite (a chunk moved this
+/// frame), and visible to the draws' index reads and later copies.
+pub fn record_made(
+    gpu: &Gpu,
+    cmd: vk::CommandBuffer,
+    pool: &TilePool,
+    staging: &Staging,
+    made: &[vk::BufferCopy],
+) {
+    if made.is_empty() {
+        return;
+    }
+    let transfer = vk::PipelineStageFlags::TRANSFER;
+    let earlier = vk::PipelineStageFlags::VERTEX_INPUT
+        | vk::PipelineStageFlags::VERTEX_SHADER
+        | vk::PipelineStageFlags::COMPUTE_SHADER
+        | transfer;
+    let written = vk::AccessFlags::TRANSFER_WRITE | vk::AccessFlags::SHADER_WRITE;
+    sync::memory_barrier(
+        gpu,
+        cmd,
+        (earlier, written),
+        (transfer, vk::AccessFlags::TRANSFER_WRITE),
+    );
+    // SAFETY: recording outside rendering; each copy reads the staging slot and writes an
+    // index region of the pool that no other copy of the frame writes.
+    unsafe {
+        gpu.device
+            .cmd_copy_buffer(cmd, staging.buffer.raw, pool.buffer.raw, made);
+    }
+    let (readers, reads) = super::indices::IndexBuilder::READERS;
+    sync::memory_barrier(
+        gpu,
+        cmd,
+        (transfer, vk::AccessFlags::TRANSFER_WRITE),
+        (readers, reads),
+    );
+}
+
 pub fn record_transfers(
     gpu: &Gpu,
     cmd: vk::CommandBuffer,
