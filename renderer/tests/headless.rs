@@ -880,7 +880,8 @@ fn exit_codes_follow_the_table() {
 /// on through `VK_LAYER_ENABLES`) over flights that copy blocks, build index arrays (levels and
 /// part-by-part mixes), move chunks and run the morph pass, and one that builds with no pass
 /// after it (discrete levels): no hazard. The builder's last barrier is left to the morph pass
-/// when one follows, so both orders are flown. The control: a transfer recorded between the
+/// when one follows, so both orders are flown, with the GPU's builder and with the arrays made
+/// on the CPU and copied (lavapipe's default). The control: a transfer recorded between the
 /// pass and the draws with no barrier (`VKTERRAIN_FAULT=unsynchronised`) is reported, so the
 /// layer did check.
 #[test]
@@ -901,10 +902,14 @@ fn the_frames_barriers_leave_no_hazard() {
         }
         c.output().expect("vkterrain runs")
     };
-    let flights: [&[&str]; 3] = [
+    // Index arrays by the device's default builder (made on the CPU and copied on lavapipe),
+    // and by the GPU's builder.
+    let flights: [&[&str]; 5] = [
         &["--tau", "1"],
         &["--tau", "1", "--gpu-budget-mb", "48"],
         &["--tau", "1", "--no-geomorph"],
+        &["--tau", "1", "--index-builder", "gpu"],
+        &["--tau", "1", "--no-geomorph", "--index-builder", "gpu"],
     ];
     for extra in flights {
         let o = run(extra, None);

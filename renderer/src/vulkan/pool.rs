@@ -174,7 +174,7 @@ impl Staging {
 /// Records the copies of index arrays made on the CPU (`frame::made`) from the slot's staging
 /// memory into the pool, where the GPU's builder would have written them: after earlier
 /// frames' reads and the frame's own copies of the regions they rewrite (a chunk moved this
-/// frame), and visible to the draws' index reads and later copies.
+/// frame), and visible to whatever reads the pool after them.
 pub fn record_made(
     gpu: &Gpu,
     cmd: vk::CommandBuffer,
@@ -203,12 +203,16 @@ pub fn record_made(
         gpu.device
             .cmd_copy_buffer(cmd, staging.buffer.raw, pool.buffer.raw, made);
     }
+    // Readers: the draws' index reads, and every stage that binds the whole pool as storage
+    // (the vertex shader, the morph pass), which synchronisation validation tracks as reads
+    // of the regions written here; later copies (a chunk moved) and the host.
     let (readers, reads) = super::indices::IndexBuilder::READERS;
+    let storage = vk::PipelineStageFlags::VERTEX_SHADER | vk::PipelineStageFlags::COMPUTE_SHADER;
     sync::memory_barrier(
         gpu,
         cmd,
         (transfer, vk::AccessFlags::TRANSFER_WRITE),
-        (readers, reads),
+        (readers | storage, reads | vk::AccessFlags::SHADER_READ),
     );
 }
 
