@@ -10,7 +10,7 @@ use renderer::lod::Bound;
 use renderer::parts::BuildCost;
 use renderer::plan::CheckPolicy;
 use renderer::prefetch::PrefetchOptions;
-use renderer::settings::{MemoryOptions, MorphShader, Settings, Shading};
+use renderer::settings::{MemoryOptions, MorphShader, Settings, Shading, TextureFormat};
 use renderer::terrain::Terrain;
 
 #[derive(Parser)]
@@ -159,6 +159,12 @@ pub struct Cli {
     /// native code.
     #[arg(long, value_enum, default_value_t = Where::Auto)]
     pub index_builder: Where,
+    /// The texture slots' format: bc1 (the file's blocks as they are), rgb565 (decoded on the
+    /// CPU as they are uploaded; four times the slot memory), or auto: rgb565 on a software
+    /// rasteriser such as lavapipe, which samples BC1 by decoding blocks on every fetch, and on
+    /// a device that cannot sample BC1; bc1 elsewhere.
+    #[arg(long, value_enum, default_value_t = TextureFormatArg::Auto)]
+    pub texture_format: TextureFormatArg,
     /// Measure each frame's screen-space error against this DEM (the one the tile set was
     /// built from; with --source-spacing / --source-vertical-scale as given to tiletool):
     /// log column max_error_px. Slow (every sample of the drawn tiles, on the CPU); headless.
@@ -438,6 +444,13 @@ pub enum IndexArraysArg {
     Sent,
 }
 
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum TextureFormatArg {
+    Auto,
+    Bc1,
+    Rgb565,
+}
+
 /// Where a step runs: on the GPU, on the CPU, or where the device says it pays.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Where {
@@ -515,6 +528,12 @@ impl Cli {
         self.index_builder == Where::Auto
     }
 
+    /// Whether the device decides the texture slots' format
+    /// ([`renderer::settings::texture_format_for`]): `--texture-format auto`.
+    pub fn texture_format_by_device(&self) -> bool {
+        self.texture_format == TextureFormatArg::Auto
+    }
+
     /// GPU memory, uploads and prefetching; `textures`: whether texture slots are wanted.
     pub fn memory(&self, textures: bool) -> Result<MemoryOptions> {
         let upload_budget = match self.upload_budget_mb {
@@ -558,6 +577,11 @@ impl Cli {
             // (`Cli::decode_by_device`).
             decode_on_gpu: self.decode != Where::Cpu,
             build_on_gpu: self.index_builder != Where::Cpu,
+            // Where the user did not choose, the device does (`Cli::texture_format_by_device`).
+            texture_format: match self.texture_format {
+                TextureFormatArg::Rgb565 => TextureFormat::Rgb565,
+                TextureFormatArg::Auto | TextureFormatArg::Bc1 => TextureFormat::Bc1,
+            },
             plan_sample: self.plan_sample,
         })
     }

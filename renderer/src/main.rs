@@ -213,6 +213,7 @@ fn fly_path(
             parts_by_device,
             decode_by_device: cli.decode_by_device(),
             builder_by_device: cli.builder_by_device(),
+            texture_format_by_device: cli.texture_format_by_device(),
             memory,
             trace: cli.trace.is_some(),
             frames: cli.frames,
@@ -244,6 +245,13 @@ fn fly_path(
     }
     if cli.builder_by_device() {
         memory.build_on_gpu = settings::builds_pay_on(gpu.properties.device_type);
+    }
+    if cli.texture_format_by_device() {
+        memory.texture_format = settings::texture_format_for(
+            gpu.properties.device_type,
+            gpu.bc_textures,
+            gpu.rgb565_textures,
+        );
     }
     let part_by_part = settings.geomorph && settings.part_by_part;
     let flight = Flight {

@@ -178,6 +178,10 @@ pub struct MemoryOptions {
     /// checked levels and the frame copies it into place (`frame::made`). Where the user did
     /// not choose, the device decides ([`builds_pay_on`]).
     pub build_on_gpu: bool,
+    /// The texture slots' format: the file's BC1 blocks as they are, or decoded on the CPU to
+    /// R5G6B5 as they are uploaded (four times the slot memory). Where the user did not choose,
+    /// the device decides ([`texture_format_for`]).
+    pub texture_format: TextureFormat,
     /// The most tiles the GPU pool, the staging memory and the stitch buffer are sized from:
     /// every tile of a set of up to this many, else one in each run of `tiles / plan_sample`
     /// (`memory::costs::sample`), so that a set of any size opens without reading every
@@ -204,6 +208,7 @@ impl Default for MemoryOptions {
             morph_rows: false,
             decode_on_gpu: true,
             build_on_gpu: true,
+            texture_format: TextureFormat::Bc1,
             plan_sample: memory::costs::SAMPLE_TILES,
         }
     }
@@ -219,6 +224,44 @@ pub fn builds_pay_on(device: ash::vk::PhysicalDeviceType) -> bool {
     device != ash::vk::PhysicalDeviceType::CPU
 }
 
+/// The texture slots' format ([`MemoryOptions::texture_format`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TextureFormat {
+    /// BC1 blocks, as the tile set stores them (half a byte a texel).
+    Bc1,
+    /// R5G6B5, decoded from the BC1 blocks on the CPU at upload (two bytes a texel).
+    Rgb565,
+}
+
+impl TextureFormat {
+    /// Bytes of a mip `texels` across in this format.
+    pub fn mip_bytes(self, texels: u32) -> u64 {
+        let n = u64::from(texels);
+        match self {
+            TextureFormat::Bc1 => n.div_ceil(4) * n.div_ceil(4) * 8,
+            TextureFormat::Rgb565 => n * n * 2,
+        }
+    }
+}
+
+/// The texture slots' format on a device of this type, when the user has not chosen
+/// (`--texture-format`): R5G6B5 on a software rasteriser, where sampling BC1 decodes its
+/// blocks in software on every fetch (on lavapipe the draws of the demo flyover at tau 3 took
+/// 51-60 ms with R5G6B5 slots against 63-72 ms with BC1, bench/README.md, "Texture slots
+/// decoded on a software rasteriser"), and on a device that cannot sample BC1 but can R5G6B5
+/// (which would otherwise draw without textures); BC1 elsewhere.
+pub fn texture_format_for(
+    device: ash::vk::PhysicalDeviceType,
+    bc1: bool,
+    rgb565: bool,
+) -> TextureFormat {
+    if rgb565 && (device == ash::vk::PhysicalDeviceType::CPU || !bc1) {
+        TextureFormat::Rgb565
+    } else {
+        TextureFormat::Bc1
+    }
+}
+
 /// The share of the GPU budget texture slots take by default.
 pub const DEFAULT_TEXTURE_SHARE: f64 = 0.25;
 
@@ -226,7 +269,23 @@ pub const DEFAULT_TEXTURE_SHARE: f64 = 0.25;
 mod tests {
     use ash::vk::PhysicalDeviceType as Kind;
 
-    use super::{builds_pay_on, decode_pays_on, parts_pay_on};
+    use super::{builds_pay_on, decode_pays_on, parts_pay_on, texture_format_for, TextureFormat};
+
+    #[test]
+    fn textures_are_decoded_on_a_software_rasteriser_or_without_bc1() {
+        use TextureFormat::{Bc1, Rgb565};
+        assert_eq!(texture_format_for(Kind::CPU, true, true), Rgb565);
+        assert_eq!(texture_format_for(Kind::DISCRETE_GPU, true, true), Bc1);
+        assert_eq!(
+            texture_format_for(Kind::INTEGRATED_GPU, false, true),
+            Rgb565
+        );
+        // Nothing to decode to: BC1 (or no textures, the budget's call).
+        assert_eq!(texture_format_for(Kind::CPU, true, false), Bc1);
+        // A 17-texel BC1 mip is 5 x 5 blocks; R5G6B5 two bytes a texel.
+        assert_eq!(Bc1.mip_bytes(17), 200);
+        assert_eq!(Rgb565.mip_bytes(17), 578);
+    }
 
     #[test]
     fn index_arrays_are_built_on_the_gpu_except_on_a_software_rasteriser() {

@@ -170,3 +170,19 @@ mod tests {
         assert_eq!(mip_for_distance(f64::INFINITY, texel, &view, mips), 0);
     }
 }
+
+/// A BC1 mip `texels` across (its blocks as the tile set stores them) decoded to R5G6B5, two
+/// bytes a texel, row by row: the texture slots' format where sampling BC1 would decode blocks
+/// on every fetch (`settings::TextureFormat::Rgb565`). Each channel rounds to its nearest
+/// 5- or 6-bit step, so a texel is within half a step of BC1's own decode.
+pub fn rgb565_of_bc1(blocks: &[u8], texels: u32) -> Vec<u8> {
+    let n = texels as usize;
+    let rgba = tiles::texture::decode_bc1(blocks, n, n);
+    let to = |v: u8, max: u32| (u32::from(v) * max + 127) / 255;
+    rgba.chunks_exact(4)
+        .flat_map(|p| {
+            let packed = (to(p[0], 31) << 11) | (to(p[1], 63) << 5) | to(p[2], 31);
+            (packed as u16).to_le_bytes()
+        })
+        .collect()
+}

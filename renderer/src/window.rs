@@ -36,6 +36,8 @@ pub struct WindowOptions {
     pub decode_by_device: bool,
     /// The device decides `memory.build_on_gpu` ([`crate::settings::builds_pay_on`]).
     pub builder_by_device: bool,
+    /// The device decides `memory.texture_format` ([`crate::settings::texture_format_for`]).
+    pub texture_format_by_device: bool,
     pub memory: MemoryOptions,
     /// Keep every frame's requests (`--trace`).
     pub trace: bool,
@@ -105,6 +107,13 @@ pub fn run(
     }
     if options.builder_by_device {
         options.memory.build_on_gpu = settings::builds_pay_on(gpu.properties.device_type);
+    }
+    if options.texture_format_by_device {
+        options.memory.texture_format = settings::texture_format_for(
+            gpu.properties.device_type,
+            gpu.bc_textures,
+            gpu.rgb565_textures,
+        );
     }
     let camera = options.start;
     let mut app = App {

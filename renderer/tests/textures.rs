@@ -19,9 +19,10 @@ fn column(out: &Path, name: &str) -> Vec<f64> {
     common::log_column(&out.join("frames.csv"), name)
 }
 
+/// With the slots in either format: BC1 as stored, or decoded to R5G6B5 (lavapipe's default).
 #[test]
 fn photo_and_relief_stream_into_their_slots_within_the_budget() {
-    for photo in [true, false] {
+    for (photo, format) in [(true, "bc1"), (false, "bc1"), (true, "rgb565")] {
         let dir = tempfile::tempdir().expect("tempdir");
         let set = puget_textured(dir.path(), photo);
         let out = dir.path().join("run");
@@ -32,7 +33,12 @@ fn photo_and_relief_stream_into_their_slots_within_the_budget() {
             &out,
             "flyover",
             16,
-            &["--upload-budget-mb", &budget.to_string()],
+            &[
+                "--upload-budget-mb",
+                &budget.to_string(),
+                "--texture-format",
+                format,
+            ],
         );
         let sum = summary(&out);
         assert_eq!(sum["validation_messages"], 0);
@@ -47,14 +53,15 @@ fn photo_and_relief_stream_into_their_slots_within_the_budget() {
             "{sent_mb} MB of textures sent into {texture_mb} MB of slots"
         );
         // Geometry goes first; textures take what it leaves of the budget, plus new tiles'
-        // base mips (at most 32 texels across: a few hundred bytes each).
+        // base mips (at most 32 texels across: a few hundred bytes each as BC1, four times
+        // that decoded).
         let geometry = column(&out, "upload_bytes");
         let textures = column(&out, "upload_bytes_textures");
         let drawn = column(&out, "tiles_drawn");
         let budget_bytes = budget * f64::from(1 << 20);
         for ((g, t), n) in geometry.iter().zip(&textures).zip(&drawn) {
             assert!(
-                g + t <= budget_bytes.max(*g) + n * 1024.0,
+                g + t <= budget_bytes.max(*g) + n * if format == "bc1" { 1024.0 } else { 4096.0 },
                 "frame sent {g} bytes of geometry and {t} of textures with a {budget_bytes} budget"
             );
         }
@@ -245,5 +252,68 @@ fn photo_shading_of_a_set_without_textures_is_one_clear_line() {
     assert!(
         err.contains("no texture tiles") && err.contains(s(&set)),
         "{err}"
+    );
+}
+
+/// Texture slots decoded to R5G6B5 on the CPU (`--texture-format rgb565`, the default on a
+/// software rasteriser: `settings::texture_format_for`) draw what BC1 slots draw: the Puget
+/// photo's flyover, every frame within 4 of 255 per channel of the BC1 frame (R5G6B5 steps are
+/// 8 and 4 of 255; both decode the same blocks), in four times the slot memory. Where the
+/// device decides, a software rasteriser decodes. The control: a texture moved by 4 samples on
+/// every other tile (`texture-seam`) is far outside that tolerance.
+#[test]
+fn slots_decoded_to_rgb565_draw_what_bc1_slots_draw() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let set = puget_textured(dir.path(), true);
+    let run = |name: &str, extra: &[&str], fault: Option<&str>| {
+        let out = dir.path().join(name);
+        std::fs::create_dir_all(&out).expect("out");
+        let frames = flight_with_fault(&set, &out, "flyover", 12, extra, fault);
+        (frames, summary(&out))
+    };
+    let (bc1, bc1_sum) = run("bc1", &["--texture-format", "bc1"], None);
+    let (rgb, rgb_sum) = run("rgb565", &["--texture-format", "rgb565"], None);
+    // The largest and the mean difference of a channel over a frame.
+    let differ = |a: &image::RgbaImage, b: &image::RgbaImage| {
+        let d: Vec<u8> = a
+            .pixels()
+            .zip(b.pixels())
+            .flat_map(|(p, q)| (0..3).map(move |c| p[c].abs_diff(q[c])))
+            .collect();
+        let mean = d.iter().map(|&x| f64::from(x)).sum::<f64>() / d.len() as f64;
+        (d.iter().copied().max().unwrap_or(0), mean)
+    };
+    for (k, (a, b)) in bc1.iter().zip(&rgb).enumerate() {
+        let (max, mean) = differ(a, b);
+        assert!(
+            max <= 4 && mean < 1.0,
+            "frame {k}: {max} at most, {mean} on average"
+        );
+    }
+    let mb = |s: &serde_json::Value| s["texture_mb"].as_f64().expect("texture_mb");
+    let ratio = mb(&rgb_sum) / mb(&bc1_sum);
+    assert!((3.5..=4.5).contains(&ratio), "slots {ratio}x BC1's");
+    let (_, auto) = run("auto", &[], None);
+    let software = auto["device"]
+        .as_str()
+        .is_some_and(|d| d.contains("llvmpipe"));
+    let chosen = if software { mb(&rgb_sum) } else { mb(&bc1_sum) };
+    assert_eq!(mb(&auto), chosen, "{auto}");
+
+    // The control.
+    let (seam, _) = run(
+        "seam",
+        &["--texture-format", "rgb565"],
+        Some("texture-seam"),
+    );
+    let worst = bc1
+        .iter()
+        .zip(&seam)
+        .map(|(a, b)| differ(a, b).0)
+        .max()
+        .unwrap_or(0);
+    assert!(
+        worst > 32,
+        "a texture moved by 4 samples differs by {worst} at most"
     );
 }

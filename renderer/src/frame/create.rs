@@ -15,7 +15,7 @@ use crate::fault::Fault;
 use crate::interface::{RECORDS_OFFSET, RECORD_BYTES};
 use crate::parts::PartDraws;
 use crate::prefetch::Prefetcher;
-use crate::settings::MemoryOptions;
+use crate::settings::{MemoryOptions, TextureFormat};
 use crate::stitch::MAX_RECORDS;
 use crate::target::{COLOR_FORMAT, DEPTH_FORMAT};
 use crate::terrain::{cost_of, Terrain};
@@ -317,7 +317,10 @@ fn texture_array(
         (Some(c), Some(layout)) => TextureArray::new(
             gpu,
             TextureDesc {
-                format: vk::Format::BC1_RGB_UNORM_BLOCK,
+                format: match options.texture_format {
+                    TextureFormat::Bc1 => vk::Format::BC1_RGB_UNORM_BLOCK,
+                    TextureFormat::Rgb565 => vk::Format::R5G6B5_UNORM_PACK16,
+                },
                 size: layout.size,
                 mips: layout.mips,
                 layers: c.slots as u32,
@@ -337,7 +340,11 @@ fn split_budget(gpu: &Gpu, terrain: &Terrain, options: &MemoryOptions) -> Split 
         max_storage_range: u64::from(limits.max_storage_buffer_range),
         max_image_layers: limits.max_image_array_layers,
         storage_16bit: gpu.storage_16bit,
-        bc1_textures: gpu.bc_textures,
+        // (Whether the device samples the slots' format.)
+        bc1_textures: match options.texture_format {
+            TextureFormat::Bc1 => gpu.bc_textures,
+            TextureFormat::Rgb565 => gpu.rgb565_textures,
+        },
     };
     let wishes = budget::Wishes {
         gpu_budget: options.gpu_budget_bytes,
@@ -357,7 +364,7 @@ fn split_budget(gpu: &Gpu, terrain: &Terrain, options: &MemoryOptions) -> Split 
         tiles: terrain.tiles.len(),
         texture: terrain.texture.map(|layout| budget::MipChain {
             mip_bytes: (0..layout.mips)
-                .map(|m| layout.mip_bytes(m) as u64)
+                .map(|m| options.texture_format.mip_bytes(layout.mip_size(m)))
                 .collect(),
             mip_texels: (0..layout.mips).map(|m| layout.mip_size(m)).collect(),
         }),
@@ -365,7 +372,8 @@ fn split_budget(gpu: &Gpu, terrain: &Terrain, options: &MemoryOptions) -> Split 
     let split = Split::new(&device, &wishes, &set, &indices::builder_cost());
     match split.textures {
         Textures::NoBc1 => eprintln!(
-            "vkterrain: note: the device cannot sample BC1 textures; drawing without the tile set's textures"
+            "vkterrain: note: the device cannot sample the texture slots' format ({:?}); drawing without the tile set's textures",
+            options.texture_format
         ),
         Textures::NoSlot { share, slot_bytes } => eprintln!(
             "vkterrain: note: {:.1} MB of the GPU budget holds no {:.2} MB texture slot; drawing without textures",

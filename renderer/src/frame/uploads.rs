@@ -12,6 +12,7 @@ use super::Renderer;
 use crate::error::FrameError;
 use crate::fault::Fault;
 use crate::plan::Plan;
+use crate::settings::TextureFormat;
 use crate::terrain::Terrain;
 use crate::textures::TexturePlan;
 use crate::vulkan::decode::Decode;
@@ -308,6 +309,15 @@ impl Renderer {
                     mip: u.mip,
                 },
             )?;
+            let texels = self.textures.desc.size >> u.mip;
+            let decoded;
+            let bytes = match self.options.texture_format {
+                TextureFormat::Bc1 => bytes,
+                TextureFormat::Rgb565 => {
+                    decoded = crate::textures::rgb565_of_bc1(bytes, texels.max(1));
+                    &decoded[..]
+                }
+            };
             let staging = &mut self.slots[s].staging;
             let at = staging
                 .push_aligned(bytes, TEXTURE_ALIGN)
@@ -316,7 +326,6 @@ impl Renderer {
                     tile: u.tile,
                     what: "'s texture",
                 })?;
-            let texels = self.textures.desc.size >> u.mip;
             copies.push(texture::copy_region(at, u.slot, u.mip, texels.max(1)));
         }
         Ok(copies)

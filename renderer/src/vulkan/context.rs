@@ -43,6 +43,9 @@ pub struct Gpu {
     /// BC1 textures can be sampled with linear filtering and copied to (feature
     /// `textureCompressionBC`, enabled when present).
     pub bc_textures: bool,
+    /// R5G6B5 textures can be sampled with linear filtering and copied to (the texture slots'
+    /// format where BC1 tiles are decoded on the CPU, `--texture-format rgb565`).
+    pub rgb565_textures: bool,
     /// The largest anisotropy a sampler may use (1: `samplerAnisotropy` or
     /// `shaderResourceMinLod` is missing; the terrain needs both to clamp each tile's texture
     /// level under anisotropic filtering).
@@ -207,6 +210,15 @@ fn query_features(
                 | vk::FormatFeatureFlags::SAMPLED_IMAGE_FILTER_LINEAR
                 | vk::FormatFeatureFlags::TRANSFER_DST,
         );
+    // SAFETY: plain query on this instance's device.
+    let rgb565 = unsafe {
+        instance.get_physical_device_format_properties(physical, vk::Format::R5G6B5_UNORM_PACK16)
+    };
+    let rgb565_textures = rgb565.optimal_tiling_features.contains(
+        vk::FormatFeatureFlags::SAMPLED_IMAGE
+            | vk::FormatFeatureFlags::SAMPLED_IMAGE_FILTER_LINEAR
+            | vk::FormatFeatureFlags::TRANSFER_DST,
+    );
     let min_lod = supported.shader_resource_min_lod == vk::TRUE;
     let storage_16bit = {
         let mut v11 = vk::PhysicalDeviceVulkan11Features::default();
@@ -218,6 +230,7 @@ fn query_features(
     let anisotropy = supported.sampler_anisotropy == vk::TRUE && min_lod;
     Features {
         bc_textures,
+        rgb565_textures,
         min_lod,
         vertex_stores: supported.vertex_pipeline_stores_and_atomics == vk::TRUE,
         storage_16bit,
@@ -286,6 +299,7 @@ fn unified_memory(instance: &ash::Instance, physical: vk::PhysicalDevice) -> boo
 /// What the chosen device can do that the renderer enables or works around.
 struct Features {
     bc_textures: bool,
+    rgb565_textures: bool,
     min_lod: bool,
     vertex_stores: bool,
     storage_16bit: bool,
@@ -378,6 +392,7 @@ impl Gpu {
             callback_counter,
             wireframe_supported,
             bc_textures: features.bc_textures,
+            rgb565_textures: features.rgb565_textures,
             max_anisotropy: features.max_anisotropy,
             min_lod: features.min_lod,
             storage_16bit: features.storage_16bit,
