@@ -18,15 +18,16 @@ N=$out/n48.vkt
 [ -f "$P" ] || { echo "bench/made.sh: $P is missing: run bash .ci/demo first" >&2; exit 2; }
 [ -f "$N" ] || $B/tiletool build ../shared/data/srtm/N48W125.hgt -o "$N" --quiet --force
 modes=("--no-geomorph --tau 1" "--tau 1" "--tau 3" "--brute-force")
+FLAG=${FLAG:---index-builder}; FROM=${FROM:-gpu}; TO=${TO:-cpu}
 rows=$out/rows.txt; : > "$rows"
 for round in $(seq "$rounds"); do
   for flight in "$P flyover" "$P orbit" "$N flyover" "$N orbit"; do
     set -- $flight
     for mode in "${modes[@]}"; do
-      for builder in gpu cpu; do
+      for builder in "$FROM" "$TO"; do
         # shellcheck disable=SC2086
         $B/vkterrain "$1" --headless --path "$2" --frames 60 --size 1024x768 $mode \
-          --index-builder $builder --log "$out/log.csv" > /dev/null
+          $FLAG $builder --log "$out/log.csv" > /dev/null
         python3 - "$round" "$(basename "$1" .vkt) $2" "$mode" "$builder" "$out/log.csv" >> "$rows" <<'PY'
 import csv, sys
 r = list(csv.DictReader(open(sys.argv[5])))[5:]
@@ -43,17 +44,18 @@ PY
     done
   done
 done
-python3 - "$rows" <<'PY'
+python3 - "$rows" "$FROM" "$TO" <<'PY'
 import collections, statistics, sys
 runs = collections.defaultdict(dict)
 for l in open(sys.argv[1]):
     rnd, flight, mode, builder, frame, outside, upload, tris, made = l.rstrip("\n").split("|")
     runs[(flight, mode, builder)][int(rnd)] = (float(frame), float(outside), float(upload), int(tris), int(made))
 keys = list(dict.fromkeys((f, m) for f, m, _ in runs))
-print("| flight | mode | frame ms, builder (each round) | frame ms, made on the CPU | outside the draws ms, builder -> CPU | CPU upload ms, builder -> CPU | triangles | arrays made | CPU / builder (median of rounds) |")
+a, b = sys.argv[2], sys.argv[3]
+print(f"| flight | mode | frame ms, {a} (each round) | frame ms, {b} | outside the draws ms, {a} -> {b} | CPU upload ms, {a} -> {b} | triangles | arrays made ({b}) | {b} / {a} (median of rounds) |")
 print("|---|---|---|---|---|---|---:|---:|---:|")
 for f, m in keys:
-    g, c = runs[(f, m, "gpu")], runs[(f, m, "cpu")]
+    g, c = runs[(f, m, a)], runs[(f, m, b)]
     rs = sorted(set(g) & set(c))
     ratio = statistics.median(c[r][0] / g[r][0] for r in rs)
     med = lambda x, i: statistics.median(x[r][i] for r in rs)
