@@ -246,10 +246,10 @@ impl TextureFormat {
 
 /// The texture slots' format on a device of this type, when the user has not chosen
 /// (`--texture-format`): R5G6B5 on a software rasteriser, where sampling BC1 decodes its
-/// blocks in software on every fetch (on lavapipe the draws of the demo flyover at tau 3 took
-/// 51-60 ms with R5G6B5 slots against 63-72 ms with BC1, bench/README.md, "Texture slots
-/// decoded on a software rasteriser"), and on a device that cannot sample BC1 but can R5G6B5
-/// (which would otherwise draw without textures); BC1 elsewhere.
+/// blocks in software on every fetch (on lavapipe issue 25's flights took 0.79-0.95x the frame
+/// time of BC1 slots, the CPU decoding each mip once as it is uploaded; bench/README.md,
+/// "Texture slots decoded on a software rasteriser"), and on a device that cannot sample BC1
+/// but can R5G6B5 (which would otherwise draw without textures); BC1 elsewhere.
 pub fn texture_format_for(
     device: ash::vk::PhysicalDeviceType,
     bc1: bool,
