@@ -11,13 +11,8 @@
 #   bench/made.sh [ROUNDS]                                            # default 2, ~6 min each
 set -euo pipefail
 rounds=${1:-2}
-B=target/release
-out=${OUT:-/tmp/made-bench}; mkdir -p "$out"
-P=out/puget.vkt
-N=$out/n48.vkt
-[ -f "$P" ] || { echo "bench/made.sh: $P is missing: run bash .ci/demo first" >&2; exit 2; }
-[ -f "$N" ] || $B/tiletool build ../shared/data/srtm/N48W125.hgt -o "$N" --quiet --force
-modes=("--no-geomorph --tau 1" "--tau 1" "--tau 3" "--brute-force")
+# shellcheck source=bench/issue25_sets.sh
+source "$(dirname "$0")/issue25_sets.sh" /tmp/made-bench
 FLAG=${FLAG:---index-builder}; FROM=${FROM:-gpu}; TO=${TO:-cpu}
 rows=$out/rows.txt; : > "$rows"
 for round in $(seq "$rounds"); do

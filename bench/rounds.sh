@@ -11,13 +11,8 @@
 #   bench/rounds.sh [ROUNDS]                                          # default 3, ~3.5 min each
 set -euo pipefail
 rounds=${1:-3}
-B=target/release
-out=${OUT:-/tmp/rounds-bench}; mkdir -p "$out"
-P=out/puget.vkt
-N=$out/n48.vkt
-[ -f "$P" ] || { echo "bench/rounds.sh: $P is missing: run bash .ci/demo first" >&2; exit 2; }
-[ -f "$N" ] || $B/tiletool build ../shared/data/srtm/N48W125.hgt -o "$N" --quiet --force
-modes=("--no-geomorph --tau 1" "--tau 1" "--tau 3" "--brute-force")
+# shellcheck source=bench/issue25_sets.sh
+source "$(dirname "$0")/issue25_sets.sh" /tmp/rounds-bench
 rows=$out/rows.txt; : > "$rows"
 for round in $(seq "$rounds"); do
   for flight in "$P flyover" "$P orbit" "$N flyover" "$N orbit"; do
