@@ -10,7 +10,7 @@ use renderer::lod::Bound;
 use renderer::parts::BuildCost;
 use renderer::plan::CheckPolicy;
 use renderer::prefetch::PrefetchOptions;
-use renderer::settings::{MemoryOptions, MorphShader, Settings, Shading, TextureFormat};
+use renderer::settings::{ByDevice, MemoryOptions, MorphShader, Settings, Shading, TextureFormat};
 use renderer::terrain::Terrain;
 
 #[derive(Parser)]
@@ -497,7 +497,7 @@ impl Cli {
             geomorph: !self.no_geomorph,
             // Pre-recorded frames cannot follow a mix that changes from frame to frame.
             // Where the user did not choose, the device does once it is known
-            // (`Cli::parts_by_device`).
+            // (`Cli::by_device`).
             part_by_part: !self.whole_tiles && !self.draw_only,
             part_build_cost: self.part_build_cost,
             checks: self.checks,
@@ -509,29 +509,15 @@ impl Cli {
         })
     }
 
-    /// Whether the device decides between part by part and whole tiles
-    /// ([`renderer::settings::parts_pay_on`]): the user chose neither, and frames are drawn
-    /// live.
-    pub fn parts_by_device(&self) -> bool {
-        !(self.whole_tiles || self.part_by_part || self.draw_only)
-    }
-
-    /// Whether the device decides where a compact set's levels are decoded
-    /// ([`renderer::settings::decode_pays_on`]): `--decode auto`.
-    pub fn decode_by_device(&self) -> bool {
-        self.decode == Where::Auto
-    }
-
-    /// Whether the device decides who builds index arrays
-    /// ([`renderer::settings::builds_pay_on`]): `--index-builder auto`.
-    pub fn builder_by_device(&self) -> bool {
-        self.index_builder == Where::Auto
-    }
-
-    /// Whether the device decides the texture slots' format
-    /// ([`renderer::settings::texture_format_for`]): `--texture-format auto`.
-    pub fn texture_format_by_device(&self) -> bool {
-        self.texture_format == TextureFormatArg::Auto
+    /// The choices left to the device ([`renderer::settings::ByDevice`]): part by part or
+    /// whole tiles where the user chose neither and frames are drawn live, and each `auto`.
+    pub fn by_device(&self) -> ByDevice {
+        ByDevice {
+            parts: !(self.whole_tiles || self.part_by_part || self.draw_only),
+            decode: self.decode == Where::Auto,
+            builder: self.index_builder == Where::Auto,
+            texture_format: self.texture_format == TextureFormatArg::Auto,
+        }
     }
 
     /// GPU memory, uploads and prefetching; `textures`: whether texture slots are wanted.
@@ -574,10 +560,10 @@ impl Cli {
             // Whether geomorphing is on or not: the window's key switches it.
             morph_rows: self.morph_rows || self.morph_shader != MorphShaderArg::Hierarchical,
             // Where the user did not choose, the device does once it is known
-            // (`Cli::decode_by_device`).
+            // (`Cli::by_device`).
             decode_on_gpu: self.decode != Where::Cpu,
             build_on_gpu: self.index_builder != Where::Cpu,
-            // Where the user did not choose, the device does (`Cli::texture_format_by_device`).
+            // Where the user did not choose, the device does (`Cli::by_device`).
             texture_format: match self.texture_format {
                 TextureFormatArg::Rgb565 => TextureFormat::Rgb565,
                 TextureFormatArg::Auto | TextureFormatArg::Bc1 => TextureFormat::Bc1,

@@ -16,7 +16,7 @@ use renderer::headless::{fly, Flight, FlightResult};
 use renderer::log::{write_csv, RunInfo, Summary};
 use renderer::measure::ErrorMeter;
 use renderer::path::CameraPath;
-use renderer::settings::{self, MemoryOptions, Settings, Shading};
+use renderer::settings::{MemoryOptions, Settings, Shading};
 use renderer::terrain::Terrain;
 use renderer::vulkan::{Gpu, GpuOptions};
 use renderer::window::{self, WindowOptions};
@@ -204,16 +204,13 @@ fn fly_path(
     (settings, memory): (Settings, MemoryOptions),
     windowed: bool,
 ) -> Result<Flown> {
-    let parts_by_device = cli.parts_by_device();
+    let by_device = cli.by_device();
     if windowed {
         let options = WindowOptions {
             gpu: gpu_options(cli),
             size: cli.size,
             settings,
-            parts_by_device,
-            decode_by_device: cli.decode_by_device(),
-            builder_by_device: cli.builder_by_device(),
-            texture_format_by_device: cli.texture_format_by_device(),
+            by_device,
             memory,
             trace: cli.trace.is_some(),
             frames: cli.frames,
@@ -237,22 +234,7 @@ fn fly_path(
     }
     let gpu = Gpu::new(&gpu_options(cli))?;
     let (mut settings, mut memory) = (settings, memory);
-    if parts_by_device {
-        settings.part_by_part = settings::parts_pay_on(gpu.properties.device_type);
-    }
-    if cli.decode_by_device() {
-        memory.decode_on_gpu = settings::decode_pays_on(gpu.properties.device_type);
-    }
-    if cli.builder_by_device() {
-        memory.build_on_gpu = settings::builds_pay_on(gpu.properties.device_type);
-    }
-    if cli.texture_format_by_device() {
-        memory.texture_format = settings::texture_format_for(
-            gpu.properties.device_type,
-            gpu.bc_textures,
-            gpu.rgb565_textures,
-        );
-    }
+    by_device.apply(&gpu, &mut settings, &mut memory);
     let part_by_part = settings.geomorph && settings.part_by_part;
     let flight = Flight {
         terrain,

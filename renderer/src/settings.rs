@@ -262,6 +262,45 @@ pub fn texture_format_for(
     }
 }
 
+/// Which choices the user left to the device (`auto`, or neither of two flags), each made by
+/// its rule above once the device is known ([`ByDevice::apply`]).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ByDevice {
+    /// `Settings::part_by_part` ([`parts_pay_on`]).
+    pub parts: bool,
+    /// `MemoryOptions::decode_on_gpu` ([`decode_pays_on`]).
+    pub decode: bool,
+    /// `MemoryOptions::build_on_gpu` ([`builds_pay_on`]).
+    pub builder: bool,
+    /// `MemoryOptions::texture_format` ([`texture_format_for`]).
+    pub texture_format: bool,
+}
+
+impl ByDevice {
+    /// Makes each choice left to the device as `gpu` says.
+    pub fn apply(
+        self,
+        gpu: &crate::vulkan::Gpu,
+        settings: &mut Settings,
+        memory: &mut MemoryOptions,
+    ) {
+        let device = gpu.properties.device_type;
+        if self.parts {
+            settings.part_by_part = parts_pay_on(device);
+        }
+        if self.decode {
+            memory.decode_on_gpu = decode_pays_on(device);
+        }
+        if self.builder {
+            memory.build_on_gpu = builds_pay_on(device);
+        }
+        if self.texture_format {
+            memory.texture_format =
+                texture_format_for(device, gpu.bc_textures, gpu.rgb565_textures);
+        }
+    }
+}
+
 /// The share of the GPU budget texture slots take by default.
 pub const DEFAULT_TEXTURE_SHARE: f64 = 0.25;
 

@@ -21,7 +21,7 @@ use crate::frame::{Finished, FrameInput, Present, Renderer};
 use crate::headless::{write_png, FlightResult};
 use crate::log::FrameRecord;
 use crate::path::{CameraPath, Keyframe};
-use crate::settings::{self, MemoryOptions, Settings, Shading};
+use crate::settings::{ByDevice, MemoryOptions, Settings, Shading};
 use crate::terrain::Terrain;
 use crate::vulkan::swapchain::Swapchain;
 use crate::vulkan::{Gpu, GpuOptions, VkError};
@@ -30,14 +30,8 @@ pub struct WindowOptions {
     pub gpu: GpuOptions,
     pub size: (u32, u32),
     pub settings: Settings,
-    /// The device decides `settings.part_by_part` ([`crate::settings::parts_pay_on`]).
-    pub parts_by_device: bool,
-    /// The device decides `memory.decode_on_gpu` ([`crate::settings::decode_pays_on`]).
-    pub decode_by_device: bool,
-    /// The device decides `memory.build_on_gpu` ([`crate::settings::builds_pay_on`]).
-    pub builder_by_device: bool,
-    /// The device decides `memory.texture_format` ([`crate::settings::texture_format_for`]).
-    pub texture_format_by_device: bool,
+    /// The choices left to the device.
+    pub by_device: ByDevice,
     pub memory: MemoryOptions,
     /// Keep every frame's requests (`--trace`).
     pub trace: bool,
@@ -99,22 +93,12 @@ pub fn run(
         .as_raw();
     options.gpu.display = Some(display);
     let gpu = Gpu::new(&options.gpu).map_err(|e| e.to_string())?;
-    if options.parts_by_device {
-        options.settings.part_by_part = settings::parts_pay_on(gpu.properties.device_type);
-    }
-    if options.decode_by_device {
-        options.memory.decode_on_gpu = settings::decode_pays_on(gpu.properties.device_type);
-    }
-    if options.builder_by_device {
-        options.memory.build_on_gpu = settings::builds_pay_on(gpu.properties.device_type);
-    }
-    if options.texture_format_by_device {
-        options.memory.texture_format = settings::texture_format_for(
-            gpu.properties.device_type,
-            gpu.bc_textures,
-            gpu.rgb565_textures,
-        );
-    }
+    let (by_device, settings, memory) = (
+        options.by_device,
+        &mut options.settings,
+        &mut options.memory,
+    );
+    by_device.apply(&gpu, settings, memory);
     let camera = options.start;
     let mut app = App {
         gpu,

@@ -30,7 +30,7 @@ pub(super) struct Uploads {
     /// Of the frame's builds, those the GPU's builder makes (the first in its list).
     pub on_gpu: u32,
     /// Copies of the index arrays made on the CPU ([`super::made`]) from the staging memory
-    /// into the pool (of `builds`, those the GPU's builder does not make).
+    /// into the pool (the frame's builds the GPU's builder does not make).
     pub made: Vec<vk::BufferCopy>,
     /// The decoder's list, in waves: how many decodes each holds (a tile's finer level in a
     /// later wave than its coarser one).
