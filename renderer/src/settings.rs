@@ -213,13 +213,15 @@ impl Default for MemoryOptions {
         }
     }
 }
+
 /// Whether index arrays are best built by the GPU's builder on a device of this type, when the
 /// user has not chosen (`--index-builder`). On a GPU a build is a dispatch over the blocks
 /// already resident, and no index crosses the bus. On a software rasteriser the "GPU" is the
 /// same cores, and the builder's workgroup (one per array) runs on one of them: on lavapipe a
 /// build took 6-13 ms of the frame's GPU time on the demo flight (7-21 ms a frame, 7-17% of
-/// it), where the CPU makes the same array from the tile's checked levels in well under a
-/// millisecond and a copy puts it in place (bench/README.md, "Index arrays made on the CPU").
+/// it), where the CPU makes the same array from the tile's checked levels natively (a whole
+/// level's is the file's; a mix about a millisecond on this machine) and a copy puts it in
+/// place (bench/README.md, "Index arrays made on the CPU").
 pub fn builds_pay_on(device: ash::vk::PhysicalDeviceType) -> bool {
     device != ash::vk::PhysicalDeviceType::CPU
 }

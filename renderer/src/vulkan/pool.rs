@@ -168,9 +168,6 @@ impl Staging {
     }
 }
 
-/// Records this frame's pool transfers: in-pool moves, then copies from the staging slot, with
-/// a barrier before them (earlier frames' reads and writes of the pool come first) and after
-/// them (the draws read what they wrote).
 /// Records the copies of index arrays made on the CPU (`frame::made`) from the slot's staging
 /// memory into the pool, where the GPU's builder would have written them: after earlier
 /// frames' reads and the frame's own copies of the regions they rewrite (a chunk moved this
@@ -216,6 +213,9 @@ pub fn record_made(
     );
 }
 
+/// Records this frame's pool transfers: in-pool moves, then copies from the staging slot, with
+/// a barrier before them (earlier frames' reads and writes of the pool come first) and after
+/// them (the draws read what they wrote).
 pub fn record_transfers(
     gpu: &Gpu,
     cmd: vk::CommandBuffer,
