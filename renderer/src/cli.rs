@@ -559,11 +559,10 @@ impl Cli {
             read_back_heights: self.read_back_heights,
             // Whether geomorphing is on or not: the window's key switches it.
             morph_rows: self.morph_rows || self.morph_shader != MorphShaderArg::Hierarchical,
-            // Where the user did not choose, the device does once it is known
-            // (`Cli::by_device`).
+            // Where the user did not choose (`auto`), the device does once it is known
+            // (`Cli::by_device`); until then, what a GPU would get.
             decode_on_gpu: self.decode != Where::Cpu,
             build_on_gpu: self.index_builder != Where::Cpu,
-            // Where the user did not choose, the device does (`Cli::by_device`).
             texture_format: match self.texture_format {
                 TextureFormatArg::Rgb565 => TextureFormat::Rgb565,
                 TextureFormatArg::Auto | TextureFormatArg::Bc1 => TextureFormat::Bc1,
