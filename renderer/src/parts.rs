@@ -236,6 +236,31 @@ pub fn blocks(terrain: &Terrain, tile: usize) -> Blocks {
     }
 }
 
+/// [`blocks`] from `tile`'s blocks `0..levels` alone, as the checks passed them
+/// ([`Terrain::part`]; None where one has not passed): what a mix of parts no finer than level
+/// `levels - 1` reads, without the whole tile (a compact tile is rebuilt only as far as it
+/// was checked).
+pub fn blocks_through(terrain: &Terrain, tile: usize, levels: u32) -> Option<Blocks> {
+    let info = &terrain.tiles[tile];
+    let mesh_max = (info.header.mesh_max_x, info.header.mesh_max_y);
+    let positions = (0..levels)
+        .map(|j| {
+            let bytes = terrain.part(tile, memory::Part::Positions(j))?;
+            // In place where the blob keeps them aligned (it does: 4-byte sections).
+            Some(match bytemuck::try_cast_slice::<u8, u32>(bytes) {
+                Ok(words) => std::borrow::Cow::Borrowed(words),
+                Err(_) => std::borrow::Cow::Owned(
+                    bytes
+                        .chunks_exact(4)
+                        .map(|w| u32::from_le_bytes([w[0], w[1], w[2], w[3]]))
+                        .collect(),
+                ),
+            })
+        })
+        .collect::<Option<Vec<_>>>()?;
+    Some(Blocks::new(positions.iter().map(|p| &p[..]), mesh_max))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -236,12 +236,11 @@ pub enum TextureFormat {
 }
 
 impl TextureFormat {
-    /// Bytes of a mip `texels` across in this format.
-    pub fn mip_bytes(self, texels: u32) -> u64 {
-        let n = u64::from(texels);
+    /// Bytes of mip `m` of a layer of `layout` in this format (BC1: as the tile set stores it).
+    pub fn mip_bytes(self, layout: &tiles::texture::Layout, m: u32) -> u64 {
         match self {
-            TextureFormat::Bc1 => n.div_ceil(4) * n.div_ceil(4) * 8,
-            TextureFormat::Rgb565 => n * n * 2,
+            TextureFormat::Bc1 => layout.mip_bytes(m) as u64,
+            TextureFormat::Rgb565 => 2 * u64::from(layout.mip_size(m)).pow(2),
         }
     }
 }
@@ -323,9 +322,14 @@ mod tests {
         );
         // Nothing to decode to: BC1 (or no textures, the budget's call).
         assert_eq!(texture_format_for(Kind::CPU, true, false), Bc1);
-        // A 17-texel BC1 mip is 5 x 5 blocks; R5G6B5 two bytes a texel.
-        assert_eq!(Bc1.mip_bytes(17), 200);
-        assert_eq!(Rgb565.mip_bytes(17), 578);
+        // R5G6B5 is two bytes a texel; BC1 what the tile set stores, a 17-texel mip 5 x 5
+        // blocks.
+        let layout = tiles::texture::Layout::new(256).expect("layout");
+        let m = (0..layout.mips)
+            .find(|&m| layout.mip_size(m) == 17)
+            .expect("a 17-texel mip");
+        assert_eq!(Bc1.mip_bytes(&layout, m), 200);
+        assert_eq!(Rgb565.mip_bytes(&layout, m), 578);
     }
 
     #[test]

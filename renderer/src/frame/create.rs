@@ -364,7 +364,7 @@ fn split_budget(gpu: &Gpu, terrain: &Terrain, options: &MemoryOptions) -> Split 
         tiles: terrain.tiles.len(),
         texture: terrain.texture.map(|layout| budget::MipChain {
             mip_bytes: (0..layout.mips)
-                .map(|m| options.texture_format.mip_bytes(layout.mip_size(m)))
+                .map(|m| options.texture_format.mip_bytes(&layout, m))
                 .collect(),
             mip_texels: (0..layout.mips).map(|m| layout.mip_size(m)).collect(),
         }),

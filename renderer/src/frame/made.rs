@@ -12,13 +12,14 @@
 //!   start where the previous fan left off; the file's rings start where the builder's model of
 //!   a vertex cache did: the same fans in the same order);
 //! - a mix of the parts' levels is [`tiles::parts::Blocks::indices`], the CPU side of the
-//!   builder's mixed walk, from the positions of the blocks the mix reads, and must be as long
+//!   builder's mixed walk, from the positions of the blocks the mix reads
+//!   ([`crate::parts::blocks_through`]), and must be as long
 //!   as the tables said when the draw was planned (the builder checks the same on the GPU).
 //!
 //! [`MemoryOptions::build_on_gpu`]: crate::settings::MemoryOptions::build_on_gpu
 
 use ash::vk;
-use tiles::parts::{Blocks, PartKey, RESTART};
+use tiles::parts::{PartKey, RESTART};
 
 use crate::error::FrameError;
 use crate::terrain::Terrain;
@@ -82,22 +83,10 @@ fn array_bytes(
             return Ok(bytes.to_vec());
         }
         Array::Mix(key) => {
-            let top = key.levels.iter().copied().max().unwrap_or(0);
-            let blocks = (0..=u32::from(top))
-                .map(|j| {
-                    let part = memory::Part::Positions(j);
-                    let bytes = terrain.part(tile, part).ok_or(FrameError::MissingPart {
-                        tile: tile as u32,
-                        part,
-                    })?;
-                    Ok(bytes
-                        .chunks_exact(4)
-                        .map(|w| u32::from_le_bytes([w[0], w[1], w[2], w[3]]))
-                        .collect::<Vec<u32>>())
-                })
-                .collect::<Result<Vec<_>, FrameError>>()?;
-            let mesh_max = (build.mesh_max_x, build.mesh_max_y);
-            let blocks = Blocks::new(blocks.iter().map(Vec::as_slice), mesh_max);
+            let levels = u32::from(key.levels.iter().copied().max().unwrap_or(0)) + 1;
+            let blocks = crate::parts::blocks_through(terrain, tile, levels).ok_or_else(|| {
+                failed(format!("its blocks 0..{levels} have not passed the check"))
+            })?;
             blocks
                 .indices(&key)
                 .ok_or_else(|| failed("a fan of its mix lacks a vertex".into()))?
