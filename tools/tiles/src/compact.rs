@@ -210,15 +210,19 @@ struct Bits {
 }
 
 impl Bits {
+    /// Appends the low `width` bits of `value` (at most 32), least significant first: at most
+    /// five bytes are touched, the first of them shared with the bits before.
     fn push(&mut self, value: u32, width: u32) {
-        for i in 0..width {
-            if self.len.is_multiple_of(8) {
-                self.bytes.push(0);
-            }
-            if (value >> i) & 1 == 1 {
-                self.bytes[self.len / 8] |= 1 << (self.len % 8);
-            }
-            self.len += 1;
+        if width == 0 {
+            return;
+        }
+        let value = u64::from(value) & ((1u64 << width) - 1);
+        let (first, skip) = (self.len / 8, self.len % 8);
+        self.len += width as usize;
+        self.bytes.resize(self.len.div_ceil(8), 0);
+        let shifted = (value << skip).to_le_bytes();
+        for (byte, &b) in self.bytes[first..].iter_mut().zip(&shifted) {
+            *byte |= b;
         }
     }
 
@@ -292,7 +296,9 @@ pub fn encode_levels(tile: &Tile) -> (Vec<u8>, Vec<u32>) {
             block[at((x, y))] = j as u32;
         }
     }
-    let mut known = vec![false; TILE_SIZE * TILE_SIZE];
+    // The decoder's walk (`decode_levels`), over the entries asked about alone.
+    let mut learnt = Learnt::new();
+    let table = walk();
     for (j, level) in levels.iter().enumerate() {
         let j = j as u32;
         // Sent as they are: the vertices without both parents in this level (the walk meets
@@ -313,18 +319,21 @@ pub fn encode_levels(tile: &Tile) -> (Vec<u8>, Vec<u32>) {
             bits.push(x, 9);
             bits.push(y, 9);
             bits.push(u32::from(code[at((x, y))]), 14);
-            known[at((x, y))] = true;
+            learnt.learn(at((x, y)));
         }
         let mut added = Vec::new();
-        for &[p, a, b] in walk() {
-            let (p, a, b) = (p as usize, a as usize, b as usize);
-            if !known[p] && known[a] && known[b] {
+        for word in 0..learnt.asked.len() {
+            let mut asked = learnt.asked[word];
+            while asked != 0 {
+                let bit = asked.trailing_zeros();
+                let [p, a, b] = table[word * 64 + bit as usize].map(|v| v as usize);
                 let adds = block[p] == j;
                 bits.push(u32::from(adds), 1);
                 if adds {
-                    known[p] = true;
+                    learnt.learn(p);
                     added.push((p, a, b));
                 }
+                asked = learnt.asked[word] & (!0u64).checked_shl(bit + 1).unwrap_or(0);
             }
         }
         let residual = |&(p, a, b): &Walked| {
@@ -493,6 +502,37 @@ mod tests {
         }
         reader.align();
         assert!(reader.read(1).is_err());
+    }
+
+    /// The word-wise writer lays down what one bit at a time does, masking the bits of a value
+    /// above its width (the escape and unary codes rely on it).
+    #[test]
+    fn pushes_lay_down_the_bits_one_at_a_time_would() {
+        let (mut bits, mut reference) = (
+            Bits {
+                bytes: Vec::new(),
+                len: 0,
+            },
+            (Vec::<u8>::new(), 0usize),
+        );
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        for _ in 0..5000 {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1);
+            let (value, width) = ((state >> 11) as u32, ((state >> 45) % 33) as u32);
+            bits.push(value, width);
+            for i in 0..width {
+                if reference.1 % 8 == 0 {
+                    reference.0.push(0);
+                }
+                if (value >> i) & 1 == 1 {
+                    reference.0[reference.1 / 8] |= 1 << (reference.1 % 8);
+                }
+                reference.1 += 1;
+            }
+            assert_eq!((&bits.bytes, bits.len), (&reference.0, reference.1));
+        }
     }
 
     /// Every point but the tile's corners has parents of a coarser scale, and the walk visits
