@@ -326,3 +326,108 @@ fn a_compact_tiles_first_levels_rebuild_alone() {
     );
     assert!(d.tile(1, 0).is_err() && d.tile(0, 0).is_ok());
 }
+
+/// The compact writer decodes every tile's stream and must get its vertices back, in order, and
+/// rebuilds one tile in `FULL_CHECK_EVERY` whole against the tile built. Fed version 3 tiles
+/// damaged two ways, 2 x 2 tiles of SRTM3:
+/// - two vertices of a block swapped: the stream, which sends vertices in the decoder's order,
+///   no longer decodes to the block, so the writer refuses the tile, with one line;
+/// - a morph offset changed, which the stream does not hold: refused where the tile is rebuilt
+///   (tile 0,0, in the sample), written where it is not (tile 1,0), where a reader's rebuild
+///   fails the stored checksum and `verify` names the tile.
+///
+/// The control: the same tiles undamaged are written, and read back as built.
+#[test]
+fn the_compact_writer_decodes_every_stream_and_rebuilds_a_sample() {
+    use tiles::format::{FileHeader, TileSetWriter, FULL_CHECK_EVERY};
+    let (w, h) = (513, 513);
+    let heights = srtm3_crop(300, 200, w, h);
+    let grid = common::srtm3_grid(&heights, (w, h));
+    let dir = tempfile::tempdir().expect("temp dir");
+    let plain = dir.path().join("plain.vkt");
+    build_tileset(
+        &grid,
+        &BuildParams::default(),
+        &TileSetMeta::default(),
+        &plain,
+        &|| {},
+    )
+    .expect("plain");
+    let p = TileSet::open(&plain).expect("open");
+    let header = FileHeader {
+        flags: p.header().flags | FLAG_COMPACT_LEVELS,
+        ..*p.header()
+    };
+    // The writer's sample (`FULL_CHECK_EVERY`): tile 0,0 is in it, tile 1,0 is not.
+    let sampled = |tx: u32, ty: u32| (tx + 3 * ty).is_multiple_of(FULL_CHECK_EVERY);
+    assert!(sampled(0, 0) && !sampled(1, 0));
+    // Byte offsets in tile (tx, ty)'s blob of level 1's last two vertices and first morph offset.
+    let offsets = |tx: u32, ty: u32| {
+        let (tile, blob) = (p.tile(tx, ty).expect("tile"), p.blob(tx, ty).expect("blob"));
+        let l = tile.level(1).expect("level 1");
+        let at = |ptr: *const u8| ptr as usize - blob.as_ptr() as usize;
+        assert!(l.positions.len() >= 2 && !l.morph.is_empty());
+        let last = at(l.positions[l.positions.len() - 2..].as_ptr().cast());
+        (last, at(l.morph.as_ptr().cast()))
+    };
+    let write =
+        |name: &str, damaged: (u32, u32), swap: bool| -> Result<std::path::PathBuf, String> {
+            let path = dir.path().join(name);
+            let mut writer = TileSetWriter::create(&path, header).map_err(|e| e.to_string())?;
+            for ty in 0..2 {
+                for tx in 0..2 {
+                    let mut blob = p.blob(tx, ty).expect("blob").to_vec();
+                    if (tx, ty) == damaged {
+                        let (last, morph) = offsets(tx, ty);
+                        if swap {
+                            let (a, b) = blob[last..last + 8].split_at_mut(4);
+                            a.swap_with_slice(b);
+                        } else {
+                            blob[morph] = blob[morph].wrapping_add(1);
+                        }
+                    }
+                    writer.add_tile(tx, ty, &blob).map_err(|e| e.to_string())?;
+                }
+            }
+            writer.finish().map_err(|e| e.to_string())?;
+            Ok(path)
+        };
+    let refused = |name: &str, damaged, swap, what: &str| {
+        let e = write(name, damaged, swap).expect_err("a damaged tile was written");
+        eprintln!("{e}");
+        let tile = format!("tile {},{}", damaged.0, damaged.1);
+        assert!(
+            e.contains(name) && e.contains(&tile) && e.contains(what),
+            "{e}"
+        );
+        assert!(!dir.path().join(name).exists(), "{name} left behind");
+    };
+    refused(
+        "swapped.vkt",
+        (1, 0),
+        true,
+        "level 1 does not decode to its vertices",
+    );
+    refused("morph.vkt", (0, 0), false, "rebuild");
+    let unsampled = write("unsampled.vkt", (1, 0), false).expect("tile 1,0 is not rebuilt");
+    let u = TileSet::open(&unsampled).expect("open");
+    let error = u
+        .tile(1, 0)
+        .map(|_| ())
+        .expect_err("a damaged morph offset read");
+    assert!(error.to_string().contains("checksum"), "{error}");
+    let report = verify(&u, None);
+    assert!(
+        report.problems.iter().any(|p| p.contains("tile 1,0")),
+        "{:#?}",
+        report.problems
+    );
+    // The control.
+    let sound = write("sound.vkt", (9, 9), false).expect("sound tiles");
+    let s = TileSet::open(&sound).expect("open");
+    assert!(s.compact());
+    for (tx, ty) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+        assert_eq!(s.blob(tx, ty), p.blob(tx, ty), "tile {tx},{ty}");
+    }
+    assert!(verify(&s, Some(&grid)).ok());
+}
