@@ -204,6 +204,7 @@ impl Renderer {
         // frame_ms: the interval between this frame's and the previous frame's completion on
         // the GPU (the cadence a display sees, whatever runs ahead); the first frame costs its
         // CPU time to submission plus its GPU time. Without timestamps: the CPU interval.
+        record.pass_statistics = slot.timestamps.read_statistics(gpu);
         match slot.timestamps.read_ticks(gpu) {
             Some(t) => {
                 record.gpu_ms = slot.timestamps.ms_between(t[0], t[3]);

@@ -17,8 +17,10 @@
 //! `tiles_part_by_part, part_builds`, the morph pass's `tiles_unmorphed`, the tiles drawn from
 //! the pyramid's layers above the base grid `tiles_above_base` and the tiles of its cut an
 //! ancestor (or a coarser checked level) stood in for `tiles_stood_in` (`--pyramid`), the index
-//! arrays made on the CPU rather than built on the GPU `index_arrays_made`, and last
-//! `tiles_level_0 .. tiles_level_{n-1}`.
+//! arrays made on the CPU rather than built on the GPU `index_arrays_made`, the terrain pass as
+//! the GPU counted it (pipeline statistics, empty where the device does not count them)
+//! `gpu_primitives, gpu_primitives_after_clipping, gpu_vertex_invocations,
+//! gpu_fragment_invocations`, and last `tiles_level_0 .. tiles_level_{n-1}`.
 
 use std::path::Path;
 
@@ -135,10 +137,12 @@ pub struct FrameRecord {
     /// Of the frame's index arrays (`index_builds` and `part_builds`), those made on the CPU
     /// and copied into place rather than built on the GPU (`--index-builder`).
     pub index_arrays_made: u64,
+    /// The terrain pass as the GPU counted it, where the device counts pipeline statistics.
+    pub pass_statistics: Option<crate::vulkan::timestamps::PassStatistics>,
     pub tiles_per_level: Vec<u64>,
 }
 
-pub const BASE_COLUMNS: [&str; 59] = [
+pub const BASE_COLUMNS: [&str; 63] = [
     "frame",
     "time_s",
     "frame_ms",
@@ -198,6 +202,10 @@ pub const BASE_COLUMNS: [&str; 59] = [
     "tiles_above_base",
     "tiles_stood_in",
     "index_arrays_made",
+    "gpu_primitives",
+    "gpu_primitives_after_clipping",
+    "gpu_vertex_invocations",
+    "gpu_fragment_invocations",
 ];
 
 pub fn header(levels: u32) -> String {
@@ -289,12 +297,19 @@ impl FrameRecord {
             n(self.tiles_stood_in),
             n(self.index_arrays_made),
         ];
-        let levels = self.tiles_per_level.iter().map(|&v| n(v));
-        cells
+        let counted = self.pass_statistics.map(|s| {
+            [
+                s.primitives,
+                s.clipped_primitives,
+                s.vertex_invocations,
+                s.fragment_invocations,
+            ]
+        });
+        let cells = cells
             .into_iter()
-            .chain(levels)
-            .collect::<Vec<_>>()
-            .join(",")
+            .chain((0..4).map(|k| counted.map_or_else(String::new, |c| c[k].to_string())));
+        let levels = self.tiles_per_level.iter().map(|&v| n(v));
+        cells.chain(levels).collect::<Vec<_>>().join(",")
     }
 
     /// All the frame's CPU work: its decisions, its uploads and the checks of tiles that came

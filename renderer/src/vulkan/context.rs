@@ -59,6 +59,10 @@ pub struct Gpu {
     /// the terrain shader can write the heights it computed for a read-back
     /// (`vkterrain --read-back-heights`).
     pub vertex_stores: bool,
+    /// The device counts pipeline statistics (`pipelineStatisticsQuery`, enabled): the frame
+    /// log's primitives, vertex and fragment shader invocations of the terrain pass, as the
+    /// GPU counted them.
+    pub pipeline_statistics: bool,
     /// Every device-local memory type is also host-visible and coherent (lavapipe, most
     /// integrated GPUs): the CPU can write tile data where the GPU reads it.
     unified_memory: bool,
@@ -233,6 +237,7 @@ fn query_features(
         rgb565_textures,
         min_lod,
         vertex_stores: supported.vertex_pipeline_stores_and_atomics == vk::TRUE,
+        pipeline_statistics: supported.pipeline_statistics_query == vk::TRUE,
         storage_16bit,
         anisotropy,
         max_anisotropy: if anisotropy {
@@ -263,7 +268,8 @@ fn create_device(
         .texture_compression_bc(f.bc_textures)
         .sampler_anisotropy(f.anisotropy)
         .shader_resource_min_lod(f.min_lod)
-        .vertex_pipeline_stores_and_atomics(f.vertex_stores);
+        .vertex_pipeline_stores_and_atomics(f.vertex_stores)
+        .pipeline_statistics_query(f.pipeline_statistics);
     let device_extensions: Vec<*const i8> = if swapchain {
         vec![ash::khr::swapchain::NAME.as_ptr()]
     } else {
@@ -302,6 +308,7 @@ struct Features {
     rgb565_textures: bool,
     min_lod: bool,
     vertex_stores: bool,
+    pipeline_statistics: bool,
     storage_16bit: bool,
     anisotropy: bool,
     max_anisotropy: f32,
@@ -397,6 +404,7 @@ impl Gpu {
             min_lod: features.min_lod,
             storage_16bit: features.storage_16bit,
             vertex_stores: features.vertex_stores,
+            pipeline_statistics: features.pipeline_statistics,
             unified_memory,
             allocations: AtomicU64::new(0),
         };
