@@ -242,6 +242,12 @@ pub struct Cli {
     /// Diagnostic: do not draw the stitching triangles (shows the cracks they close).
     #[arg(long)]
     pub no_stitch: bool,
+    /// Draw the tiles' back-facing triangles too. They are hidden while the camera is above
+    /// the terrain, so by default they are culled (a software rasteriser then sets up and
+    /// shades fewer triangles); from below the surface, or beside the set's edge below its
+    /// heights, this shows the terrain's underside instead of what lies beyond.
+    #[arg(long)]
+    pub no_cull: bool,
     /// Diagnostic: geomorph a tile set built with `--independent-sides` without the sliver
     /// triangles that join the two tiles' differently morphed copies of a shared side vertex
     /// (shows the cracks they close; sets built with shared sides need none).
@@ -490,6 +496,7 @@ impl Cli {
             wireframe: self.wireframe,
             sky: self.sky,
             no_stitch: self.no_stitch,
+            cull_back_faces: !self.no_cull,
             bound: match self.lod_bound {
                 LodBound::Guaranteed => Bound::Guaranteed,
                 LodBound::Sampled => Bound::Sampled,

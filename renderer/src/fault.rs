@@ -30,6 +30,9 @@ pub enum Fault {
     /// `mirror-bias`: the CPU mirror the read-back heights are checked against adds one unit
     /// to every stored morph offset (the read-back test's control).
     MirrorBias,
+    /// `cull-front`: the tiles' front faces are culled instead of their back faces (the control
+    /// of the back-face culling test).
+    CullFront,
     /// `no-stitch-across`: no stitches where tiles of two pyramid layers meet (the control of
     /// the pyramid's crack test); stitches within a layer stay.
     NoStitchAcross,
@@ -70,6 +73,7 @@ impl Fault {
             "mirror-bias" => Some(Fault::MirrorBias),
             "unsynchronised" => Some(Fault::Unsynchronised),
             "no-stitch-across" => Some(Fault::NoStitchAcross),
+            "cull-front" => Some(Fault::CullFront),
             "no-stand-in-balance" => Some(Fault::NoStandInBalance),
             "decode-skip" => Some(Fault::DecodeSkip),
             "decode-count" => Some(Fault::DecodeCount),

@@ -172,6 +172,8 @@ impl Run<'_> {
                     vk::PipelineBindPoint::GRAPHICS,
                     self.pipeline.pipeline,
                 );
+                // The terrain tiles' state: their back faces culled (the grid has none).
+                gpu.device.cmd_set_cull_mode(cmd, vk::CullModeFlags::BACK);
                 gpu.device.cmd_push_constants(
                     cmd,
                     self.pipeline.layout,

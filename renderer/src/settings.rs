@@ -23,6 +23,11 @@ pub struct Settings {
     pub sky: [f32; 3],
     /// Diagnostic: leave the seams open, to see (and test) what stitching closes.
     pub no_stitch: bool,
+    /// Skip the tiles' back-facing triangles (off: `--no-cull`). While the camera is above
+    /// the terrain, a back face of a height field is always hidden: the ray to it arrives from
+    /// below the surface, so it crossed the surface nearer the camera first. Stitches, seen
+    /// edge-on from either side, are never culled, nor is the wireframe.
+    pub cull_back_faces: bool,
     /// How the level for tau is chosen (the guaranteed bound, or the old sampling).
     pub bound: crate::lod::Bound,
     /// Continuous levels, heights blended between levels (off: `--no-geomorph`).

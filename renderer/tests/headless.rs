@@ -654,6 +654,57 @@ fn upload_schemes_draw_the_same_frames() {
     assert!(fewer(tris, &whole_tiles), "{tris:?} vs {whole_tiles:?}");
 }
 
+/// Culling the tiles' back faces (the default) hides nothing: over the Puget flyover at 512 x
+/// 384, low over the hills, every frame is the unculled frame's but for pixels on silhouettes,
+/// where a back face and the front face it meets tie on the edge (at most 0.05% of a frame),
+/// and the GPU shades fewer fragments. The control: culling the front faces instead
+/// (`cull-front`) empties most of every frame.
+#[test]
+fn culled_back_faces_hide_nothing() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = puget(dir.path());
+    let run = |name: &str, extra: &[&str], fault: Option<&str>| {
+        let out = dir.path().join(name);
+        let mut args = vec!["--size", "512x384"];
+        args.extend(extra);
+        let shots = common::flight_with_fault(&set, &out, "flyover", 10, &args, fault);
+        let fragments = common::log_column(&out.join("frames.csv"), "gpu_fragment_invocations");
+        (shots, fragments)
+    };
+    let (culled, culled_fragments) = run("culled", &[], None);
+    let (all, all_fragments) = run("all", &["--no-cull"], None);
+    let differing = |a: &image::RgbaImage, b: &image::RgbaImage| {
+        a.pixels().zip(b.pixels()).filter(|(p, q)| p != q).count()
+    };
+    let pixels = 512 * 384;
+    for (k, (a, b)) in culled.iter().zip(&all).enumerate() {
+        let d = differing(a, b);
+        assert!(
+            d * 2000 <= pixels,
+            "frame {k}: {d} pixels differ with back faces culled"
+        );
+        assert!(
+            culled_fragments[k] <= all_fragments[k],
+            "frame {k}: more fragments culled"
+        );
+    }
+    let (c, a): (f64, f64) = (culled_fragments.iter().sum(), all_fragments.iter().sum());
+    eprintln!(
+        "fragments shaded: {c} culled, {a} not ({:.0}%)",
+        100.0 * c / a
+    );
+    assert!(c < 0.95 * a, "culling saved {c} of {a} fragments");
+    // The control.
+    let (front, _) = run("front", &[], Some("cull-front"));
+    for (k, (a, b)) in front.iter().zip(&all).enumerate() {
+        let d = differing(a, b);
+        assert!(
+            d * 4 > pixels,
+            "frame {k}: front faces culled, only {d} pixels differ"
+        );
+    }
+}
+
 /// Runs a flight with `--measure-error` against `source`; returns every frame's error in
 /// pixels.
 fn measured(

@@ -271,6 +271,7 @@ impl Renderer {
             constants: &written.constants,
             stitch_ranges: &written.stitch_ranges,
             read_back: self.options.read_back_heights,
+            cull: pass::tiles_cull_mode(settings, self.fault),
         };
         let counts = self.record_live(gpu, s, &input, scene, &uploads)?;
         let cpu_record_ms = ms(t);

@@ -205,6 +205,18 @@ pub(super) struct Scene<'a> {
     pub stitch_ranges: &'a [(u32, u32)],
     /// Draw with the pipeline that writes every vertex's height.
     pub read_back: bool,
+    /// The tiles' cull mode ([`tiles_cull_mode`]).
+    pub cull: vk::CullModeFlags,
+}
+
+/// The cull mode of the tiles' draws: back faces unless `--no-cull` or the wireframe (the
+/// `cull-front` fault culls the front faces instead).
+pub(super) fn tiles_cull_mode(settings: &Settings, fault: Option<Fault>) -> vk::CullModeFlags {
+    match (settings.cull_back_faces && !settings.wireframe, fault) {
+        (false, _) => vk::CullModeFlags::NONE,
+        (true, Some(Fault::CullFront)) => vk::CullModeFlags::FRONT,
+        (true, _) => vk::CullModeFlags::BACK,
+    }
 }
 
 /// Where a pass draws from and to: a frame slot's objects, or a static frame's.
@@ -269,6 +281,7 @@ impl Pass<'_> {
         unsafe {
             gpu.device
                 .cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, pipeline.tiles);
+            gpu.device.cmd_set_cull_mode(cmd, self.scene.cull);
             gpu.device.cmd_push_constants(
                 cmd,
                 self.pipeline.layout,
@@ -303,6 +316,8 @@ impl Pass<'_> {
                     vk::PipelineBindPoint::GRAPHICS,
                     pipeline.stitches,
                 );
+                // Seen edge-on from either side.
+                gpu.device.cmd_set_cull_mode(cmd, vk::CullModeFlags::NONE);
                 bind(0);
                 gpu.device
                     .cmd_bind_index_buffer(cmd, self.at.stitch, 0, vk::IndexType::UINT32);

@@ -4,7 +4,7 @@
 
 use ash::vk;
 
-use super::pass::{pass_constants, Bindings, DrawCounts, Scene};
+use super::pass::{self, pass_constants, Bindings, DrawCounts, Scene};
 use super::records::{self, frame_record};
 use super::ring;
 use super::Renderer;
@@ -177,6 +177,7 @@ impl Renderer {
             constants: &constants,
             stitch_ranges: &ranges,
             read_back: false,
+            cull: pass::tiles_cull_mode(settings, self.fault),
         };
         let counts = self.record_pass(gpu, cmd, at, scene);
         slot.timestamps.end(gpu, cmd);

@@ -282,7 +282,7 @@ impl TerrainPipeline {
         let viewport = vk::PipelineViewportStateCreateInfo::default()
             .viewport_count(1)
             .scissor_count(1);
-        // No culling: stitching triangles are seen edge-on from either side.
+        // The cull mode is dynamic state (above).
         let raster = vk::PipelineRasterizationStateCreateInfo::default()
             .polygon_mode(polygon)
             .cull_mode(vk::CullModeFlags::NONE)
@@ -299,7 +299,13 @@ impl TerrainPipeline {
             .color_write_mask(vk::ColorComponentFlags::RGBA)];
         let blend =
             vk::PipelineColorBlendStateCreateInfo::default().attachments(&blend_attachments);
-        let dynamic = [vk::DynamicState::VIEWPORT, vk::DynamicState::SCISSOR];
+        // The cull mode is set with each pipeline bound: the tiles' back faces are culled
+        // unless `--no-cull`, stitches' never (core in Vulkan 1.3).
+        let dynamic = [
+            vk::DynamicState::VIEWPORT,
+            vk::DynamicState::SCISSOR,
+            vk::DynamicState::CULL_MODE,
+        ];
         let dynamic_state = vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&dynamic);
         let color_formats = [color];
         let mut rendering = vk::PipelineRenderingCreateInfo::default()
