@@ -410,16 +410,40 @@ impl VertexOrder {
             fan.clear();
             mesher.fan(q, &mut fan);
             for &(x, y) in &fan {
-                let l = lattice(x, y);
-                if self.index_of[l] == NO_VERTEX {
-                    // Marked as met (not a vertex index: no block is that long).
-                    self.index_of[l] = NO_VERTEX - 1;
-                    new.push(l as u32);
-                }
+                self.meet(lattice(x, y), &mut new);
             }
         }
+        self.number_met(new);
+    }
+
+    /// [`Self::number_for_decoding`] where the level's new vertices are known, `set` (a
+    /// rebuild's decoded level), without walking its fans: the same numbers where the fans use
+    /// exactly the set's points and the coarser levels', as a sound level's do (where they do
+    /// not, the fans number the points they meet after these, and the rebuilt tile fails its
+    /// checksum).
+    fn number_set_for_decoding(&mut self, set: &[(u32, u32, u16)]) {
+        let mut new = Vec::with_capacity(set.len());
+        for &(x, y, _) in set {
+            self.meet(lattice(x, y), &mut new);
+        }
+        self.number_met(new);
+    }
+
+    /// Marks lattice point `l` as met, into `new`, if it has no number yet.
+    fn meet(&mut self, l: usize, new: &mut Vec<u32>) {
+        if self.index_of[l] == NO_VERTEX {
+            // Marked as met (not a vertex index: no block is that long).
+            self.index_of[l] = NO_VERTEX - 1;
+            new.push(l as u32);
+        }
+    }
+
+    /// Numbers the points met, `new`, in [`Numbering::Decode`]'s order: those without both
+    /// parents among the vertices so far (these included) first, row-major, then the others by
+    /// scale, coarsest first, each scale row-major.
+    fn number_met(&mut self, new: Vec<u32>) {
         let is_vertex = |index_of: &[u32], (x, y): (u32, u32)| index_of[lattice(x, y)] != NO_VERTEX;
-        let keys: Vec<(u32, u32, u32)> = new
+        let mut keyed: Vec<(u32, u32, u32)> = new
             .iter()
             .map(|&l| {
                 let (x, y) = xy(l);
@@ -433,13 +457,12 @@ impl VertexOrder {
                 }
             })
             .collect();
-        let mut order: Vec<usize> = (0..new.len()).collect();
-        order.sort_unstable_by_key(|&i| keys[i]);
+        keyed.sort_unstable();
         for &l in &new {
             self.index_of[l as usize] = NO_VERTEX;
         }
-        for i in order {
-            self.index(new[i] as usize);
+        for (_, _, l) in keyed {
+            self.index(l as usize);
         }
     }
 }
@@ -574,7 +597,7 @@ pub fn rebuild_tile(
             limited_triangles: stored.limited_triangles,
             ..LevelEntry::default()
         };
-        assembly.add_level(&mesher, &leaves, errors, &|l| code[l]);
+        assembly.add_level(&mesher, &leaves, errors, &|l| code[l], Some(set));
     }
     let units: Vec<f64> = entries.iter().map(|e| f64::from(e.morph_unit)).collect();
     let (blob, _) = assembly.seal(header, mesher.quantised_heights(), &units, entries.len());
@@ -766,7 +789,7 @@ fn mesh_tile(
                 ))
             })?
         };
-        assembly.add_level(&mesher, &leaves, errors, &code_of);
+        assembly.add_level(&mesher, &leaves, errors, &code_of, None);
     }
 
     let heights = mesher.quantised_heights();
@@ -874,21 +897,25 @@ impl Assembly {
 
     /// Adds the mesher's mesh as the next level: `leaves` its leaves in P-order, `errors` the
     /// entry's measured figures (the rest of the entry is filled here), `code_of` the height
-    /// code of a lattice point.
+    /// code of a lattice point, `set` the vertices the level adds where the caller knows them
+    /// (a rebuild: [`Numbering::Decode`] then numbers them without walking the fans).
     fn add_level(
         &mut self,
         mesher: &Mesher,
         leaves: &[Quad],
         errors: LevelEntry,
         code_of: &dyn Fn(usize) -> u16,
+        set: Option<&[(u32, u32, u16)]>,
     ) {
         let full = self.output != Output::Sides;
         let (level, n, mesh_max) = (self.levels.len(), self.levels_wanted, self.mesh_max);
         let vertices = &mut self.vertices;
         let block_start = vertices.lattice_of.len();
         let (indices, triangles) = if full {
-            if self.numbering == Numbering::Decode {
-                vertices.number_for_decoding(mesher, leaves);
+            match (self.numbering, set) {
+                (Numbering::Decode, Some(set)) => vertices.number_set_for_decoding(set),
+                (Numbering::Decode, None) => vertices.number_for_decoding(mesher, leaves),
+                (Numbering::FirstUse, _) => {}
             }
             emit_fans(mesher, leaves, vertices, &mut self.cache)
         } else {
