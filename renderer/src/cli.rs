@@ -248,6 +248,12 @@ pub struct Cli {
     /// heights, this shows the terrain's underside instead of what lies beyond.
     #[arg(long)]
     pub no_cull: bool,
+    /// Diagnostic: shade every tile with the one fragment shader that holds every shading.
+    /// By default the tiles drawn with their texture take a pipeline whose fragment shader
+    /// has the texture's path alone (the same frames, fewer inputs to interpolate: a software
+    /// rasteriser draws faster).
+    #[arg(long)]
+    pub one_fragment_shader: bool,
     /// Diagnostic: geomorph a tile set built with `--independent-sides` without the sliver
     /// triangles that join the two tiles' differently morphed copies of a shared side vertex
     /// (shows the cracks they close; sets built with shared sides need none).
@@ -497,6 +503,7 @@ impl Cli {
             sky: self.sky,
             no_stitch: self.no_stitch,
             cull_back_faces: !self.no_cull,
+            one_fragment_shader: self.one_fragment_shader,
             bound: match self.lod_bound {
                 LodBound::Guaranteed => Bound::Guaranteed,
                 LodBound::Sampled => Bound::Sampled,

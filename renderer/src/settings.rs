@@ -28,6 +28,9 @@ pub struct Settings {
     /// below the surface, so it crossed the surface nearer the camera first. Stitches, seen
     /// edge-on from either side, are never culled, nor is the wireframe.
     pub cull_back_faces: bool,
+    /// Diagnostic: shade every tile with the fragment shader that holds every shading, not the
+    /// textured tiles with its texture path alone (the same frames; `--one-fragment-shader`).
+    pub one_fragment_shader: bool,
     /// How the level for tau is chosen (the guaranteed bound, or the old sampling).
     pub bound: crate::lod::Bound,
     /// Continuous levels, heights blended between levels (off: `--no-geomorph`).

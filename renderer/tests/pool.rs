@@ -29,6 +29,7 @@ fn settings(forced_level: Option<u32>) -> Settings {
         sky: [0.5, 0.6, 0.9],
         no_stitch: false,
         cull_back_faces: true,
+        one_fragment_shader: false,
         bound: Default::default(),
         geomorph: true,
         // Each tile at one level: the pool's index arrays are then the file's levels, which

@@ -317,3 +317,59 @@ fn slots_decoded_to_rgb565_draw_what_bc1_slots_draw() {
         "a texture moved by 4 samples differs by {worst} at most"
     );
 }
+
+/// The tiles shaded by their texture take a pipeline whose fragment shader has the texture's
+/// path alone (fewer inputs to interpolate): the Puget photo's flyover draws the same pixels,
+/// frame for frame, as with the one fragment shader for every shading
+/// (`--one-fragment-shader`), with most tiles drawn by the photo pipeline and none without it;
+/// so does a flight with slots for a few tiles alone, whose other tiles are tinted by the
+/// default pipeline beside the photo one's. The
+/// control: the photo pipeline's tiles sampled 4 samples off every other tile
+/// (`texture-seam`) draw other frames.
+#[test]
+fn the_photo_pipeline_draws_what_the_one_fragment_shader_draws() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let set = puget_textured(dir.path(), true);
+    let run = |name: &str, extra: &[&str], fault: Option<&str>| {
+        let out = dir.path().join(name);
+        std::fs::create_dir_all(&out).expect("out");
+        let frames = flight_with_fault(&set, &out, "flyover", 12, extra, fault);
+        let photo: f64 = column(&out, "tiles_photo").iter().sum();
+        let drawn: f64 = column(&out, "tiles_drawn").iter().sum();
+        (frames, photo, drawn)
+    };
+    // Then with slots for a few tiles alone (1/500 of the budget): the others are tinted.
+    for (share, few) in [("0.25", false), ("0.002", true)] {
+        let extra = ["--texture-share", share];
+        let (photo, by_photo, drawn) = run("photo", &extra, None);
+        let one_shader = [&extra[..], &["--one-fragment-shader"]].concat();
+        let (one, by_one, _) = run("one", &one_shader, None);
+        for (k, (a, b)) in photo.iter().zip(&one).enumerate() {
+            assert!(
+                a == b,
+                "share {share}: frame {k} differs with the photo pipeline"
+            );
+        }
+        eprintln!("share {share}: {by_photo} of {drawn} tile draws by the photo pipeline");
+        assert_eq!(by_one, 0.0);
+        if few {
+            assert!(
+                by_photo > 0.0 && by_photo < drawn,
+                "share {share}: {by_photo} of {drawn}"
+            );
+        } else {
+            assert!(
+                by_photo * 2.0 > drawn,
+                "share {share}: {by_photo} of {drawn}"
+            );
+        }
+    }
+    let (one, ..) = run("one", &["--one-fragment-shader"], None);
+    // The control.
+    let (seam, ..) = run("seam", &[], Some("texture-seam"));
+    let differing = seam.iter().zip(&one).filter(|(a, b)| a != b).count();
+    assert!(
+        differing >= 6,
+        "a texture seam changed {differing} of 12 frames"
+    );
+}

@@ -20,6 +20,13 @@
 
 #include "interface.glsl"
 
+// True in the pipeline that draws the tiles shaded by their texture this frame (flag 4 and a
+// slot): the texture's path alone, so the inputs only the other shadings read (the position,
+// height, level and sample) are not interpolated. A software rasteriser interpolates every
+// input a shader reads for every fragment; one shader for every shading cost lavapipe 1.3x
+// the draws of the Puget flyover at tau 3.
+layout(constant_id = 1) const bool PHOTO = false;
+
 layout(set = 0, binding = 2) uniform sampler2DArray textures;
 
 layout(location = 0) in vec3 relative;
@@ -59,22 +66,31 @@ vec3 level_colour(float l) {
     return mix(colours[k], colours[k + 1], c - float(k));
 }
 
+// The tile's texture at texture coordinate `uv`, whose screen derivatives are `du` and `dv`.
+vec4 photo(vec2 uv, vec2 du, vec2 dv) {
+    vec3 at = vec3(uv, texture_tile.z);
+#ifdef MIN_LOD
+    return vec4(textureGradClampARB(textures, at, du, dv, texture_tile.w).rgb, 1.0);
+#else
+    float shorter = min(length(du), length(dv)) * frame.texture_map.z;
+    float k = max(exp2(texture_tile.w + 0.01) / max(shorter, 1e-6), 1.0);
+    return vec4(textureGrad(textures, at, du * k, dv * k).rgb, 1.0);
+#endif
+}
+
 void main() {
     // Derivatives in uniform control flow, before any branch.
     vec2 uv = frame.texture_map.x + (tile_xy + texture_tile.xy) * frame.texture_map.y;
     vec2 du = dFdx(uv);
     vec2 dv = dFdy(uv);
+    if (PHOTO) {
+        colour = photo(uv, du, dv);
+        return;
+    }
     vec3 n = normalize(cross(dFdx(relative), dFdy(relative)));
 
     if ((flags & FLAG_TEXTURE) != 0u && texture_tile.z >= 0.0) {
-        vec3 at = vec3(uv, texture_tile.z);
-#ifdef MIN_LOD
-        colour = vec4(textureGradClampARB(textures, at, du, dv, texture_tile.w).rgb, 1.0);
-#else
-        float shorter = min(length(du), length(dv)) * frame.texture_map.z;
-        float k = max(exp2(texture_tile.w + 0.01) / max(shorter, 1e-6), 1.0);
-        colour = vec4(textureGrad(textures, at, du * k, dv * k).rgb, 1.0);
-#endif
+        colour = photo(uv, du, dv);
         return;
     }
     if ((flags & FLAG_TILES) != 0u) {

@@ -193,6 +193,8 @@ pub(super) struct DrawCounts {
     pub triangles: u64,
     pub vertices: u64,
     pub stitch_triangles: u64,
+    /// Draws by the photo pipeline.
+    pub photo: u64,
 }
 
 /// What a pass draws: the same for a live frame and a replayed one.
@@ -207,6 +209,9 @@ pub(super) struct Scene<'a> {
     pub read_back: bool,
     /// The tiles' cull mode ([`tiles_cull_mode`]).
     pub cull: vk::CullModeFlags,
+    /// Per draw, whether it is shaded by its texture this frame (empty: none is), so that the
+    /// pipeline with the fragment shader's texture path alone may draw it.
+    pub textured: &'a [bool],
 }
 
 /// The cull mode of the tiles' draws: back faces unless `--no-cull` or the wireframe (the
@@ -259,6 +264,11 @@ impl Pass<'_> {
             (false, MorphShader::Hierarchical) => self.pipeline.fill,
         };
         let constants = *self.scene.constants;
+        // The textured tiles take the photo pipeline where the default one draws (it is the
+        // default's with the texture path alone).
+        let photo = (pipeline.tiles == self.pipeline.fill.tiles
+            && !self.scene.settings.one_fragment_shader)
+            .then_some(self.pipeline.photo);
         let mut counts = DrawCounts::default();
         // The set, its Tile binding at record `record`.
         let bind = |record: usize| {
@@ -279,8 +289,9 @@ impl Pass<'_> {
         // buffer outlive the frame, and every range drawn was written before (the manager's
         // grants; records and stitches by this frame).
         unsafe {
+            let mut bound_pipeline = pipeline.tiles;
             gpu.device
-                .cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, pipeline.tiles);
+                .cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, bound_pipeline);
             gpu.device.cmd_set_cull_mode(cmd, self.scene.cull);
             gpu.device.cmd_push_constants(
                 cmd,
@@ -291,6 +302,16 @@ impl Pass<'_> {
             );
             let mut bound: Option<u32> = None;
             for (record, d) in self.scene.plan.draws.iter().enumerate() {
+                let textured = self.scene.textured.get(record) == Some(&true);
+                let wanted = photo.filter(|_| textured).unwrap_or(pipeline.tiles);
+                if wanted != bound_pipeline {
+                    // The same layout: the push constants and the set stay bound.
+                    gpu.device
+                        .cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, wanted);
+                    gpu.device.cmd_set_cull_mode(cmd, self.scene.cull);
+                    bound_pipeline = wanted;
+                }
+                counts.photo += u64::from(wanted == self.pipeline.photo);
                 if bound != Some(d.index_width) {
                     gpu.device
                         .cmd_bind_index_buffer(cmd, self.pool, 0, index_type(d.index_width));

@@ -209,6 +209,7 @@ pub(super) fn frame_record(
         triangles: counts.triangles,
         vertices: counts.vertices,
         stitch_triangles: counts.stitch_triangles,
+        tiles_photo: counts.photo,
         upload_bytes: st.upload_bytes_blocks + st.upload_bytes_indices,
         resident_bytes: st.resident_bytes,
         evictions: st.evictions,

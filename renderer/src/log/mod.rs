@@ -17,7 +17,9 @@
 //! `tiles_part_by_part, part_builds`, the morph pass's `tiles_unmorphed`, the tiles drawn from
 //! the pyramid's layers above the base grid `tiles_above_base` and the tiles of its cut an
 //! ancestor (or a coarser checked level) stood in for `tiles_stood_in` (`--pyramid`), the index
-//! arrays made on the CPU rather than built on the GPU `index_arrays_made`, the terrain pass as
+//! arrays made on the CPU rather than built on the GPU `index_arrays_made`, the tiles drawn by
+//! the pipeline whose fragment shader has the texture's path alone `tiles_photo`, the terrain
+//! pass as
 //! the GPU counted it (pipeline statistics, empty where the device does not count them)
 //! `gpu_primitives, gpu_primitives_after_clipping, gpu_vertex_invocations,
 //! gpu_fragment_invocations`, and last `tiles_level_0 .. tiles_level_{n-1}`.
@@ -137,12 +139,15 @@ pub struct FrameRecord {
     /// Of the frame's index arrays (`index_builds` and `part_builds`), those made on the CPU
     /// and copied into place rather than built on the GPU (`--index-builder`).
     pub index_arrays_made: u64,
+    /// Tiles drawn by the pipeline whose fragment shader has the texture's path alone (shaded
+    /// by their texture this frame, `--one-fragment-shader` off).
+    pub tiles_photo: u64,
     /// The terrain pass as the GPU counted it, where the device counts pipeline statistics.
     pub pass_statistics: Option<crate::vulkan::timestamps::PassStatistics>,
     pub tiles_per_level: Vec<u64>,
 }
 
-pub const BASE_COLUMNS: [&str; 63] = [
+pub const BASE_COLUMNS: [&str; 64] = [
     "frame",
     "time_s",
     "frame_ms",
@@ -202,6 +207,7 @@ pub const BASE_COLUMNS: [&str; 63] = [
     "tiles_above_base",
     "tiles_stood_in",
     "index_arrays_made",
+    "tiles_photo",
     "gpu_primitives",
     "gpu_primitives_after_clipping",
     "gpu_vertex_invocations",
@@ -296,6 +302,7 @@ impl FrameRecord {
             n(self.tiles_above_base),
             n(self.tiles_stood_in),
             n(self.index_arrays_made),
+            n(self.tiles_photo),
         ];
         let counted = self.pass_statistics.map(|s| {
             [

@@ -26,6 +26,9 @@ pub struct TerrainPipeline {
     pub set_layout: vk::DescriptorSetLayout,
     pub layout: vk::PipelineLayout,
     pub fill: Pair,
+    /// `fill`'s tiles pipeline with the fragment shader's texture path alone (`PHOTO`), for
+    /// the tiles drawn with their texture this frame.
+    pub photo: vk::Pipeline,
     /// The previous per-vertex rule (`--morph-shader two-levels`).
     pub two_levels: Pair,
     /// The same rule with the paper's forward differences (`--morph-shader forward-differences`).
@@ -174,6 +177,15 @@ impl TerrainPipeline {
             Self::pair(gpu, layout, (vert, frag), (color, depth), mode, name)
         };
         let fill = pair(vert, vk::PolygonMode::FILL, "terrain (fill)");
+        let photo = Self::specialised(
+            gpu,
+            layout,
+            (vert, false),
+            (frag, true),
+            (color, depth),
+            vk::PolygonMode::FILL,
+            "terrain (fill, photo)",
+        );
         let two_levels = pair(
             vert_two_levels,
             vk::PolygonMode::FILL,
@@ -204,6 +216,7 @@ impl TerrainPipeline {
             set_layout,
             layout,
             fill: fill?,
+            photo: photo?,
             two_levels: two_levels?,
             all_rows: all_rows?,
             morph: MorphPass::new(gpu, set_layout)?,
@@ -217,34 +230,65 @@ impl TerrainPipeline {
         gpu: &Gpu,
         layout: vk::PipelineLayout,
         (vert, frag): (vk::ShaderModule, vk::ShaderModule),
-        (color, depth): (vk::Format, vk::Format),
+        formats: (vk::Format, vk::Format),
         mode: vk::PolygonMode,
         name: &str,
     ) -> VkResult<Pair> {
-        let build = |stitch: bool, name: String| {
-            let value = u32::from(stitch).to_ne_bytes();
-            let entries = [vk::SpecializationMapEntry::default()
-                .constant_id(0)
-                .offset(0)
-                .size(4)];
-            let spec = vk::SpecializationInfo::default()
-                .map_entries(&entries)
-                .data(&value);
-            Self::build(
+        let build = |stitch: bool, name: &str| {
+            Self::specialised(
                 gpu,
                 layout,
-                (vert, Some(&spec)),
-                frag,
-                color,
-                depth,
+                (vert, stitch),
+                (frag, false),
+                formats,
                 mode,
-                &name,
+                name,
             )
         };
         Ok(Pair {
-            tiles: build(false, name.to_string())?,
-            stitches: build(true, format!("{name}, stitches"))?,
+            tiles: build(false, name)?,
+            stitches: build(true, &format!("{name}, stitches"))?,
         })
+    }
+
+    /// A pipeline of `vert` and `frag` specialised: the vertex shader's `STITCH` (constant 0)
+    /// and the fragment shader's `PHOTO` (constant 1).
+    fn specialised(
+        gpu: &Gpu,
+        layout: vk::PipelineLayout,
+        (vert, stitch): (vk::ShaderModule, bool),
+        (frag, photo): (vk::ShaderModule, bool),
+        (color, depth): (vk::Format, vk::Format),
+        mode: vk::PolygonMode,
+        name: &str,
+    ) -> VkResult<vk::Pipeline> {
+        let constant = |id: u32| {
+            [vk::SpecializationMapEntry::default()
+                .constant_id(id)
+                .offset(0)
+                .size(4)]
+        };
+        let (vertex_entries, fragment_entries) = (constant(0), constant(1));
+        let (stitch, photo) = (
+            u32::from(stitch).to_ne_bytes(),
+            u32::from(photo).to_ne_bytes(),
+        );
+        let vertex = vk::SpecializationInfo::default()
+            .map_entries(&vertex_entries)
+            .data(&stitch);
+        let fragment = vk::SpecializationInfo::default()
+            .map_entries(&fragment_entries)
+            .data(&photo);
+        Self::build(
+            gpu,
+            layout,
+            (vert, Some(&vertex)),
+            (frag, Some(&fragment)),
+            color,
+            depth,
+            mode,
+            name,
+        )
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -252,7 +296,7 @@ impl TerrainPipeline {
         gpu: &Gpu,
         layout: vk::PipelineLayout,
         (vert, specialization): (vk::ShaderModule, Option<&vk::SpecializationInfo>),
-        frag: vk::ShaderModule,
+        (frag, frag_specialization): (vk::ShaderModule, Option<&vk::SpecializationInfo>),
         color: vk::Format,
         depth: vk::Format,
         polygon: vk::PolygonMode,
@@ -266,13 +310,14 @@ impl TerrainPipeline {
         if let Some(s) = specialization {
             vertex_stage = vertex_stage.specialization_info(s);
         }
-        let stages = [
-            vertex_stage,
-            vk::PipelineShaderStageCreateInfo::default()
-                .stage(vk::ShaderStageFlags::FRAGMENT)
-                .module(frag)
-                .name(entry),
-        ];
+        let mut fragment_stage = vk::PipelineShaderStageCreateInfo::default()
+            .stage(vk::ShaderStageFlags::FRAGMENT)
+            .module(frag)
+            .name(entry);
+        if let Some(s) = frag_specialization {
+            fragment_stage = fragment_stage.specialization_info(s);
+        }
+        let stages = [vertex_stage, fragment_stage];
         // No vertex input: the shader pulls its vertices from the pool.
         let vertex_input = vk::PipelineVertexInputStateCreateInfo::default();
         // Paper, section 4: recursive fans joined by primitive restart, one draw per tile.
@@ -348,6 +393,7 @@ impl TerrainPipeline {
             for p in pairs.into_iter().flatten() {
                 p.destroy(gpu);
             }
+            gpu.device.destroy_pipeline(self.photo, None);
             gpu.device.destroy_pipeline_layout(self.layout, None);
             gpu.device
                 .destroy_descriptor_set_layout(self.set_layout, None);
@@ -382,7 +428,7 @@ impl LimitPipeline {
                 gpu,
                 layout,
                 (vert, None),
-                frag,
+                (frag, None),
                 color,
                 depth,
                 vk::PolygonMode::FILL,
