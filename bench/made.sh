@@ -16,13 +16,12 @@ source "$(dirname "$0")/issue25_sets.sh" /tmp/made-bench
 FLAG=${FLAG:---index-builder}; FROM=${FROM:-gpu}; TO=${TO:-cpu}
 rows=$out/rows.txt; : > "$rows"
 for round in $(seq "$rounds"); do
-  for flight in "$P flyover" "$P orbit" "$N flyover" "$N orbit"; do
+  for flight in "${flights[@]}"; do
     set -- $flight
     for mode in "${modes[@]}"; do
       for builder in "$FROM" "$TO"; do
         # shellcheck disable=SC2086
-        $B/vkterrain "$1" --headless --path "$2" --frames 60 --size 1024x768 $mode \
-          $FLAG $builder --log "$out/log.csv" > /dev/null
+        fly "$1" "$2" $mode $FLAG $builder
         python3 - "$round" "$(basename "$1" .vkt) $2" "$mode" "$builder" "$out/log.csv" >> "$rows" <<'PY'
 import csv, sys
 r = list(csv.DictReader(open(sys.argv[5])))[5:]

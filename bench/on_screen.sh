@@ -16,12 +16,11 @@ rounds=${1:-2}
 source "$(dirname "$0")/issue25_sets.sh" /tmp/on-screen-bench
 rows=$out/rows.txt; : > "$rows"
 for round in $(seq "$rounds"); do
-  for flight in "$P flyover" "$P orbit" "$N flyover" "$N orbit"; do
+  for flight in "${flights[@]}"; do
     set -- $flight
     for mode in "${modes[@]}"; do
       # shellcheck disable=SC2086
-      $B/vkterrain "$1" --headless --path "$2" --frames 60 --size 1024x768 $mode \
-        --log "$out/log.csv" > /dev/null
+      fly "$1" "$2" $mode
       python3 - "$round" "$(basename "$1" .vkt) $2" "$mode" "$out/log.csv" >> "$rows" <<'PY'
 import csv, sys
 r = list(csv.DictReader(open(sys.argv[4])))[5:]

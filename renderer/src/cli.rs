@@ -242,16 +242,12 @@ pub struct Cli {
     /// Diagnostic: do not draw the stitching triangles (shows the cracks they close).
     #[arg(long)]
     pub no_stitch: bool,
-    /// Draw the tiles' back-facing triangles too. They are hidden while the camera is above
-    /// the terrain, so by default they are culled (a software rasteriser then sets up and
-    /// shades fewer triangles); from below the surface, or beside the set's edge below its
-    /// heights, this shows the terrain's underside instead of what lies beyond.
+    /// Draw the tiles' back faces too (culled by default: hidden while the camera is above the
+    /// terrain); from below it, or beside the set's edge below its heights, the underside shows.
     #[arg(long)]
     pub no_cull: bool,
-    /// Diagnostic: shade every tile with the one fragment shader that holds every shading.
-    /// By default the tiles drawn with their texture take a pipeline whose fragment shader
-    /// has the texture's path alone (the same frames, fewer inputs to interpolate: a software
-    /// rasteriser draws faster).
+    /// Diagnostic: shade every tile with the fragment shader of every shading, not textured
+    /// tiles with the texture's path alone (the same frames; slower on a software rasteriser).
     #[arg(long)]
     pub one_fragment_shader: bool,
     /// Diagnostic: geomorph a tile set built with `--independent-sides` without the sliver

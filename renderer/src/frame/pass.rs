@@ -23,7 +23,7 @@ use crate::terrain::Terrain;
 use crate::textures::TexturePlan;
 use crate::vulkan::decode::Decoder;
 use crate::vulkan::morph_pass::MorphPass;
-use crate::vulkan::pipeline::TerrainPipeline;
+use crate::vulkan::pipeline::{Pair, TerrainPipeline};
 use crate::vulkan::pool;
 use crate::vulkan::sync;
 use crate::vulkan::texture;
@@ -246,23 +246,43 @@ struct Pass<'a> {
 }
 
 impl Pass<'_> {
+    /// The pipelines the settings draw with.
+    fn pair(&self) -> Pair {
+        let p = self.pipeline;
+        match (
+            self.scene.settings.wireframe,
+            self.scene.settings.morph_shader,
+        ) {
+            (true, _) => p.wireframe.unwrap_or(p.fill),
+            (false, _) if self.scene.read_back => p.read_back.unwrap_or(p.fill),
+            (false, MorphShader::ForwardDifferences) => p.all_rows,
+            (false, MorphShader::TwoLevels) => p.two_levels,
+            (false, MorphShader::Hierarchical) => p.fill,
+        }
+    }
+
+    /// Binds the set, its Tile binding at record `record`.
+    fn bind(&self, record: usize) {
+        // SAFETY: recording; the set's buffers outlive the frame, and the offset is a
+        // record's, inside the records buffer (its size counts every draw's record).
+        unsafe {
+            self.gpu.device.cmd_bind_descriptor_sets(
+                self.cmd,
+                vk::PipelineBindPoint::GRAPHICS,
+                self.pipeline.layout,
+                0,
+                &[self.at.set],
+                &[tile_binding_offset(record)],
+            );
+        }
+    }
+
     fn record(&self) -> DrawCounts {
         let (gpu, cmd) = (self.gpu, self.cmd);
         self.at
             .target
             .begin_rendering(gpu, cmd, self.scene.settings.sky);
-        let pipeline = match (
-            self.scene.settings.wireframe,
-            self.scene.settings.morph_shader,
-        ) {
-            (true, _) => self.pipeline.wireframe.unwrap_or(self.pipeline.fill),
-            (false, _) if self.scene.read_back => {
-                self.pipeline.read_back.unwrap_or(self.pipeline.fill)
-            }
-            (false, MorphShader::ForwardDifferences) => self.pipeline.all_rows,
-            (false, MorphShader::TwoLevels) => self.pipeline.two_levels,
-            (false, MorphShader::Hierarchical) => self.pipeline.fill,
-        };
+        let pipeline = self.pair();
         let constants = *self.scene.constants;
         // The textured tiles take the photo pipeline where the default one draws (it is the
         // default's with the texture path alone).
@@ -270,24 +290,9 @@ impl Pass<'_> {
             && !self.scene.settings.one_fragment_shader)
             .then_some(self.pipeline.photo);
         let mut counts = DrawCounts::default();
-        // The set, its Tile binding at record `record`.
-        let bind = |record: usize| {
-            // SAFETY: recording; the set's buffers outlive the frame, and the offset is a
-            // record's, inside the records buffer (its size counts every draw's record).
-            unsafe {
-                gpu.device.cmd_bind_descriptor_sets(
-                    cmd,
-                    vk::PipelineBindPoint::GRAPHICS,
-                    self.pipeline.layout,
-                    0,
-                    &[self.at.set],
-                    &[tile_binding_offset(record)],
-                );
-            }
-        };
-        // SAFETY: recording inside dynamic rendering; the pool, the records and the stitch
-        // buffer outlive the frame, and every range drawn was written before (the manager's
-        // grants; records and stitches by this frame).
+        // SAFETY: recording inside dynamic rendering; the pool and the records outlive the
+        // frame, and every range drawn was written before (the manager's grants; records by
+        // this frame).
         unsafe {
             let mut bound_pipeline = pipeline.tiles;
             gpu.device
@@ -317,7 +322,7 @@ impl Pass<'_> {
                         .cmd_bind_index_buffer(cmd, self.pool, 0, index_type(d.index_width));
                     bound = Some(d.index_width);
                 }
-                bind(record);
+                self.bind(record);
                 // The tile's local indices plus vertexOffset: the pulled index of its record.
                 gpu.device.cmd_draw_indexed(
                     cmd,
@@ -331,31 +336,36 @@ impl Pass<'_> {
                 counts.triangles += u64::from(d.triangle_count);
                 counts.vertices += u64::from(entry.vertex_count());
             }
-            if !self.scene.settings.no_stitch && !self.scene.plan.stitches.is_empty() {
-                gpu.device.cmd_bind_pipeline(
-                    cmd,
-                    vk::PipelineBindPoint::GRAPHICS,
-                    pipeline.stitches,
-                );
-                // Seen edge-on from either side.
-                gpu.device.cmd_set_cull_mode(cmd, vk::CullModeFlags::NONE);
-                bind(0);
-                gpu.device
-                    .cmd_bind_index_buffer(cmd, self.at.stitch, 0, vk::IndexType::UINT32);
-                for ((_, s), &(first, count)) in self
-                    .scene
-                    .plan
-                    .stitches
-                    .iter()
-                    .zip(self.scene.stitch_ranges)
-                {
-                    gpu.device.cmd_draw_indexed(cmd, count, 1, first, 0, 0);
-                    counts.stitch_triangles += u64::from(s.triangles);
-                }
-            }
-            gpu.device.cmd_end_rendering(cmd);
         }
+        if !self.scene.settings.no_stitch && !self.scene.plan.stitches.is_empty() {
+            counts.stitch_triangles = self.record_stitches(pipeline.stitches);
+        }
+        // SAFETY: recording inside dynamic rendering.
+        unsafe { gpu.device.cmd_end_rendering(cmd) };
         counts
+    }
+
+    /// The stitches from the stitch buffer with `pipeline`, never culled (they are seen edge-on
+    /// from either side); their triangles.
+    fn record_stitches(&self, pipeline: vk::Pipeline) -> u64 {
+        let (gpu, cmd) = (self.gpu, self.cmd);
+        let mut triangles = 0;
+        // SAFETY: recording inside dynamic rendering, the push constants bound; the stitch
+        // buffer outlives the frame and was written by it.
+        unsafe {
+            gpu.device
+                .cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, pipeline);
+            gpu.device.cmd_set_cull_mode(cmd, vk::CullModeFlags::NONE);
+            self.bind(0);
+            gpu.device
+                .cmd_bind_index_buffer(cmd, self.at.stitch, 0, vk::IndexType::UINT32);
+            let ranges = self.scene.stitch_ranges;
+            for ((_, s), &(first, count)) in self.scene.plan.stitches.iter().zip(ranges) {
+                gpu.device.cmd_draw_indexed(cmd, count, 1, first, 0, 0);
+                triangles += u64::from(s.triangles);
+            }
+        }
+        triangles
     }
 }
 
