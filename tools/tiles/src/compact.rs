@@ -179,6 +179,29 @@ impl Learnt {
             }
         }
     }
+
+    /// One level's walk, over the entries asked about alone, in the walk's order: `adds` says
+    /// whether the level adds each entry's point, which is then learnt (and asks about entries
+    /// after it: its children are of finer scales). The points added, with their parents.
+    fn walk<E>(
+        &mut self,
+        mut adds: impl FnMut(usize) -> Result<bool, E>,
+    ) -> Result<Vec<Walked>, E> {
+        let mut added = Vec::new();
+        for word in 0..self.asked.len() {
+            let mut asked = self.asked[word];
+            while asked != 0 {
+                let bit = asked.trailing_zeros();
+                let [p, a, b] = self.table[word * 64 + bit as usize].map(|v| v as usize);
+                if adds(p)? {
+                    self.learn(p);
+                    added.push((p, a, b));
+                }
+                asked = self.asked[word] & (!0u64).checked_shl(bit + 1).unwrap_or(0);
+            }
+        }
+        Ok(added)
+    }
 }
 
 /// The grid point at flat index `i`.
@@ -298,7 +321,6 @@ pub fn encode_levels(tile: &Tile) -> (Vec<u8>, Vec<u32>) {
     }
     // The decoder's walk (`decode_levels`), over the entries asked about alone.
     let mut learnt = Learnt::new();
-    let table = walk();
     for (j, level) in levels.iter().enumerate() {
         let j = j as u32;
         // Sent as they are: the vertices without both parents in this level (the walk meets
@@ -321,21 +343,13 @@ pub fn encode_levels(tile: &Tile) -> (Vec<u8>, Vec<u32>) {
             bits.push(u32::from(code[at((x, y))]), 14);
             learnt.learn(at((x, y)));
         }
-        let mut added = Vec::new();
-        for word in 0..learnt.asked.len() {
-            let mut asked = learnt.asked[word];
-            while asked != 0 {
-                let bit = asked.trailing_zeros();
-                let [p, a, b] = table[word * 64 + bit as usize].map(|v| v as usize);
+        let added = learnt
+            .walk(|p| {
                 let adds = block[p] == j;
                 bits.push(u32::from(adds), 1);
-                if adds {
-                    learnt.learn(p);
-                    added.push((p, a, b));
-                }
-                asked = learnt.asked[word] & (!0u64).checked_shl(bit + 1).unwrap_or(0);
-            }
-        }
+                Ok::<_, std::convert::Infallible>(adds)
+            })
+            .unwrap_or_else(|never| match never {});
         let residual = |&(p, a, b): &Walked| {
             let r = i32::from(code[p]) - predicted(code[a], code[b]);
             ((r << 1) ^ (r >> 31)) as u32
@@ -381,7 +395,6 @@ pub fn decode_levels(
     let mut code = vec![0u16; TILE_SIZE * TILE_SIZE];
     let mut learnt = Learnt::new();
     let mut sets = Vec::with_capacity(levels as usize);
-    let table = walk();
     for j in 0..levels {
         let start = reader.at / 8;
         let mut set = Vec::new();
@@ -398,21 +411,7 @@ pub fn decode_levels(
             code[at((x, y))] = c;
             set.push((x, y, c));
         }
-        // The walk, over the entries asked about alone, in the walk's order: a point added
-        // asks about entries after it (its children are of finer scales).
-        let mut added: Vec<Walked> = Vec::new();
-        for word in 0..learnt.asked.len() {
-            let mut bits = learnt.asked[word];
-            while bits != 0 {
-                let bit = bits.trailing_zeros();
-                let [p, a, b] = table[word * 64 + bit as usize].map(|v| v as usize);
-                if reader.bit()? {
-                    learnt.learn(p);
-                    added.push((p, a, b));
-                }
-                bits = learnt.asked[word] & (!0u64).checked_shl(bit + 1).unwrap_or(0);
-            }
-        }
+        let added = learnt.walk(|_| reader.bit())?;
         let k = reader.read(5)?;
         if k > 16 {
             return Err(format!("level {j}: Rice parameter {k}"));
