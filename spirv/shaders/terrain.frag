@@ -23,8 +23,8 @@
 // True in the pipeline that draws the tiles shaded by their texture this frame (flag 4 and a
 // slot): the texture's path alone, so the inputs only the other shadings read (the position,
 // height, level and sample) are not interpolated. A software rasteriser interpolates every
-// input a shader reads for every fragment; one shader for every shading cost lavapipe 1.3x
-// the draws of the Puget flyover at tau 3.
+// input a shader reads for every fragment; one shader for every shading cost lavapipe
+// 1.2-1.5x the draws of the Puget flyover at tau 3.
 layout(constant_id = 1) const bool PHOTO = false;
 
 layout(set = 0, binding = 2) uniform sampler2DArray textures;

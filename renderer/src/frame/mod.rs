@@ -264,13 +264,6 @@ impl Renderer {
         let t = Instant::now();
         let written =
             self.write_pass_inputs(terrain, settings, input.camera, (plan, &textures), s)?;
-        // The draws the fragment shader shades by their texture (its test, flag and slot).
-        let photo = written.constants.flags & crate::interface::FLAG_TEXTURE != 0;
-        let textured: Vec<bool> = textures
-            .draws
-            .iter()
-            .map(|t| photo && t.is_some())
-            .collect();
         let scene = Scene {
             terrain,
             settings,
@@ -279,7 +272,7 @@ impl Renderer {
             stitch_ranges: &written.stitch_ranges,
             read_back: self.options.read_back_heights,
             cull: pass::tiles_cull_mode(settings, self.fault),
-            textured: &textured,
+            textures: &textures.draws,
         };
         let counts = self.record_live(gpu, s, &input, scene, &uploads)?;
         let cpu_record_ms = ms(t);

@@ -20,7 +20,7 @@ use crate::settings::{MorphShader, Settings, Shading};
 use crate::stitch::pulled;
 use crate::target::Target;
 use crate::terrain::Terrain;
-use crate::textures::TexturePlan;
+use crate::textures::{TextureDraw, TexturePlan};
 use crate::vulkan::decode::Decoder;
 use crate::vulkan::morph_pass::MorphPass;
 use crate::vulkan::pipeline::{Pair, TerrainPipeline};
@@ -209,9 +209,9 @@ pub(super) struct Scene<'a> {
     pub read_back: bool,
     /// The tiles' cull mode ([`tiles_cull_mode`]).
     pub cull: vk::CullModeFlags,
-    /// Per draw, whether it is shaded by its texture this frame (empty: none is), so that the
-    /// pipeline with the fragment shader's texture path alone may draw it.
-    pub textured: &'a [bool],
+    /// Per draw, its texture slot this frame (empty: none has one): with the frame's texture
+    /// flag, the draws the photo pipeline may draw (the fragment shader's own test).
+    pub textures: &'a [Option<TextureDraw>],
 }
 
 /// The cull mode of the tiles' draws: back faces unless `--no-cull` or the wireframe (the
@@ -287,6 +287,7 @@ impl Pass<'_> {
         // The textured tiles take the photo pipeline where the default one draws (it is the
         // default's with the texture path alone).
         let photo = (pipeline.tiles == self.pipeline.fill.tiles
+            && constants.flags & FLAG_TEXTURE != 0
             && !self.scene.settings.one_fragment_shader)
             .then_some(self.pipeline.photo);
         let mut counts = DrawCounts::default();
@@ -307,8 +308,8 @@ impl Pass<'_> {
             );
             let mut bound: Option<u32> = None;
             for (record, d) in self.scene.plan.draws.iter().enumerate() {
-                let textured = self.scene.textured.get(record) == Some(&true);
-                let wanted = photo.filter(|_| textured).unwrap_or(pipeline.tiles);
+                let slot = self.scene.textures.get(record).is_some_and(Option::is_some);
+                let wanted = photo.filter(|_| slot).unwrap_or(pipeline.tiles);
                 if wanted != bound_pipeline {
                     // The same layout: the push constants and the set stay bound.
                     gpu.device

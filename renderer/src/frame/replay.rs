@@ -178,7 +178,7 @@ impl Renderer {
             stitch_ranges: &ranges,
             read_back: false,
             cull: pass::tiles_cull_mode(settings, self.fault),
-            textured: &[],
+            textures: &[],
         };
         let counts = self.record_pass(gpu, cmd, at, scene);
         slot.timestamps.end(gpu, cmd);

@@ -19,9 +19,8 @@
 //! ancestor (or a coarser checked level) stood in for `tiles_stood_in` (`--pyramid`), the index
 //! arrays made on the CPU rather than built on the GPU `index_arrays_made`, the tiles drawn by
 //! the pipeline whose fragment shader has the texture's path alone `tiles_photo`, the terrain
-//! pass as
-//! the GPU counted it (pipeline statistics, empty where the device does not count them)
-//! `gpu_primitives, gpu_primitives_after_clipping, gpu_vertex_invocations,
+//! pass as the GPU counted it (pipeline statistics, empty where the device does not count
+//! them) `gpu_primitives, gpu_primitives_after_clipping, gpu_vertex_invocations,
 //! gpu_fragment_invocations`, and last `tiles_level_0 .. tiles_level_{n-1}`.
 
 use std::path::Path;
