@@ -156,6 +156,133 @@ fn stored_lengths(stored: &[u8], levels: u32) -> Vec<u32> {
         .collect()
 }
 
+/// A version 3 tile blob as a compact one: its header and level table, then its levels'
+/// bit stream. The stream is decoded here and must give back every level's vertices and
+/// height codes, in order, so that a file never holds a stream that does not decode to the
+/// tile built. What a reader makes of those vertices (fans, order, borders, morph offsets)
+/// is the build's own assembly run again ([`crate::build::rebuild_tile`]); it is rebuilt
+/// and compared byte for byte here on one tile in [`FULL_CHECK_EVERY`] (a deterministic
+/// sample, every layer's first tile among them), on every tile by `tiletool verify`, and
+/// against the stored checksum wherever a tile is read. Rebuilding every tile here cost
+/// 11% of a build (N48W125, perf). A shard of a compact build stores its tiles so, and the
+/// merge copies them.
+pub fn compact_tile(
+    blob: &[u8],
+    (tx, ty): (u32, u32),
+    (levels, step): (u32, f32),
+) -> Result<Vec<u8>, String> {
+    let tile = Tile::parse(blob, tx, ty, levels, step)?;
+    let table = table_len(levels);
+    let mut out = blob[..table].to_vec();
+    out.extend(crc32fast::hash(blob).to_le_bytes());
+    let (stream, lengths) = crate::compact::encode_levels(&tile);
+    let (sets, _) = crate::compact::decode_levels(&stream, levels)?;
+    for (j, set) in sets.iter().enumerate() {
+        let built = tile
+            .level(j as u32)
+            .map(|l| l.positions)
+            .unwrap_or_default();
+        let decoded = set.iter().map(|&(x, y, c)| crate::pack::pack(x, y, c));
+        if built.len() != set.len() || !decoded.eq(built.iter().copied()) {
+            return Err(format!(
+                "its compact level {j} does not decode to its vertices"
+            ));
+        }
+    }
+    out.extend(bytemuck::cast_slice(&lengths));
+    out.extend(stream);
+    if (tx + 3 * ty).is_multiple_of(FULL_CHECK_EVERY) {
+        let made = rebuilt(&out, (tx, ty), (levels, step), COMPACT_VERSION, levels)?;
+        if made != blob {
+            return Err("its compact levels do not rebuild it".into());
+        }
+    }
+    Ok(out)
+}
+
+/// Compact (version 5) tile `(tx, ty)`'s stored bytes with its levels' morph units set to
+/// `units`: what a merge stores for a part's tile sealed at smaller units than the set's. Its
+/// stream is decoded (checked as [`stored_tile_table`] checks it) and is kept as it is: the
+/// vertices and height codes do not depend on the units. The table takes the units, and the
+/// checksum is that of the version 3 blob the build's assembly makes of those vertices at
+/// them ([`crate::build::rebuild_tile`]). The same bytes as [`compact_tile`] of the tile
+/// sealed at `units`, with one assembly instead of an expansion, a seal and an encoding.
+pub fn reseal_compact_tile(
+    stored: &[u8],
+    xy: (u32, u32),
+    shape: (u32, f32),
+    units: &[f64],
+) -> Result<Vec<u8>, String> {
+    let (header, mut entries, sets) = compact_levels(stored, xy, shape)?;
+    for (e, &u) in entries.iter_mut().zip(units) {
+        e.morph_unit = u as f32;
+    }
+    let numbering = numbering(COMPACT_VERSION);
+    let blob = crate::build::rebuild_tile(&header, &entries, &sets, numbering);
+    let table = table_len(shape.0);
+    let mut out = blob[..table].to_vec();
+    out.extend(crc32fast::hash(&blob).to_le_bytes());
+    out.extend(&stored[table + 4..]);
+    Ok(out)
+}
+
+/// The level table of tile `(tx, ty)`'s stored bytes, checked as far as a copy needs, without
+/// a rebuild: a version 3 blob parsed whole ([`Tile::parse`]); a compact (version 5) tile's
+/// header and table, and its stream decoded to as many vertices a level as the table says,
+/// each level ending where its length says. What only a rebuild shows (the checksum of the
+/// version 3 blob) is checked by every reader and by `tiletool verify`.
+pub fn stored_tile_table(
+    stored: &[u8],
+    (tx, ty): (u32, u32),
+    (levels, step): (u32, f32),
+    compact: bool,
+) -> Result<Vec<LevelEntry>, String> {
+    match compact {
+        true => Ok(compact_levels(stored, (tx, ty), (levels, step))?.1),
+        false => Ok(Tile::parse(stored, tx, ty, levels, step)?.levels().to_vec()),
+    }
+}
+
+/// A compact (version 5) tile's header, level table and decoded levels, checked: the header
+/// and table as [`Tile::parse`] checks them, each level decoded to as many vertices as its
+/// entry says and ending where its stored length says.
+fn compact_levels(
+    stored: &[u8],
+    (tx, ty): (u32, u32),
+    (levels, step): (u32, f32),
+) -> Result<(TileHeader, Vec<LevelEntry>, crate::compact::LevelSets), String> {
+    let start = stream_start(levels, COMPACT_VERSION);
+    if stored.len() < start {
+        return Err(format!(
+            "{} bytes is too short for a tile's table",
+            stored.len()
+        ));
+    }
+    let header: TileHeader = bytemuck::pod_read_unaligned(&stored[..size_of::<TileHeader>()]);
+    check_tile_header(&header, tx, ty, levels, step)?;
+    let entries = stored_entries(stored, levels);
+    check_table(&header, &entries)?;
+    let (sets, ranges) = crate::compact::decode_levels(&stored[start..], levels)?;
+    let lengths = stored_lengths(stored, levels);
+    for (j, ((set, range), e)) in sets.iter().zip(&ranges).zip(&entries).enumerate() {
+        if set.len() != e.block_len as usize {
+            return Err(format!(
+                "its compact level {j} decodes to {} vertices, its table says {}",
+                set.len(),
+                e.block_len
+            ));
+        }
+        if range.len() != lengths[j] as usize {
+            return Err(format!(
+                "level {j}'s stream is {} bytes, its length says {}",
+                range.len(),
+                lengths[j]
+            ));
+        }
+    }
+    Ok((header, entries, sets))
+}
+
 /// The version 3 blob of a compact tile's stored bytes (its header and level table, the crc32
 /// of the version 3 blob, in version 5 each level's bytes in the stream, then its levels' bit
 /// stream), or what is wrong with them: the header as [`Tile::parse`] checks it, the stream as
@@ -699,6 +826,24 @@ impl TileSetWriter {
         } else {
             blob
         };
+        self.put_layer_tile(layer, (tx, ty), blob, decimation_error, base_errors)
+    }
+
+    /// Appends base tile `(tx, ty)`'s bytes as the file stores them: with compact levels, what
+    /// [`compact_tile`] made of its version 3 blob (a merge copies a part's tiles so), else
+    /// the blob itself.
+    pub fn add_stored_tile(&mut self, tx: u32, ty: u32, stored: &[u8]) -> Result<(), FormatError> {
+        self.put_layer_tile(0, (tx, ty), stored, 0.0, &[])
+    }
+
+    fn put_layer_tile(
+        &mut self,
+        layer: u32,
+        (tx, ty): (u32, u32),
+        blob: &[u8],
+        decimation_error: f32,
+        base_errors: &[f32],
+    ) -> Result<(), FormatError> {
         let slot = self.slot(layer, tx, ty);
         if layer > 0 {
             let n = self.header.levels as usize;
@@ -726,58 +871,18 @@ impl TileSetWriter {
         Ok(())
     }
 
-    /// A version 3 tile blob as a compact one: its header and level table, then its levels'
-    /// bit stream. The stream is decoded here and must give back every level's vertices and
-    /// height codes, in order, so that a file never holds a stream that does not decode to the
-    /// tile built. What a reader makes of those vertices (fans, order, borders, morph offsets)
-    /// is the build's own assembly run again ([`crate::build::rebuild_tile`]); it is rebuilt
-    /// and compared byte for byte here on one tile in [`FULL_CHECK_EVERY`] (a deterministic
-    /// sample, every layer's first tile among them), on every tile by `tiletool verify`, and
-    /// against the stored checksum wherever a tile is read. Rebuilding every tile here cost
-    /// 11% of a build (N48W125, perf).
+    /// [`compact_tile`] for tile `(tx, ty)` of pyramid layer `layer`, at that layer's step.
     fn compacted(&self, layer: u32, tx: u32, ty: u32, blob: &[u8]) -> Result<Vec<u8>, FormatError> {
         let step = match layer {
             0 => self.header.height_step,
             p => self.layers[p as usize - 1].height_step,
         };
-        let internal = |what: String| FormatError::Invalid {
-            path: self.path.clone(),
-            what: format!("internal: tile {tx},{ty} of layer {layer}: {what}"),
-        };
-        let tile = Tile::parse(blob, tx, ty, self.header.levels, step).map_err(internal)?;
-        let table = table_len(self.header.levels);
-        let mut out = blob[..table].to_vec();
-        out.extend(crc32fast::hash(blob).to_le_bytes());
-        let (stream, lengths) = crate::compact::encode_levels(&tile);
-        let (sets, _) =
-            crate::compact::decode_levels(&stream, self.header.levels).map_err(internal)?;
-        for (j, set) in sets.iter().enumerate() {
-            let built = tile
-                .level(j as u32)
-                .map(|l| l.positions)
-                .unwrap_or_default();
-            let decoded = set.iter().map(|&(x, y, c)| crate::pack::pack(x, y, c));
-            if built.len() != set.len() || !decoded.eq(built.iter().copied()) {
-                return Err(internal(format!(
-                    "its compact level {j} does not decode to its vertices"
-                )));
+        compact_tile(blob, (tx, ty), (self.header.levels, step)).map_err(|what| {
+            FormatError::Invalid {
+                path: self.path.clone(),
+                what: format!("internal: tile {tx},{ty} of layer {layer}: {what}"),
             }
-        }
-        out.extend(bytemuck::cast_slice(&lengths));
-        out.extend(stream);
-        if (tx + 3 * ty).is_multiple_of(FULL_CHECK_EVERY) {
-            let made = rebuilt(
-                &out,
-                (tx, ty),
-                (self.header.levels, step),
-                COMPACT_VERSION,
-                self.header.levels,
-            );
-            if made.map_err(internal)? != blob {
-                return Err(internal("its compact levels do not rebuild it".into()));
-            }
-        }
-        Ok(out)
+        })
     }
 
     /// Appends tile `(tx, ty)`'s texture blob (after its tile, in any order).

@@ -29,7 +29,7 @@
 //!   tiles' deviations and the units its blobs were sealed with; where the set's units are
 //!   larger, the merge seals those tiles again from their own vertices
 //!   ([`crate::build::rebuild_tile`], which makes the build's bytes from a tile's vertex
-//!   sets).
+//!   sets; a compact tile keeps its stream, [`reseal_compact_tile`]).
 //!
 //! The tile pyramid (`--pyramid`) is built in the merge: its layers are built from the
 //! subsampled whole grid and measured against the base grid, so the merge reads the input
@@ -43,9 +43,12 @@
 //! its halo, the recipe (the inputs and options, as text: parts of one set must hold the
 //! same), the set's header as the writer is given it, the owned tile rows, the units its
 //! blobs were sealed with, the agreement's passes and meshes, then per owned tile (row-major)
-//! its forced sides and sides (bitmaps), its deviations, its blob and its texture; last, the
-//! crc32 of everything before it and `END_MAGIC`. It is written to a temporary file and
-//! renamed when complete, so a shard killed at any point leaves no part that reads as whole.
+//! its forced sides and sides (bitmaps), its deviations, its blob (with compact levels, the
+//! bytes the set stores, [`compact_tile`]: compacted on the shard, copied by the merge) and
+//! its texture; last, the crc32 of everything before it and `END_MAGIC`. It is written to a
+//! temporary file and renamed when complete, so a shard killed at any point leaves no part
+//! that reads as whole. Version 2 (the compact bytes); version 1 parts held version 3 blobs
+//! and are refused.
 
 use std::io::{BufWriter, Write};
 use std::ops::Range;
@@ -55,7 +58,10 @@ use crate::build::{
     build_tiles, forced_sides, scan, set_header, settle, units_of, validate, Bands, BuildParams,
     CompactSides, Heights, Layer, LevelStats, Remesh, SideBits, Start, TileSetMeta,
 };
-use crate::format::{temp_path, tile_count, FileHeader, Tile, TileSetWriter, FLAG_SHARED_SIDES};
+use crate::format::{
+    compact_tile, reseal_compact_tile, stored_tile_table, temp_path, tile_count, FileHeader, Tile,
+    TileSetWriter, FLAG_COMPACT_LEVELS, FLAG_SHARED_SIDES,
+};
 use crate::texture::{Prepared, Source, Texturing};
 use crate::BuildError;
 
@@ -66,7 +72,7 @@ const END_MAGIC: [u8; 8] = *b"VKTPEND\0";
 /// Where a part's blobs start: a multiple of this many bytes from the file's start.
 const ALIGN: usize = 16;
 /// The part format's version.
-pub const PART_VERSION: u32 = 1;
+pub const PART_VERSION: u32 = 2;
 /// Tile rows beyond its own that a shard settles the sides over, by default. On the sets
 /// measured (bench/README.md, "Distributed builds") one row already left no seam to settle
 /// again in the merge; two give margin for longer cascades at the cost of about `4 / rows`
@@ -241,6 +247,7 @@ pub fn build_shard(
         ..ShardSummary::default()
     };
     let none = vec![[[0u64; 5]; 4]; params.levels as usize];
+    let compact = header.flags & FLAG_COMPACT_LEVELS != 0;
     build_tiles(
         &layer,
         params,
@@ -260,9 +267,20 @@ pub fn build_shard(
             for &d in deviation {
                 part.f64(d)?;
             }
-            part.u64(built.blob.len() as u64)?;
+            // A compact set's tiles are compacted here, on the shards: the merge copies them.
+            let compacted;
+            let blob = if compact {
+                let xy = ((t % tiles_x as usize) as u32, (t / tiles_x as usize) as u32);
+                compacted = compact_tile(&built.blob, xy, (params.levels, scanned.step)).map_err(
+                    |what| BuildError::Internal(format!("tile {},{}: {what}", xy.0, xy.1)),
+                )?;
+                &compacted[..]
+            } else {
+                &built.blob[..]
+            };
+            part.u64(blob.len() as u64)?;
             part.align()?;
-            part.put(&built.blob)?;
+            part.put(blob)?;
             let tex = texture.map(|(blob, _, _)| blob).unwrap_or_default();
             part.u64(tex.len() as u64)?;
             part.align()?;
@@ -986,34 +1004,57 @@ pub fn merge(
     // Each tile's blob as the set holds it: rebuilt above, sealed again at the set's units
     // (on every core: it is most of a merge's work when the units differ), or as the part has
     // it. Written in row-major order, as the build writes them.
+    // With compact levels a part holds each tile as the set stores it: one sealed again keeps
+    // its stream under a new table and checksum, and the rest are copied.
     let shared = params.shared_sides;
-    let make = |t: usize| -> Result<Option<Vec<u8>>, BuildError> {
+    let compact = header.flags & FLAG_COMPACT_LEVELS != 0;
+    let shape = (header.levels, step);
+    let make = |t: usize| -> Result<Made, BuildError> {
         let part = owner(t);
-        if rebuilt.contains_key(&t) || !shared || part.units == units {
-            return Ok(None);
-        }
         let (tx, ty) = xy(t);
-        reseal(part.tile(t).blob, (tx, ty), header.levels, step, &units)
-            .map(Some)
-            .map_err(|what| {
-                BuildError::Input(format!("{}: tile {tx},{ty}: {what}", part.path.display()))
-            })
+        let failed = |what: String| {
+            BuildError::Input(format!("{}: tile {tx},{ty}: {what}", part.path.display()))
+        };
+        let stored = part.tile(t).blob;
+        if rebuilt.contains_key(&t) {
+            return Ok(Made::Rebuilt);
+        }
+        if !shared || part.units == units {
+            let entries = stored_tile_table(stored, (tx, ty), shape, compact).map_err(failed)?;
+            return Ok(Made::Copied(entries));
+        }
+        let out = match compact {
+            true => reseal_compact_tile(stored, (tx, ty), shape, &units),
+            false => reseal(stored, (tx, ty), header.levels, step, &units),
+        };
+        let out = out.map_err(failed)?;
+        let entries = stored_tile_table(&out, (tx, ty), shape, compact).map_err(failed)?;
+        Ok(Made::Resealed(out, entries))
     };
     let in_flight = 2 * rayon::current_num_threads();
     crate::ordered::in_order(count, in_flight, make, |t, made| {
         let tile = owner(t).tile(t);
         let (tx, ty) = xy(t);
-        let made = made?;
-        summary.resealed += u64::from(made.is_some());
-        let blob = match (&made, rebuilt.get(&t)) {
-            (_, Some(blob)) | (Some(blob), None) => &blob[..],
-            (None, None) => tile.blob,
+        let entries = match made? {
+            Made::Rebuilt => {
+                let blob = &rebuilt[&t];
+                writer.add_tile(tx, ty, blob)?;
+                let parsed = Tile::parse(blob, tx, ty, header.levels, step).map_err(|what| {
+                    BuildError::Internal(format!("tile {tx},{ty} of the merged set: {what}"))
+                })?;
+                parsed.levels().to_vec()
+            }
+            Made::Resealed(stored, entries) => {
+                summary.resealed += 1;
+                writer.add_stored_tile(tx, ty, &stored)?;
+                entries
+            }
+            Made::Copied(entries) => {
+                writer.add_stored_tile(tx, ty, tile.blob)?;
+                entries
+            }
         };
-        writer.add_tile(tx, ty, blob)?;
-        let parsed = Tile::parse(blob, tx, ty, header.levels, step).map_err(|what| {
-            BuildError::Internal(format!("tile {tx},{ty} of the merged set: {what}"))
-        })?;
-        for (sum, e) in summary.levels.iter_mut().zip(parsed.levels()) {
+        for (sum, e) in summary.levels.iter_mut().zip(&entries) {
             sum.vertices += u64::from(e.vertex_count());
             sum.triangles += u64::from(e.triangle_count);
             sum.max_error = sum.max_error.max(f64::from(e.max_error));
@@ -1062,6 +1103,16 @@ pub fn merge(
     writer.finish()?;
     summary.file_bytes = std::fs::metadata(out).map(|m| m.len()).unwrap_or(0);
     Ok(summary)
+}
+
+/// What the merge makes of a part's tile before it is written, with its level table.
+enum Made {
+    /// Built again from the input (the agreement moved its sides): written as built.
+    Rebuilt,
+    /// Sealed again at the set's morph units: the bytes to store.
+    Resealed(Vec<u8>, Vec<crate::format::LevelEntry>),
+    /// Copied as the part stores it.
+    Copied(Vec<crate::format::LevelEntry>),
 }
 
 /// Tiles whose recorded forced sides are not what their own and their neighbours' recorded

@@ -78,6 +78,48 @@ fn merged_parts_are_the_builds_bytes() {
             "{n} shards {extra:?}: the merged set differs from the build"
         );
     }
+    // Compact levels where the shards' morph units differ from the set's (SRTM1 N43E007 in 3
+    // shards): the shards store their tiles compact, the merge seals most again keeping their
+    // streams, and copies the rest; the bytes are still the build's.
+    let input_units = data("srtm/N43E007.hgt");
+    let whole = dir.path().join("whole-units.vkt");
+    build(&input_units, &whole, &["--compact"]);
+    let sub = dir.path().join("units");
+    std::fs::create_dir(&sub).expect("dir");
+    let parts = shards(&input_units, &sub, 3, &["--compact"]);
+    let merged = sub.join("merged.vkt");
+    let o = merge(&parts, &merged);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        said.contains("sealed again at the set's morph units"),
+        "no tile was sealed again, so this case tests nothing new: {said}"
+    );
+    assert!(
+        same_bytes(&merged, &whole),
+        "compact, units sealed again: differs from the build"
+    );
+    // The parts hold the compact bytes, not version 3 blobs: together about the set's size.
+    // The control: the same shards without --compact weigh several times more.
+    let weight = |parts: &[PathBuf]| -> u64 {
+        parts
+            .iter()
+            .map(|p| std::fs::metadata(p).expect("part").len())
+            .sum()
+    };
+    let set_bytes = std::fs::metadata(&whole).expect("set").len();
+    assert!(
+        weight(&parts) < set_bytes * 11 / 10,
+        "compact parts weigh {} bytes, the set {set_bytes}",
+        weight(&parts)
+    );
+    let sub = dir.path().join("units-v3");
+    std::fs::create_dir(&sub).expect("dir");
+    let v3_parts = shards(&input_units, &sub, 3, &[]);
+    assert!(
+        weight(&v3_parts) > 2 * weight(&parts),
+        "the control: version 3 parts are not heavier"
+    );
     // A halo of 0: the shards see no neighbour across their seams, so the merge must resume
     // the agreement there and build those tiles again.
     let whole = dir.path().join("whole-0.vkt");
@@ -349,6 +391,48 @@ fn parts_that_do_not_belong_are_refused() {
         "do not add up",
     );
     assert!(err.contains("do not add up"), "{err}");
+    // A compact part whose first tile's stored level length is wrong, the part's checksum made
+    // to match: the merge checks what it copies (decoded against the tile's table and
+    // lengths), so it is refused, naming the part and the tile. The control: the same part
+    // unchanged merges.
+    let compact_dir = dir.path().join("compact");
+    std::fs::create_dir(&compact_dir).expect("dir");
+    let compact = shards(&input, &compact_dir, 3, &["--no-texture", "--compact"]);
+    let bytes = std::fs::read(&compact[1]).expect("read");
+    let recipe_len = u32::from_le_bytes(bytes[24..28].try_into().expect("4 bytes")) as usize;
+    let rows_at = 28 + recipe_len + size_of::<tiles::format::FileHeader>();
+    let levels = u32::from_le_bytes(bytes[rows_at + 12..rows_at + 16].try_into().expect("4"));
+    let tiles_at = rows_at + 16 + 8 * levels as usize + 12;
+    // Forced sides and sides (4 sides of 5 words a level, each), deviations, the blob's length.
+    let blob_len_at = tiles_at + levels as usize * (2 * 4 * 40 + 8);
+    let blob_at = (blob_len_at + 8).next_multiple_of(16);
+    let table = size_of::<tiles::format::TileHeader>()
+        + levels as usize * size_of::<tiles::format::LevelEntry>();
+    let first_length = blob_at + table + 4;
+    let mut forged = bytes[..bytes.len() - 12].to_vec();
+    let n = u32::from_le_bytes(
+        forged[first_length..first_length + 4]
+            .try_into()
+            .expect("4"),
+    );
+    forged[first_length..first_length + 4].copy_from_slice(&(n + 1).to_le_bytes());
+    let crc = crc32fast::hash(&forged);
+    forged.extend(crc.to_le_bytes());
+    forged.extend(b"VKTPEND\0");
+    let forged_part = compact_dir.join("forged");
+    std::fs::write(&forged_part, &forged).expect("write");
+    let err = refused(
+        &[compact[0].clone(), forged_part.clone(), compact[2].clone()],
+        &forged_part,
+        "its length says",
+    );
+    assert!(
+        err.contains("its length says") && err.contains("tile 0,"),
+        "the damaged tile is not named: {err}"
+    );
+    let o = merge(&compact, &out);
+    assert!(o.status.success(), "the control: {}", stderr(&o));
+    std::fs::remove_file(&out).expect("rm");
     let set = dir.path().join("a-set");
     build(&input, &set, &["--no-texture"]);
     refused(
