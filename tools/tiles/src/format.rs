@@ -207,19 +207,31 @@ pub fn compact_tile(
 /// checksum is that of the version 3 blob the build's assembly makes of those vertices at
 /// them ([`crate::build::rebuild_tile`]). The same bytes as [`compact_tile`] of the tile
 /// sealed at `units`, with one assembly instead of an expansion, a seal and an encoding.
+///
+/// The new checksum is made, not checked, so a stream that decodes but is not the one the
+/// shard encoded would be sealed as if it were. The part's own checksum covers its bytes
+/// between the shard and the merge, and the tiles [`compact_tile`] rebuilds in full (one in
+/// [`FULL_CHECK_EVERY`]) are rebuilt here at their old units too and must give their stored
+/// checksum.
 pub fn reseal_compact_tile(
     stored: &[u8],
-    xy: (u32, u32),
+    (tx, ty): (u32, u32),
     shape: (u32, f32),
     units: &[f64],
 ) -> Result<Vec<u8>, String> {
-    let (header, mut entries, sets) = compact_levels(stored, xy, shape)?;
+    let (header, mut entries, sets) = compact_levels(stored, (tx, ty), shape)?;
+    let numbering = numbering(COMPACT_VERSION);
+    let table = table_len(shape.0);
+    if (tx + 3 * ty).is_multiple_of(FULL_CHECK_EVERY) {
+        let old = crate::build::rebuild_tile(&header, &entries, &sets, numbering);
+        if crc32fast::hash(&old).to_le_bytes()[..] != stored[table..table + 4] {
+            return Err("its compact levels rebuild a tile that fails its checksum".into());
+        }
+    }
     for (e, &u) in entries.iter_mut().zip(units) {
         e.morph_unit = u as f32;
     }
-    let numbering = numbering(COMPACT_VERSION);
     let blob = crate::build::rebuild_tile(&header, &entries, &sets, numbering);
-    let table = table_len(shape.0);
     let mut out = blob[..table].to_vec();
     out.extend(crc32fast::hash(&blob).to_le_bytes());
     out.extend(&stored[table + 4..]);

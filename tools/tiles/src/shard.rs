@@ -1003,9 +1003,10 @@ pub fn merge(
     let xy = |t: usize| ((t % tiles_x as usize) as u32, (t / tiles_x as usize) as u32);
     // Each tile's blob as the set holds it: rebuilt above, sealed again at the set's units
     // (on every core: it is most of a merge's work when the units differ), or as the part has
-    // it. Written in row-major order, as the build writes them.
-    // With compact levels a part holds each tile as the set stores it: one sealed again keeps
-    // its stream under a new table and checksum, and the rest are copied.
+    // it. Written in row-major order, as the build writes them. With compact levels a part
+    // holds each tile as the set stores it: one sealed again keeps its stream under a new
+    // table and checksum, and the rest are copied once their streams decode as their tables
+    // say.
     let shared = params.shared_sides;
     let compact = header.flags & FLAG_COMPACT_LEVELS != 0;
     let shape = (header.levels, step);

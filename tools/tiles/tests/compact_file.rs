@@ -431,3 +431,68 @@ fn the_compact_writer_decodes_every_stream_and_rebuilds_a_sample() {
     }
     assert!(verify(&s, Some(&grid)).ok());
 }
+
+/// What a merge does to a compact tile sealed at smaller morph units than the set's
+/// (`reseal_compact_tile`): the stream is kept and decoded, the table takes the new units,
+/// and the checksum is made anew. On the writer's sample (`FULL_CHECK_EVERY`) the tile is
+/// first rebuilt at its old units and must give its stored checksum. The control: a tile in
+/// the sample whose stored checksum is off is refused, and the same damage outside the
+/// sample is sealed (the part's own checksum covers that case).
+#[test]
+fn a_compact_tile_sealed_again_keeps_its_stream_and_checks_a_sample() {
+    use tiles::format::{
+        compact_tile, reseal_compact_tile, stored_tile_table, LevelEntry, TileHeader,
+        FULL_CHECK_EVERY,
+    };
+    let (w, h) = (513, 513);
+    let heights = srtm3_crop(300, 200, w, h);
+    let grid = common::srtm3_grid(&heights, (w, h));
+    let dir = tempfile::tempdir().expect("temp dir");
+    let plain = dir.path().join("plain.vkt");
+    build_tileset(
+        &grid,
+        &BuildParams::default(),
+        &TileSetMeta::default(),
+        &plain,
+        &|| {},
+    )
+    .expect("plain");
+    let p = TileSet::open(&plain).expect("open");
+    let shape = (p.header().levels, p.header().height_step);
+    let table = size_of::<TileHeader>() + shape.0 as usize * size_of::<LevelEntry>();
+    let sampled = |tx: u32, ty: u32| (tx + 3 * ty).is_multiple_of(FULL_CHECK_EVERY);
+    assert!(sampled(0, 0) && !sampled(1, 0));
+    for (tx, ty) in [(0, 0), (1, 0)] {
+        let stored = compact_tile(p.blob(tx, ty).expect("blob"), (tx, ty), shape).expect("compact");
+        let entries = stored_tile_table(&stored, (tx, ty), shape, true).expect("table");
+        let units: Vec<f64> = entries
+            .iter()
+            .map(|e| 2.0 * f64::from(e.morph_unit))
+            .collect();
+        let sealed = reseal_compact_tile(&stored, (tx, ty), shape, &units).expect("sealed");
+        assert_eq!(
+            sealed[table + 4..],
+            stored[table + 4..],
+            "the stream changed"
+        );
+        assert_ne!(
+            sealed[table..table + 4],
+            stored[table..table + 4],
+            "the same checksum"
+        );
+        let now = stored_tile_table(&sealed, (tx, ty), shape, true).expect("sealed table");
+        for (e, u) in now.iter().zip(&units) {
+            assert_eq!(e.morph_unit, *u as f32);
+        }
+        let mut damaged = stored.clone();
+        damaged[table] ^= 1;
+        let got = reseal_compact_tile(&damaged, (tx, ty), shape, &units);
+        match sampled(tx, ty) {
+            true => assert!(
+                got.as_ref().is_err_and(|e| e.contains("checksum")),
+                "tile {tx},{ty}: {got:?}"
+            ),
+            false => assert!(got.is_ok(), "tile {tx},{ty}: {got:?}"),
+        }
+    }
+}
