@@ -1,7 +1,8 @@
 # Sourced by issue 25's round scripts (bench/rounds.sh, bench/made.sh): the binaries, the
 # scratch folder ($out, from OUT or the script's default $1), the demo's Puget set ($P) and the
 # SRTM N48W125 set built with the default options ($N, as bench/device.sh builds it), and the
-# modes and flights of issue 25's table, and `fly`, which flies one of them.
+# modes and flights of issue 25's table, and `fly`, which flies one of them (with the binary
+# $VK when set).
 B=target/release
 out=${OUT:-$1}; mkdir -p "$out"
 P=out/puget.vkt
@@ -14,6 +15,6 @@ flights=("$P flyover" "$P orbit" "$N flyover" "$N orbit")
 fly() {
   local set=$1 path=$2
   shift 2
-  "$B/vkterrain" "$set" --headless --path "$path" --frames 60 --size 1024x768 "$@" \
+  "${VK:-$B/vkterrain}" "$set" --headless --path "$path" --frames 60 --size 1024x768 "$@" \
     --log "$out/log.csv" > /dev/null
 }

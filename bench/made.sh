@@ -9,6 +9,8 @@
 #
 #   cargo build --release -p tiletool -p renderer && bash .ci/demo   # out/puget.vkt
 #   bench/made.sh [ROUNDS]                                            # default 2, ~6 min each
+#   FLAG=--texture-format FROM=bc1 TO=rgb565 bench/made.sh            # another flag's values
+#   BINARIES=1 FROM=OLD/vkterrain TO=NEW/vkterrain bench/made.sh      # two binaries
 set -euo pipefail
 rounds=${1:-2}
 # shellcheck source=bench/issue25_sets.sh
@@ -21,7 +23,11 @@ for round in $(seq "$rounds"); do
     for mode in "${modes[@]}"; do
       for builder in "$FROM" "$TO"; do
         # shellcheck disable=SC2086
-        fly "$1" "$2" $mode $FLAG $builder
+        if [ -n "${BINARIES:-}" ]; then
+          VK=$builder fly "$1" "$2" $mode
+        else
+          fly "$1" "$2" $mode $FLAG $builder
+        fi
         python3 - "$round" "$(basename "$1" .vkt) $2" "$mode" "$builder" "$out/log.csv" >> "$rows" <<'PY'
 import csv, sys
 r = list(csv.DictReader(open(sys.argv[5])))[5:]
