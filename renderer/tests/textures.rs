@@ -323,9 +323,12 @@ fn slots_decoded_to_rgb565_draw_what_bc1_slots_draw() {
 /// frame for frame, as with the one fragment shader for every shading
 /// (`--one-fragment-shader`), with most tiles drawn by the photo pipeline and none without it;
 /// so does a flight with slots for a few tiles alone, whose other tiles are tinted by the
-/// default pipeline beside the photo one's. The
-/// control: the photo pipeline's tiles sampled 4 samples off every other tile
-/// (`texture-seam`) draw other frames.
+/// default pipeline beside the photo one's. "The same" within the sampler's own rounding: a
+/// tile whose every mip is resident samples with implicit derivatives (`WHOLE_MIPS`), the one
+/// shader with the same derivatives given, and lavapipe rounds the two levels differently on
+/// 0.6-2.2% of a frame's pixels, by at most 9 levels of 255 ([`same_samples`]). The control:
+/// the photo pipeline's tiles sampled 4 samples off every other tile (`texture-seam`) draw
+/// frames beyond that.
 #[test]
 fn the_photo_pipeline_draws_what_the_one_fragment_shader_draws() {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -345,9 +348,12 @@ fn the_photo_pipeline_draws_what_the_one_fragment_shader_draws() {
         let one_shader = [&extra[..], &["--one-fragment-shader"]].concat();
         let (one, by_one, _) = run("one", &one_shader, None);
         for (k, (a, b)) in photo.iter().zip(&one).enumerate() {
+            let (share_of, max) = sampled_apart(a, b);
             assert!(
-                a == b,
-                "share {share}: frame {k} differs with the photo pipeline"
+                same_samples(a, b),
+                "share {share}: frame {k} differs with the photo pipeline on {:.2}% of its \
+                 pixels, by up to {max}",
+                100.0 * share_of
             );
         }
         eprintln!("share {share}: {by_photo} of {drawn} tile draws by the photo pipeline");
@@ -367,9 +373,34 @@ fn the_photo_pipeline_draws_what_the_one_fragment_shader_draws() {
     let (one, ..) = run("one", &["--one-fragment-shader"], None);
     // The control.
     let (seam, ..) = run("seam", &[], Some("texture-seam"));
-    let differing = seam.iter().zip(&one).filter(|(a, b)| a != b).count();
+    let differing = seam
+        .iter()
+        .zip(&one)
+        .filter(|(a, b)| !same_samples(a, b))
+        .count();
     assert!(
         differing >= 6,
         "a texture seam changed {differing} of 12 frames"
     );
+}
+
+/// The share of pixels whose colour differs between `a` and `b`, and the largest difference
+/// of a channel.
+fn sampled_apart(a: &image::RgbaImage, b: &image::RgbaImage) -> (f64, u8) {
+    let mut differing = 0usize;
+    let mut max = 0u8;
+    for (p, q) in a.pixels().zip(b.pixels()) {
+        let d = (0..3).map(|c| p[c].abs_diff(q[c])).max().unwrap_or(0);
+        differing += usize::from(d > 0);
+        max = max.max(d);
+    }
+    (differing as f64 / f64::from(a.width() * a.height()), max)
+}
+
+/// `a` and `b` are the same frame but for the sampler's own rounding of its level: at most 5%
+/// of the pixels differ, by at most 16 levels a channel (measured: at most 2.2%, by 9; the
+/// control, a seam, 13-52% by 100-219).
+fn same_samples(a: &image::RgbaImage, b: &image::RgbaImage) -> bool {
+    let (share, max) = sampled_apart(a, b);
+    a.dimensions() == b.dimensions() && share <= 0.05 && max <= 16
 }

@@ -26,6 +26,12 @@
 // input a shader reads for every fragment; one shader for every shading cost lavapipe
 // 1.2-1.5x the draws of the Puget flyover at tau 3.
 layout(constant_id = 1) const bool PHOTO = false;
+// True in the photo pipeline for tiles whose every mip is resident (finest 0): the sampler's
+// own level from the implicit derivatives, which lavapipe takes with 0.75-1.0x the frame of
+// explicit gradients (bench/README.md, "Implicit derivatives"). A run-time branch on the
+// finest mip instead cost lavapipe 1.1-1.35x the frame: it runs both sides of a branch it
+// cannot prove uniform, so both samples.
+layout(constant_id = 2) const bool WHOLE_MIPS = false;
 
 layout(set = 0, binding = 2) uniform sampler2DArray textures;
 
@@ -69,11 +75,16 @@ vec3 level_colour(float l) {
 // The tile's texture at texture coordinate `uv`, whose screen derivatives are `du` and `dv`.
 vec4 photo(vec2 uv, vec2 du, vec2 dv) {
     vec3 at = vec3(uv, texture_tile.z);
+    if (WHOLE_MIPS) {
+        return vec4(texture(textures, at).rgb, 1.0);
+    }
 #ifdef MIN_LOD
     return vec4(textureGradClampARB(textures, at, du, dv, texture_tile.w).rgb, 1.0);
 #else
+    // With every mip resident the sampler's own level stands (the gradients as they are,
+    // what WHOLE_MIPS samples with implicit derivatives).
     float shorter = min(length(du), length(dv)) * frame.texture_map.z;
-    float k = max(exp2(texture_tile.w + 0.01) / max(shorter, 1e-6), 1.0);
+    float k = texture_tile.w > 0.0 ? max(exp2(texture_tile.w + 0.01) / max(shorter, 1e-6), 1.0) : 1.0;
     return vec4(textureGrad(textures, at, du * k, dv * k).rgb, 1.0);
 #endif
 }

@@ -289,7 +289,7 @@ impl Pass<'_> {
         let photo = (pipeline.tiles == self.pipeline.fill.tiles
             && constants.flags & FLAG_TEXTURE != 0
             && !self.scene.settings.one_fragment_shader)
-            .then_some(self.pipeline.photo);
+            .then_some((self.pipeline.photo, self.pipeline.photo_whole));
         let mut counts = DrawCounts::default();
         // SAFETY: recording inside dynamic rendering; the pool and the records outlive the
         // frame, and every range drawn was written before (the manager's grants; records by
@@ -308,8 +308,13 @@ impl Pass<'_> {
             );
             let mut bound: Option<u32> = None;
             for (record, d) in self.scene.plan.draws.iter().enumerate() {
-                let slot = self.scene.textures.get(record).is_some_and(Option::is_some);
-                let wanted = photo.filter(|_| slot).unwrap_or(pipeline.tiles);
+                // A tile with every mip resident samples at the sampler's own level.
+                let slot = self.scene.textures.get(record).copied().flatten();
+                let wanted = match (photo, slot) {
+                    (Some((_, whole)), Some(t)) if t.finest == 0 => whole,
+                    (Some((some, _)), Some(_)) => some,
+                    _ => pipeline.tiles,
+                };
                 if wanted != bound_pipeline {
                     // The same layout: the push constants and the set stay bound.
                     gpu.device
@@ -317,7 +322,7 @@ impl Pass<'_> {
                     gpu.device.cmd_set_cull_mode(cmd, self.scene.cull);
                     bound_pipeline = wanted;
                 }
-                counts.photo += u64::from(wanted == self.pipeline.photo);
+                counts.photo += u64::from(photo.is_some_and(|(a, b)| wanted == a || wanted == b));
                 if bound != Some(d.index_width) {
                     gpu.device
                         .cmd_bind_index_buffer(cmd, self.pool, 0, index_type(d.index_width));

@@ -29,6 +29,8 @@ pub struct TerrainPipeline {
     /// `fill`'s tiles pipeline with the fragment shader's texture path alone (`PHOTO`), for
     /// the tiles drawn with their texture this frame.
     pub photo: vk::Pipeline,
+    /// `photo` for tiles whose every mip is resident (`WHOLE_MIPS`): the sampler's own level.
+    pub photo_whole: vk::Pipeline,
     /// The previous per-vertex rule (`--morph-shader two-levels`).
     pub two_levels: Pair,
     /// The same rule with the paper's forward differences (`--morph-shader forward-differences`).
@@ -177,14 +179,20 @@ impl TerrainPipeline {
             Self::pair(gpu, layout, (vert, frag), (color, depth), mode, name)
         };
         let fill = pair(vert, vk::PolygonMode::FILL, "terrain (fill)");
-        let photo = Self::specialised(
-            gpu,
-            layout,
-            (vert, false),
-            (frag, true),
-            (color, depth),
-            vk::PolygonMode::FILL,
-            "terrain (fill, photo)",
+        let photo = |whole: bool, name: &str| {
+            Self::specialised(
+                gpu,
+                layout,
+                (vert, false),
+                (frag, Some(whole)),
+                (color, depth),
+                vk::PolygonMode::FILL,
+                name,
+            )
+        };
+        let (photo, photo_whole) = (
+            photo(false, "terrain (fill, photo)"),
+            photo(true, "terrain (fill, photo, every mip)"),
         );
         let two_levels = pair(
             vert_two_levels,
@@ -217,6 +225,7 @@ impl TerrainPipeline {
             layout,
             fill: fill?,
             photo: photo?,
+            photo_whole: photo_whole?,
             two_levels: two_levels?,
             all_rows: all_rows?,
             morph: MorphPass::new(gpu, set_layout)?,
@@ -239,7 +248,7 @@ impl TerrainPipeline {
                 gpu,
                 layout,
                 (vert, stitch),
-                (frag, false),
+                (frag, None),
                 formats,
                 mode,
                 name,
@@ -252,33 +261,35 @@ impl TerrainPipeline {
     }
 
     /// A pipeline of `vert` and `frag` specialised: the vertex shader's `STITCH` (constant 0)
-    /// and the fragment shader's `PHOTO` (constant 1).
+    /// and, for the photo pipelines (`photo` Some), the fragment shader's `PHOTO` (constant 1)
+    /// and `WHOLE_MIPS` (constant 2) as `photo` says.
     fn specialised(
         gpu: &Gpu,
         layout: vk::PipelineLayout,
         (vert, stitch): (vk::ShaderModule, bool),
-        (frag, photo): (vk::ShaderModule, bool),
+        (frag, photo): (vk::ShaderModule, Option<bool>),
         (color, depth): (vk::Format, vk::Format),
         mode: vk::PolygonMode,
         name: &str,
     ) -> VkResult<vk::Pipeline> {
-        let constant = |id: u32| {
-            [vk::SpecializationMapEntry::default()
+        let constant = |id: u32, offset: u32| {
+            vk::SpecializationMapEntry::default()
                 .constant_id(id)
-                .offset(0)
-                .size(4)]
+                .offset(offset)
+                .size(4)
         };
-        let (vertex_entries, fragment_entries) = (constant(0), constant(1));
-        let (stitch, photo) = (
-            u32::from(stitch).to_ne_bytes(),
-            u32::from(photo).to_ne_bytes(),
-        );
+        let vertex_entries = [constant(0, 0)];
+        let fragment_entries = [constant(1, 0), constant(2, 4)];
+        let stitch = u32::from(stitch).to_ne_bytes();
+        let mut photo_data = [0u8; 8];
+        photo_data[..4].copy_from_slice(&u32::from(photo.is_some()).to_ne_bytes());
+        photo_data[4..].copy_from_slice(&u32::from(photo == Some(true)).to_ne_bytes());
         let vertex = vk::SpecializationInfo::default()
             .map_entries(&vertex_entries)
             .data(&stitch);
         let fragment = vk::SpecializationInfo::default()
             .map_entries(&fragment_entries)
-            .data(&photo);
+            .data(&photo_data);
         Self::build(
             gpu,
             layout,
@@ -394,6 +405,7 @@ impl TerrainPipeline {
                 p.destroy(gpu);
             }
             gpu.device.destroy_pipeline(self.photo, None);
+            gpu.device.destroy_pipeline(self.photo_whole, None);
             gpu.device.destroy_pipeline_layout(self.layout, None);
             gpu.device
                 .destroy_descriptor_set_layout(self.set_layout, None);
