@@ -17,7 +17,7 @@ use crate::settings::Settings;
 use crate::terrain::Terrain;
 use crate::textures::TexturePlan;
 use crate::vulkan::buffer::BufferDesc;
-use crate::vulkan::pipeline::{SetBuffers, TerrainSets};
+use crate::vulkan::sets::{SetBuffers, TerrainSets};
 use crate::vulkan::sync;
 use crate::vulkan::{Buffer, Gpu, VkResult};
 

@@ -10,6 +10,7 @@ pub mod indices;
 pub mod morph_pass;
 pub mod pipeline;
 pub mod pool;
+pub mod sets;
 pub mod swapchain;
 pub mod sync;
 pub mod texture;

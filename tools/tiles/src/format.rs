@@ -255,15 +255,14 @@ pub fn stored_tile_table(
     }
 }
 
-/// A compact (version 5) tile's header, level table and decoded levels, checked: the header
-/// and table as [`Tile::parse`] checks them, each level decoded to as many vertices as its
-/// entry says and ending where its stored length says.
-fn compact_levels(
+/// A compact tile's header and level table from its stored bytes, checked as [`Tile::parse`]
+/// checks them; the bytes must reach `start`, where its stream begins.
+fn stored_table(
     stored: &[u8],
     (tx, ty): (u32, u32),
     (levels, step): (u32, f32),
-) -> Result<(TileHeader, Vec<LevelEntry>, crate::compact::LevelSets), String> {
-    let start = stream_start(levels, COMPACT_VERSION);
+    start: usize,
+) -> Result<(TileHeader, Vec<LevelEntry>), String> {
     if stored.len() < start {
         return Err(format!(
             "{} bytes is too short for a tile's table",
@@ -274,6 +273,19 @@ fn compact_levels(
     check_tile_header(&header, tx, ty, levels, step)?;
     let entries = stored_entries(stored, levels);
     check_table(&header, &entries)?;
+    Ok((header, entries))
+}
+
+/// A compact (version 5) tile's header, level table and decoded levels, checked: the header
+/// and table as [`Tile::parse`] checks them, each level decoded to as many vertices as its
+/// entry says and ending where its stored length says.
+fn compact_levels(
+    stored: &[u8],
+    (tx, ty): (u32, u32),
+    (levels, step): (u32, f32),
+) -> Result<(TileHeader, Vec<LevelEntry>, crate::compact::LevelSets), String> {
+    let start = stream_start(levels, COMPACT_VERSION);
+    let (header, entries) = stored_table(stored, (tx, ty), (levels, step), start)?;
     let (sets, ranges) = crate::compact::decode_levels(&stored[start..], levels)?;
     let lengths = stored_lengths(stored, levels);
     for (j, ((set, range), e)) in sets.iter().zip(&ranges).zip(&entries).enumerate() {
@@ -315,16 +327,7 @@ fn rebuilt(
 ) -> Result<Vec<u8>, String> {
     let table = table_len(levels);
     let start = stream_start(levels, version);
-    if stored.len() < start {
-        return Err(format!(
-            "{} bytes is too short for a tile's table",
-            stored.len()
-        ));
-    }
-    let header: TileHeader = bytemuck::pod_read_unaligned(&stored[..size_of::<TileHeader>()]);
-    check_tile_header(&header, tx, ty, levels, step)?;
-    let entries = stored_entries(stored, levels);
-    check_table(&header, &entries)?;
+    let (header, entries) = stored_table(stored, (tx, ty), (levels, step), start)?;
     let crc = u32::from_le_bytes(stored[table..table + 4].try_into().expect("4 bytes"));
     let lengths = match version {
         FIRST_COMPACT_VERSION => Vec::new(),

@@ -26,6 +26,23 @@ fn compact_set(grid: &tiles::Grid, dir: &std::path::Path) -> std::path::PathBuf 
     path
 }
 
+/// A 513² crop of N55W003 (2 x 2 tiles) built as version 3 into `dir/plain.vkt`, opened.
+fn plain_crop(dir: &std::path::Path) -> TileSet {
+    let (w, h) = (513, 513);
+    let heights = srtm3_crop(300, 200, w, h);
+    let grid = common::srtm3_grid(&heights, (w, h));
+    let plain = dir.join("plain.vkt");
+    build_tileset(
+        &grid,
+        &BuildParams::default(),
+        &TileSetMeta::default(),
+        &plain,
+        &|| {},
+    )
+    .expect("plain");
+    TileSet::open(&plain).expect("open")
+}
+
 #[test]
 fn compact_sets_read_back_as_built_and_refuse_a_damaged_stream() {
     // 2 x 2 tiles and a partial third column, with the pyramid: two layers of tiles.
@@ -340,20 +357,8 @@ fn a_compact_tiles_first_levels_rebuild_alone() {
 #[test]
 fn the_compact_writer_decodes_every_stream_and_rebuilds_a_sample() {
     use tiles::format::{FileHeader, TileSetWriter, FULL_CHECK_EVERY};
-    let (w, h) = (513, 513);
-    let heights = srtm3_crop(300, 200, w, h);
-    let grid = common::srtm3_grid(&heights, (w, h));
     let dir = tempfile::tempdir().expect("temp dir");
-    let plain = dir.path().join("plain.vkt");
-    build_tileset(
-        &grid,
-        &BuildParams::default(),
-        &TileSetMeta::default(),
-        &plain,
-        &|| {},
-    )
-    .expect("plain");
-    let p = TileSet::open(&plain).expect("open");
+    let p = plain_crop(dir.path());
     let header = FileHeader {
         flags: p.header().flags | FLAG_COMPACT_LEVELS,
         ..*p.header()
@@ -429,6 +434,8 @@ fn the_compact_writer_decodes_every_stream_and_rebuilds_a_sample() {
     for (tx, ty) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
         assert_eq!(s.blob(tx, ty), p.blob(tx, ty), "tile {tx},{ty}");
     }
+    let heights = srtm3_crop(300, 200, 513, 513);
+    let grid = common::srtm3_grid(&heights, (513, 513));
     assert!(verify(&s, Some(&grid)).ok());
 }
 
@@ -444,20 +451,8 @@ fn a_compact_tile_sealed_again_keeps_its_stream_and_checks_a_sample() {
         compact_tile, reseal_compact_tile, stored_tile_table, LevelEntry, TileHeader,
         FULL_CHECK_EVERY,
     };
-    let (w, h) = (513, 513);
-    let heights = srtm3_crop(300, 200, w, h);
-    let grid = common::srtm3_grid(&heights, (w, h));
     let dir = tempfile::tempdir().expect("temp dir");
-    let plain = dir.path().join("plain.vkt");
-    build_tileset(
-        &grid,
-        &BuildParams::default(),
-        &TileSetMeta::default(),
-        &plain,
-        &|| {},
-    )
-    .expect("plain");
-    let p = TileSet::open(&plain).expect("open");
+    let p = plain_crop(dir.path());
     let shape = (p.header().levels, p.header().height_step);
     let table = size_of::<TileHeader>() + shape.0 as usize * size_of::<LevelEntry>();
     let sampled = |tx: u32, ty: u32| (tx + 3 * ty).is_multiple_of(FULL_CHECK_EVERY);
