@@ -322,7 +322,7 @@ impl Pass<'_> {
                     gpu.device.cmd_set_cull_mode(cmd, self.scene.cull);
                     bound_pipeline = wanted;
                 }
-                counts.photo += u64::from(photo.is_some_and(|(a, b)| wanted == a || wanted == b));
+                counts.photo += u64::from(wanted != pipeline.tiles);
                 if bound != Some(d.index_width) {
                     gpu.device
                         .cmd_bind_index_buffer(cmd, self.pool, 0, index_type(d.index_width));

@@ -299,6 +299,15 @@ fn with_scans_a_shard_reads_only_its_rows_and_the_set_is_the_same() {
 /// other shards, one cut short (as a killed shard cannot leave: it writes a temporary
 /// file), a flipped byte, and a file that is no part. Bad `--shard` values are refused
 /// before any work.
+/// Where a part's fields lie (tools/tiles/src/shard.rs, "The part file"): the offset of its
+/// owned tile rows, its levels, and where its first tile's record starts.
+fn part_layout(bytes: &[u8]) -> (usize, u32, usize) {
+    let recipe_len = u32::from_le_bytes(bytes[24..28].try_into().expect("4 bytes")) as usize;
+    let rows_at = 28 + recipe_len + size_of::<tiles::format::FileHeader>();
+    let levels = u32::from_le_bytes(bytes[rows_at + 12..rows_at + 16].try_into().expect("4"));
+    (rows_at, levels, rows_at + 16 + 8 * levels as usize + 12)
+}
+
 #[test]
 fn parts_that_do_not_belong_are_refused() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -372,10 +381,7 @@ fn parts_that_do_not_belong_are_refused() {
     // A part forged and resealed (its checksum made to match): shard 0 of 2^32 - 1, owning
     // no tile row, so that only the shard count is wrong. Refused for it, not trusted into
     // an allocation of that many shards.
-    let recipe_len = u32::from_le_bytes(bytes[24..28].try_into().expect("4 bytes")) as usize;
-    let rows_at = 28 + recipe_len + size_of::<tiles::format::FileHeader>();
-    let levels = u32::from_le_bytes(bytes[rows_at + 12..rows_at + 16].try_into().expect("4"));
-    let tiles_at = rows_at + 16 + 8 * levels as usize + 12;
+    let (rows_at, _, tiles_at) = part_layout(&bytes);
     let mut forged = bytes[..tiles_at].to_vec();
     forged[12..16].copy_from_slice(&0u32.to_le_bytes());
     forged[16..20].copy_from_slice(&u32::MAX.to_le_bytes());
@@ -399,10 +405,7 @@ fn parts_that_do_not_belong_are_refused() {
     std::fs::create_dir(&compact_dir).expect("dir");
     let compact = shards(&input, &compact_dir, 3, &["--no-texture", "--compact"]);
     let bytes = std::fs::read(&compact[1]).expect("read");
-    let recipe_len = u32::from_le_bytes(bytes[24..28].try_into().expect("4 bytes")) as usize;
-    let rows_at = 28 + recipe_len + size_of::<tiles::format::FileHeader>();
-    let levels = u32::from_le_bytes(bytes[rows_at + 12..rows_at + 16].try_into().expect("4"));
-    let tiles_at = rows_at + 16 + 8 * levels as usize + 12;
+    let (_, levels, tiles_at) = part_layout(&bytes);
     // Forced sides and sides (4 sides of 5 words a level, each), deviations, the blob's length.
     let blob_len_at = tiles_at + levels as usize * (2 * 4 * 40 + 8);
     let blob_at = (blob_len_at + 8).next_multiple_of(16);
