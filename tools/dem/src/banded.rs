@@ -14,6 +14,11 @@
 //! their margin, and pushes down from the stored (or void-free) level, with the same taps and
 //! the same arithmetic as the whole-grid fill: the same bits. The margin is at most
 //! `2^(stored_at + 1) + 2` rows either side.
+//!
+//! The pass splits by rows ([`Scanner::part`], [`Plan::join`]): shares that start on a row of
+//! the top pulled level each pull their own rows of it, and those rows, put together, are the
+//! pass's. So the shards of a distributed build each scan their own rows, and every shard
+//! plans the fill from all the shares without reading the rest of the grid.
 
 use std::borrow::Cow;
 
@@ -35,6 +40,93 @@ pub struct Plan {
     stored: Option<(usize, Level)>,
     /// Voids of the grid.
     pub voids: u64,
+}
+
+/// A share of a [`Scanner`]'s pass: what rows `first_row..` of the grid, from a row of the
+/// top pulled level, pull up to it and hold. Shares that cover the grid's rows once join into
+/// the pass's plan ([`Plan::join`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Pulled {
+    /// The first row of the top level these rows pull.
+    pub first: usize,
+    /// The top level's width.
+    pub width: usize,
+    /// Its rows `first..`, whole width (NaN: void).
+    pub top: Vec<f32>,
+    /// Per level from 0: whether a sample of it pulled from these rows is a void.
+    pub void: Vec<bool>,
+    /// Voids and samples of these grid rows.
+    pub voids: u64,
+    pub samples: u64,
+}
+
+impl Pulled {
+    /// One line of text: the figures, the void levels as `0`/`1`, then every top sample as the
+    /// 8 hex digits of its bits (so it reads back exact).
+    pub fn to_line(&self) -> String {
+        let mut line = format!(
+            "{} {} {} {} {} ",
+            self.first,
+            self.width,
+            self.voids,
+            self.samples,
+            self.void
+                .iter()
+                .map(|&v| if v { '1' } else { '0' })
+                .collect::<String>()
+        );
+        line.reserve(self.top.len() * 8);
+        for h in &self.top {
+            line.push_str(&format!("{:08x}", h.to_bits()));
+        }
+        line
+    }
+
+    /// [`Pulled::to_line`] read back.
+    pub fn from_line(line: &str) -> Result<Pulled, String> {
+        let mut words = line.split(' ');
+        let mut number = |what: &str| -> Result<u64, String> {
+            words
+                .next()
+                .and_then(|w| w.parse().ok())
+                .ok_or_else(|| format!("a bad {what} in the pulled rows"))
+        };
+        let (first, width) = (number("first row")? as usize, number("width")? as usize);
+        let (voids, samples) = (number("void count")?, number("sample count")?);
+        let void = words
+            .next()
+            .filter(|w| !w.is_empty() && w.bytes().all(|b| b == b'0' || b == b'1'))
+            .ok_or("bad void levels in the pulled rows")?
+            .bytes()
+            .map(|b| b == b'1')
+            .collect();
+        let hex = words.next().unwrap_or_default();
+        if words.next().is_some() || !hex.len().is_multiple_of(8) || width == 0 {
+            return Err("pulled rows of a bad length".into());
+        }
+        let top = hex
+            .as_bytes()
+            .chunks_exact(8)
+            .map(|h| {
+                std::str::from_utf8(h)
+                    .ok()
+                    .and_then(|h| u32::from_str_radix(h, 16).ok())
+                    .map(f32::from_bits)
+                    .ok_or_else(|| "a bad sample in the pulled rows".to_string())
+            })
+            .collect::<Result<Vec<f32>, String>>()?;
+        if !top.len().is_multiple_of(width) {
+            return Err("pulled rows of a bad length".into());
+        }
+        Ok(Pulled {
+            first,
+            width,
+            top,
+            void,
+            voids,
+            samples,
+        })
+    }
 }
 
 /// One pass over a grid's rows, north to south, pulling levels `1..=stored_at` as rows arrive.
@@ -106,15 +198,51 @@ impl Scanner {
         }
     }
 
-    /// The plan, once every row has arrived; `None` when every sample is a void.
-    pub fn finish(mut self) -> Option<Plan> {
-        // An odd level's last row pairs with itself (`pull` clamps its second row).
+    /// Grid rows per row of the top pulled level: a share of the pass ([`Scanner::part`])
+    /// starts on a multiple of it, and ends on one or on the grid's last row.
+    pub fn unit(&self) -> usize {
+        1 << (self.dims.len() - 1)
+    }
+
+    /// An odd level's last row pairs with itself (`pull` clamps its second row).
+    fn close(&mut self) {
         for i in 1..self.dims.len() {
             if let Some(last) = self.pending[i].take() {
                 let coarse = pull(&last, self.dims[i - 1].0, 1).samples;
                 self.arrive(i, coarse);
             }
         }
+    }
+
+    /// This scanner's share of the pass, given grid rows `first_row..` (a multiple of
+    /// [`Scanner::unit`]) up to a multiple of it or to the grid's last row, or none.
+    pub fn part(mut self, first_row: usize) -> Pulled {
+        let unit = self.unit();
+        let (width, height) = self.dims[0];
+        let rows = (self.samples / width as u64) as usize;
+        assert!(
+            rows == 0
+                || first_row.is_multiple_of(unit)
+                    && (first_row + rows == height || rows.is_multiple_of(unit)),
+            "a share of rows {first_row}..{} is not on rows of the top level",
+            first_row + rows
+        );
+        if first_row + rows == height {
+            self.close();
+        }
+        Pulled {
+            first: first_row / unit,
+            width: self.dims[self.dims.len() - 1].0,
+            top: self.top,
+            void: self.void,
+            voids: self.voids,
+            samples: self.samples,
+        }
+    }
+
+    /// The plan, once every row has arrived; `None` when every sample is a void.
+    pub fn finish(mut self) -> Option<Plan> {
+        self.close();
         if self.voids == self.samples {
             return None;
         }
@@ -161,6 +289,47 @@ impl Scanner {
 }
 
 impl Plan {
+    /// The plan of a `width` x `height` grid's pass from its shares ([`Scanner::part`]), in
+    /// any order: the same as one pass over every row. An error when the shares do not cover
+    /// the grid's rows once each; `Ok(None)` when every sample is a void.
+    pub fn join(
+        width: usize,
+        height: usize,
+        stored_at: usize,
+        parts: &[Pulled],
+    ) -> Result<Option<Plan>, String> {
+        let mut scan = Scanner::new(width, height, stored_at);
+        let (top_width, top_height) = scan.dims[scan.dims.len() - 1];
+        let mut parts: Vec<&Pulled> = parts.iter().filter(|p| p.samples > 0).collect();
+        parts.sort_by_key(|p| p.first);
+        for p in parts {
+            let next = scan.top.len() / top_width;
+            if p.first != next {
+                return Err(format!(
+                    "the shares' pulled rows do not follow on: {} after {next}",
+                    p.first
+                ));
+            }
+            if p.width != top_width || p.void.len() != scan.void.len() {
+                return Err("a share pulled to another grid's levels".into());
+            }
+            scan.top.extend_from_slice(&p.top);
+            for (all, &this) in scan.void.iter_mut().zip(&p.void) {
+                *all |= this;
+            }
+            scan.voids += p.voids;
+            scan.samples += p.samples;
+        }
+        if scan.top.len() != top_width * top_height || scan.samples != (width * height) as u64 {
+            return Err(format!(
+                "the shares hold {} of the grid's {} rows",
+                scan.samples / width as u64,
+                height
+            ));
+        }
+        Ok(scan.finish())
+    }
+
     /// The plan of a `width` x `height` grid known to hold no void: nothing to fill.
     pub fn no_voids(width: usize, height: usize, stored_at: usize) -> Plan {
         Plan {
@@ -374,6 +543,89 @@ mod tests {
         }
         // Not vacuous: many bands, and the kept level was used.
         assert!(checked.0 > 5_000 && checked.1 > 10, "{checked:?}");
+    }
+
+    /// A pass split into shares by rows, each scanned alone and sent as text, joins into
+    /// the plan of one pass: the same fill of every band, bit for bit. Shares at every
+    /// multiple of the unit, so the grid's odd last rows and empty shares are among them. The
+    /// controls: a share's pulled sample changed fills differently, and shares that leave out
+    /// rows or overlap are refused.
+    #[test]
+    fn a_pass_in_shares_plans_the_same_fill() {
+        let (mut joined, mut changed_differ) = (0, 0);
+        for seed in 0..24u64 {
+            let width = 1 + (seed as usize * 11) % 61;
+            let height = 1 + (seed as usize * 29) % 157;
+            let density = [0.05, 0.5, 0.95][seed as usize % 3];
+            let raw = grid(seed, width, height, density);
+            let mut whole = raw.clone();
+            let voids = fill_voids(&mut whole, width, height);
+            for stored_at in [1, 3, STORED] {
+                let unit = Scanner::new(width, height, stored_at).unit();
+                let cuts: Vec<usize> = (0..=height)
+                    .step_by(unit * (1 + seed as usize % 2))
+                    .chain([height, height])
+                    .collect();
+                let parts: Vec<Pulled> = cuts
+                    .windows(2)
+                    .map(|w| {
+                        let mut scan = Scanner::new(width, height, stored_at);
+                        for row in raw[w[0] * width..w[1] * width].chunks_exact(width) {
+                            scan.row(row);
+                        }
+                        let part = scan.part(w[0]);
+                        Pulled::from_line(&part.to_line()).expect("read back")
+                    })
+                    .collect();
+                let plan = Plan::join(width, height, stored_at, &parts).expect("covers");
+                let Some(plan) = plan else {
+                    assert_eq!(voids, None, "seed {seed}");
+                    continue;
+                };
+                let fill = |plan: &Plan| {
+                    plan.fill(0, height, &mut |a, b| {
+                        Ok::<_, ()>(raw[a * width..b * width].to_vec())
+                    })
+                    .expect("read")
+                };
+                let same = |got: &[f32]| {
+                    got.iter()
+                        .zip(&whole)
+                        .all(|(a, b)| a.to_bits() == b.to_bits())
+                };
+                assert!(same(&fill(&plan)), "seed {seed}, kept {stored_at}");
+                assert_eq!(Some(plan.voids), voids);
+                joined += 1;
+                // The controls.
+                let short = &parts[1..];
+                if parts[0].samples > 0 {
+                    assert!(Plan::join(width, height, stored_at, short).is_err());
+                }
+                let twice: Vec<Pulled> = parts.iter().chain(&parts[..1]).cloned().collect();
+                if parts[0].samples > 0 {
+                    assert!(Plan::join(width, height, stored_at, &twice).is_err());
+                }
+                if plan.stored.is_some() {
+                    let mut changed = parts.clone();
+                    let Some(s) = changed
+                        .iter_mut()
+                        .flat_map(|p| p.top.iter_mut())
+                        .find(|h| !h.is_nan())
+                    else {
+                        continue;
+                    };
+                    *s += 100.0;
+                    let other = Plan::join(width, height, stored_at, &changed)
+                        .expect("covers")
+                        .expect("valid");
+                    changed_differ += usize::from(!same(&fill(&other)));
+                }
+            }
+        }
+        assert!(
+            joined > 40 && changed_differ > 5,
+            "{joined} {changed_differ}"
+        );
     }
 
     /// The control: a band filled from a plan of another grid differs somewhere.

@@ -12,7 +12,7 @@
 use std::borrow::Cow;
 use std::path::PathBuf;
 
-use crate::banded::{Plan, Scanner, STORED};
+use crate::banded::{Plan, Pulled, Scanner, STORED};
 use crate::placement::Placement;
 use crate::raster::Georef;
 use crate::{
@@ -105,14 +105,16 @@ pub fn open(paths: &[PathBuf], opts: &ReadOptions) -> Result<Stream, DemError> {
 }
 
 /// Opens `paths` without reading their rows: for a caller that learnt what the whole grid's
-/// read would say from elsewhere and knows it holds no void (a sharded build's scans, which
-/// each read a band: `tiletool build --scan-only`). [`Stream::rows`] then reads the rows as stored, and
-/// `min_max` is `min_max`, as given. Formats read whole ([`BAND_FORMATS`] are not) are
-/// opened as [`open`] does.
+/// read would say from elsewhere (a sharded build's scans, which each read a band:
+/// `tiletool build --scan-only`). With `plan` (the shares' pulled rows joined,
+/// [`Plan::join`]) [`Stream::rows`] fills its rows as [`open`]'s stream does; without, the
+/// grid is known to hold no void and the rows are read as stored. `min_max` is as given.
+/// Formats read whole ([`BAND_FORMATS`] are not) are opened as [`open`] does.
 pub fn open_unscanned(
     paths: &[PathBuf],
     opts: &ReadOptions,
     min_max: (f32, f32),
+    plan: Option<Plan>,
 ) -> Result<Stream, DemError> {
     match laid_out(paths, opts)? {
         Opened::Whole(stream) => Ok(stream),
@@ -121,12 +123,12 @@ pub fn open_unscanned(
             height: l.height,
             spacing_x: l.spacing_x,
             spacing_y: l.spacing_y,
-            voids_filled: 0,
+            voids_filled: plan.as_ref().map_or(0, |p| p.voids),
             description: l.description(opts),
             placement: l.placement.map(|p| p.window(l.x0, l.y0)),
             min_max,
             source: Source::Bands {
-                plan: Plan::no_voids(l.width, l.height, STORED),
+                plan: plan.unwrap_or_else(|| Plan::no_voids(l.width, l.height, STORED)),
                 rows: Box::new(l.rows),
                 x0: l.x0,
                 y0: l.y0,
@@ -135,12 +137,15 @@ pub fn open_unscanned(
     }
 }
 
-/// What a read of some rows finds: their range of heights (voids aside) and their voids.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// What a read of some rows finds: their range of heights (voids aside) and their voids,
+/// and the fill's share of the pass over the rows asked to be pulled ([`Plan::join`]; `None`
+/// for formats read whole).
+#[derive(Clone, Debug, PartialEq)]
 pub struct RowsScan {
     pub lo: f32,
     pub hi: f32,
     pub voids: u64,
+    pub pulled: Option<Pulled>,
 }
 
 /// A DEM opened for reading in bands, its rows not yet read.
@@ -295,18 +300,22 @@ impl Layout {
     }
 }
 
-/// Rows `y0..y1` of `paths`' grid read and checked as [`open`] checks every row, without
-/// reading the others: their range and voids. One shard's share of a scan
-/// (`tiletool build --shard K/N --scan-only`); formats read whole are decoded whole.
+/// Rows `rows` of `paths`' grid read and checked as [`open`] checks every row, without
+/// reading the others: their range and voids, and the fill's share of the pass over rows
+/// `pull` (within `rows`, from a multiple of [`unit`] to one or to the grid's end). One
+/// shard's share of a scan (`tiletool build --shard K/N --scan-only`); formats read whole are
+/// decoded whole.
 pub fn scan_rows(
     paths: &[PathBuf],
     opts: &ReadOptions,
     rows: std::ops::Range<usize>,
+    pull: std::ops::Range<usize>,
 ) -> Result<RowsScan, DemError> {
     let mut out = RowsScan {
         lo: f32::INFINITY,
         hi: f32::NEG_INFINITY,
         voids: 0,
+        pulled: None,
     };
     match laid_out(paths, opts)? {
         Opened::Whole(stream) => {
@@ -321,18 +330,32 @@ pub fn scan_rows(
         }
         Opened::Banded(l) => {
             let end = rows.end.min(l.height);
+            assert!(rows.start <= pull.start && pull.end <= end.max(pull.start));
             let mut range = (f32::INFINITY, f32::NEG_INFINITY);
             let mut voids = 0u64;
+            let mut scan = Scanner::new(l.width, l.height, STORED);
+            let mut y = rows.start;
             for first in (rows.start..end).step_by(SCAN_ROWS) {
                 let n = SCAN_ROWS.min(end - first);
                 l.checked_rows(first, n, &mut range, &mut |row| {
                     voids += row.iter().filter(|h| h.is_nan()).count() as u64;
+                    if pull.contains(&y) {
+                        scan.row(row);
+                    }
+                    y += 1;
                 })?;
             }
             (out.lo, out.hi, out.voids) = (range.0, range.1, voids);
+            out.pulled = Some(scan.part(pull.start));
         }
     }
     Ok(out)
+}
+
+/// Grid rows per row of the fill's top pulled level, for a `width` x `height` grid: a share of
+/// the pass ([`scan_rows`]'s `pull`) starts on a multiple of it.
+pub fn unit(width: usize, height: usize) -> usize {
+    Scanner::new(width, height, STORED).unit()
 }
 
 impl Stream {

@@ -10,8 +10,12 @@
 //!   shard scans the whole input, as the build does, unless it is given every shard's scan
 //!   ([`ShardScan`], `tiletool build --shard K/N --scan-only`, which reads only shard K's
 //!   rows): their extremes are the whole grid's, so the step is the same.
-//! - **The void fill**, which is global (`dem::banded`): the reader's open does it, as for a
-//!   build. With scans, a grid with no void needs none, and one with voids is read whole.
+//! - **The void fill**, which is global (`dem::banded`): the reader's open plans it, as for a
+//!   build. With scans, each scan carries its rows' share of the plan's pass ([`pull_rows`]),
+//!   and the shares join into the pass's plan. A fill changes the tiles' ranges, so a grid
+//!   with voids takes a second stage ([`ShardRanges`], `--ranges-only`): each shard fills its
+//!   rows with the joined plan and ranges their tiles. The build then reads only its rows,
+//!   with the margin their fill needs.
 //! - **The shared sides.** The build's agreement ([`crate::build`]) settles the least fixed
 //!   point of "a tile's sides are those of its mesh with its own and its neighbours' sides
 //!   forced": meshing is monotone in what is forced, and the passes climb to that point from
@@ -304,74 +308,149 @@ pub fn build_shard(
 
 /// What a shard's scan found of its tile rows (`tiletool build --shard K/N --scan-only`): the range of
 /// heights, what the lattice step depends on ([`crate::quantise::lattice_step`]: the
-/// largest tile range and absolute height) and the voids. Every shard's together stand for
-/// the build's pass over the whole grid, when the grid holds no void.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// largest tile range and absolute height) and the voids, and the void fill's share of the
+/// pass over the grid (`fill`: `dem::Pulled` as a line of text, from the rows
+/// [`pull_rows`]; `None` for inputs decoded whole). Every shard's together stand for the
+/// build's pass over the whole grid: with no void, for all of it; with voids, their ranges
+/// are those of the grid before its fill, so a second stage reads them again filled
+/// ([`ShardRanges`]).
+#[derive(Clone, Debug, PartialEq)]
 pub struct ShardScan {
     pub lo: f32,
     pub hi: f32,
     pub max_range: f32,
     pub max_abs: f32,
     pub voids: u64,
+    pub fill: Option<String>,
 }
 
 /// The first line of a scan file, with its version; its first bytes are [`SCAN_MAGIC`].
-const SCAN_HEAD: &str = "VKTSCAN1 vkterrain shard scan, version 1";
+/// Version 1 held no fill.
+const SCAN_HEAD: &str = "VKTSCAN1 vkterrain shard scan, version 2";
 /// The first bytes of a scan file.
 pub const SCAN_MAGIC: [u8; 8] = *b"VKTSCAN1";
 
+/// What a shard's tile rows hold once the grid's voids are filled (`tiletool build --shard
+/// K/N --scans DIR --ranges-only`): the largest tile range and absolute height, which every
+/// shard's scan gives for a grid with no void. The second stage of a scanned build of an
+/// input with voids.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ShardRanges {
+    pub max_range: f32,
+    pub max_abs: f32,
+}
+
+/// The first line of a ranges file; its first bytes are [`RANGES_MAGIC`].
+const RANGES_HEAD: &str = "VKTRANGE vkterrain shard ranges, version 1";
+/// The first bytes of a ranges file.
+pub const RANGES_MAGIC: [u8; 8] = *b"VKTRANGE";
+
+/// A scan or ranges file: its first line, the shard, `name value` fields, then the input's
+/// recipe; a crc32 line guards them all.
+fn record_text(head: &str, shard: Shard, fields: &[(&str, String)], recipe: &str) -> String {
+    let mut body = format!("{head}\nshard {shard}\n");
+    for (name, value) in fields {
+        body.push_str(&format!("{name} {value}\n"));
+    }
+    body.push_str(recipe);
+    body.push('\n');
+    format!("{body}crc {:08x}\n", crc32fast::hash(body.as_bytes()))
+}
+
+/// [`record_text`] read back, its fields `names` in order: the shard, their values, the recipe.
+fn record_fields(
+    text: &str,
+    head: &str,
+    names: &[&str],
+) -> Result<(Shard, Vec<String>, String), String> {
+    let (body, crc) = text
+        .trim_end_matches('\n')
+        .rsplit_once("\ncrc ")
+        .ok_or("not a shard record (no crc line)")?;
+    let body = format!("{body}\n");
+    let stored = u32::from_str_radix(crc.trim(), 16).map_err(|_| "a bad crc line")?;
+    if crc32fast::hash(body.as_bytes()) != stored {
+        return Err("damaged: its checksum does not match".into());
+    }
+    let mut lines = body.lines();
+    if lines.next() != Some(head) {
+        return Err(format!("not a file of this version ({head})"));
+    }
+    let mut field = |name: &str| -> Result<String, String> {
+        let line = lines.next().unwrap_or_default();
+        line.strip_prefix(name)
+            .and_then(|v| v.strip_prefix(' '))
+            .map(str::to_string)
+            .ok_or_else(|| format!("expected `{name}`, found `{}`", &line[..line.len().min(40)]))
+    };
+    let shard: Shard = field("shard")?.parse()?;
+    let values = names
+        .iter()
+        .map(|n| field(n))
+        .collect::<Result<Vec<_>, _>>()?;
+    let recipe: Vec<&str> = lines.collect();
+    Ok((shard, values, recipe.join("\n")))
+}
+
+/// A height as the 8 hex digits of its bits, so that it reads back exact.
+fn height_text(h: f32) -> String {
+    format!("{:08x}", h.to_bits())
+}
+
+fn height_of(v: &str) -> Result<f32, String> {
+    u32::from_str_radix(v, 16)
+        .map(f32::from_bits)
+        .map_err(|_| format!("a bad height `{v}`"))
+}
+
 impl ShardScan {
-    /// The scan file: its figures (heights as their bits, so they read back exact), then the
-    /// input's recipe; a crc32 line guards both.
+    /// The scan file: its figures, the fill's share (`-` for none), the input's recipe.
     pub fn to_text(&self, shard: Shard, recipe: &str) -> String {
-        let body = format!(
-            "{SCAN_HEAD}\nshard {shard}\nlo {:08x}\nhi {:08x}\nmax-range {:08x}\nmax-abs {:08x}\nvoids {}\n{recipe}\n",
-            self.lo.to_bits(),
-            self.hi.to_bits(),
-            self.max_range.to_bits(),
-            self.max_abs.to_bits(),
-            self.voids
-        );
-        format!("{body}crc {:08x}\n", crc32fast::hash(body.as_bytes()))
+        let fields = [
+            ("lo", height_text(self.lo)),
+            ("hi", height_text(self.hi)),
+            ("max-range", height_text(self.max_range)),
+            ("max-abs", height_text(self.max_abs)),
+            ("voids", self.voids.to_string()),
+            ("fill", self.fill.clone().unwrap_or_else(|| "-".into())),
+        ];
+        record_text(SCAN_HEAD, shard, &fields, recipe)
     }
 
     /// A scan file read back: its shard, figures and recipe.
     pub fn from_text(text: &str) -> Result<(Shard, ShardScan, String), String> {
-        let (body, crc) = text
-            .trim_end_matches('\n')
-            .rsplit_once("\ncrc ")
-            .ok_or("not a shard scan (no crc line)")?;
-        let body = format!("{body}\n");
-        let stored = u32::from_str_radix(crc.trim(), 16).map_err(|_| "a bad crc line")?;
-        if crc32fast::hash(body.as_bytes()) != stored {
-            return Err("damaged: its checksum does not match".into());
-        }
-        let mut lines = body.lines();
-        if lines.next() != Some(SCAN_HEAD) {
-            return Err(format!("not a shard scan of this version ({SCAN_HEAD})"));
-        }
-        let mut field = |name: &str| -> Result<String, String> {
-            let line = lines.next().unwrap_or_default();
-            line.strip_prefix(name)
-                .and_then(|v| v.strip_prefix(' '))
-                .map(str::to_string)
-                .ok_or_else(|| format!("expected `{name}`, found `{line}`"))
-        };
-        let bits = |v: String| -> Result<f32, String> {
-            u32::from_str_radix(&v, 16)
-                .map(f32::from_bits)
-                .map_err(|_| format!("a bad height `{v}`"))
-        };
-        let shard: Shard = field("shard")?.parse()?;
+        let names = ["lo", "hi", "max-range", "max-abs", "voids", "fill"];
+        let (shard, v, recipe) = record_fields(text, SCAN_HEAD, &names)?;
         let scan = ShardScan {
-            lo: bits(field("lo")?)?,
-            hi: bits(field("hi")?)?,
-            max_range: bits(field("max-range")?)?,
-            max_abs: bits(field("max-abs")?)?,
-            voids: field("voids")?.parse().map_err(|_| "a bad void count")?,
+            lo: height_of(&v[0])?,
+            hi: height_of(&v[1])?,
+            max_range: height_of(&v[2])?,
+            max_abs: height_of(&v[3])?,
+            voids: v[4].parse().map_err(|_| "a bad void count")?,
+            fill: (v[5] != "-").then(|| v[5].clone()),
         };
-        let recipe: Vec<&str> = lines.collect();
-        Ok((shard, scan, recipe.join("\n")))
+        Ok((shard, scan, recipe))
+    }
+}
+
+impl ShardRanges {
+    /// The ranges file: the two figures, then the input's recipe.
+    pub fn to_text(&self, shard: Shard, recipe: &str) -> String {
+        let fields = [
+            ("max-range", height_text(self.max_range)),
+            ("max-abs", height_text(self.max_abs)),
+        ];
+        record_text(RANGES_HEAD, shard, &fields, recipe)
+    }
+
+    /// A ranges file read back: its shard, figures and recipe.
+    pub fn from_text(text: &str) -> Result<(Shard, ShardRanges, String), String> {
+        let (shard, v, recipe) = record_fields(text, RANGES_HEAD, &["max-range", "max-abs"])?;
+        let ranges = ShardRanges {
+            max_range: height_of(&v[0])?,
+            max_abs: height_of(&v[1])?,
+        };
+        Ok((shard, ranges, recipe))
     }
 }
 
@@ -407,6 +486,15 @@ impl Scans {
         ))
     }
 
+    /// The scans with the tile ranges of the filled grid: every shard's [`ShardRanges`].
+    pub fn filled(self, ranges: &[ShardRanges]) -> Scans {
+        Scans {
+            max_range: ranges.iter().fold(0.0, |m, r| m.max(r.max_range)),
+            max_abs: ranges.iter().fold(0.0, |m, r| m.max(r.max_abs)),
+            ..self
+        }
+    }
+
     /// What the build's pass over the whole grid finds: the same range, the same step.
     fn scanned(&self) -> crate::build::Scanned {
         crate::build::Scanned {
@@ -415,6 +503,25 @@ impl Scans {
             step: crate::quantise::lattice_step(self.max_range, self.max_abs),
         }
     }
+}
+
+/// Grid rows whose share of the void fill's pass a shard's scan pulls: its tile rows' samples
+/// but the row its last tile row shares with the next shard's, so that the shards' shares
+/// cover the grid's rows once. Each starts on a multiple of 256 rows (a tile row), which is a
+/// multiple of the fill's unit (`dem::unit`, at most 64).
+pub fn pull_rows(
+    shard: Shard,
+    (width, height): (usize, usize),
+) -> Result<Range<usize>, BuildError> {
+    let (_, tiles_y) = tile_count(width, height).map_err(BuildError::Params)?;
+    let rows = shard.rows_of(tiles_y)?;
+    let cells = crate::mesh::TILE_CELLS as usize;
+    let end = if rows.end == tiles_y {
+        height
+    } else {
+        rows.end as usize * cells
+    };
+    Ok(rows.start as usize * cells..end)
 }
 
 /// Grid rows a shard's scan reads: its tile rows' samples, up to and with the row its last

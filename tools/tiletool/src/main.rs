@@ -14,7 +14,7 @@ mod info;
 mod photo;
 mod shards;
 
-use shards::{input_recipe, merge, print_shard, recipe, scan, shard_scans};
+use shards::{input_recipe, merge, print_shard, ranges, recipe, scan, scanned_stream};
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -91,15 +91,21 @@ enum Command {
         #[arg(long, requires = "shard", default_value_t = tiles::shard::DEFAULT_HALO)]
         halo: u32,
         /// A folder holding every shard's scan (`build ... --shard K/N --scan-only -o
-        /// DIR/scan-K-of-N.vktscan`): the shard then reads only its rows of the input, not the
-        /// whole of it (inputs with voids are still read whole: their fill is global).
+        /// DIR/scan-K-of-N.vktscan`): the shard then reads only its rows of the input (with
+        /// the margin their voids' fill needs), not the whole of it. An input with voids needs
+        /// every shard's ranges in DIR too (`--ranges-only`).
         #[arg(long, requires = "shard", value_name = "DIR")]
         scans: Option<PathBuf>,
         /// Only scan shard K/N's rows of the input (their range of heights, tile ranges and
-        /// voids, reading only those rows) into OUTPUT, by convention
-        /// DIR/scan-K-of-N.vktscan, for the shards' `--scans DIR`.
+        /// voids, and the void fill's share of the pass, reading only those rows) into
+        /// OUTPUT, by convention DIR/scan-K-of-N.vktscan, for the shards' `--scans DIR`.
         #[arg(long, requires = "shard", conflicts_with = "scans")]
         scan_only: bool,
+        /// With --scans: only fill shard K/N's rows as the scans plan and write their tile
+        /// ranges into OUTPUT, by convention DIR/ranges-K-of-N.vktranges (the second stage of
+        /// a scanned build, which an input with voids needs).
+        #[arg(long, requires = "scans", conflicts_with = "scan_only")]
+        ranges_only: bool,
     },
 
     /// Join the part files of a sharded build (`build --shard K/N`) into the tile set.
@@ -343,16 +349,22 @@ fn main() -> ExitCode {
             halo,
             scans,
             scan_only,
+            ranges_only,
         } => {
-            // A shard's output is a part file (or a scan), which a retried shard replaces.
-            let replaces = match (shard, scan_only) {
-                (Some(_), true) => tiles::shard::SCAN_MAGIC,
-                (Some(_), false) => tiles::shard::PART_MAGIC,
-                (None, _) => tiles::format::MAGIC,
+            // A shard's output is a part file (or a scan, or ranges), which a retried shard
+            // replaces.
+            let replaces = match (shard, scan_only, ranges_only) {
+                (Some(_), true, _) => tiles::shard::SCAN_MAGIC,
+                (Some(_), _, true) => tiles::shard::RANGES_MAGIC,
+                (Some(_), false, false) => tiles::shard::PART_MAGIC,
+                (None, _, _) => tiles::format::MAGIC,
             };
             check_output(&output, &input.inputs, force, replaces).and_then(|()| {
                 if let (Some(shard), true) = (shard, scan_only) {
                     return scan(&input, shard, &output);
+                }
+                if let (Some(shard), Some(dir), true) = (shard, &scans, ranges_only) {
+                    return ranges(&input, shard, dir, &output);
                 }
                 remove_on_signal(&output)?;
                 build(
@@ -612,21 +624,22 @@ fn build(
     let start = Instant::now();
     // A photo is laid on the grid by its georeferencing, which needs the grid whole; otherwise
     // SRTM and raw inputs are read a band at a time (dem::open), the others held whole.
-    // A shard with every shard's scans reads only its own rows, when the input has no void.
-    // What the input is, for a shard's recipe and its scans: its files read once for it.
+    // A shard with every shard's scans reads only its own rows (and the margin their voids'
+    // fill needs). What the input is, for a shard's recipe and its scans: its files read once
+    // for it.
     let inputs = shard.as_ref().map(|_| input_recipe(input)).transpose()?;
-    let scans = match (&shard, &inputs) {
+    let scanned = match (&shard, &inputs) {
         (Some((s, _, Some(dir))), Some(ours)) if texture.texture.is_none() => {
-            shard_scans(ours, *s, dir)?
+            Some(scanned_stream(input, ours, *s, dir)?)
         }
         _ => None,
     };
     let ours = shard.as_ref().map(|(s, _, _)| *s);
+    let mut scans = None;
     let dem = if texture.texture.is_some() {
         Dem::Whole(read_dem(&input.inputs, &input.read)?)
-    } else if let Some(scans) = &scans {
-        let stream =
-            dem::open_unscanned(&input.inputs, &input.read.options(), (scans.lo, scans.hi))?;
+    } else if let Some((stream, found)) = scanned {
+        scans = Some(found);
         let per_band = band_rows
             .unwrap_or_else(|| default_band_rows(stream.width, ours.map(|s| (s, stream.height))));
         Dem::Bands(StreamHeights { stream, per_band })

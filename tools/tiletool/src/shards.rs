@@ -323,12 +323,15 @@ pub fn merge(parts: &[PathBuf], output: &Path, quiet: bool) -> Result<ExitCode> 
 }
 
 /// `tiletool build --shard K/N --scan-only`: shard K's rows of the input read and checked, and what the
-/// build needs of them written to `output` (temporary file, then rename).
+/// build needs of them written to `output` (temporary file, then rename): their range, tile
+/// ranges and voids, and the void fill's share of the pass over the grid.
 pub fn scan(input: &InputArgs, shard: tiles::shard::Shard, output: &Path) -> Result<ExitCode> {
     let opts = input.read.options();
-    let stream = dem::open_unscanned(&input.inputs, &opts, (0.0, 0.0))?;
-    let rows = tiles::shard::scan_rows(shard, (stream.width, stream.height))?;
-    let read = dem::scan_rows(&input.inputs, &opts, rows)?;
+    let stream = dem::open_unscanned(&input.inputs, &opts, (0.0, 0.0), None)?;
+    let dims = (stream.width, stream.height);
+    let rows = tiles::shard::scan_rows(shard, dims)?;
+    let pull = tiles::shard::pull_rows(shard, dims)?;
+    let read = dem::scan_rows(&input.inputs, &opts, rows, pull)?;
     let per_band = default_band_rows(stream.width, Some((shard, stream.height)));
     let heights = StreamHeights { stream, per_band };
     let (max_range, max_abs) = tiles::shard::tile_ranges(&heights, shard)?;
@@ -338,6 +341,7 @@ pub fn scan(input: &InputArgs, shard: tiles::shard::Shard, output: &Path) -> Res
         max_range,
         max_abs,
         voids: read.voids,
+        fill: read.pulled.map(|p| p.to_line()),
     };
     let text = found.to_text(shard, &input_recipe(input)?);
     tiles::format::write_atomically(output, text.as_bytes())
@@ -345,14 +349,48 @@ pub fn scan(input: &InputArgs, shard: tiles::shard::Shard, output: &Path) -> Res
     Ok(ExitCode::SUCCESS)
 }
 
-/// Every shard's scan from `dir` (`scan-K-of-N.vktscan`), checked to be of this input, put
-/// together; `None`, with a note, when the input has voids (their fill is global: the shard
-/// then reads the whole input, as without scans).
-pub fn shard_scans(
+/// `tiletool build --shard K/N --scans DIR --ranges-only`: the second stage of a scanned build
+/// of an input with voids. Shard K's rows are read with the margin their voids need and
+/// filled with the plan joined from every shard's scan, and the largest tile range and
+/// absolute height of the filled rows go to `output` (by convention
+/// DIR/ranges-K-of-N.vktranges). With no void the scan's own figures are those of the filled
+/// grid, and nothing is read.
+pub fn ranges(
+    input: &InputArgs,
+    shard: tiles::shard::Shard,
+    dir: &Path,
+    output: &Path,
+) -> Result<ExitCode> {
+    let ours = input_recipe(input)?;
+    let (found, scans) = read_scans(&ours, shard, dir)?;
+    let own = &found[shard.index as usize];
+    let opts = input.read.options();
+    let figures = match fill_plan(input, &found, dir)? {
+        None => tiles::shard::ShardRanges {
+            max_range: own.max_range,
+            max_abs: own.max_abs,
+        },
+        Some(plan) => {
+            let stream =
+                dem::open_unscanned(&input.inputs, &opts, (scans.lo, scans.hi), Some(plan))?;
+            let per_band = default_band_rows(stream.width, Some((shard, stream.height)));
+            let heights = StreamHeights { stream, per_band };
+            let (max_range, max_abs) = tiles::shard::tile_ranges(&heights, shard)?;
+            tiles::shard::ShardRanges { max_range, max_abs }
+        }
+    };
+    tiles::format::write_atomically(output, figures.to_text(shard, &ours).as_bytes())
+        .map_err(|e| anyhow::anyhow!("{}: {e}", output.display()))?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Every shard's scan from `dir` (`scan-K-of-N.vktscan`), checked to be of this input: each
+/// shard's (in shard order) and together.
+fn read_scans(
     ours: &str,
     shard: tiles::shard::Shard,
     dir: &Path,
-) -> Result<Option<tiles::shard::Scans>> {
+) -> Result<(Vec<tiles::shard::ShardScan>, tiles::shard::Scans)> {
     let mut found = Vec::new();
     for k in 0..shard.count {
         let path = dir.join(format!("scan-{k}-of-{}.vktscan", shard.count));
@@ -379,12 +417,89 @@ pub fn shard_scans(
         found.push(scan);
     }
     let scans = tiles::shard::Scans::join(&found).expect("at least one shard");
-    if scans.voids > 0 {
-        eprintln!(
-            "tiletool: note: the input has {} voids, whose fill is global: reading the whole input",
-            scans.voids
-        );
+    Ok((found, scans))
+}
+
+/// The void fill's plan joined from every shard's share of the pass (`dem::Plan::join`), or
+/// `None` when there is nothing to plan: no void, or an input decoded whole (a picture), whose
+/// scans each filled the whole grid already.
+fn fill_plan(
+    input: &InputArgs,
+    found: &[tiles::shard::ShardScan],
+    dir: &Path,
+) -> Result<Option<dem::Plan>> {
+    if found.iter().all(|s| s.voids == 0) || found.iter().any(|s| s.fill.is_none()) {
         return Ok(None);
     }
-    Ok(Some(scans))
+    let opts = input.read.options();
+    let laid = dem::open_unscanned(&input.inputs, &opts, (0.0, 0.0), None)?;
+    let shares = found
+        .iter()
+        .enumerate()
+        .map(|(k, s)| {
+            dem::Pulled::from_line(s.fill.as_deref().unwrap_or_default()).map_err(|e| {
+                anyhow::anyhow!(
+                    "{}: {e}",
+                    dir.join(format!("scan-{k}-of-{}.vktscan", found.len()))
+                        .display()
+                )
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let plan = dem::Plan::join(laid.width, laid.height, dem::STORED, &shares)
+        .map_err(|e| anyhow::anyhow!("{}: the scans do not make one pass: {e}", dir.display()))?;
+    match plan {
+        Some(plan) => Ok(Some(plan)),
+        None => bail!(
+            "{}: every sample of the input is a void",
+            input.inputs[0].display()
+        ),
+    }
+}
+
+/// The grid as a shard given every shard's scan in `dir` reads it (its rows, with the margin
+/// their voids need, filled as the whole grid is), and the whole grid's figures. An input with
+/// voids needs every shard's ranges too (`--ranges-only`, [`ranges`]).
+pub fn scanned_stream(
+    input: &InputArgs,
+    ours: &str,
+    shard: tiles::shard::Shard,
+    dir: &Path,
+) -> Result<(dem::Stream, tiles::shard::Scans)> {
+    let (found, mut scans) = read_scans(ours, shard, dir)?;
+    let plan = fill_plan(input, &found, dir)?;
+    if plan.is_some() {
+        let mut ranges = Vec::new();
+        for k in 0..shard.count {
+            let path = dir.join(format!("ranges-{k}-of-{}.vktranges", shard.count));
+            let text = std::fs::read_to_string(&path).map_err(|e| {
+                anyhow::anyhow!(
+                    "{}: {e} (the input has voids: run `tiletool build ... --shard {k}/{} --scans {} --ranges-only` first)",
+                    path.display(),
+                    shard.count,
+                    dir.display()
+                )
+            })?;
+            let (theirs, figures, recipe) = tiles::shard::ShardRanges::from_text(&text)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+            if theirs.index != k || theirs.count != shard.count {
+                bail!("{}: holds the ranges of shard {theirs}", path.display());
+            }
+            if recipe != ours {
+                bail!(
+                    "{}: the ranges of other inputs or read options",
+                    path.display()
+                );
+            }
+            ranges.push(figures);
+        }
+        scans = scans.filled(&ranges);
+    }
+    let stream = dem::open_unscanned(
+        &input.inputs,
+        &input.read.options(),
+        (scans.lo, scans.hi),
+        plan,
+    )?;
+    Ok((stream, scans))
 }

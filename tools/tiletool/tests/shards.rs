@@ -176,9 +176,8 @@ fn scan_all(input: &Path, dir: &Path, n: u32) {
 /// one tile row, halo 0 so that a shard's window is its row (the merge settles the seams): a
 /// shard says how much it read, under 0.6 of the file with scans (its row twice, and the
 /// inputs' fingerprints), and over twice the
-/// file without them (the control: it reads the whole input twice to scan it). An input with
-/// voids (N48W125) falls back to reading the whole input, with a note, and merges to the
-/// build's bytes too. A scan of other inputs is refused.
+/// file without them (the control: it reads the whole input twice to scan it). A scan of
+/// other inputs is refused.
 #[test]
 fn with_scans_a_shard_reads_only_its_rows_and_the_set_is_the_same() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -189,19 +188,6 @@ fn with_scans_a_shard_reads_only_its_rows_and_the_set_is_the_same() {
     std::fs::create_dir(&scans).expect("dir");
     let n = 5;
     scan_all(&input, &scans, n);
-    let read = |o: &std::process::Output| -> f64 {
-        let said = String::from_utf8_lossy(&o.stdout);
-        let line = said
-            .lines()
-            .find(|l| l.contains("input read"))
-            .unwrap_or_else(|| panic!("no input-read figure: {said}"));
-        let mb = line.split("input read ").nth(1).expect("figure");
-        mb.split_whitespace()
-            .next()
-            .expect("MB")
-            .parse()
-            .expect("number")
-    };
     let shard_args = |k: u32, part: &Path, with_scans: bool| -> std::process::Output {
         let shard = format!("{k}/{n}");
         let mut args = vec![
@@ -226,7 +212,7 @@ fn with_scans_a_shard_reads_only_its_rows_and_the_set_is_the_same() {
     let mut with = Vec::new();
     for k in 0..n {
         let part = dir.path().join(format!("part-{k}-of-{n}"));
-        with.push(read(&shard_args(k, &part, true)));
+        with.push(input_read(&shard_args(k, &part, true)));
         parts.push(part);
     }
     let merged = dir.path().join("merged.vkt");
@@ -236,7 +222,7 @@ fn with_scans_a_shard_reads_only_its_rows_and_the_set_is_the_same() {
         same_bytes(&merged, &whole),
         "with scans: differs from the build"
     );
-    let without = read(&shard_args(2, &dir.path().join("alone"), false));
+    let without = input_read(&shard_args(2, &dir.path().join("alone"), false));
     let file = std::fs::metadata(&input).expect("input").len() as f64 / 1e6;
     assert!(
         with[2] < 0.6 * file && without > 2.0 * file,
@@ -258,31 +244,98 @@ fn with_scans_a_shard_reads_only_its_rows_and_the_set_is_the_same() {
     ]);
     assert!(!o.status.success(), "a scan of another input was taken");
     assert!(stderr(&o).contains("scan-0-of-5.vktscan"), "{}", stderr(&o));
-    // Voids: their fill is global, so the shards read the whole input, and say so.
+}
+
+/// The figure a shard prints of what it read of its input, MB.
+fn input_read(o: &std::process::Output) -> f64 {
+    let said = String::from_utf8_lossy(&o.stdout);
+    let line = said
+        .lines()
+        .find(|l| l.contains("input read"))
+        .unwrap_or_else(|| panic!("no input-read figure: {said}"));
+    let mb = line.split("input read ").nth(1).expect("figure");
+    mb.split_whitespace()
+        .next()
+        .expect("MB")
+        .parse()
+        .expect("number")
+}
+
+/// An input with voids (SRTM1 N48W125, half of it sea) in three stages: every shard's scan
+/// pulls its rows' share of the void fill's pass, every shard's ranges fill its rows with the
+/// plan joined from all the scans, then each shard reads only its rows with the margin their
+/// fill needs. The merged set is the build's bytes, and each of 5 shards (halo 0) reads under
+/// 1.3x the file where the control, the same shard without scans, reads over 3x (the whole
+/// input to scan it and again to range its tiles). A shard without the ranges is refused with
+/// one line naming the missing file, and ranges from other scans are refused.
+#[test]
+fn with_scans_and_ranges_a_shard_fills_its_voids_from_its_rows() {
+    let dir = tempfile::tempdir().expect("temp dir");
     let voids = data("srtm/N48W125.hgt");
     let whole = dir.path().join("n48.vkt");
     build(&voids, &whole, &["--no-texture"]);
     let scans = dir.path().join("n48-scans");
     std::fs::create_dir(&scans).expect("dir");
-    scan_all(&voids, &scans, 2);
-    let mut parts = Vec::new();
-    for k in 0..2 {
-        let shard = format!("{k}/2");
-        let part = dir.path().join(format!("n48-{k}"));
-        let o = tiletool(&[
+    let n = 5;
+    scan_all(&voids, &scans, n);
+    let shard_build = |k: u32, part: &Path, with_scans: bool| -> std::process::Output {
+        let shard = format!("{k}/{n}");
+        let mut args = vec![
             "build",
             s(&voids),
             "--no-texture",
-            "--quiet",
+            "--halo",
+            "0",
+            "--shard",
+            &shard,
+            "-o",
+            s(part),
+        ];
+        if with_scans {
+            args.extend(["--scans", s(&scans)]);
+        }
+        tiletool(&args)
+    };
+    // Without the second stage: refused, naming the ranges file.
+    let o = shard_build(0, &dir.path().join("early"), true);
+    assert!(!o.status.success(), "built without the ranges");
+    assert!(
+        stderr(&o).contains("ranges-0-of-5.vktranges") && stderr(&o).lines().count() == 1,
+        "{}",
+        stderr(&o)
+    );
+    let ranges = |k: u32| -> std::process::Output {
+        let shard = format!("{k}/{n}");
+        let out = scans.join(format!("ranges-{k}-of-{n}.vktranges"));
+        let args = [
+            "build",
+            s(&voids),
+            "--no-texture",
             "--shard",
             &shard,
             "--scans",
             s(&scans),
+            "--ranges-only",
             "-o",
-            s(&part),
-        ]);
+            s(&out),
+        ];
+        tiletool(&args)
+    };
+    for k in 0..n {
+        let o = ranges(k);
         assert!(o.status.success(), "{}", stderr(&o));
-        assert!(stderr(&o).contains("voids"), "no note: {}", stderr(&o));
+    }
+    let file = std::fs::metadata(&voids).expect("input").len() as f64 / 1e6;
+    let mut parts = Vec::new();
+    for k in 0..n {
+        let part = dir.path().join(format!("n48-{k}"));
+        let o = shard_build(k, &part, true);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let read = input_read(&o);
+        assert!(
+            read < 1.3 * file,
+            "shard {k}/{n} read {read} MB of a {file} MB input"
+        );
         parts.push(part);
     }
     let merged = dir.path().join("n48-merged.vkt");
@@ -290,7 +343,42 @@ fn with_scans_a_shard_reads_only_its_rows_and_the_set_is_the_same() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(
         same_bytes(&merged, &whole),
-        "N48W125 with scans: differs from the build"
+        "N48W125 in 5 scanned shards: differs from the build"
+    );
+    let o = shard_build(2, &dir.path().join("alone"), false);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        input_read(&o) > 3.0 * file,
+        "the control read {} MB",
+        input_read(&o)
+    );
+    // Ranges from the scans of another input: refused, naming them.
+    let other = dir.path().join("other-scans");
+    std::fs::create_dir(&other).expect("dir");
+    let input = data("srtm/N42E001.hgt");
+    scan_all(&input, &other, n);
+    let theirs = other.join("ranges-1-of-5.vktranges");
+    let args = [
+        "build",
+        s(&input),
+        "--no-texture",
+        "--shard",
+        "1/5",
+        "--scans",
+        s(&other),
+        "--ranges-only",
+        "-o",
+        s(&theirs),
+    ];
+    let o = tiletool(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    std::fs::copy(&theirs, scans.join("ranges-1-of-5.vktranges")).expect("copy");
+    let o = shard_build(0, &dir.path().join("foreign"), true);
+    assert!(!o.status.success(), "built with foreign ranges");
+    assert!(
+        stderr(&o).contains("ranges-1-of-5.vktranges"),
+        "{}",
+        stderr(&o)
     );
 }
 

@@ -3,7 +3,8 @@
 //! `.ci/setup`), the 4K Puget DEM built as a 4-task array job with the merge depending on it
 //! (`deploy/slurm/submit.sh`), compared byte for byte with the build without shards. Then one
 //! array task is cancelled while it writes its part, leaves nothing, and only that index is
-//! submitted again; the merge's set is again the build's.
+//! submitted again; the merge's set is again the build's. Last, an input with voids (SRTM1
+//! N48W125) in the three stages `submit.sh` runs with SCAN=1: scan, ranges, build, then merge.
 
 mod common;
 
@@ -71,9 +72,15 @@ impl Cluster {
 
     /// A Slurm command (or one of our scripts) against this cluster, run in `cwd`.
     fn run(&self, program: &Path, args: &[&str], cwd: &Path) -> Output {
+        self.run_with(program, args, cwd, &[])
+    }
+
+    /// [`Cluster::run`] with more variables in its environment.
+    fn run_with(&self, program: &Path, args: &[&str], cwd: &Path, env: &[(&str, &str)]) -> Output {
         Command::new(program)
             .args(args)
             .current_dir(cwd)
+            .envs(env.iter().copied())
             .env("SLURM_CONF", self.state.path().join("slurm.conf"))
             .env("TILETOOL", env!("CARGO_BIN_EXE_tiletool"))
             .output()
@@ -210,5 +217,34 @@ fn a_slurm_array_builds_the_same_set_and_one_cancelled_index_is_rerun() {
     assert!(
         same_bytes(&merged, &whole),
         "after the rerun the set differs from the build without shards"
+    );
+
+    // The three stages (SCAN=1: scan, ranges, build; then the merge) over an input with
+    // voids, SRTM1 N48W125 in 3 shards: the set is the build's.
+    let voids = data("srtm/N48W125.hgt");
+    let options = [s(&voids), "--no-texture", "--quiet"];
+    let whole = dir.path().join("n48.vkt");
+    let mut args = vec!["build", "-o", s(&whole)];
+    args.extend(options);
+    let o = tiletool(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let work = dir.path().join("n48-parts");
+    let merged = dir.path().join("n48-merged.vkt");
+    let mut args = vec!["3", s(&work), s(&merged)];
+    args.extend(options);
+    let o = cluster.run_with(&submit, &args, cwd, &[("SCAN", "1")]);
+    assert!(o.status.success(), "submit.sh: {}", stderr(&o));
+    let ids = String::from_utf8_lossy(&o.stdout).trim().to_string();
+    let (array, merge) = ids.split_once(' ').expect("two job ids");
+    for k in 0..3 {
+        let task = format!("{array}_{k}");
+        assert_eq!(cluster.wait(&task, cwd), "COMPLETED", "N48W125 shard {k}");
+        let ranges = work.join(format!("scans/ranges-{k}-of-3.vktranges"));
+        assert!(ranges.exists(), "no {}", ranges.display());
+    }
+    assert_eq!(cluster.wait(merge, cwd), "COMPLETED", "the N48W125 merge");
+    assert!(
+        same_bytes(&merged, &whole),
+        "N48W125 built in three stages on Slurm differs from the build without shards"
     );
 }
