@@ -95,6 +95,22 @@ expect "no input" 2 '' 'no input' -- JOB_COMPLETION_INDEX=0 SHARDS=4 --
 expect "SKIP_COMPLETE=yes" 2 '' "SKIP_COMPLETE='yes': must be 1 or 0" \
   -- SKIP_COMPLETE=yes JOB_COMPLETION_INDEX=0 SHARDS=4 -- /data/x.hgt
 
+# the scan stages
+expect "STAGE=scan" 0 \
+  '^tiletool \[build\] \[/data/x.hgt\] \[--shard\] \[2/4\] \[--scan-only\] \[-o\] \['"$W"'/scans/scan-2-of-4.vktscan\]$' '' \
+  -- STAGE=scan JOB_COMPLETION_INDEX=2 SHARDS=4 WORK_DIR="$W" -- /data/x.hgt
+if [ -d "$W/scans" ]; then ok "  ... and made the scans' dir"; else bad "  ... no scans' dir made"; fi
+expect "STAGE=ranges" 0 \
+  '^tiletool \[build\] \[/data/x.hgt\] \[--shard\] \[2/4\] \[--scans\] \['"$W"'/scans\] \[--ranges-only\] \[-o\] \['"$W"'/scans/ranges-2-of-4.vktranges\]$' '' \
+  -- STAGE=ranges JOB_COMPLETION_INDEX=2 SHARDS=4 WORK_DIR="$W" -- /data/x.hgt
+expect "STAGE=build, SCANS=1" 0 \
+  '^tiletool \[build\] \[/data/x.hgt\] \[--shard\] \[2/4\] \[--scans\] \['"$W"'/scans\] \[-o\] \['"$W"'/part-2-of-4.vktpart\]$' '' \
+  -- STAGE=build SCANS=1 JOB_COMPLETION_INDEX=2 SHARDS=4 WORK_DIR="$W" -- /data/x.hgt
+expect "STAGE=merge" 2 '' "STAGE='merge': must be scan, ranges or build" \
+  -- STAGE=merge JOB_COMPLETION_INDEX=0 SHARDS=4 -- /data/x.hgt
+expect "SCANS=yes" 2 '' "SCANS='yes': must be 1 or 0" \
+  -- SCANS=yes JOB_COMPLETION_INDEX=0 SHARDS=4 -- /data/x.hgt
+
 # merge
 mkdir -p "$W"
 rm -f "$W"/part-*

@@ -11,6 +11,14 @@
 # its name is whole; a retried shard replaces it.
 # Merge: runs `$TILETOOL merge` over part-0-of-N ... part-(N-1)-of-N in $WORK_DIR with
 #   -o OUTPUT (the second argument, else $OUTPUT).
+# Scan stages (STAGE, build mode only): so that each shard reads only its rows of the input,
+# an Indexed Job with STAGE=scan, then one with STAGE=ranges, run before the build Job with
+# SCANS=1 (run.sh does this with SCAN=1; README.md here):
+#   STAGE=scan    $TILETOOL build INPUT... --shard K/N --scan-only
+#                   -o $WORK_DIR/scans/scan-K-of-N.vktscan
+#   STAGE=ranges  $TILETOOL build INPUT... --shard K/N --scans $WORK_DIR/scans --ranges-only
+#                   -o $WORK_DIR/scans/ranges-K-of-N.vktranges
+#   SCANS=1       the build adds --scans $WORK_DIR/scans
 #
 # Env:
 #   JOB_COMPLETION_INDEX  K (build only): a non-negative integer below SHARDS
@@ -22,6 +30,9 @@
 #                         already there and ends with the part's end mark (for re-running a
 #                         Job after some indexes failed). The merge checks every part's
 #                         checksum and recipe anyway. 0 or unset: always build.
+#   STAGE                 scan, ranges or build [build]
+#   SCANS                 1: the build reads every shard's scan (and ranges) from
+#                         $WORK_DIR/scans; 0 or unset: it scans the whole input itself
 # Refusals (bad env or arguments) print one line on stderr and exit 2; a merge with parts
 # missing lists the missing shards and exits 1.
 set -euo pipefail
@@ -66,6 +77,15 @@ case ${SKIP_COMPLETE:-0} in
   1) skip_complete=true ;;
   *) refuse "SKIP_COMPLETE='$SKIP_COMPLETE': must be 1 or 0" ;;
 esac
+case ${STAGE:-build} in
+  scan | ranges | build) stage=${STAGE:-build} ;;
+  *) refuse "STAGE='$STAGE': must be scan, ranges or build" ;;
+esac
+case ${SCANS:-0} in
+  0) scans=() ;;
+  1) scans=(--scans "$WORK_DIR/scans") ;;
+  *) refuse "SCANS='$SCANS': must be 1 or 0" ;;
+esac
 
 if [ "$mode" = merge ]; then
   [ $# -le 1 ] || refuse "merge takes at most one argument, the output; got $#: $*"
@@ -89,6 +109,16 @@ K=$(integer_env JOB_COMPLETION_INDEX)
 [ "$K" -lt "$N" ] ||
   refuse "JOB_COMPLETION_INDEX=$K is not below SHARDS=$N (the Job's completions must equal SHARDS)"
 
+case $stage in
+  scan)
+    mkdir -p "$WORK_DIR/scans"
+    run "$TILETOOL" build "$@" --shard "$K/$N" --scan-only \
+      -o "$WORK_DIR/scans/scan-$K-of-$N.vktscan" ;;
+  ranges)
+    run "$TILETOOL" build "$@" --shard "$K/$N" --scans "$WORK_DIR/scans" --ranges-only \
+      -o "$WORK_DIR/scans/ranges-$K-of-$N.vktranges" ;;
+esac
+
 part=$(part_name "$K" "$N")
 if $skip_complete && [ -f "$part" ] &&
   [ "$(head -c 7 "$part")" = VKTPART ] && [ "$(tail -c 8 "$part" | tr -d '\0')" = VKTPEND ]; then
@@ -98,4 +128,4 @@ if $skip_complete && [ -f "$part" ] &&
 fi
 
 mkdir -p "$WORK_DIR"
-run "$TILETOOL" build "$@" --shard "$K/$N" -o "$part"
+run "$TILETOOL" build "$@" --shard "$K/$N" "${scans[@]}" -o "$part"

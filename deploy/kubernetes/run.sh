@@ -12,7 +12,10 @@
 #   deploy/kubernetes/run.sh merge    only the merge (the build Job must be Complete)
 #
 # Env: NAMESPACE (default: kubectl's current one), BUILD_TIMEOUT_S [86400],
-#      MERGE_TIMEOUT_S [21600], POLL_S [15].
+#      MERGE_TIMEOUT_S [21600], POLL_S [15]. SCAN=1 (run only): before the build Job, two
+#      Indexed Jobs made from build-job.yaml, vkterrain-scan (STAGE=scan) and then
+#      vkterrain-ranges (STAGE=ranges), each waited for; the build Job then runs with
+#      SCANS=1, so that each shard reads only its rows of the input (README.md here).
 # Needs a cluster >= 1.29 (build-job.yaml) and kubectl >= 1.29: `kubectl set env --local`
 # passes the Job through kubectl's own types, and an older one drops the fields it lacks.
 #
@@ -80,14 +83,32 @@ report_build_failure() {
   say "the shards without a complete part: $0 rerun"
 }
 
-# create_build [SKIP_COMPLETE value]
+# create_build [SKIP_COMPLETE value]: the build Job (with SCANS=1 after the scan stages).
 create_build() {
-  if [ "${1:-0}" = 1 ]; then
-    kubectl set env --local -f "$here/build-job.yaml" SKIP_COMPLETE=1 -o yaml | k create -f -
+  local envs=()
+  [ "${1:-0}" = 1 ] && envs+=(SKIP_COMPLETE=1)
+  [ "${SCAN:-0}" = 1 ] && envs+=(SCANS=1)
+  if [ ${#envs[@]} -gt 0 ]; then
+    kubectl set env --local -f "$here/build-job.yaml" "${envs[@]}" -o yaml | k create -f -
   else
     k create -f "$here/build-job.yaml"
   fi
   check_features
+}
+
+# stage scan|ranges: the build Job's manifest as vkterrain-STAGE with STAGE set, created and
+# waited for; exits when it does not complete.
+stage() {
+  local name=vkterrain-$1 rc=0
+  k delete job "$name" --ignore-not-found --cascade=foreground --wait=true
+  kubectl set env --local -f "$here/build-job.yaml" STAGE="$1" -o yaml |
+    sed "s/^  name: $BUILD\$/  name: $name/" | k create -f -
+  wait_job "$name" "$BUILD_TIMEOUT_S" || rc=$?
+  if [ "$rc" != 0 ]; then
+    say "job/$name did not complete; its failed indexes' logs:"
+    say "  kubectl logs -l batch.kubernetes.io/job-name=$name --prefix --tail=20"
+    exit 1
+  fi
 }
 
 build() {
@@ -121,6 +142,10 @@ case ${1:-run} in
       say "job/$BUILD exists from an earlier run: \`$0 rerun\` rebuilds the shards without a"
       say "complete part; or delete it (kubectl delete job $BUILD --cascade=foreground) first"
       exit 1
+    fi
+    if [ "${SCAN:-0}" = 1 ]; then
+      stage scan
+      stage ranges
     fi
     create_build 0
     build

@@ -74,6 +74,51 @@ fn the_entrypoint_maps_the_index_to_a_shard_and_merges_the_builds_bytes() {
     assert!(stderr(&o).contains("JOB_COMPLETION_INDEX is not set"));
 }
 
+/// The scan stages as run.sh runs them with SCAN=1, each an Indexed Job's pods: STAGE=scan,
+/// then STAGE=ranges, then the build with SCANS=1, over an input with voids (SRTM1
+/// N48W125), then the merge: the set is the build's bytes.
+#[test]
+fn the_entrypoints_scan_stages_build_the_same_set() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let input = data("srtm/N48W125.hgt");
+    let whole = dir.path().join("whole.vkt");
+    let args = [
+        "build",
+        s(&input),
+        "--no-texture",
+        "--quiet",
+        "-o",
+        s(&whole),
+    ];
+    let o = tiletool(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let work = dir.path().join("parts");
+    for (stage, scans) in [("scan", "0"), ("ranges", "0"), ("build", "1")] {
+        for k in 0..3 {
+            let index = k.to_string();
+            let vars = [
+                ("JOB_COMPLETION_INDEX", index.as_str()),
+                ("SHARDS", "3"),
+                ("WORK_DIR", s(&work)),
+                ("STAGE", stage),
+                ("SCANS", scans),
+            ];
+            let o = entrypoint(&vars, &[s(&input), "--no-texture", "--quiet"]);
+            assert!(o.status.success(), "{stage} pod {k}: {}", stderr(&o));
+        }
+    }
+    assert!(work.join("scans/ranges-2-of-3.vktranges").exists());
+    let set = dir.path().join("set.vkt");
+    let vars = [("SHARDS", "3"), ("WORK_DIR", s(&work)), ("OUTPUT", s(&set))];
+    let o = entrypoint(&vars, &["merge"]);
+    assert!(o.status.success(), "merge: {}", stderr(&o));
+    let same = std::fs::read(&set).expect("set") == std::fs::read(&whole).expect("whole");
+    assert!(
+        same,
+        "the set built in three stages differs from the build without shards"
+    );
+}
+
 fn check(folder: &Path) -> (bool, String) {
     let o = Command::new("bash")
         .arg(folder.join("check.sh"))
