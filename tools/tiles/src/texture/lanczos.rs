@@ -42,16 +42,13 @@ impl Image {
             texels,
         }
     }
+}
 
-    /// Texels rounded to bytes, RGBA with alpha 255 (what the BC1 encoder takes).
-    pub fn to_rgba8(&self) -> Vec<u8> {
-        let mut out = vec![255u8; self.texels.len() * 4];
-        for (o, t) in out.chunks_exact_mut(4).zip(&self.texels) {
-            for (o, &c) in o.iter_mut().zip(t) {
-                *o = byte(c);
-            }
-        }
-        out
+/// `texels` as RGBA bytes into `out` (4 a texel), opaque, each channel rounded ([`byte`]):
+/// what the BC1 encoder takes.
+pub fn rgba8_into(texels: &[[f32; 3]], out: &mut [u8]) {
+    for (o, &[r, g, b]) in out.chunks_exact_mut(4).zip(texels) {
+        o.copy_from_slice(&[byte(r), byte(g), byte(b), 255]);
     }
 }
 

@@ -455,14 +455,22 @@ pub fn encode_bc1(image: &Image) -> (Vec<u8>, f64) {
     // The encoder takes whole blocks: pad to a multiple of 4 by repeating the last texels
     // (the padding lies outside the mip and is never sampled).
     let (pw, ph) = (w.next_multiple_of(4), h.next_multiple_of(4));
-    let rgba = image.to_rgba8();
+    // The image's rows as RGBA bytes, each padded to `pw` texels, then the last row repeated.
     let mut padded = vec![0u8; pw * ph * 4];
-    for y in 0..ph {
-        let sy = y.min(h - 1);
-        for x in 0..pw {
-            let (s, d) = ((sy * w + x.min(w - 1)) * 4, (y * pw + x) * 4);
-            padded[d..d + 4].copy_from_slice(&rgba[s..s + 4]);
+    let (rows, pad) = padded.split_at_mut(h * pw * 4);
+    for (row, texels) in rows
+        .chunks_exact_mut(pw * 4)
+        .zip(image.texels.chunks_exact(w))
+    {
+        let (inside, right) = row.split_at_mut(w * 4);
+        lanczos::rgba8_into(texels, inside);
+        for texel in right.chunks_exact_mut(4) {
+            texel.copy_from_slice(&inside[(w - 1) * 4..]);
         }
+    }
+    let last = &rows[(h - 1) * pw * 4..];
+    for row in pad.chunks_exact_mut(pw * 4) {
+        row.copy_from_slice(last);
     }
     let blocks = intel_tex_2::bc1::compress_blocks(&intel_tex_2::RgbaSurface {
         width: pw as u32,
@@ -471,8 +479,10 @@ pub fn encode_bc1(image: &Image) -> (Vec<u8>, f64) {
         data: &padded,
     });
     let decoded = decode_bc1(&blocks, w, h);
-    let squared_error = rgba
-        .chunks_exact(4)
+    let squared_error = padded
+        .chunks_exact(pw * 4)
+        .take(h)
+        .flat_map(|row| row[..w * 4].chunks_exact(4))
         .zip(decoded.chunks_exact(4))
         .map(|(a, b)| {
             (0..3)

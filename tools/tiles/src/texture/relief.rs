@@ -180,23 +180,26 @@ pub fn render(
         (lo(&xs), lo(&ys)),
         (hi(&xs, grid.width), hi(&ys, grid.height)),
     );
-    let at = |x: usize, y: usize| lit.colours[(y - lit.y0) * lit.width + (x - lit.x0)];
-    // Each column's two samples and weight, once for all rows (`floor` is a library call).
+    // Each column's two samples (as indices into a row of `lit`) and weight, once for all rows
+    // (`floor` is a library call).
     let columns: Vec<(usize, usize, f32)> = xs
         .iter()
         .map(|&x| {
             let xa = x.floor() as usize;
-            (xa, (xa + 1).min(grid.width - 1), (x - xa as f64) as f32)
+            let xb = (xa + 1).min(grid.width - 1);
+            (xa - lit.x0, xb - lit.x0, (x - xa as f64) as f32)
         })
         .collect();
     let mut image = Image::new(width, height);
-    for (j, &y) in ys.iter().enumerate() {
+    let row_of = |y: usize| &lit.colours[(y - lit.y0) * lit.width..][..lit.width];
+    for (&y, out) in ys.iter().zip(image.texels.chunks_exact_mut(width)) {
         let ya = y.floor() as usize;
         let yb = (ya + 1).min(grid.height - 1);
         let fy = (y - ya as f64) as f32;
-        for (i, &(xa, xb, fx)) in columns.iter().enumerate() {
-            let (a, b, c, d) = (at(xa, ya), at(xb, ya), at(xa, yb), at(xb, yb));
-            image.texels[j * width + i] = [0, 1, 2].map(|k| {
+        let (upper, lower) = (row_of(ya), row_of(yb));
+        for (texel, &(xa, xb, fx)) in out.iter_mut().zip(&columns) {
+            let (a, b, c, d) = (upper[xa], upper[xb], lower[xa], lower[xb]);
+            *texel = [0, 1, 2].map(|k| {
                 let top = a[k] + fx * (b[k] - a[k]);
                 let bottom = c[k] + fx * (d[k] - c[k]);
                 top + fy * (bottom - top)
