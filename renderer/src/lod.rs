@@ -186,8 +186,7 @@ pub fn level(view: &View, camera: DVec3, tile: &TileInfo, tau: f64, rule: Bound)
 /// The level a tile is drawn at while geomorphing ([`crate::morph`], "The level a tile is
 /// drawn at"): the coarsest that covers the level `Λ(τ / S)` of every vertex on screen whose
 /// level moves it. Each vertex takes one of the tile's nine level tables
-/// ([`crate::morph::table_of`]): the interior its own, a side the larger of the two tiles'
-/// errors near it. So
+/// ([`crate::morph::table_of`]): the interior its own, a side the larger of the two tiles'. So
 /// the drawn level is the largest, over the interior and the four sides, of
 /// `ceil(Λ_part(τ / S_part))`, with `S_part` the proved bound over the on-screen pieces of that
 /// part's box: the whole tile's box for the interior; for a side, the strip

@@ -1667,9 +1667,7 @@ fn prefetching_draws_fewer_tiles_coarser_after_the_cold_start() {
     let warm = |v: &serde_json::Value| v["tiles_coarser_warm"].as_u64().expect("count");
     assert_eq!(on["index_arrays"], "built", "{on}");
     assert_eq!(on["warmup_frames"], off["warmup_frames"], "{on}\n{off}");
-    // (10 late tile-frames without prefetching, 2 with, until the side tables took the
-    // errors near each side; 9 and 1 since, at this budget and at 0.02 and 0.015 MiB.)
-    assert!(warm(&off) >= 8, "the budget must make tiles late: {off}");
+    assert!(warm(&off) >= 10, "the budget must make tiles late: {off}");
     assert!(
         warm(&on) * 2 < warm(&off),
         "prefetching: {} late tile-frames, without: {}",

@@ -3,8 +3,7 @@
 //! of their linear blend, as the vertex shader evaluates it.
 //!
 //! A tile's own table is its levels' measured errors plus half a morph unit. A vertex on a side
-//! takes the larger of the two tiles' errors near that side (over the triangles that touch it,
-//! plus half a morph unit), a corner the own tables of the tiles around it
+//! takes the larger errors of the two tiles there, a corner those of the tiles around it
 //! ([`crate::tile::TileInfo::tables`]): every tile holding a vertex gives it one table, and a
 //! tile is drawn at the finest level any of its tables asks for where that table's part of the
 //! tile is on screen. Errors are made to fall by at least

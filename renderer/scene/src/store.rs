@@ -51,10 +51,6 @@ pub struct Outline {
     pub min: DVec3,
     pub max: DVec3,
     table: LevelTable,
-    /// Per side (N, E, S, W), the table of its levels' errors near that side
-    /// ([`LevelEntry::side_error`]; the tile's own table where none was recorded, and for a
-    /// pyramid layer's tile, whose errors are measured against the base grid).
-    sides: [LevelTable; 4],
     pub broken: Option<String>,
 }
 
@@ -141,9 +137,9 @@ impl Tiles {
         })
     }
 
-    /// Tile `i` from its outline, with its side and corner tables: on a side the larger of the
-    /// two tiles' errors near it, at a corner the largest of the tiles' own tables (all from
-    /// their outlines), the same table in each of them. A neighbour whose outline does not read is never drawn, so no
+    /// Tile `i` from its outline, with its side and corner tables: the larger errors of the
+    /// tiles that hold the side or corner (their own tables, from their outlines), the same
+    /// table in each of them. A neighbour whose outline does not read is never drawn, so no
     /// side or corner is shared with it, and it adds nothing.
     fn info(&self, i: usize) -> TileInfo {
         let (p, tx, ty) = self.place(i);
@@ -157,20 +153,12 @@ impl Tiles {
                 .filter(|o| o.broken.is_none())
                 .fold(own, |a, b| a.max(&b.table))
         };
-        // A side's table: the larger of its two tiles' errors near it, the same in both.
-        let side = |side: Side| {
-            let near = outline.sides[side.index()];
-            self.at(p, tx, ty, side.step())
-                .map(|j| self.outline(j))
-                .filter(|o| o.broken.is_none())
-                .map_or(near, |o| near.max(&o.sides[side.opposite().index()]))
-        };
         let tables = [
             own,
-            side(Side::North),
-            side(Side::East),
-            side(Side::South),
-            side(Side::West),
+            around(&[Side::North.step()]),
+            around(&[Side::East.step()]),
+            around(&[Side::South.step()]),
+            around(&[Side::West.step()]),
             around(&[(-1, -1), (0, -1), (-1, 0)]),
             around(&[(1, -1), (0, -1), (1, 0)]),
             around(&[(-1, 1), (0, 1), (-1, 0)]),
@@ -247,19 +235,7 @@ fn read_outline(set: &TileSet, tx: u32, ty: u32) -> Result<Outline, String> {
         .iter()
         .map(|l| l.max_error.max(0.0) + 0.5 * l.morph_unit.max(0.0))
         .collect();
-    let distinct = distinct_levels(&levels);
-    let table = LevelTable::over(&errors, distinct);
-    let layer_tile = set.base_errors(tx, ty).is_some();
-    let sides = [0, 1, 2, 3].map(|k| {
-        if layer_tile {
-            return table;
-        }
-        let near: Vec<f32> = levels
-            .iter()
-            .map(|l| l.side_error(k).max(0.0) + 0.5 * l.morph_unit.max(0.0))
-            .collect();
-        LevelTable::over(&near, distinct)
-    });
+    let table = LevelTable::over(&errors, distinct_levels(&levels));
     Ok(Outline {
         header: th,
         levels,
@@ -267,7 +243,6 @@ fn read_outline(set: &TileSet, tx: u32, ty: u32) -> Result<Outline, String> {
         min,
         max,
         table,
-        sides,
         broken: None,
     })
 }
@@ -290,7 +265,6 @@ fn placeholder(set: &TileSet, tx: u32, ty: u32, problem: String) -> Outline {
     Outline {
         header: TileHeader::default(),
         table: LevelTable::over(&vec![0.0; levels.len()], 1),
-        sides: [LevelTable::over(&vec![0.0; levels.len()], 1); 4],
         levels,
         streams: Vec::new(),
         min: DVec3::new(c0 * sx, -(r0 + f64::from(hh)) * sy, f64::from(h.height_min)),

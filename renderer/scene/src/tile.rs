@@ -34,9 +34,8 @@ pub struct TileInfo {
     pub min: DVec3,
     pub max: DVec3,
     /// The level tables geomorphing takes its vertices' levels from ([`crate::levels`]):
-    /// inside the tile (its own errors), on its N, E, S, W sides (the larger of its and that
-    /// neighbour's errors near the side), at its NW, NE, SW, SE corners (the largest of the
-    /// tiles' own tables there).
+    /// inside the tile (its own errors), on its N, E, S, W sides (the larger errors of it and
+    /// that neighbour), at its NW, NE, SW, SE corners (the largest of the tiles there).
     pub tables: [LevelTable; 9],
     /// The largest of the nine: covers every vertex's table, for the quick test that the whole
     /// tile may be drawn at level 0 (the drawn level itself takes each part's table over that

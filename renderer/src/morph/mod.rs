@@ -38,9 +38,8 @@
 //! geometric one: `E(l(v)) <= τ / S(v)`, the vertex's error projects to at most `τ` pixels.
 //! `E_k` is the level table of where the vertex lies ([`crate::levels`]): inside a tile, that
 //! tile's measured error of level `k` plus half its morph unit (the stored offsets are rounded
-//! to whole units); on a side, the larger of the two tiles' errors near that side (over their
-//! triangles that touch it, which the file records); at a corner, the largest of the tiles'
-//! own tables there. So the table, too, is the same in every tile holding the vertex. Each table
+//! to whole units); on a side, the larger of the two tiles'; at a corner, the largest of the
+//! tiles there. So the table, too, is the same in every tile holding the vertex. Each table
 //! falls by at least [`crate::levels::MIN_RATIO`] a level (a coarser level is taken as worse
 //! where the spacing rule left it better than a finer one), so `Λ` is continuous:
 //!
@@ -183,17 +182,16 @@
 //! room. `--whole-tiles` draws each tile at one level (the comparison); where index arrays are
 //! sent from the file, a tile is drawn at its largest part's level throughout.
 //!
-//! A side's table is made from each tile's errors near the side alone
-//! ([`tiles::format::LevelEntry::side_error`]): a side vertex lies in no triangle that misses
-//! the side, at any level, so those errors bound every surface blended around it. Before the
-//! star rule below (see "Over the star") they were tried twice and let the error reach 2.06 px
-//! at tau 2 on N48W125 (bench/README.md): the worst sample lay on a tile's side between a
-//! corner and a side vertex 128 rows (4 km) away, a segment that blends all along at the far
-//! vertex's level, whose `τ / S(v)` the corner's larger `|J z|` magnified. A side vertex's star
-//! now reaches its scale along the side, so its level takes the `|J z|` at that corner, and the
-//! same flights stay within tau with them (N48W125's first 12 s at tau 1, 2, 3: 0.966, 1.938,
-//! 2.911 px, as with the whole tiles' tables; bench/README.md, "Side tables from the errors
-//! near each side, with the star").
+//! The side tables from each tile's errors near the side alone (which the file records,
+//! [`tiles::format::LevelEntry::side_error`]) were tried and measured twice: they cut the
+//! N48W125 orbit at tau 1 to 1.14x discrete's triangles, but the error reached 2.06 px at tau
+//! 2 there (bench/README.md). Found the second time: the worst sample lies on the side of a
+//! tile drawn at level 1, between a corner and a side vertex 128 rows (4 km) away. A
+//! segment whose one end is a block-0 vertex blends, all along, at the other end's level, so
+//! the error near the corner is the far vertex's `τ / S(v)` seen at the corner's larger
+//! `|J z|`. Smaller side tables lower `G`, lengthen such segments and expose it. Sides keep the
+//! whole tiles' tables until the vertex rule bounds `|J z|` over a vertex's star, not at the
+//! vertex alone.
 //!
 //! # Continuity
 //!

@@ -557,7 +557,8 @@ impl LevelEntry {
     /// 1..=255, and `max_error` itself where the code is 0 (not recorded). A vertex on a side
     /// lies in no triangle of any level that misses the side, so this bounds every level's
     /// error wherever its triangles around that vertex reach. The renderer's side level tables
-    /// are made from it (`scene::store`; `renderer::morph`, "The error of a blend").
+    /// do not use it yet: taken alone it let the error between a triangle's vertices pass tau
+    /// (bench/README.md, "Geomorphing").
     pub fn side_error(&self, side: usize) -> f32 {
         side_error_of(self.max_error, self.side_errors[side])
     }
