@@ -513,15 +513,8 @@ pub fn pull_rows(
     shard: Shard,
     (width, height): (usize, usize),
 ) -> Result<Range<usize>, BuildError> {
-    let (_, tiles_y) = tile_count(width, height).map_err(BuildError::Params)?;
-    let rows = shard.rows_of(tiles_y)?;
-    let cells = crate::mesh::TILE_CELLS as usize;
-    let end = if rows.end == tiles_y {
-        height
-    } else {
-        rows.end as usize * cells
-    };
-    Ok(rows.start as usize * cells..end)
+    let (rows, last) = grid_rows(shard, (width, height))?;
+    Ok(rows.start..if last { height } else { rows.end - 1 })
 }
 
 /// Grid rows a shard's scan reads: its tile rows' samples, up to and with the row its last
@@ -530,10 +523,20 @@ pub fn scan_rows(
     shard: Shard,
     (width, height): (usize, usize),
 ) -> Result<Range<usize>, BuildError> {
+    Ok(grid_rows(shard, (width, height))?.0)
+}
+
+/// The grid rows of a shard's tile rows (with the row the last shares with the next tile row),
+/// and whether they end the grid.
+fn grid_rows(
+    shard: Shard,
+    (width, height): (usize, usize),
+) -> Result<(Range<usize>, bool), BuildError> {
     let (_, tiles_y) = tile_count(width, height).map_err(BuildError::Params)?;
     let rows = shard.rows_of(tiles_y)?;
     let cells = crate::mesh::TILE_CELLS as usize;
-    Ok(rows.start as usize * cells..(rows.end as usize * cells + 1).min(height))
+    let grid = rows.start as usize * cells..(rows.end as usize * cells + 1).min(height);
+    Ok((grid, rows.end == tiles_y))
 }
 
 /// The largest tile range and absolute height over shard `shard`'s tile rows, reading only

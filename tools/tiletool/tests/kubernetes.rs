@@ -31,20 +31,26 @@ fn entrypoint(vars: &[(&str, &str)], args: &[&str]) -> Output {
         .expect("bash runs")
 }
 
-#[test]
-fn the_entrypoint_maps_the_index_to_a_shard_and_merges_the_builds_bytes() {
-    let dir = tempfile::tempdir().expect("temp dir");
-    let input = data("srtm/N55W003.hgt");
-    let whole = dir.path().join("whole.vkt");
+/// `input` built untextured without shards into `dir`/whole.vkt: what the shards must merge to.
+fn built(input: &Path, dir: &Path) -> PathBuf {
+    let whole = dir.join("whole.vkt");
     let o = tiletool(&[
         "build",
-        s(&input),
+        s(input),
         "--no-texture",
         "--quiet",
         "-o",
         s(&whole),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
+    whole
+}
+
+#[test]
+fn the_entrypoint_maps_the_index_to_a_shard_and_merges_the_builds_bytes() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let input = data("srtm/N55W003.hgt");
+    let whole = built(&input, dir.path());
     let work = dir.path().join("parts");
     for k in 0..3 {
         let index = k.to_string();
@@ -81,17 +87,7 @@ fn the_entrypoint_maps_the_index_to_a_shard_and_merges_the_builds_bytes() {
 fn the_entrypoints_scan_stages_build_the_same_set() {
     let dir = tempfile::tempdir().expect("temp dir");
     let input = data("srtm/N48W125.hgt");
-    let whole = dir.path().join("whole.vkt");
-    let args = [
-        "build",
-        s(&input),
-        "--no-texture",
-        "--quiet",
-        "-o",
-        s(&whole),
-    ];
-    let o = tiletool(&args);
-    assert!(o.status.success(), "{}", stderr(&o));
+    let whole = built(&input, dir.path());
     let work = dir.path().join("parts");
     for (stage, scans) in [("scan", "0"), ("ranges", "0"), ("build", "1")] {
         for k in 0..3 {

@@ -6,6 +6,7 @@
 mod common;
 
 use std::path::{Path, PathBuf};
+use std::process::Output;
 
 use common::{s, stderr, tiletool};
 use testdata::data;
@@ -36,7 +37,7 @@ fn shards(input: &Path, dir: &Path, n: u32, extra: &[&str]) -> Vec<PathBuf> {
         .collect()
 }
 
-fn merge(parts: &[PathBuf], out: &Path) -> std::process::Output {
+fn merge(parts: &[PathBuf], out: &Path) -> Output {
     let mut args = vec!["merge", "-o", s(out)];
     args.extend(parts.iter().map(|p| s(p)));
     tiletool(&args)
@@ -188,23 +189,8 @@ fn with_scans_a_shard_reads_only_its_rows_and_the_set_is_the_same() {
     std::fs::create_dir(&scans).expect("dir");
     let n = 5;
     scan_all(&input, &scans, n);
-    let shard_args = |k: u32, part: &Path, with_scans: bool| -> std::process::Output {
-        let shard = format!("{k}/{n}");
-        let mut args = vec![
-            "build",
-            s(&input),
-            "--no-texture",
-            "--halo",
-            "0",
-            "--shard",
-            &shard,
-            "-o",
-            s(part),
-        ];
-        if with_scans {
-            args.extend(["--scans", s(&scans)]);
-        }
-        let o = tiletool(&args);
+    let shard_args = |k: u32, part: &Path, with_scans: bool| -> Output {
+        let o = halo_0_shard(&input, (k, n), part, with_scans.then_some(scans.as_path()));
         assert!(o.status.success(), "{}", stderr(&o));
         o
     };
@@ -246,8 +232,30 @@ fn with_scans_a_shard_reads_only_its_rows_and_the_set_is_the_same() {
     assert!(stderr(&o).contains("scan-0-of-5.vktscan"), "{}", stderr(&o));
 }
 
+/// Shard `k` of `n` of `input`, untextured, with a halo of 0 (a shard's window is its rows;
+/// the merge settles the seams), into `part`, given every shard's scans (and ranges) in
+/// `scans` when there are some.
+fn halo_0_shard(input: &Path, (k, n): (u32, u32), part: &Path, scans: Option<&Path>) -> Output {
+    let shard = format!("{k}/{n}");
+    let mut args = vec![
+        "build",
+        s(input),
+        "--no-texture",
+        "--halo",
+        "0",
+        "--shard",
+        &shard,
+        "-o",
+        s(part),
+    ];
+    if let Some(dir) = scans {
+        args.extend(["--scans", s(dir)]);
+    }
+    tiletool(&args)
+}
+
 /// The figure a shard prints of what it read of its input, MB.
-fn input_read(o: &std::process::Output) -> f64 {
+fn input_read(o: &Output) -> f64 {
     let said = String::from_utf8_lossy(&o.stdout);
     let line = said
         .lines()
@@ -278,23 +286,8 @@ fn with_scans_and_ranges_a_shard_fills_its_voids_from_its_rows() {
     std::fs::create_dir(&scans).expect("dir");
     let n = 5;
     scan_all(&voids, &scans, n);
-    let shard_build = |k: u32, part: &Path, with_scans: bool| -> std::process::Output {
-        let shard = format!("{k}/{n}");
-        let mut args = vec![
-            "build",
-            s(&voids),
-            "--no-texture",
-            "--halo",
-            "0",
-            "--shard",
-            &shard,
-            "-o",
-            s(part),
-        ];
-        if with_scans {
-            args.extend(["--scans", s(&scans)]);
-        }
-        tiletool(&args)
+    let shard_build = |k: u32, part: &Path, with_scans: bool| -> Output {
+        halo_0_shard(&voids, (k, n), part, with_scans.then_some(scans.as_path()))
     };
     // Without the second stage: refused, naming the ranges file.
     let o = shard_build(0, &dir.path().join("early"), true);
@@ -304,7 +297,7 @@ fn with_scans_and_ranges_a_shard_fills_its_voids_from_its_rows() {
         "{}",
         stderr(&o)
     );
-    let ranges = |k: u32| -> std::process::Output {
+    let ranges = |k: u32| -> Output {
         let shard = format!("{k}/{n}");
         let out = scans.join(format!("ranges-{k}-of-{n}.vktranges"));
         let args = [
