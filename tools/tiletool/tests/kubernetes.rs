@@ -46,6 +46,16 @@ fn built(input: &Path, dir: &Path) -> PathBuf {
     whole
 }
 
+/// The entrypoint's merge of the 3 parts in `work` into `dir`/set.vkt; whether the set is
+/// `whole`'s bytes.
+fn merges_to(work: &Path, dir: &Path, whole: &Path) -> bool {
+    let set = dir.join("set.vkt");
+    let vars = [("SHARDS", "3"), ("WORK_DIR", s(work)), ("OUTPUT", s(&set))];
+    let o = entrypoint(&vars, &["merge"]);
+    assert!(o.status.success(), "merge: {}", stderr(&o));
+    std::fs::read(&set).expect("set") == std::fs::read(whole).expect("whole")
+}
+
 #[test]
 fn the_entrypoint_maps_the_index_to_a_shard_and_merges_the_builds_bytes() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -68,12 +78,10 @@ fn the_entrypoint_maps_the_index_to_a_shard_and_merges_the_builds_bytes() {
         );
         assert!(work.join(format!("part-{k}-of-3.vktpart")).exists());
     }
-    let set = dir.path().join("set.vkt");
-    let vars = [("SHARDS", "3"), ("WORK_DIR", s(&work)), ("OUTPUT", s(&set))];
-    let o = entrypoint(&vars, &["merge"]);
-    assert!(o.status.success(), "merge: {}", stderr(&o));
-    let same = std::fs::read(&set).expect("set") == std::fs::read(&whole).expect("whole");
-    assert!(same, "the merged set differs from the build without shards");
+    assert!(
+        merges_to(&work, dir.path(), &whole),
+        "the merged set differs from the build without shards"
+    );
     // A pod without its index is refused before any work.
     let o = entrypoint(&[("SHARDS", "3"), ("WORK_DIR", s(&work))], &[s(&input)]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
@@ -104,13 +112,8 @@ fn the_entrypoints_scan_stages_build_the_same_set() {
         }
     }
     assert!(work.join("scans/ranges-2-of-3.vktranges").exists());
-    let set = dir.path().join("set.vkt");
-    let vars = [("SHARDS", "3"), ("WORK_DIR", s(&work)), ("OUTPUT", s(&set))];
-    let o = entrypoint(&vars, &["merge"]);
-    assert!(o.status.success(), "merge: {}", stderr(&o));
-    let same = std::fs::read(&set).expect("set") == std::fs::read(&whole).expect("whole");
     assert!(
-        same,
+        merges_to(&work, dir.path(), &whole),
         "the set built in three stages differs from the build without shards"
     );
 }
