@@ -36,7 +36,7 @@ pub use geotiff::read_placement as read_tiff_placement;
 pub use options::{parse_size, Crop, Encoding, ReadOptions};
 pub use placement::{Crs, Mapping, Placement};
 pub use raster::{MAX_BANDED_SAMPLES, MAX_SAMPLES};
-pub use stream::{open, open_unscanned, scan_rows, unit, RowsScan, Stream, BAND_FORMATS};
+pub use stream::{open, open_unscanned, scan_rows, RowsScan, Stream, BAND_FORMATS};
 
 use error::label;
 use raster::{Georef, Raster};

@@ -106,15 +106,13 @@ pub fn open(paths: &[PathBuf], opts: &ReadOptions) -> Result<Stream, DemError> {
 
 /// Opens `paths` without reading their rows: for a caller that learnt what the whole grid's
 /// read would say from elsewhere (a sharded build's scans, which each read a band:
-/// `tiletool build --scan-only`). With `plan` (the shares' pulled rows joined,
-/// [`Plan::join`]) [`Stream::rows`] fills its rows as [`open`]'s stream does; without, the
-/// grid is known to hold no void and the rows are read as stored. `min_max` is as given.
-/// Formats read whole ([`BAND_FORMATS`] are not) are opened as [`open`] does.
+/// `tiletool build --scan-only`). [`Stream::rows`] then reads the rows as stored, a grid
+/// known to hold no void, until [`Stream::with_plan`] gives it the fill's plan. `min_max` is
+/// as given. Formats read whole ([`BAND_FORMATS`] are not) are opened as [`open`] does.
 pub fn open_unscanned(
     paths: &[PathBuf],
     opts: &ReadOptions,
     min_max: (f32, f32),
-    plan: Option<Plan>,
 ) -> Result<Stream, DemError> {
     match laid_out(paths, opts)? {
         Opened::Whole(stream) => Ok(stream),
@@ -123,12 +121,12 @@ pub fn open_unscanned(
             height: l.height,
             spacing_x: l.spacing_x,
             spacing_y: l.spacing_y,
-            voids_filled: plan.as_ref().map_or(0, |p| p.voids),
+            voids_filled: 0,
             description: l.description(opts),
             placement: l.placement.map(|p| p.window(l.x0, l.y0)),
             min_max,
             source: Source::Bands {
-                plan: plan.unwrap_or_else(|| Plan::no_voids(l.width, l.height, STORED)),
+                plan: Plan::no_voids(l.width, l.height, STORED),
                 rows: Box::new(l.rows),
                 x0: l.x0,
                 y0: l.y0,
@@ -302,7 +300,8 @@ impl Layout {
 
 /// Rows `rows` of `paths`' grid read and checked as [`open`] checks every row, without
 /// reading the others: their range and voids, and the fill's share of the pass over rows
-/// `pull` (within `rows`, from a multiple of [`unit`] to one or to the grid's end). One
+/// `pull` (within `rows`, from a row of the fill's top pulled level, every 64 rows at most, to
+/// another or to the grid's end: [`Pulled`]). One
 /// shard's share of a scan (`tiletool build --shard K/N --scan-only`); formats read whole are
 /// decoded whole.
 pub fn scan_rows(
@@ -352,13 +351,18 @@ pub fn scan_rows(
     Ok(out)
 }
 
-/// Grid rows per row of the fill's top pulled level, for a `width` x `height` grid: a share of
-/// the pass ([`scan_rows`]'s `pull`) starts on a multiple of it.
-pub fn unit(width: usize, height: usize) -> usize {
-    Scanner::new(width, height, STORED).unit()
-}
-
 impl Stream {
+    /// This stream (opened by [`open_unscanned`]) filling its rows with `plan` (the shares'
+    /// pulled rows joined, [`Plan::join`]) as [`open`]'s stream does. A stream held whole was
+    /// filled when it was decoded, and stays as it is.
+    pub fn with_plan(mut self, plan: Plan) -> Stream {
+        if let Source::Bands { plan: ours, .. } = &mut self.source {
+            self.voids_filled = plan.voids;
+            *ours = plan;
+        }
+        self
+    }
+
     /// Rows `y0..y1` of the filled grid (`y1 <= height`): the same bits as those rows of
     /// [`crate::read`]'s grid.
     pub fn rows(&self, y0: usize, y1: usize) -> Result<Cow<'_, [f32]>, DemError> {

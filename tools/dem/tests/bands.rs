@@ -284,7 +284,7 @@ fn a_grid_larger_than_one_read_whole_streams_in_bands() {
     };
     let (paths, opts) = sparse("big.r16", 65537);
     const { assert!(65537u64 * 65537 > dem::MAX_SAMPLES) };
-    let stream = dem::open_unscanned(&paths, &opts, (0.0, 0.0), None).expect("opens in bands");
+    let stream = dem::open_unscanned(&paths, &opts, (0.0, 0.0)).expect("opens in bands");
     assert_eq!((stream.width, stream.height), (65537, 65537));
     let band = stream.rows(40_000, 40_002).expect("a band");
     assert!(band.len() == 2 * 65537 && band.iter().all(|&h| h == 0.0));
@@ -298,7 +298,7 @@ fn a_grid_larger_than_one_read_whole_streams_in_bands() {
     );
     // One past the banded limit's square root (2^18 = 262144 a side).
     let (paths, opts) = sparse("huge.r16", 262_145);
-    let refused = dem::open_unscanned(&paths, &opts, (0.0, 0.0), None).err();
+    let refused = dem::open_unscanned(&paths, &opts, (0.0, 0.0)).err();
     let line = refused.expect("past the banded limit").to_string();
     assert!(
         line.contains("more than the limit of 68719476736 samples"),

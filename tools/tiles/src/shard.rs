@@ -381,7 +381,10 @@ fn record_fields(
         line.strip_prefix(name)
             .and_then(|v| v.strip_prefix(' '))
             .map(str::to_string)
-            .ok_or_else(|| format!("expected `{name}`, found `{}`", &line[..line.len().min(40)]))
+            .ok_or_else(|| {
+                let start: String = line.chars().take(40).collect();
+                format!("expected `{name}`, found `{start}`")
+            })
     };
     let shard: Shard = field("shard")?.parse()?;
     let values = names
@@ -508,7 +511,8 @@ impl Scans {
 /// Grid rows whose share of the void fill's pass a shard's scan pulls: its tile rows' samples
 /// but the row its last tile row shares with the next shard's, so that the shards' shares
 /// cover the grid's rows once. Each starts on a multiple of 256 rows (a tile row), which is a
-/// multiple of the fill's unit (`dem::unit`, at most 64).
+/// multiple of the rows a row of the fill's top pulled level stands for (at most 64,
+/// `dem::Pulled`).
 pub fn pull_rows(
     shard: Shard,
     (width, height): (usize, usize),

@@ -327,7 +327,7 @@ pub fn merge(parts: &[PathBuf], output: &Path, quiet: bool) -> Result<ExitCode> 
 /// ranges and voids, and the void fill's share of the pass over the grid.
 pub fn scan(input: &InputArgs, shard: tiles::shard::Shard, output: &Path) -> Result<ExitCode> {
     let opts = input.read.options();
-    let stream = dem::open_unscanned(&input.inputs, &opts, (0.0, 0.0), None)?;
+    let stream = dem::open_unscanned(&input.inputs, &opts, (0.0, 0.0))?;
     let dims = (stream.width, stream.height);
     let rows = tiles::shard::scan_rows(shard, dims)?;
     let pull = tiles::shard::pull_rows(shard, dims)?;
@@ -354,7 +354,7 @@ pub fn scan(input: &InputArgs, shard: tiles::shard::Shard, output: &Path) -> Res
 /// filled with the plan joined from every shard's scan, and the largest tile range and
 /// absolute height of the filled rows go to `output` (by convention
 /// DIR/ranges-K-of-N.vktranges). With no void the scan's own figures are those of the filled
-/// grid, and nothing is read.
+/// grid, and no row is read.
 pub fn ranges(
     input: &InputArgs,
     shard: tiles::shard::Shard,
@@ -362,18 +362,18 @@ pub fn ranges(
     output: &Path,
 ) -> Result<ExitCode> {
     let ours = input_recipe(input)?;
-    let (found, scans) = read_scans(&ours, shard, dir)?;
+    let found = read_scans(&ours, shard, dir)?;
+    let scans = tiles::shard::Scans::join(&found).expect("at least one shard");
     let own = &found[shard.index as usize];
-    let opts = input.read.options();
-    let figures = match fill_plan(input, &found, dir)? {
+    let stream = dem::open_unscanned(&input.inputs, &input.read.options(), (scans.lo, scans.hi))?;
+    let figures = match fill_plan(input, &found, dir, (stream.width, stream.height))? {
         None => tiles::shard::ShardRanges {
             max_range: own.max_range,
             max_abs: own.max_abs,
         },
         Some(plan) => {
-            let stream =
-                dem::open_unscanned(&input.inputs, &opts, (scans.lo, scans.hi), Some(plan))?;
             let per_band = default_band_rows(stream.width, Some((shard, stream.height)));
+            let stream = stream.with_plan(plan);
             let heights = StreamHeights { stream, per_band };
             let (max_range, max_abs) = tiles::shard::tile_ranges(&heights, shard)?;
             tiles::shard::ShardRanges { max_range, max_abs }
@@ -384,69 +384,80 @@ pub fn ranges(
     Ok(ExitCode::SUCCESS)
 }
 
-/// Every shard's scan from `dir` (`scan-K-of-N.vktscan`), checked to be of this input: each
-/// shard's (in shard order) and together.
+/// A shard record's text read back: its shard, the record, the input's recipe.
+type ParseRecord<T> = fn(&str) -> Result<(tiles::shard::Shard, T, String), String>;
+
+/// Every shard's record of one kind from `dir` (`{kind}-K-of-N.{ext}`, read by `parse`), in
+/// shard order, each checked to be that shard's and of this input (`ours`); a missing one
+/// names the command that makes it (`makes`, given K).
+fn read_records<T>(
+    ours: &str,
+    shard: tiles::shard::Shard,
+    dir: &Path,
+    (kind, ext): (&str, &str),
+    parse: ParseRecord<T>,
+    makes: &dyn Fn(u32) -> String,
+) -> Result<Vec<T>> {
+    (0..shard.count)
+        .map(|k| {
+            let path = dir.join(format!("{kind}-{k}-of-{}.{ext}", shard.count));
+            let text = std::fs::read_to_string(&path)
+                .map_err(|e| anyhow::anyhow!("{}: {e} ({})", path.display(), makes(k)))?;
+            let (theirs, record, recipe) =
+                parse(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+            if (theirs.index, theirs.count) != (k, shard.count) {
+                bail!("{}: holds the {kind} of shard {theirs}", path.display());
+            }
+            if recipe != ours {
+                bail!(
+                    "{}: the {kind} of other inputs or read options",
+                    path.display()
+                );
+            }
+            Ok(record)
+        })
+        .collect()
+}
+
+/// Every shard's scan from `dir` (`scan-K-of-N.vktscan`), in shard order.
 fn read_scans(
     ours: &str,
     shard: tiles::shard::Shard,
     dir: &Path,
-) -> Result<(Vec<tiles::shard::ShardScan>, tiles::shard::Scans)> {
-    let mut found = Vec::new();
-    for k in 0..shard.count {
-        let path = dir.join(format!("scan-{k}-of-{}.vktscan", shard.count));
-        let text = std::fs::read_to_string(&path).map_err(|e| {
-            anyhow::anyhow!(
-                "{}: {e} (run `tiletool build ... --shard {k}/{} --scan-only` first)",
-                path.display(),
-                shard.count
-            )
-        })?;
-        let (theirs, scan, recipe) = tiles::shard::ShardScan::from_text(&text)
-            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-        if theirs
-            != (tiles::shard::Shard {
-                index: k,
-                count: shard.count,
-            })
-        {
-            bail!("{}: holds the scan of shard {theirs}", path.display());
-        }
-        if recipe != ours {
-            bail!("{}: a scan of other inputs or read options", path.display());
-        }
-        found.push(scan);
-    }
-    let scans = tiles::shard::Scans::join(&found).expect("at least one shard");
-    Ok((found, scans))
+) -> Result<Vec<tiles::shard::ShardScan>> {
+    let makes = |k: u32| {
+        format!(
+            "run `tiletool build ... --shard {k}/{} --scan-only` first",
+            shard.count
+        )
+    };
+    let parse = tiles::shard::ShardScan::from_text;
+    read_records(ours, shard, dir, ("scan", "vktscan"), parse, &makes)
 }
 
-/// The void fill's plan joined from every shard's share of the pass (`dem::Plan::join`), or
-/// `None` when there is nothing to plan: no void, or an input decoded whole (a picture), whose
-/// scans each filled the whole grid already.
+/// The void fill's plan of the `width` x `height` grid joined from every shard's share of the
+/// pass (`dem::Plan::join`), or `None` when there is nothing to plan: no void, or an input
+/// decoded whole (a picture), whose scans each filled the whole grid already.
 fn fill_plan(
     input: &InputArgs,
     found: &[tiles::shard::ShardScan],
     dir: &Path,
+    (width, height): (usize, usize),
 ) -> Result<Option<dem::Plan>> {
     if found.iter().all(|s| s.voids == 0) || found.iter().any(|s| s.fill.is_none()) {
         return Ok(None);
     }
-    let opts = input.read.options();
-    let laid = dem::open_unscanned(&input.inputs, &opts, (0.0, 0.0), None)?;
     let shares = found
         .iter()
         .enumerate()
         .map(|(k, s)| {
             dem::Pulled::from_line(s.fill.as_deref().unwrap_or_default()).map_err(|e| {
-                anyhow::anyhow!(
-                    "{}: {e}",
-                    dir.join(format!("scan-{k}-of-{}.vktscan", found.len()))
-                        .display()
-                )
+                let path = dir.join(format!("scan-{k}-of-{}.vktscan", found.len()));
+                anyhow::anyhow!("{}: {e}", path.display())
             })
         })
         .collect::<Result<Vec<_>>>()?;
-    let plan = dem::Plan::join(laid.width, laid.height, dem::STORED, &shares)
+    let plan = dem::Plan::join(width, height, dem::STORED, &shares)
         .map_err(|e| anyhow::anyhow!("{}: the scans do not make one pass: {e}", dir.display()))?;
     match plan {
         Some(plan) => Ok(Some(plan)),
@@ -466,40 +477,20 @@ pub fn scanned_stream(
     shard: tiles::shard::Shard,
     dir: &Path,
 ) -> Result<(dem::Stream, tiles::shard::Scans)> {
-    let (found, mut scans) = read_scans(ours, shard, dir)?;
-    let plan = fill_plan(input, &found, dir)?;
-    if plan.is_some() {
-        let mut ranges = Vec::new();
-        for k in 0..shard.count {
-            let path = dir.join(format!("ranges-{k}-of-{}.vktranges", shard.count));
-            let text = std::fs::read_to_string(&path).map_err(|e| {
-                anyhow::anyhow!(
-                    "{}: {e} (the input has voids: run `tiletool build ... --shard {k}/{} --scans {} --ranges-only` first)",
-                    path.display(),
-                    shard.count,
-                    dir.display()
-                )
-            })?;
-            let (theirs, figures, recipe) = tiles::shard::ShardRanges::from_text(&text)
-                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-            if theirs.index != k || theirs.count != shard.count {
-                bail!("{}: holds the ranges of shard {theirs}", path.display());
-            }
-            if recipe != ours {
-                bail!(
-                    "{}: the ranges of other inputs or read options",
-                    path.display()
-                );
-            }
-            ranges.push(figures);
-        }
-        scans = scans.filled(&ranges);
-    }
-    let stream = dem::open_unscanned(
-        &input.inputs,
-        &input.read.options(),
-        (scans.lo, scans.hi),
-        plan,
-    )?;
-    Ok((stream, scans))
+    let found = read_scans(ours, shard, dir)?;
+    let scans = tiles::shard::Scans::join(&found).expect("at least one shard");
+    let stream = dem::open_unscanned(&input.inputs, &input.read.options(), (scans.lo, scans.hi))?;
+    let Some(plan) = fill_plan(input, &found, dir, (stream.width, stream.height))? else {
+        return Ok((stream, scans));
+    };
+    let makes = |k: u32| {
+        format!(
+            "the input has voids: run `tiletool build ... --shard {k}/{} --scans {} --ranges-only` first",
+            shard.count,
+            dir.display()
+        )
+    };
+    let parse = tiles::shard::ShardRanges::from_text;
+    let ranges = read_records(ours, shard, dir, ("ranges", "vktranges"), parse, &makes)?;
+    Ok((stream.with_plan(plan), scans.filled(&ranges)))
 }
