@@ -47,8 +47,8 @@ pub struct MorphFrame {
     pub jacobian: [f32; 4],
     pub tau: f32,
     pub near: f32,
-    /// How much of the segment from a vertex to a corner of its star must be in view for the
-    /// corner to count fully towards the vertex's level ([`crate::morph::STAR_RAMP`]).
+    /// How deep in view (a share of the half-image) the segment from a vertex to a corner of
+    /// its star must reach for the corner to count fully ([`crate::morph::STAR_RAMP`]).
     pub ramp: f32,
     pub pad: f32,
 }

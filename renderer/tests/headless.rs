@@ -1231,8 +1231,9 @@ fn flyover_start(set: &Path, dir: &Path, seconds: f64) -> std::path::PathBuf {
 /// flights over Puget and SRTM N43E007 flown at 30 frames per second of path time (the first
 /// 4 s of each flyover, 120 frames: a pop is what one displayed frame shows; the whole 48 s
 /// flyover in 120 frames is 0.4 s a frame, where the morph's own motion is larger, see
-/// bench/README.md), and on the Puget orbit in 120 frames. Every frame's error stays within
-/// tau.
+/// bench/README.md), on the Puget orbit in 120 frames, and at tau 5 over the Puget flyover's
+/// first 12 s (where a star weighted by its share in view popped 0.6-0.7 px, see
+/// `morph::star_weight`). Every frame's error stays within tau.
 #[test]
 fn geomorphing_keeps_pops_under_half_a_pixel_and_discrete_lod_pops() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -1251,6 +1252,7 @@ fn geomorphing_keeps_pops_under_half_a_pixel_and_discrete_lod_pops() {
     let srtm = tileset(srtm_dir.path(), &hgt, dem::ReadOptions::default());
     let srtm_source = ["--measure-error", s(&hgt)];
     let puget_path = flyover_start(&set, dir.path(), 4.0);
+    let puget_12s = flyover_start(&set, dir.path(), 12.0);
     let srtm_path = flyover_start(&srtm, srtm_dir.path(), 4.0);
     let run = |set: &Path, path: &str, frames: &str, source: &[&str], extra: &[&str]| {
         let mut args = vec![
@@ -1276,6 +1278,7 @@ fn geomorphing_keeps_pops_under_half_a_pixel_and_discrete_lod_pops() {
         (&set, "Puget", s(&puget_path), "120", &puget_source[..], "2"),
         (&set, "Puget", s(&puget_path), "120", &puget_source[..], "3"),
         (&set, "Puget", "orbit", "120", &puget_source[..], "1"),
+        (&set, "Puget", s(&puget_12s), "360", &puget_source[..], "5"),
         (
             &srtm,
             "SRTM N43E007",

@@ -35,7 +35,7 @@ struct MorphFrame {
     vec4 jacobian;
     float tau;               // pixels
     float near;              // the near plane's depth (m)
-    float ramp;              // how far inside the image a star's point counts fully (clip units)
+    float ramp;              // how deep in view (share of the half-image) a star's segment counts fully
     float pad;
 };
 

@@ -83,9 +83,29 @@ vec2 in_view(vec4 a, vec4 b) {
     return vec2(lo, hi);
 }
 
+// How far inside the view clip position `p` is, as a share of the half-image: its distance to
+// the image's nearest edge, and less within four near planes' depth (0 at twice the near
+// plane's depth and nearer, as off the image).
+float depth_in_view(vec4 p) {
+    float near = 2.0 * frame_morph.morph.near;
+    if (p.w <= near) {
+        return 0.0;
+    }
+    float m = min(min(p.w - abs(p.x), p.w - abs(p.y)), p.w - near);
+    return max(m / p.w, 0.0);
+}
+
+// How fully the segment from clip position `a` (a vertex) to `b` (a corner of its star) counts
+// towards the vertex's level: how far inside the view the deepest of its ends and midpoint is,
+// over the ramp.
+float star_weight(vec4 a, vec4 b) {
+    float inside = max(max(depth_in_view(a), depth_in_view(b)), depth_in_view(0.5 * (a + b)));
+    return clamp(inside / frame_morph.morph.ramp, 0.0, 1.0);
+}
+
 // The error allowed at a vertex whose own allowed error is `e`, lowered towards that at the
 // farthest point in view on the segment to each corner of its star's box (x +- reach.x,
-// y +- reach.y at its height), weighted by how much of the segment is in view
+// y +- reach.y at its height), weighted by how deep in view the segment reaches
 // (renderer/src/morph/mod.rs, "Over the star").
 float star_error(vec4 clip, float e, vec2 reach) {
     vec4 east = frame.view_proj[0] * (reach.x * frame.camera.w);
@@ -95,7 +115,7 @@ float star_error(vec4 clip, float e, vec2 reach) {
         vec4 q = (clip + ((k & 1) == 0 ? -east : east)) + ((k & 2) == 0 ? -south : south);
         vec2 span = in_view(clip, q);
         if (span.x <= span.y) {
-            float weight = clamp((span.y - span.x) / frame_morph.morph.ramp, 0.0, 1.0);
+            float weight = star_weight(clip, q);
             vec4 p = clip + (q - clip) * span.y;
             lift = max(lift, weight * (e - allowed_error(p)));
         }

@@ -102,11 +102,12 @@
 //! the morph pass (not the two-levels rule) takes, for `e(v) = τ / |J z(v)|` the error allowed
 //! at `v` and the corners `q_k = (x ± r_x, y ± r_y)` at `v`'s own height, the farthest point
 //! `p_k` of the segment from `v` to `q_k` that is in view (in clip space: inside the image and
-//! at least twice the near plane's depth away; [`in_view`]), and `I_k` the share of the segment
-//! in view,
+//! at least twice the near plane's depth away; [`in_view`]), and `D_k` how deep in view the
+//! segment reaches (the largest of [`depth_in_view`] at `v`, `q_k` and their midpoint: the
+//! distance to the image's nearest edge as a share of the half-image),
 //!
 //! ```text
-//! e*(v) = e(v) - max_k ω_k · max(e(v) - e(p_k), 0),   ω_k = clamp(I_k / STAR_RAMP, 0, 1),
+//! e*(v) = e(v) - max_k ω_k · max(e(v) - e(p_k), 0),   ω_k = clamp(D_k / STAR_RAMP, 0, 1),
 //! l*(v) = Λ(e*(v)).
 //! ```
 //!
@@ -128,11 +129,19 @@
 //!   part's needs. The test `the_placed_level_stays_within_every_part_that_draws_the_vertex`
 //!   checks it vertex by vertex (its control: the whole star's box, across lines, would break
 //!   it).
-//! - **Continuous** in the camera: the ends of the in-view share move continuously, and its
-//!   weight vanishes with it; max and clamp are continuous. A corner leaving the image does not
-//!   switch off: its point slides along the segment to the edge. (The rule before weighted
-//!   each corner itself by how far inside the image it was, over 0.3 of the half-width, so a
-//!   vertex near the edges of the image, whose corners were off it, was barely raised.)
+//! - **Continuous** in the camera, and no faster than the image: the point `p_k` slides along
+//!   the segment to the edge of the view as the corner leaves it, and the weight moves at most
+//!   as fast as `v`, `q_k` or their midpoint moves on the image, over `STAR_RAMP` (each depth
+//!   is a minimum of distances to edges, and max and clamp add no speed), vanishing as the
+//!   segment leaves the view. The rule before weighted each corner by the share of its segment
+//!   in view, which is as continuous but not as slow: a segment nearly parallel to an edge of
+//!   the view has its share swept in a frame by a small turn. On the Puget flyover's first 12
+//!   s in 300 frames at tau 5, long segments along lines between parts, just off the image's
+//!   side, went from half in view to 4% in one frame and dropped their vertex's level from
+//!   0.60 to 0.22: a 32 m jump, 0.62 px on screen (bench/README.md). The rule before that
+//!   weighted each corner by how far inside the image the corner itself was, over 0.3 of the
+//!   half-width, so a vertex near the image's edges whose corners were off it was barely
+//!   raised; the depth here is the segment's deepest point, the vertex's own included.
 //! - **The same in every tile** holding a vertex of a tile's side: its corners are computed
 //!   from the same integers with the same table and arithmetic.
 //! - **Not a bound**: the points stand at the vertex's height, not on the surface, and
@@ -223,7 +232,7 @@ mod two_levels;
 
 use hierarchy::hierarchical;
 pub use hierarchy::{block_points, orphan, parents, scale_of};
-pub use star::in_view;
+pub use star::{depth_in_view, in_view, star_weight};
 pub use two_levels::{height_slope, morphed_height, weights};
 
 /// How far (samples) the star of a vertex on a tile's side reaches across the side, into both
@@ -241,10 +250,12 @@ pub use spirv::flags::SIDE_REACH;
 /// tau before); the test flights stay under the aim. 3% is kept for it.
 pub const TAU_MARGIN: f64 = 0.97;
 
-/// How much of the segment from a vertex to a corner of its star must be in view for the
-/// corner to count fully towards the vertex's level (module header, "Over the star"): a
-/// segment coming into view raises the vertex as it does, not at once.
-pub const STAR_RAMP: f32 = 0.3;
+/// How deep in view (a share of the half-image) the segment from a vertex to a corner of its
+/// star must reach for the corner to count fully towards the vertex's level (module header,
+/// "Over the star"): a segment coming into view raises the vertex as it comes, at most as fast
+/// as the image moves over this depth. Measured (bench/README.md, "A star's weight from how
+/// deep it reaches in view"): 0.1, 0.15 and 0.3 pop alike; 0.1 stays nearest to tau.
+pub const STAR_RAMP: f32 = 0.1;
 
 /// The frame's constants of the vertex rule for `view` at tolerance `tau` (`MorphFrame` of the
 /// shader interface). With `clip = view_proj * p` for `p` relative to the camera, `d = clip.w`
