@@ -5,41 +5,18 @@
 # morph pass's GPU time (time outside the draws), two rounds alternating.
 # Usage: bench/side_reach.sh BEFORE_BINARY   (after cargo build --release; sets: out/puget.vkt,
 #   /tmp/n48.vkt, /tmp/m4p.vkt with its raw source /tmp/m4.r16, as bench/README says)
-set -euo pipefail
-before=$1
-after=target/release/vkterrain
-out=$(mktemp -d)
-trap 'rm -rf "$out"' EXIT
-P="--measure-error sample/ps_height_1k.png --source-spacing 160 --source-vertical-scale 0.1"
-N="--measure-error ../shared/data/srtm/N48W125.hgt"
-M="--measure-error /tmp/m4.r16 --source-size 4097x4097 --source-spacing 90"
-# The flyovers' first 12 s at 30 frames a second, as tilebench table1 cuts them.
-start() {
-  $after "$1" --headless --path flyover --frames 1 --size 64x48 --record "$out/keys.csv" > /dev/null 2>&1
-  python3 - "$out/keys.csv" "$2" <<'PY'
-import csv, sys
-rows = list(csv.reader(open(sys.argv[1])))
-t = rows[0].index("time_s")
-csv.writer(open(sys.argv[2], "w")).writerows([rows[0]] + [r for r in rows[1:] if float(r[t]) <= 12])
-PY
-}
+source "$(dirname "$0")/measured_sets.sh"
 start /tmp/n48.vkt "$out/n48.csv"
 start /tmp/m4p.vkt "$out/m4.csv"
 echo "| flight | tau | max_error_px before | after | pop_px before | after | triangles (median) before | after |"
 echo "|---|---:|---:|---:|---:|---:|---:|---:|"
 row() { # name tau args...
   local name=$1 tau=$2; shift 2
-  local r=()
-  for b in "$before" "$after"; do
-    $b "$@" --tau "$tau" --upload-budget-mb 100000 --log "$out/f.csv" > /dev/null
-    r+=("$(python3 -c "
-import csv, statistics
-r = list(csv.DictReader(open('$out/f.csv')))
-print(max(float(x['max_error_px']) for x in r), max(float(x['pop_px']) for x in r[1:]), statistics.median(float(x['triangles']) for x in r))")")
-  done
-  python3 -c "
-a, b = '${r[0]}'.split(), '${r[1]}'.split()
-print(f'| $name | $tau | {float(a[0]):.3f} | {float(b[0]):.3f} | {float(a[1]):.3f} | {float(b[1]):.3f} | {float(a[2]):.0f} | {float(b[2]):.0f} |')"
+  flown "$@" --tau "$tau" --upload-budget-mb 100000
+  read -r e1 p1 _ t1 <<< "$m_before"
+  read -r e2 p2 _ t2 <<< "$m_after"
+  printf '| %s | %s | %.3f | %.3f | %.3f | %.3f | %.0f | %.0f |\n' \
+    "$name" "$tau" "$e1" "$e2" "$p1" "$p2" "$t1" "$t2"
 }
 for tau in 1 3 5; do
   row "Puget flyover, 120 frames, 1024 x 768" $tau out/puget.vkt --headless --path flyover --frames 120 --size 1024x768 $P
@@ -57,18 +34,6 @@ echo "| flight | tau | before: outside the draws, ms (two rounds) | after | tria
 echo "|---|---:|---|---|---:|---:|"
 for spec in "out/puget.vkt orbit 1" "out/puget.vkt flyover 1" "/tmp/n48.vkt orbit 1" "out/puget.vkt flyover 3"; do
   set -- $spec
-  declare -A ms=() tri=()
-  for round in 1 2; do
-    for b in before after; do
-      bin=$before; [ $b = after ] && bin=$after
-      $bin "$1" --headless --path "$2" --frames 60 --size 1024x768 --tau "$3" --log "$out/g.csv" > /dev/null
-      read -r m t < <(python3 -c "
-import csv, statistics
-r = list(csv.DictReader(open('$out/g.csv')))[5:]
-print(f\"{statistics.median(float(x['gpu_ms']) - float(x['gpu_draw_ms']) for x in r):.1f}\", int(statistics.median(float(x['triangles']) for x in r)))")
-      ms[$b]="${ms[$b]:+${ms[$b]}, }$m"; tri[$b]=$t
-    done
-  done
-  echo "| $(basename "$1") $2 | $3 | ${ms[before]} | ${ms[after]} | ${tri[before]} | ${tri[after]} |"
-  unset ms tri
+  two_rounds "$@"
+  echo "| $(basename "$1") $2 | $3 | $ms_before | $ms_after | $tri_before | $tri_after |"
 done

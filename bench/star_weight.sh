@@ -7,43 +7,17 @@
 # Usage: bench/star_weight.sh BEFORE_BINARY   (after cargo build --release -p renderer; sets:
 #   out/puget.vkt (.ci/demo), /tmp/n48.vkt and /tmp/m4p.vkt with its raw source /tmp/m4.r16,
 #   built as bench/README.md says)
-set -euo pipefail
-before=$1
-after=target/release/vkterrain
-out=$(mktemp -d)
-trap 'rm -rf "$out"' EXIT
-P="--measure-error sample/ps_height_1k.png --source-spacing 160 --source-vertical-scale 0.1"
-N="--measure-error ../shared/data/srtm/N48W125.hgt"
-M="--measure-error /tmp/m4.r16 --source-size 4097x4097 --source-spacing 90"
-# The first 12 s of a set's flyover: its recorded keyframes up to 12 s.
-start() {
-  $after "$1" --headless --path flyover --frames 1 --size 64x48 --record "$out/keys.csv" > /dev/null 2>&1
-  awk -F, 'NR == 1 || $1 <= 12' "$out/keys.csv" > "$2"
-}
+source "$(dirname "$0")/measured_sets.sh"
 start out/puget.vkt "$out/puget.csv"
 start /tmp/n48.vkt "$out/n48.csv"
 start /tmp/m4p.vkt "$out/m4.csv"
-# max_error_px, the largest pop_px, the frames popping over half a pixel, median triangles.
-measures() {
-  python3 - "$1" <<'PY'
-import csv, statistics, sys
-r = list(csv.DictReader(open(sys.argv[1])))
-pops = [float(x['pop_px']) for x in r[1:]]
-print(max(float(x['max_error_px']) for x in r), max(pops), sum(p > 0.5 for p in pops),
-      statistics.median(float(x['triangles']) for x in r))
-PY
-}
 echo "| flight | tau | max_error_px before | after | pop_px before | after | frames over 0.5 px before | after | triangles (median) |"
 echo "|---|---:|---:|---:|---:|---:|---:|---:|---:|"
 row() { # name tau args...
   local name=$1 tau=$2; shift 2
-  local r=()
-  for b in "$before" "$after"; do
-    $b "$@" --warmup --tau "$tau" --log "$out/f.csv" > /dev/null
-    r+=("$(measures "$out/f.csv")")
-  done
-  read -r e1 p1 n1 t1 <<< "${r[0]}"
-  read -r e2 p2 n2 t2 <<< "${r[1]}"
+  flown "$@" --warmup --tau "$tau"
+  read -r e1 p1 n1 t1 <<< "$m_before"
+  read -r e2 p2 n2 t2 <<< "$m_after"
   printf '| %s | %s | %.3f | %.3f | %.3f | %.3f | %d | %d | %.0f |\n' \
     "$name" "$tau" "$e1" "$e2" "$p1" "$p2" "$n1" "$n2" "$t2"
   [ "$t1" = "$t2" ] || echo "(triangles before: $t1)"
@@ -65,18 +39,6 @@ echo "| flight | tau | before: outside the draws, ms (two rounds) | after |"
 echo "|---|---:|---|---|"
 for spec in "out/puget.vkt orbit 1" "out/puget.vkt flyover 3" "/tmp/n48.vkt orbit 1"; do
   set -- $spec
-  declare -A ms=()
-  for round in 1 2; do
-    for b in before after; do
-      bin=$before; [ $b = after ] && bin=$after
-      $bin "$1" --headless --path "$2" --frames 60 --size 1024x768 --tau "$3" --log "$out/g.csv" > /dev/null
-      m=$(python3 -c "
-import csv, statistics
-r = list(csv.DictReader(open('$out/g.csv')))[5:]
-print(f\"{statistics.median(float(x['gpu_ms']) - float(x['gpu_draw_ms']) for x in r):.1f}\")")
-      ms[$b]="${ms[$b]:+${ms[$b]}, }$m"
-    done
-  done
-  echo "| $(basename "$1") $2 | $3 | ${ms[before]} | ${ms[after]} |"
-  unset ms
+  two_rounds "$@"
+  echo "| $(basename "$1") $2 | $3 | $ms_before | $ms_after |"
 done
