@@ -95,8 +95,8 @@ impl TileMorph {
 
     /// The vertex's level raised towards the levels on the segments to the corners `(x ±
     /// reach.x, y ± reach.y)` at its height, each at its farthest point [`in_view`] and as far
-    /// as [`star_weight`] gives: the placed level at the rule's [`TileMorph::reach`] (other reaches are
-    /// the tests' controls).
+    /// as [`star_weight`] gives: the placed level at the rule's [`TileMorph::reach`] (other
+    /// reaches are the tests' controls).
     pub fn level_reaching(&self, x: u32, y: u32, own: f32, reach: Vec2) -> f32 {
         let (relative, _) = self.vertex(x, y, own);
         let clip = self.view_proj * relative.extend(1.0);
