@@ -95,11 +95,11 @@ float depth_in_view(vec4 p) {
     return max(m / p.w, 0.0);
 }
 
-// How fully the segment from clip position `a` (a vertex) to `b` (a corner of its star) counts
-// towards the vertex's level: how far inside the view the deepest of its ends and midpoint is,
-// over the ramp.
-float star_weight(vec4 a, vec4 b) {
-    float inside = max(max(depth_in_view(a), depth_in_view(b)), depth_in_view(0.5 * (a + b)));
+// How fully the segment from clip position `a` (a vertex, `depth_a` its depth_in_view) to `b`
+// (a corner of its star) counts towards the vertex's level: how far inside the view the deepest
+// of its ends and midpoint is, over the ramp.
+float star_weight(float depth_a, vec4 a, vec4 b) {
+    float inside = max(max(depth_a, depth_in_view(b)), depth_in_view(0.5 * (a + b)));
     return clamp(inside / frame_morph.morph.ramp, 0.0, 1.0);
 }
 
@@ -110,12 +110,13 @@ float star_weight(vec4 a, vec4 b) {
 float star_error(vec4 clip, float e, vec2 reach) {
     vec4 east = frame.view_proj[0] * (reach.x * frame.camera.w);
     vec4 south = frame.view_proj[1] * (-reach.y * frame.spacing_y);
+    float depth = depth_in_view(clip);
     float lift = 0.0;
     for (int k = 0; k < 4; ++k) {
         vec4 q = (clip + ((k & 1) == 0 ? -east : east)) + ((k & 2) == 0 ? -south : south);
         vec2 span = in_view(clip, q);
         if (span.x <= span.y) {
-            float weight = star_weight(clip, q);
+            float weight = star_weight(depth, clip, q);
             vec4 p = clip + (q - clip) * span.y;
             lift = max(lift, weight * (e - allowed_error(p)));
         }

@@ -46,12 +46,13 @@ pub fn depth_in_view(m: &MorphFrame, p: Vec4) -> f32 {
     (d / p.w).max(0.0)
 }
 
-/// How fully the segment from clip position `a` (a vertex) to `b` (a corner of its star)
-/// counts towards the vertex's level: how far inside the view the deepest of its ends and
-/// midpoint is, over [`STAR_RAMP`](crate::morph::STAR_RAMP) (module header, "Over the star");
-/// as `star_weight` in `morph.comp`.
-pub fn star_weight(m: &MorphFrame, a: Vec4, b: Vec4) -> f32 {
-    let inside = depth_in_view(m, a)
+/// How fully the segment from clip position `a` (a vertex, `depth_a` its [`depth_in_view`],
+/// the same for its four corners) to `b` (a corner of its star) counts towards the vertex's
+/// level: how far inside the view the deepest of its ends and midpoint is, over
+/// [`STAR_RAMP`](crate::morph::STAR_RAMP) (module header, "Over the star"); as `star_weight`
+/// in `morph.comp`.
+pub fn star_weight(m: &MorphFrame, depth_a: f32, a: Vec4, b: Vec4) -> f32 {
+    let inside = depth_a
         .max(depth_in_view(m, b))
         .max(depth_in_view(m, 0.5 * (a + b)));
     (inside / m.ramp).clamp(0.0, 1.0)
@@ -106,12 +107,13 @@ impl TileMorph {
             let reach = reach * (1u32 << self.layer) as f32;
             let east = self.view_proj.x_axis * (reach.x * self.camera.w);
             let south = self.view_proj.y_axis * (-reach.y * self.spacing_y);
+            let depth = depth_in_view(&self.frame, clip);
             let lift = (0..4)
                 .map(|k| {
                     let q = (clip + if k & 1 == 0 { -east } else { east })
                         + if k & 2 == 0 { -south } else { south };
                     in_view(&self.frame, clip, q).map_or(0.0, |(_, hi)| {
-                        let weight = star_weight(&self.frame, clip, q);
+                        let weight = star_weight(&self.frame, depth, clip, q);
                         weight * (e - allowed_error(&self.frame, clip + (q - clip) * hi))
                     })
                 })
@@ -182,7 +184,9 @@ mod tests {
                 })
                 .fold(0.0f32, f32::max);
             let bound = moved / STAR_RAMP;
-            let change = (star_weight(&m1, c1[0], c1[1]) - star_weight(&m2, c2[0], c2[1])).abs();
+            let weight =
+                |m: &MorphFrame, c: &[Vec4; 3]| star_weight(m, depth_in_view(m, c[0]), c[0], c[1]);
+            let change = (weight(&m1, &c1) - weight(&m2, &c2)).abs();
             assert!(
                 change <= bound + 1e-4,
                 "the weight moved {change} for an image move of {moved}"
