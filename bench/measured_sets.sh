@@ -1,8 +1,9 @@
 # Sourced by the geomorphing benchmarks that measure flights against their sources
 # (side_reach.sh, star_weight.sh): the error meter's flags for each set, and the first 12 s of a
-# set's flyover as tilebench table1 cuts them. Needs $after (a vkterrain) and $out (a folder).
+# set's flyover as tilebench table1 cuts them. Sets $before (the caller's first argument, the
+# binary before), $after (this tree's vkterrain) and $out (a folder removed on exit).
 # The sets: out/puget.vkt (.ci/demo), /tmp/n48.vkt, and /tmp/m4p.vkt with its raw source
-# /tmp/m4.r16, built as bench/README.md says. The caller's first argument is the binary before.
+# /tmp/m4.r16, built as bench/README.md says.
 set -euo pipefail
 before=$1
 after=target/release/vkterrain
