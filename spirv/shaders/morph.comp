@@ -13,16 +13,17 @@
 //
 // its parents' mean plus its share w of its own detail; block 0 is always at its own height.
 // Its level l is the one its position and the camera give it, raised towards the levels on the
-// segments in view from it to the corners of its star's box (star_error below).
+// segments in view from it to the corners of its star's box (star_error below), and to at
+// least what its parents of its own block pass on (PASSED below).
 // Where every vertex is at w = 1 that is the level's surface; where a vertex has w = 0 it lies
 // on the surface drawn without it, so a finer level arriving moves nothing at first.
 //
 // One workgroup places one tile at a time (the records r = g, g + groups, ...), in a scratch
 // region of its own (never cleared: every parent is a vertex of the tile's drawn blocks, so
 // only what was written for this tile is read). First each invocation takes vertices of the
-// tile, writes their own heights into the region's 257 x 257 grid, places block 0, and lists
-// every other vertex under its scale (a list per scale, at a fixed place, as long as the grid
-// has points of that scale). Then, from the coarsest scale (128 samples) to the finest (1),
+// tile, writes their own heights into the region's 257 x 257 grid (and level 0 to pass on),
+// places block 0, and lists every other vertex under its scale (a list per scale, at a fixed
+// place, as long as the grid has points of that scale). Then, from the coarsest scale (128 samples) to the finest (1),
 // the invocations place the vertices of one list each round from the grid, with a barrier
 // between scales: a vertex is read from the pool once and placed once.
 
@@ -35,8 +36,8 @@ const uint LANES = 32u;
 const uint SIDE = 257;
 const uint GRID = SIDE * SIDE;
 // A workgroup's region: the grid of (own, morphed) heights, then the lists of (vertex, packed
-// position) by scale.
-const uint REGION = 2u * GRID;
+// position) by scale, then the levels passed to children (PASSED below), two to an entry.
+const uint REGION = 2u * GRID + (GRID + 1u) / 2u;
 
 // Per workgroup: the grid (vec2 per point), then the lists (uvec2 per entry), as floats' bits.
 layout(std430, set = 0, binding = 7) coherent buffer Scratch { uvec2 cells[]; } scratch;
@@ -45,6 +46,23 @@ layout(std430, set = 0, binding = 6) writeonly buffer Morphed { float values[]; 
 // The level whose blocks the draw's mesh takes at a point (the index builder's rule).
 #include "parts.glsl"
 #include "hierarchy.glsl"
+
+// The level each grid point passes to its children, a float per point after the lists: a
+// placed vertex's level held to its block, clamp(l, j - 1, j), so that a child of its block
+// takes at least its weight and a child of a finer block nothing (renderer/src/morph/mod.rs,
+// "Within a block"; morph::hierarchy mirrors it); 0 for block 0 and the tile's corners.
+const uint PASSED = 2u * GRID;
+float passed_of(uint region, uint at) {
+    uvec2 pair = scratch.cells[region + PASSED + at / 2u];
+    return uintBitsToFloat((at & 1u) == 0u ? pair.x : pair.y);
+}
+void set_passed(uint region, uint at, float l) {
+    if ((at & 1u) == 0u) {
+        scratch.cells[region + PASSED + at / 2u].x = floatBitsToUint(l);
+    } else {
+        scratch.cells[region + PASSED + at / 2u].y = floatBitsToUint(l);
+    }
+}
 
 // Vertices listed per scale index (scale 2^k at k) for the tile being placed.
 shared uint listed[8];
@@ -169,6 +187,7 @@ void main() {
             uint y = (v >> 9) & 511u;
             float own = float(height_base + int(v >> 18)) * height_step;
             scratch.cells[region + y * SIDE + x] = uvec2(floatBitsToUint(own));
+            set_passed(region, y * SIDE + x, 0.0);
             uint k = scale_index(x, y);
             uvec4 passed = uvec4(greaterThanEqual(uvec4(i), starts_lo))
                          + uvec4(greaterThanEqual(uvec4(i), starts_hi));
@@ -235,13 +254,17 @@ void main() {
                 if (reach != vec2(0.0)) {
                     allowed = star_error(clip, allowed, reach);
                 }
-                float l = min(level_for(allowed, c), cap);
+                // At least the levels its parents pass on ("Within a block").
+                float l = max(min(level_for(allowed, c), cap),
+                              max(passed_of(region, p.y * SIDE + p.x),
+                                  passed_of(region, q.y * SIDE + q.x)));
                 uvec4 passed = uvec4(greaterThanEqual(uvec4(i), starts_lo))
                              + uvec4(greaterThanEqual(uvec4(i), starts_hi));
                 uint j = passed.x + passed.y + passed.z + passed.w;
                 float w = clamp(l - float(j) + 1.0, 0.0, 1.0);
                 float m = 0.5 * (a.y + b.y) + w * (own - 0.5 * (a.x + b.x));
                 scratch.cells[region + y * SIDE + x].y = floatBitsToUint(m);
+                set_passed(region, y * SIDE + x, clamp(l, float(j) - 1.0, float(j)));
                 morphed.values[out_at + i] = m;
             }
             memoryBarrierBuffer();

@@ -2,7 +2,7 @@
 //! each vertex's scale and its two parents, the checks that every placed vertex's parents are
 //! drawn with it, and the CPU mirror of `morph.comp`'s placement.
 
-use super::TileMorph;
+use super::{MorphRule, TileMorph};
 
 /// Samples per tile side.
 const SIDE: usize = 257;
@@ -39,11 +39,21 @@ pub fn orphan(points: &[(u32, u32, usize)]) -> Option<(u32, u32, usize)> {
     })
 }
 
+/// The level a placed vertex of block `j` passes to its children (module header, "Within a
+/// block"): its level `l` held to its own block, `clamp(l, j - 1, j)`. A child of the same
+/// block takes at least the parent's weight from it; a child of a finer block takes nothing
+/// (the held level is at most `j`, and a finer block's weight starts at `j`).
+pub fn held_level(l: f32, j: usize) -> f32 {
+    l.clamp(j as f32 - 1.0, j as f32)
+}
+
 /// The morph pass's placement of blocks `0..=level` (module header), as `morph.comp` computes
 /// it, into `vertices` (index order): heights and their slopes. Drawn part by part, only the
 /// vertices the mix holds are placed (the others stay at their own heights, undrawn); a mesh
 /// holds every vertex's parents (they are corners of its cell, or the ends of its cell's
-/// edge), so no placed vertex reads an unplaced one.
+/// edge), so no placed vertex reads an unplaced one. Each vertex takes the larger of its own
+/// level and its parents' held levels ([`held_level`]), unless the rule is
+/// [`MorphRule::OwnLevels`] (the rule before, kept as a control).
 pub(super) fn hierarchical(
     tile: &tiles::format::Tile,
     level: u32,
@@ -51,17 +61,18 @@ pub(super) fn hierarchical(
     (units, bias): (&[f32], i8),
     vertices: &mut [(u32, u32, f32, f32)],
 ) {
-    // Per grid point: own height, morphed height, slope.
-    let mut grid = vec![(f32::NAN, f32::NAN, 0.0f32); SIDE * SIDE];
+    // Per grid point: own height, morphed height, slope, and the level passed to children.
+    let mut grid = vec![(f32::NAN, f32::NAN, 0.0f32, 0.0f32); SIDE * SIDE];
     // Per vertex of blocks 1..: its index, block and level; by scale, coarsest first.
     let mut by_scale: [Vec<(usize, usize, f32)>; 9] = Default::default();
     let base = tile.header.height_base;
+    let inherit = morph.rule != MorphRule::OwnLevels;
     let mut start = 0usize;
     for (j, block) in (0..=level).map_while(|j| tile.level(j)).enumerate() {
         for (i, &p) in block.positions.iter().enumerate() {
             let (x, y, code) = tiles::pack::unpack(p);
             let own = (base + code as i32) as f32 * morph.height_step;
-            grid[y as usize * SIDE + x as usize] = (own, own, 0.0);
+            grid[y as usize * SIDE + x as usize] = (own, own, 0.0, 0.0);
             vertices[start + i].2 = own;
             let held = morph
                 .parts
@@ -86,12 +97,16 @@ pub(super) fn hierarchical(
                 grid[p.1 as usize * SIDE + p.0 as usize],
                 grid[q.1 as usize * SIDE + q.0 as usize],
             );
+            let l = match inherit {
+                true => l.max(a.3).max(b.3),
+                false => l,
+            };
             let unit = units.get(j - 1).copied().unwrap_or(0.0);
             let detail = own - 0.5 * (a.0 + b.0) + f32::from(bias) * unit;
             let w = (l - j as f32 + 1.0).clamp(0.0, 1.0);
             let m = 0.5 * (a.1 + b.1) + w * detail;
             let slope = detail.abs() + 0.5 * (a.2 + b.2);
-            grid[at] = (own, m, slope);
+            grid[at] = (own, m, slope, held_level(l, j));
             vertices[index].2 = m;
             vertices[index].3 = slope;
         }

@@ -11,9 +11,10 @@ use crate::interface::{FrameConstants, PUSH_CONSTANT_BYTES};
 /// Workgroups of the morph pass at most: each places one tile at a time in a scratch region of
 /// its own (`memory::budget` decides how many the budget holds).
 pub const MORPH_GROUPS: u32 = 16;
-/// Bytes of one workgroup's scratch region: a grid of 257 x 257 pairs of floats and its lists
-/// of vertices by scale (as many 8-byte entries again at most).
-pub const MORPH_REGION_BYTES: u64 = 2 * 257 * 257 * 8;
+/// Bytes of one workgroup's scratch region: a grid of 257 x 257 pairs of floats, its lists of
+/// vertices by scale (as many 8-byte entries again at most), and a float per grid point (the
+/// level each vertex passes to its children), two to an entry (`REGION` in `morph.comp`).
+pub const MORPH_REGION_BYTES: u64 = (2 * 257 * 257 + (257 * 257 + 1) / 2) * 8;
 
 /// The pass's pipeline and its layout: the terrain set layout, the frame's push constants for
 /// the compute stage.
