@@ -2,8 +2,8 @@
 # (side_reach.sh, star_weight.sh): the error meter's flags for each set, and the first 12 s of a
 # set's flyover as tilebench table1 cuts them. Sets $before (the caller's first argument, the
 # binary before), $after (this tree's vkterrain) and $out (a folder removed on exit).
-# The sets: out/puget.vkt (.ci/demo), /tmp/n48.vkt, and /tmp/m4p.vkt with its raw source
-# /tmp/m4.r16, built as bench/README.md says.
+# The sets: out/puget.vkt (.ci/demo), /tmp/n48.vkt, /tmp/m4p.vkt with its raw source
+# /tmp/m4.r16, and /tmp/p4k.vkt (the 4K Puget), built as bench/README.md says.
 set -euo pipefail
 before=$1
 after=target/release/vkterrain
@@ -12,6 +12,7 @@ trap 'rm -rf "$out"' EXIT
 P="--measure-error sample/ps_height_1k.png --source-spacing 160 --source-vertical-scale 0.1"
 N="--measure-error ../shared/data/srtm/N48W125.hgt"
 M="--measure-error /tmp/m4.r16 --source-size 4097x4097 --source-spacing 90"
+K="--measure-error ../shared/data/puget/ps_height_4k_8bit.jpg --source-spacing 40 --source-vertical-scale 25.7"
 # start SET OUT.csv: the set's flyover keyframes up to 12 s.
 start() {
   $after "$1" --headless --path flyover --frames 1 --size 64x48 --record "$out/keys.csv" > /dev/null 2>&1

@@ -554,14 +554,19 @@ fn the_drawn_level_covers_every_vertex_on_screen() {
 /// level adds starts on the surface drawn without it, as before the star, and a coarser part's
 /// fans, which take in a line's vertices, are not bent by a finer part's needs. (Before
 /// 2026-12-04 the east and south parts' side stretches were found by comparing metres, and a
-/// rounding lost them: a vertex on those sides was above its part's level.) Over Puget and SRTM N48W125,
+/// rounding lost them: a vertex on those sides was above its part's level.) The weights the
+/// mirror places the tile's mix with, each vertex's parents' passed on ("Within a block"),
+/// are 0 at every vertex of a block finer than a part holding it (without the hold to the
+/// coarsest part, a line's vertex took 0.28 from a parent on the tile's side in a part at
+/// level 0). Over Puget and SRTM N48W125,
 /// from the paths and low random cameras, at tau 1 and 3. Controls: the star raises many
 /// on-screen vertices above their own level, and the star's whole box (reaching across the
 /// lines between parts and along no grid) would break the bound somewhere.
 #[test]
 fn the_placed_level_stays_within_every_part_that_draws_the_vertex() {
     use renderer::lod::{self, Bound};
-    use renderer::morph::TileMorph;
+    use renderer::morph::{tile_weights, TileMorph};
+    use tiles::parts::PartKey;
     let (dir, srtm_dir) = (
         tempfile::tempdir().expect("tempdir"),
         tempfile::tempdir().expect("tempdir"),
@@ -569,6 +574,7 @@ fn the_placed_level_stays_within_every_part_that_draws_the_vertex() {
     let terrains = cover_terrains((dir.path(), srtm_dir.path()));
     let mut rng = splitmix::Rng(0x7374_6172_5f6c_766c);
     let (mut checked, mut raised, mut across) = (0usize, 0usize, 0usize);
+    let mut inherited = 0usize;
     // The parts whose closed box holds tile-local coordinate c (one, or two on a line).
     let span = |c: u32| (c.saturating_sub(1) / 64).min(3)..=(c / 64).min(3);
     for terrain in &terrains {
@@ -582,7 +588,20 @@ fn the_placed_level_stays_within_every_part_that_draws_the_vertex() {
                     let morph = TileMorph::from_camera(terrain, &camera, EXTENT, tau, i);
                     let data = terrain.set.tile(tile.tx, tile.ty).expect("tile");
                     let block0 = data.level(0).expect("level 0").positions.len();
-                    for (x, y, own) in data.vertices().into_iter().skip(block0) {
+                    // Each vertex's block, and its weight with its parents' passed on.
+                    let blocks: Vec<u32> = (0..terrain.levels)
+                        .flat_map(|j| {
+                            let n = data.level(j).map_or(0, |b| b.positions.len());
+                            std::iter::repeat_n(j, n)
+                        })
+                        .collect();
+                    // The weights as the frame places them: part by part, at the finest
+                    // part's level (vertices past it are not placed: weight 0).
+                    let top = u32::from(parts.iter().copied().max().expect("parts"));
+                    let mut drawn = morph;
+                    (drawn.parts, drawn.cap) = (Some(PartKey { levels: parts }), top as f32);
+                    let weights = tile_weights(&data, top, &drawn);
+                    for (k, (x, y, own)) in data.vertices().into_iter().enumerate().skip(block0) {
                         let (relative, point) = morph.vertex(x, y, own);
                         let clip = morph.view_proj * relative.extend(1.0);
                         let w = clip.w;
@@ -610,6 +629,17 @@ fn the_placed_level_stays_within_every_part_that_draws_the_vertex() {
                              a part holding it at {within}"
                         );
                         raised += usize::from(placed > point + 0.01);
+                        // A vertex that a part holding it lacks (the part's next level adds
+                        // it) has weight 0, whatever its parents pass on ("Within a block").
+                        let j = blocks[k] as f32;
+                        let weight = weights.get(k).copied().unwrap_or(0.0);
+                        assert!(
+                            j <= within || weight == 0.0,
+                            "tile {i} parts {parts:?}: ({x}, {y}) of block {j} at weight {weight} \
+                             beyond a part holding it at {within}"
+                        );
+                        let own_weight = (placed - j + 1.0).clamp(0.0, 1.0);
+                        inherited += usize::from(weight > own_weight + 0.01);
                         let s = renderer::morph::scale_of(x, y) as f32;
                         let whole = morph.level_reaching(x, y, own, glam::Vec2::splat(s));
                         across += usize::from(whole > within + 1e-3);
@@ -620,8 +650,10 @@ fn the_placed_level_stays_within_every_part_that_draws_the_vertex() {
     }
     eprintln!(
         "{checked} on-screen vertices within every part holding them; {raised} raised by \
-         their star; the whole star's box would exceed a part's level at {across}"
+         their star, {inherited} by their parents; the whole star's box would exceed a \
+         part's level at {across}"
     );
+    assert!(inherited > 0, "no vertex took a weight from its parents");
     assert!(checked > 1_000_000, "only {checked} vertices checked");
     assert!(
         raised > checked / 100,

@@ -21,11 +21,11 @@
 // One workgroup places one tile at a time (the records r = g, g + groups, ...), in a scratch
 // region of its own (never cleared: every parent is a vertex of the tile's drawn blocks, so
 // only what was written for this tile is read). First each invocation takes vertices of the
-// tile, writes their own heights into the region's 257 x 257 grid (and level 0 to pass on),
-// places block 0, and lists every other vertex under its scale (a list per scale, at a fixed
-// place, as long as the grid has points of that scale). Then, from the coarsest scale (128 samples) to the finest (1),
-// the invocations place the vertices of one list each round from the grid, with a barrier
-// between scales: a vertex is read from the pool once and placed once.
+// tile, writes their own heights into the region's 257 x 257 grid, places block 0 (level 0 to
+// pass on), and lists every other vertex under its scale (a list per scale, at a fixed place,
+// as long as the grid has points of that scale). Then, from the coarsest scale (128 samples)
+// to the finest (1), the invocations place the vertices of one list each round from the grid,
+// with a barrier between scales: a vertex is read from the pool once and placed once.
 
 #define MORPH_PASS
 #include "interface.glsl"
@@ -36,42 +36,45 @@ const uint LANES = 32u;
 const uint SIDE = 257;
 const uint GRID = SIDE * SIDE;
 // A workgroup's region: the grid of (own, morphed) heights, then the lists of (vertex, packed
-// position) by scale, then the levels passed to children (PASSED below), two to an entry.
-const uint REGION = 2u * GRID + (GRID + 1u) / 2u;
+// position) by scale, two to an entry. A grid point's entry holds (own, morphed, the level it
+// passes to its children, unused): a parent is one read.
+const uint LIST_ENTRIES = 66045u;
+const uint REGION = GRID + (LIST_ENTRIES + 1u) / 2u;
 
 // Per workgroup: the grid (vec2 per point), then the lists (uvec2 per entry), as floats' bits.
-layout(std430, set = 0, binding = 7) coherent buffer Scratch { uvec2 cells[]; } scratch;
+layout(std430, set = 0, binding = 7) coherent buffer Scratch { uvec4 cells[]; } scratch;
 layout(std430, set = 0, binding = 6) writeonly buffer Morphed { float values[]; } morphed;
 
 // The level whose blocks the draw's mesh takes at a point (the index builder's rule).
 #include "parts.glsl"
 #include "hierarchy.glsl"
 
-// The level each grid point passes to its children, a float per point after the lists: a
-// placed vertex's level held to its block, clamp(l, j - 1, j), so that a child of its block
-// takes at least its weight and a child of a finer block nothing (renderer/src/morph/mod.rs,
-// "Within a block"; morph::hierarchy mirrors it); 0 for block 0 and the tile's corners.
-const uint PASSED = 2u * GRID;
-float passed_of(uint region, uint at) {
-    uvec2 pair = scratch.cells[region + PASSED + at / 2u];
-    return uintBitsToFloat((at & 1u) == 0u ? pair.x : pair.y);
+// A grid point's third value, the level it passes to its children, is a placed vertex's level
+// held to its block, clamp(l, j - 1, j), so that a child of its block takes at least its
+// weight and a child of a finer block nothing (renderer/src/morph/mod.rs, "Within a block";
+// morph::hierarchy mirrors it); 0 for block 0 and the tile's corners.
+
+// List entry n (from the first list's start) of a region, and its writing.
+uvec2 list_entry(uint region, uint n) {
+    uvec4 pair = scratch.cells[region + GRID + n / 2u];
+    return (n & 1u) == 0u ? pair.xy : pair.zw;
 }
-void set_passed(uint region, uint at, float l) {
-    if ((at & 1u) == 0u) {
-        scratch.cells[region + PASSED + at / 2u].x = floatBitsToUint(l);
+void set_list_entry(uint region, uint n, uvec2 entry) {
+    if ((n & 1u) == 0u) {
+        scratch.cells[region + GRID + n / 2u].xy = entry;
     } else {
-        scratch.cells[region + PASSED + at / 2u].y = floatBitsToUint(l);
+        scratch.cells[region + GRID + n / 2u].zw = entry;
     }
 }
 
 // Vertices listed per scale index (scale 2^k at k) for the tile being placed.
 shared uint listed[8];
 
-// Where the list of scale index k starts in a region: after the grid and the lists of the
-// coarser scales, each as long as the grid's points of its scale, (256/s + 1)^2 - (128/s + 1)^2
-// for s = 2^k < 256 (the first of which, s = 128, has 5: the tile's centre and edge midpoints;
-// the last, s = 1, ends at 132,094, within REGION).
-const uint LIST_START[8] = uint[](82686u, 70270u, 67134u, 66334u, 66126u, 66070u, 66054u, 66049u);
+// Where the list of scale index k starts (in list entries): after the lists of the coarser
+// scales, each as long as the grid's points of its scale, (256/s + 1)^2 - (128/s + 1)^2 for
+// s = 2^k < 256 (the first of which, s = 128, has 5: the tile's centre and edge midpoints;
+// the last, s = 1, ends at LIST_ENTRIES).
+const uint LIST_START[8] = uint[](16637u, 4221u, 1085u, 285u, 77u, 21u, 5u, 0u);
 
 // The scale index of tile-local grid point (x, y): log2 of the largest power of two dividing
 // both (8 or more for the tile's corners, which have no parents and stay at their own height).
@@ -186,8 +189,8 @@ void main() {
             uint x = v & 511u;
             uint y = (v >> 9) & 511u;
             float own = float(height_base + int(v >> 18)) * height_step;
-            scratch.cells[region + y * SIDE + x] = uvec2(floatBitsToUint(own));
-            set_passed(region, y * SIDE + x, 0.0);
+            uint own_bits = floatBitsToUint(own);
+            scratch.cells[region + y * SIDE + x] = uvec4(own_bits, own_bits, 0u, 0u);
             uint k = scale_index(x, y);
             uvec4 passed = uvec4(greaterThanEqual(uvec4(i), starts_lo))
                          + uvec4(greaterThanEqual(uvec4(i), starts_hi));
@@ -197,28 +200,29 @@ void main() {
             } else if (j <= packed_presence_level(parts, x, y, level)) {
                 // (A vertex the mesh does not hold is neither placed nor drawn.)
                 uint slot = atomicAdd(listed[k], 1u);
-                scratch.cells[region + LIST_START[k] + slot] = uvec2(i, v);
+                set_list_entry(region, LIST_START[k] + slot, uvec2(i, v));
             }
         }
         memoryBarrierBuffer();
         barrier();
         for (int k = 7; k >= 0; --k) {
             uint s = 1u << uint(k);
-            uint start = region + LIST_START[k];
+            uint start = LIST_START[k];
             uint n = listed[k];
             if (n == 0u) {
                 continue;   // the same for the whole workgroup: no barrier is skipped by part
             }
             for (uint e = lane; e < n; e += LANES) {
-                uvec2 entry = scratch.cells[start + e];
+                uvec2 entry = list_entry(region, start + e);
                 uint i = entry.x;
                 uint v = entry.y;
                 uint x = v & 511u;
                 uint y = (v >> 9) & 511u;
                 uvec2 p, q;
                 parents_of(x, y, uint(k), p, q);
-                vec2 a = uintBitsToFloat(scratch.cells[region + p.y * SIDE + p.x]);
-                vec2 b = uintBitsToFloat(scratch.cells[region + q.y * SIDE + q.x]);
+                // Each parent's own and placed heights, and the level it passes on.
+                vec3 a = uintBitsToFloat(scratch.cells[region + p.y * SIDE + p.x].xyz);
+                vec3 b = uintBitsToFloat(scratch.cells[region + q.y * SIDE + q.x].xyz);
                 float own = float(height_base + int(v >> 18)) * height_step;
                 ivec2 sample_pos = tile_offset + (ivec2(int(x), int(y)) << layer_shift);
                 vec3 relative = vec3(float(sample_pos.x) * frame.camera.w,
@@ -255,16 +259,18 @@ void main() {
                     allowed = star_error(clip, allowed, reach);
                 }
                 // At least the levels its parents pass on ("Within a block").
-                float l = max(min(level_for(allowed, c), cap),
-                              max(passed_of(region, p.y * SIDE + p.x),
-                                  passed_of(region, q.y * SIDE + q.x)));
+                // (No further than the coarsest part holding it draws: a part's fans hold
+                // no vertex of a finer block than its own away from weight 0.)
+                float inherited = min(max(a.z, b.z),
+                                      float(packed_coarsest_level(parts, x, y, level)));
+                float l = max(min(level_for(allowed, c), cap), inherited);
                 uvec4 passed = uvec4(greaterThanEqual(uvec4(i), starts_lo))
                              + uvec4(greaterThanEqual(uvec4(i), starts_hi));
                 uint j = passed.x + passed.y + passed.z + passed.w;
                 float w = clamp(l - float(j) + 1.0, 0.0, 1.0);
                 float m = 0.5 * (a.y + b.y) + w * (own - 0.5 * (a.x + b.x));
-                scratch.cells[region + y * SIDE + x].y = floatBitsToUint(m);
-                set_passed(region, y * SIDE + x, clamp(l, float(j) - 1.0, float(j)));
+                float held = clamp(l, float(j) - 1.0, float(j));
+                scratch.cells[region + y * SIDE + x].yz = floatBitsToUint(vec2(m, held));
                 morphed.values[out_at + i] = m;
             }
             memoryBarrierBuffer();

@@ -22,3 +22,18 @@ uint packed_presence_level(uvec2 parts, uint x, uint y, uint top) {
     return max(max(packed_part_level(parts, i0, j0), packed_part_level(parts, i1, j0)),
                max(packed_part_level(parts, i0, j1), packed_part_level(parts, i1, j1)));
 }
+
+// The level of the coarsest part whose closed box holds lattice point (x, y), `top` on the
+// tile's border (drawn at the tile's level): the most the morph pass lets a vertex there take
+// from its parents, so that a part never draws, nor drops, a vertex of a finer block than its
+// own at a weight above 0 (tools/tiles/src/parts.rs, coarsest_level, the CPU side).
+uint packed_coarsest_level(uvec2 parts, uint x, uint y, uint top) {
+    if (x == 0u || y == 0u || x >= 256u || y >= 256u) {
+        return top;
+    }
+    uint i1 = x / 64u, j1 = y / 64u;
+    uint i0 = x % 64u == 0u ? i1 - 1u : i1;
+    uint j0 = y % 64u == 0u ? j1 - 1u : j1;
+    return min(min(packed_part_level(parts, i0, j0), packed_part_level(parts, i1, j0)),
+               min(packed_part_level(parts, i0, j1), packed_part_level(parts, i1, j1)));
+}

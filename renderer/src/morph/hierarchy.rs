@@ -53,14 +53,16 @@ pub fn held_level(l: f32, j: usize) -> f32 {
 /// holds every vertex's parents (they are corners of its cell, or the ends of its cell's
 /// edge), so no placed vertex reads an unplaced one. Each vertex takes the larger of its own
 /// level and its parents' held levels ([`held_level`]), unless the rule is
-/// [`MorphRule::OwnLevels`] (the rule before, kept as a control).
+/// [`MorphRule::OwnLevels`] (the rule before, kept as a control). Returns each vertex's
+/// weight `w` in index order: 1 in block 0, 0 where not placed.
 pub(super) fn hierarchical(
     tile: &tiles::format::Tile,
     level: u32,
     morph: &TileMorph,
     (units, bias): (&[f32], i8),
     vertices: &mut [(u32, u32, f32, f32)],
-) {
+) -> Vec<f32> {
+    let mut weights = vec![0.0f32; vertices.len()];
     // Per grid point: own height, morphed height, slope, and the level passed to children.
     let mut grid = vec![(f32::NAN, f32::NAN, 0.0f32, 0.0f32); SIDE * SIDE];
     // Per vertex of blocks 1..: its index, block and level; by scale, coarsest first.
@@ -74,6 +76,9 @@ pub(super) fn hierarchical(
             let own = (base + code as i32) as f32 * morph.height_step;
             grid[y as usize * SIDE + x as usize] = (own, own, 0.0, 0.0);
             vertices[start + i].2 = own;
+            if j == 0 {
+                weights[start + i] = 1.0;
+            }
             let held = morph
                 .parts
                 .is_none_or(|key| j <= usize::from(tiles::parts::presence_level(&key, x, y)));
@@ -97,8 +102,12 @@ pub(super) fn hierarchical(
                 grid[p.1 as usize * SIDE + p.0 as usize],
                 grid[q.1 as usize * SIDE + q.0 as usize],
             );
+            // No further than the coarsest part holding it draws (module header).
+            let bound = morph.parts.map_or(level, |key| {
+                u32::from(tiles::parts::coarsest_level(&key, x, y))
+            });
             let l = match inherit {
-                true => l.max(a.3).max(b.3),
+                true => l.max(a.3.max(b.3).min(bound as f32)),
                 false => l,
             };
             let unit = units.get(j - 1).copied().unwrap_or(0.0);
@@ -109,6 +118,8 @@ pub(super) fn hierarchical(
             grid[at] = (own, m, slope, held_level(l, j));
             vertices[index].2 = m;
             vertices[index].3 = slope;
+            weights[index] = w;
         }
     }
+    weights
 }

@@ -170,10 +170,16 @@
 //! and a child of a finer block takes nothing from it (`held(p) <= j_p <= j - 1`). Where a
 //! block's vertices around a point share a weight this is the blend at that weight, within
 //! `(1 - t) E_(j-1) + t E_j`, which is at most `E_(j-1)`: no more than the point's own level
-//! allowed. The drawn level is unchanged: a weight never exceeds 1, so the raise moves only
-//! vertices the mesh holds, and a block that a part's next level adds arrives with its
-//! parents of that block at weight 0 (the cover above), so its vertices still start on the
-//! surface drawn before. Measured (bench/README.md, "A vertex at its parents' weight"): the 4K
+//! allowed. What a vertex takes from its parents is held to the level of the coarsest part
+//! whose closed box holds it (the tile's level on its border; [`tiles::parts::coarsest_level`]),
+//! as its own placed level is ("Over the star"): a parent on the tile's side, held only by the
+//! tile's level, would otherwise pass a weight to a vertex on a line that a coarser part's
+//! fans take in, and that vertex would leave the mesh at that weight when its finer part
+//! coarsened. So the drawn level is unchanged, every vertex a part holding it lacks still has
+//! weight 0, and a block that a part's next level adds still starts on the surface drawn
+//! before (the test `the_placed_level_stays_within_every_part_that_draws_the_vertex` checks
+//! the weights vertex by vertex; without the hold it found a line's vertex at weight 0.28 in a
+//! part at level 0). Measured (bench/README.md, "A vertex at its parents' weight"): the 4K
 //! Puget flyover in 120 frames at 1024 x 768 and tau 1 measured 1.008 px on frame 18, where
 //! the star raised a vertex to level 0.75 and its child of the same block, at 0, sat at its
 //! parents' mean; now 0.965 px. Passing the level itself across blocks too (not held) took
@@ -458,6 +464,24 @@ impl TileMorph {
             vertex_level(&self.frame, table, clip).min(self.cap),
         )
     }
+}
+
+/// The weight of its own detail the morph pass gives each vertex of a tile's blocks
+/// `0..=level` (index order; module header, "The morph" and "Within a block"): 1 in block 0,
+/// 0 for a vertex a part's mix does not hold.
+pub fn tile_weights(tile: &tiles::format::Tile, level: u32, morph: &TileMorph) -> Vec<f32> {
+    let mut vertices: Vec<(u32, u32, f32, f32)> = tile
+        .vertices()
+        .into_iter()
+        .map(|(x, y, h)| (x, y, h, 0.0))
+        .collect();
+    let end = (0..=level)
+        .map_while(|j| tile.level(j))
+        .map(|b| b.positions.len())
+        .sum::<usize>();
+    vertices.truncate(end);
+    let units: Vec<f32> = tile.levels().iter().map(|l| l.morph_unit).collect();
+    hierarchical(tile, level, morph, (&units, 0), &mut vertices)
 }
 
 /// The vertices of a tile's blocks `0..=level`, decoded: `(x, y, height)` in index order,

@@ -11,10 +11,10 @@ use crate::interface::{FrameConstants, PUSH_CONSTANT_BYTES};
 /// Workgroups of the morph pass at most: each places one tile at a time in a scratch region of
 /// its own (`memory::budget` decides how many the budget holds).
 pub const MORPH_GROUPS: u32 = 16;
-/// Bytes of one workgroup's scratch region: a grid of 257 x 257 pairs of floats, its lists of
-/// vertices by scale (as many 8-byte entries again at most), and a float per grid point (the
-/// level each vertex passes to its children), two to an entry (`REGION` in `morph.comp`).
-pub const MORPH_REGION_BYTES: u64 = (2 * 257 * 257 + (257 * 257 + 1) / 2) * 8;
+/// Bytes of one workgroup's scratch region: a grid of 257 x 257 points of 16 bytes (own and
+/// morphed height, the level passed to children), then its lists of vertices by scale, 66,045
+/// entries of 8 bytes at most, two to 16 bytes (`REGION` in `morph.comp`).
+pub const MORPH_REGION_BYTES: u64 = (257 * 257 + 66_045_u64.div_ceil(2)) * 16;
 
 /// The pass's pipeline and its layout: the terrain set layout, the frame's push constants for
 /// the compute stage.

@@ -627,11 +627,34 @@ pub fn packed_levels(levels: &PartLevels) -> [u32; 2] {
     words
 }
 
-/// The level a lattice point of the mixed mesh takes (module header).
+/// The level a lattice point of the mixed mesh takes (module header): the finest of the parts
+/// whose closed box holds it, the tile's (the finest part's) on its border.
 pub fn presence_level(key: &PartKey, x: u32, y: u32) -> u8 {
+    holding_parts(key, x, y).map_or(top_level(key), |levels| {
+        levels.into_iter().max().unwrap_or(0)
+    })
+}
+
+/// The coarsest of the parts whose closed box holds a lattice point, the tile's (the finest
+/// part's) on its border: the most the morph pass lets a vertex there take from its parents
+/// (`renderer::morph`, "Within a block"; `packed_coarsest_level` in `parts.glsl`).
+pub fn coarsest_level(key: &PartKey, x: u32, y: u32) -> u8 {
+    holding_parts(key, x, y).map_or(top_level(key), |levels| {
+        levels.into_iter().min().unwrap_or(0)
+    })
+}
+
+/// The tile's level: its finest part's.
+fn top_level(key: &PartKey) -> u8 {
+    key.levels.iter().copied().max().unwrap_or(0)
+}
+
+/// The levels of the four parts (some the same) whose closed boxes hold lattice point `(x,
+/// y)` inside the tile; None on its border.
+fn holding_parts(key: &PartKey, x: u32, y: u32) -> Option<[u8; 4]> {
     let edge = TILE_SIZE as u32 - 1;
     if x == 0 || y == 0 || x >= edge || y >= edge {
-        return key.levels.iter().copied().max().unwrap_or(0);
+        return None;
     }
     let span = |v: u32| {
         let hi = (v / PART_CELLS) as usize;
@@ -643,7 +666,7 @@ pub fn presence_level(key: &PartKey, x: u32, y: u32) -> u8 {
     };
     let ((i0, i1), (j0, j1)) = (span(x), span(y));
     let at = |i: usize, j: usize| key.levels[j * PARTS + i];
-    at(i0, j0).max(at(i1, j0)).max(at(i0, j1)).max(at(i1, j1))
+    Some([at(i0, j0), at(i1, j0), at(i0, j1), at(i1, j1)])
 }
 
 /// The parts of quadrant `k` (row by row: NW, NE, SW, SE of the tile's 2 x 2 quadrants).
@@ -689,7 +712,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn presence_takes_the_finest_part_at_a_line_and_the_top_on_the_border() {
+    fn presence_is_the_finest_holding_part_coarsest_the_coarsest_and_the_border_both_the_top() {
         let mut levels = [2u8; 16];
         levels[5] = 6; // part (1, 1)
         let key = PartKey { levels };
@@ -711,6 +734,24 @@ mod tests {
             "the border takes the top level"
         );
         assert_eq!(presence_level(&key, 192, 150), 2);
+        // The coarsest holding part: the same inside a part and on the border, the coarser
+        // part on a line or at a corner.
+        assert_eq!(coarsest_level(&key, 100, 100), 6);
+        assert_eq!(
+            coarsest_level(&key, 64, 100),
+            2,
+            "line between parts 4 and 5"
+        );
+        assert_eq!(
+            coarsest_level(&key, 64, 64),
+            2,
+            "corner of parts 0, 1, 4, 5"
+        );
+        assert_eq!(
+            coarsest_level(&key, 200, 0),
+            6,
+            "the border takes the top level"
+        );
     }
 
     #[test]
