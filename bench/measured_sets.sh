@@ -1,6 +1,6 @@
 # Sourced by the geomorphing benchmarks that measure flights against their sources
-# (side_reach.sh, star_weight.sh): the error meter's flags for each set, and the first 12 s of a
-# set's flyover as tilebench table1 cuts them. Sets $before (the caller's first argument, the
+# (side_reach.sh, star_weight.sh, parents_weight.sh): the error meter's flags for each set,
+# and the first 12 s of a set's flyover as tilebench table1 cuts them. Sets $before (the caller's first argument, the
 # binary before), $after (this tree's vkterrain) and $out (a folder removed on exit).
 # The sets: out/puget.vkt (.ci/demo), /tmp/n48.vkt, /tmp/m4p.vkt with its raw source
 # /tmp/m4.r16, and /tmp/p4k.vkt (the 4K Puget), built as bench/README.md says.
@@ -59,4 +59,19 @@ PY
 )")
   done
   m_before=${r[0]} m_after=${r[1]}
+}
+# flown_header, then flown_row NAME TAU ARGS... per flight: a table of flown's measures
+# before and after, at --tau TAU, warm.
+flown_header() {
+  echo "| flight | tau | max_error_px before | after | pop_px before | after | frames over 0.5 px before | after | triangles (median) |"
+  echo "|---|---:|---:|---:|---:|---:|---:|---:|---:|"
+}
+flown_row() {
+  local name=$1 tau=$2 e1 p1 n1 t1 e2 p2 n2 t2; shift 2
+  flown "$@" --warmup --tau "$tau"
+  read -r e1 p1 n1 t1 <<< "$m_before"
+  read -r e2 p2 n2 t2 <<< "$m_after"
+  printf '| %s | %s | %.3f | %.3f | %.3f | %.3f | %d | %d | %.0f |\n' \
+    "$name" "$tau" "$e1" "$e2" "$p1" "$p2" "$n1" "$n2" "$t2"
+  [ "$t1" = "$t2" ] || echo "(triangles before: $t1)"
 }

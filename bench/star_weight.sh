@@ -11,28 +11,18 @@ source "$(dirname "$0")/measured_sets.sh"
 start out/puget.vkt "$out/puget.csv"
 start /tmp/n48.vkt "$out/n48.csv"
 start /tmp/m4p.vkt "$out/m4.csv"
-echo "| flight | tau | max_error_px before | after | pop_px before | after | frames over 0.5 px before | after | triangles (median) |"
-echo "|---|---:|---:|---:|---:|---:|---:|---:|---:|"
-row() { # name tau args...
-  local name=$1 tau=$2; shift 2
-  flown "$@" --warmup --tau "$tau"
-  read -r e1 p1 n1 t1 <<< "$m_before"
-  read -r e2 p2 n2 t2 <<< "$m_after"
-  printf '| %s | %s | %.3f | %.3f | %.3f | %.3f | %d | %d | %.0f |\n' \
-    "$name" "$tau" "$e1" "$e2" "$p1" "$p2" "$n1" "$n2" "$t2"
-  [ "$t1" = "$t2" ] || echo "(triangles before: $t1)"
-}
+flown_header
 for tau in 1 3 5; do
-  row "Puget flyover, first 12 s, 360 frames, 480 x 360" $tau out/puget.vkt --headless --path "$out/puget.csv" --frames 360 --size 480x360 $P
+  flown_row "Puget flyover, first 12 s, 360 frames, 480 x 360" $tau out/puget.vkt --headless --path "$out/puget.csv" --frames 360 --size 480x360 $P
 done
 for tau in 3 5; do
-  row "N48W125 flyover, first 12 s, 360 frames, 480 x 360" $tau /tmp/n48.vkt --headless --path "$out/n48.csv" --frames 360 --size 480x360 $N
+  flown_row "N48W125 flyover, first 12 s, 360 frames, 480 x 360" $tau /tmp/n48.vkt --headless --path "$out/n48.csv" --frames 360 --size 480x360 $N
 done
 for tau in 1 3; do
-  row "4K mirror (GENERATED) flyover, first 12 s, 360 frames, 480 x 360" $tau /tmp/m4p.vkt --headless --path "$out/m4.csv" --frames 360 --size 480x360 $M
+  flown_row "4K mirror (GENERATED) flyover, first 12 s, 360 frames, 480 x 360" $tau /tmp/m4p.vkt --headless --path "$out/m4.csv" --frames 360 --size 480x360 $M
 done
 for tau in 3 5; do
-  row "Puget flyover, 120 frames, 1024 x 768" $tau out/puget.vkt --headless --path flyover --frames 120 --size 1024x768 $P
+  flown_row "Puget flyover, 120 frames, 1024 x 768" $tau out/puget.vkt --headless --path flyover --frames 120 --size 1024x768 $P
 done
 echo
 echo "| flight | tau | before: outside the draws, ms (two rounds) | after |"
