@@ -1,7 +1,8 @@
 # Sourced by the geomorphing benchmarks that measure flights against their sources
 # (side_reach.sh, star_weight.sh, parents_weight.sh): the error meter's flags for each set,
-# and the first 12 s of a set's flyover as tilebench table1 cuts them. Sets $before (the caller's first argument, the
-# binary before), $after (this tree's vkterrain) and $out (a folder removed on exit).
+# the first 12 s of a set's flyover as tilebench table1 cuts them, and a table of flights
+# measured before and after. Sets $before (the caller's first argument, the binary before),
+# $after (this tree's vkterrain) and $out (a folder removed on exit).
 # The sets: out/puget.vkt (.ci/demo), /tmp/n48.vkt, /tmp/m4p.vkt with its raw source
 # /tmp/m4.r16, and /tmp/p4k.vkt (the 4K Puget), built as bench/README.md says.
 set -euo pipefail

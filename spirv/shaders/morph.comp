@@ -14,7 +14,7 @@
 // its parents' mean plus its share w of its own detail; block 0 is always at its own height.
 // Its level l is the one its position and the camera give it, raised towards the levels on the
 // segments in view from it to the corners of its star's box (star_error below), and to at
-// least what its parents of its own block pass on (PASSED below).
+// least what its parents of its own block pass on (a grid point's third value, below).
 // Where every vertex is at w = 1 that is the level's surface; where a vertex has w = 0 it lies
 // on the surface drawn without it, so a finer level arriving moves nothing at first.
 //
@@ -35,14 +35,14 @@ const uint LANES = 32u;
 
 const uint SIDE = 257;
 const uint GRID = SIDE * SIDE;
-// A workgroup's region: the grid of (own, morphed) heights, then the lists of (vertex, packed
-// position) by scale, two to an entry. A grid point's entry holds (own, morphed, the level it
-// passes to its children, unused): a parent is one read.
+// A workgroup's region, in words: the grid, three a point (its own and morphed height and the
+// level it passes to its children, as floats' bits), then the lists of vertices (their indices
+// in the draw) by scale: 1,056,768 bytes, no more than the two-word grid and two-word entries
+// it had before the passed level (renderer/src/vulkan/morph_pass.rs, MORPH_REGION_BYTES).
 const uint LIST_ENTRIES = 66045u;
-const uint REGION = GRID + (LIST_ENTRIES + 1u) / 2u;
+const uint REGION = 3u * GRID + LIST_ENTRIES;
 
-// Per workgroup: the grid (vec2 per point), then the lists (uvec2 per entry), as floats' bits.
-layout(std430, set = 0, binding = 7) coherent buffer Scratch { uvec4 cells[]; } scratch;
+layout(std430, set = 0, binding = 7) coherent buffer Scratch { uint words[]; } scratch;
 layout(std430, set = 0, binding = 6) writeonly buffer Morphed { float values[]; } morphed;
 
 // The level whose blocks the draw's mesh takes at a point (the index builder's rule).
@@ -54,17 +54,15 @@ layout(std430, set = 0, binding = 6) writeonly buffer Morphed { float values[]; 
 // weight and a child of a finer block nothing (renderer/src/morph/mod.rs, "Within a block";
 // morph::hierarchy mirrors it); 0 for block 0 and the tile's corners.
 
-// List entry n (from the first list's start) of a region, and its writing.
-uvec2 list_entry(uint region, uint n) {
-    uvec4 pair = scratch.cells[region + GRID + n / 2u];
-    return (n & 1u) == 0u ? pair.xy : pair.zw;
+// Grid point (x, y)'s first word in a region.
+uint point_at(uint region, uint x, uint y) {
+    return region + 3u * (y * SIDE + x);
 }
-void set_list_entry(uint region, uint n, uvec2 entry) {
-    if ((n & 1u) == 0u) {
-        scratch.cells[region + GRID + n / 2u].xy = entry;
-    } else {
-        scratch.cells[region + GRID + n / 2u].zw = entry;
-    }
+
+// A grid point's (own, morphed, passed) values.
+vec3 point_values(uint at) {
+    return uintBitsToFloat(uvec3(scratch.words[at], scratch.words[at + 1u],
+                                 scratch.words[at + 2u]));
 }
 
 // Vertices listed per scale index (scale 2^k at k) for the tile being placed.
@@ -73,7 +71,7 @@ shared uint listed[8];
 // Where the list of scale index k starts (in list entries): after the lists of the coarser
 // scales, each as long as the grid's points of its scale, (256/s + 1)^2 - (128/s + 1)^2 for
 // s = 2^k < 256 (the first of which, s = 128, has 5: the tile's centre and edge midpoints;
-// the last, s = 1, ends at LIST_ENTRIES).
+// the last, s = 1, ends at LIST_ENTRIES), after the grid's 3 GRID words.
 const uint LIST_START[8] = uint[](16637u, 4221u, 1085u, 285u, 77u, 21u, 5u, 0u);
 
 // The scale index of tile-local grid point (x, y): log2 of the largest power of two dividing
@@ -189,8 +187,10 @@ void main() {
             uint x = v & 511u;
             uint y = (v >> 9) & 511u;
             float own = float(height_base + int(v >> 18)) * height_step;
-            uint own_bits = floatBitsToUint(own);
-            scratch.cells[region + y * SIDE + x] = uvec4(own_bits, own_bits, 0u, 0u);
+            uint at = point_at(region, x, y);
+            scratch.words[at] = floatBitsToUint(own);
+            scratch.words[at + 1u] = floatBitsToUint(own);
+            scratch.words[at + 2u] = 0u;
             uint k = scale_index(x, y);
             uvec4 passed = uvec4(greaterThanEqual(uvec4(i), starts_lo))
                          + uvec4(greaterThanEqual(uvec4(i), starts_hi));
@@ -200,7 +200,7 @@ void main() {
             } else if (j <= packed_presence_level(parts, x, y, level)) {
                 // (A vertex the mesh does not hold is neither placed nor drawn.)
                 uint slot = atomicAdd(listed[k], 1u);
-                set_list_entry(region, LIST_START[k] + slot, uvec2(i, v));
+                scratch.words[region + 3u * GRID + LIST_START[k] + slot] = i;
             }
         }
         memoryBarrierBuffer();
@@ -213,16 +213,15 @@ void main() {
                 continue;   // the same for the whole workgroup: no barrier is skipped by part
             }
             for (uint e = lane; e < n; e += LANES) {
-                uvec2 entry = list_entry(region, start + e);
-                uint i = entry.x;
-                uint v = entry.y;
+                uint i = scratch.words[region + 3u * GRID + start + e];
+                uint v = pool.words[positions + i];
                 uint x = v & 511u;
                 uint y = (v >> 9) & 511u;
                 uvec2 p, q;
                 parents_of(x, y, uint(k), p, q);
                 // Each parent's own and placed heights, and the level it passes on.
-                vec3 a = uintBitsToFloat(scratch.cells[region + p.y * SIDE + p.x].xyz);
-                vec3 b = uintBitsToFloat(scratch.cells[region + q.y * SIDE + q.x].xyz);
+                vec3 a = point_values(point_at(region, p.x, p.y));
+                vec3 b = point_values(point_at(region, q.x, q.y));
                 float own = float(height_base + int(v >> 18)) * height_step;
                 ivec2 sample_pos = tile_offset + (ivec2(int(x), int(y)) << layer_shift);
                 vec3 relative = vec3(float(sample_pos.x) * frame.camera.w,
@@ -270,7 +269,9 @@ void main() {
                 float w = clamp(l - float(j) + 1.0, 0.0, 1.0);
                 float m = 0.5 * (a.y + b.y) + w * (own - 0.5 * (a.x + b.x));
                 float held = clamp(l, float(j) - 1.0, float(j));
-                scratch.cells[region + y * SIDE + x].yz = floatBitsToUint(vec2(m, held));
+                uint at = point_at(region, x, y);
+                scratch.words[at + 1u] = floatBitsToUint(m);
+                scratch.words[at + 2u] = floatBitsToUint(held);
                 morphed.values[out_at + i] = m;
             }
             memoryBarrierBuffer();

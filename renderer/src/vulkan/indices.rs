@@ -141,16 +141,19 @@ impl IndexBuilder {
             && self.buffers.lists[s].write(0, bytemuck::cast_slice(builds))
     }
 
-    /// Who reads what the builds write: the draws' index reads, the copies (a chunk moved) and
-    /// the host (the build status).
+    /// Who reads what the builds write: the draws' index reads and vertex shaders (which read
+    /// the pool the arrays are built in: other bytes of the one buffer, which the validation
+    /// layer cannot tell apart), the copies (a chunk moved) and the host (the build status).
     pub const READERS: (vk::PipelineStageFlags, vk::AccessFlags) = (
         vk::PipelineStageFlags::from_raw(
             vk::PipelineStageFlags::VERTEX_INPUT.as_raw()
+                | vk::PipelineStageFlags::VERTEX_SHADER.as_raw()
                 | vk::PipelineStageFlags::TRANSFER.as_raw()
                 | vk::PipelineStageFlags::HOST.as_raw(),
         ),
         vk::AccessFlags::from_raw(
             vk::AccessFlags::INDEX_READ.as_raw()
+                | vk::AccessFlags::SHADER_READ.as_raw()
                 | vk::AccessFlags::TRANSFER_READ.as_raw()
                 | vk::AccessFlags::HOST_READ.as_raw(),
         ),

@@ -11,10 +11,11 @@ use crate::interface::{FrameConstants, PUSH_CONSTANT_BYTES};
 /// Workgroups of the morph pass at most: each places one tile at a time in a scratch region of
 /// its own (`memory::budget` decides how many the budget holds).
 pub const MORPH_GROUPS: u32 = 16;
-/// Bytes of one workgroup's scratch region: a grid of 257 x 257 points of 16 bytes (own and
+/// Bytes of one workgroup's scratch region: a grid of 257 x 257 points of three words (own and
 /// morphed height, the level passed to children), then its lists of vertices by scale, 66,045
-/// entries of 8 bytes at most, two to 16 bytes (`REGION` in `morph.comp`).
-pub const MORPH_REGION_BYTES: u64 = (257 * 257 + 66_045_u64.div_ceil(2)) * 16;
+/// words at most (`REGION` in `morph.comp`): 1,056,768 bytes, the budget's share of regions
+/// as before the passed level (two-word points and entries, 1,056,784).
+pub const MORPH_REGION_BYTES: u64 = (3 * 257 * 257 + 66_045) * 4;
 
 /// The pass's pipeline and its layout: the terrain set layout, the frame's push constants for
 /// the compute stage.
