@@ -716,42 +716,19 @@ mod tests {
         let mut levels = [2u8; 16];
         levels[5] = 6; // part (1, 1)
         let key = PartKey { levels };
-        assert_eq!(presence_level(&key, 100, 100), 6);
-        assert_eq!(
-            presence_level(&key, 64, 100),
-            6,
-            "line between parts 4 and 5"
-        );
-        assert_eq!(
-            presence_level(&key, 64, 64),
-            6,
-            "corner of parts 0, 1, 4, 5"
-        );
-        assert_eq!(presence_level(&key, 10, 10), 2);
-        assert_eq!(
-            presence_level(&key, 200, 0),
-            6,
-            "the border takes the top level"
-        );
-        assert_eq!(presence_level(&key, 192, 150), 2);
-        // The coarsest holding part: the same inside a part and on the border, the coarser
-        // part on a line or at a corner.
-        assert_eq!(coarsest_level(&key, 100, 100), 6);
-        assert_eq!(
-            coarsest_level(&key, 64, 100),
-            2,
-            "line between parts 4 and 5"
-        );
-        assert_eq!(
-            coarsest_level(&key, 64, 64),
-            2,
-            "corner of parts 0, 1, 4, 5"
-        );
-        assert_eq!(
-            coarsest_level(&key, 200, 0),
-            6,
-            "the border takes the top level"
-        );
+        // (x, y, presence, coarsest, where): on a line or a corner the finest and the coarsest
+        // holding part differ; inside a part and on the border they are the same.
+        for (x, y, finest, coarsest, at) in [
+            (100, 100, 6, 6, "inside part 5"),
+            (64, 100, 6, 2, "line between parts 4 and 5"),
+            (64, 64, 6, 2, "corner of parts 0, 1, 4, 5"),
+            (10, 10, 2, 2, "inside part 0"),
+            (200, 0, 6, 6, "the border takes the top level"),
+            (192, 150, 2, 2, "line between parts 10 and 11"),
+        ] {
+            assert_eq!(presence_level(&key, x, y), finest, "{at}");
+            assert_eq!(coarsest_level(&key, x, y), coarsest, "{at}");
+        }
     }
 
     #[test]
