@@ -86,10 +86,10 @@
 //! `|J z|`, is seen at `q`'s larger one; the next section raises vertices over their star to
 //! take most of that away. Where a vertex is finer than `q` needs, the excess is a partial sum
 //! of finer details, not bounded here either; "Within a block" below takes away the case
-//! measured. The rule aims at [`TAU_MARGIN`] of `τ` (3% below) to leave room for what is left. What the GPU's surface delivers is measured: the
-//! error meter rasterises this mirror's surface against the source on every measured frame
-//! (`max_error_px`), and a test reads the vertex shader's heights back and compares them with
-//! this mirror vertex for vertex.
+//! measured. The rule aims at [`TAU_MARGIN`] of `τ` (3% below) to leave room for what is
+//! left. What the GPU's surface delivers is measured: the error meter rasterises this mirror's
+//! surface against the source on every measured frame (`max_error_px`), and a test reads the
+//! vertex shader's heights back and compares them with this mirror vertex for vertex.
 //!
 //! # Over the star
 //!
