@@ -470,15 +470,8 @@ fn tight_budgets_draw_coarser_never_crack() {
 #[test]
 fn a_348_mb_tile_set_flies_in_40_mb() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let set = tileset(
-        dir.path(),
-        &data("puget/ps_height_4k_8bit.jpg"),
-        dem::ReadOptions {
-            spacing: Some(40.0),
-            vertical_scale: Some(25.7),
-            ..Default::default()
-        },
-    );
+    let (input, options) = common::puget_4k();
+    let set = tileset(dir.path(), &input, options);
     let bytes = std::fs::metadata(&set).expect("tile set").len();
     assert!(bytes > 300 << 20, "the 4K set is {bytes} bytes");
     // Uploads fast enough that the pool, not the bus, is what the flight runs out of (each

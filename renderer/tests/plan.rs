@@ -1125,12 +1125,7 @@ fn a_vertex_takes_its_parents_weight_within_its_block() {
     use renderer::morph::{MorphRule, TileMorph};
     const SIZE: (u32, u32) = (1024, 768);
     let dir = tempfile::tempdir().expect("tempdir");
-    let input = common::data("puget/ps_height_4k_8bit.jpg");
-    let options = dem::ReadOptions {
-        spacing: Some(40.0),
-        vertical_scale: Some(25.7),
-        ..Default::default()
-    };
+    let (input, options) = common::puget_4k();
     let set = common::tileset(dir.path(), &input, options.clone());
     let terrain = common::open_checked(&set);
     let dem = dem::read(&[input], &options).expect("read");

@@ -25,7 +25,8 @@
 // pass on), and lists every other vertex under its scale (a list per scale, at a fixed place,
 // as long as the grid has points of that scale). Then, from the coarsest scale (128 samples)
 // to the finest (1), the invocations place the vertices of one list each round from the grid,
-// with a barrier between scales: a vertex is read from the pool once and placed once.
+// with a barrier between scales: a vertex is placed once (its pool word read again then, as
+// the lists hold only its index).
 
 #define MORPH_PASS
 #include "interface.glsl"

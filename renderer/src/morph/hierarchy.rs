@@ -102,12 +102,16 @@ pub(super) fn hierarchical(
                 grid[p.1 as usize * SIDE + p.0 as usize],
                 grid[q.1 as usize * SIDE + q.0 as usize],
             );
-            // No further than the coarsest part holding it draws (module header).
-            let bound = morph.parts.map_or(level, |key| {
-                u32::from(tiles::parts::coarsest_level(&key, x, y))
-            });
-            let l = match inherit {
-                true => l.max(a.3.max(b.3).min(bound as f32)),
+            // At least what its parents pass on, no further than the coarsest part holding
+            // it draws (module header); the parts are looked up only where that raises it.
+            let passed = a.3.max(b.3);
+            let l = match inherit && passed > l {
+                true => {
+                    let bound = morph.parts.map_or(level, |key| {
+                        u32::from(tiles::parts::coarsest_level(&key, x, y))
+                    });
+                    l.max(passed.min(bound as f32))
+                }
                 false => l,
             };
             let unit = units.get(j - 1).copied().unwrap_or(0.0);

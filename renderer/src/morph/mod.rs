@@ -470,18 +470,13 @@ impl TileMorph {
 /// `0..=level` (index order; module header, "The morph" and "Within a block"): 1 in block 0,
 /// 0 for a vertex a part's mix does not hold.
 pub fn tile_weights(tile: &tiles::format::Tile, level: u32, morph: &TileMorph) -> Vec<f32> {
-    let mut vertices: Vec<(u32, u32, f32, f32)> = tile
-        .vertices()
-        .into_iter()
-        .map(|(x, y, h)| (x, y, h, 0.0))
-        .collect();
-    let end = (0..=level)
-        .map_while(|j| tile.level(j))
-        .map(|b| b.positions.len())
-        .sum::<usize>();
-    vertices.truncate(end);
-    let units: Vec<f32> = tile.levels().iter().map(|l| l.morph_unit).collect();
-    hierarchical(tile, level, morph, (&units, 0), &mut vertices)
+    let mut vertices = tile_heights(tile, level, None, 0);
+    hierarchical(tile, level, morph, (&morph_units(tile), 0), &mut vertices)
+}
+
+/// Each level's morph unit (m), as the morph reads them.
+fn morph_units(tile: &tiles::format::Tile) -> Vec<f32> {
+    tile.levels().iter().map(|l| l.morph_unit).collect()
 }
 
 /// The vertices of a tile's blocks `0..=level`, decoded: `(x, y, height)` in index order,
@@ -519,7 +514,7 @@ pub fn tile_heights(
     let Some(morph) = morph else {
         return vertices;
     };
-    let units: Vec<f32> = tile.levels().iter().map(|l| l.morph_unit).collect();
+    let units = morph_units(tile);
     if morph.rule != MorphRule::TwoLevels {
         hierarchical(tile, level, morph, (&units, bias), &mut vertices);
         return vertices;

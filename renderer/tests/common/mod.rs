@@ -188,6 +188,17 @@ pub fn puget_options() -> dem::ReadOptions {
     }
 }
 
+/// The 4K Puget Sound heights (`puget/ps_height_4k_8bit.jpg` of the shared data) and how the
+/// tests read them: 40 m a sample, the 8-bit codes scaled to metres.
+pub fn puget_4k() -> (PathBuf, dem::ReadOptions) {
+    let options = dem::ReadOptions {
+        spacing: Some(40.0),
+        vertical_scale: Some(25.7),
+        ..Default::default()
+    };
+    (data("puget/ps_height_4k_8bit.jpg"), options)
+}
+
 pub fn puget(dir: &Path) -> PathBuf {
     tileset(dir, &sample(), puget_options())
 }
