@@ -13,6 +13,8 @@ use crate::format::{
     TileSetWriter, FLAG_SHARED_SIDES, MAX_LEVELS, TILE_MAGIC,
 };
 use crate::grid::{tile_samples, Grid};
+#[cfg(test)]
+use crate::mesh::hilbert_index;
 use crate::mesh::{
     lattice, plane, triangle_spans, Mesher, Quad, TileSamples, TILE_CELLS, TILE_SIZE,
 };
@@ -274,30 +276,6 @@ pub struct Agreement {
     pub floor: f64,
 }
 
-/// Position of a cell along the Hilbert curve over `n x n` cells (`n` a power of two).
-/// Leaves sorted by it are visited depth-first with every step to an adjacent cell: the
-/// P-order traversal of the paper, figure 3.
-fn hilbert_index(n: u32, mut x: u32, mut y: u32) -> u32 {
-    let mut d = 0;
-    let mut s = n / 2;
-    while s > 0 {
-        let rx = u32::from(x & s > 0);
-        let ry = u32::from(y & s > 0);
-        d += s * s * ((3 * rx) ^ ry);
-        if ry == 0 {
-            if rx == 1 {
-                x = s - 1 - (x & (s - 1));
-                y = s - 1 - (y & (s - 1));
-            }
-            std::mem::swap(&mut x, &mut y);
-        }
-        x &= s - 1;
-        y &= s - 1;
-        s /= 2;
-    }
-    d
-}
-
 const NO_VERTEX: u32 = u32::MAX;
 
 /// A model of a GPU's post-transform vertex cache (first in, first out, 16 entries, the size
@@ -471,19 +449,6 @@ fn xy(l: u32) -> (u32, u32) {
     (l % TILE_SIZE as u32, l / TILE_SIZE as u32)
 }
 
-/// Leaves in P-order (Hilbert order of their cells).
-fn p_order(leaves: Vec<Quad>) -> Vec<Quad> {
-    let mut keyed: Vec<(u32, Quad)> = leaves
-        .into_iter()
-        .map(|q| {
-            let (x, y) = q.origin();
-            (hilbert_index(TILE_CELLS / 2, x / 2, y / 2), q)
-        })
-        .collect();
-    keyed.sort_unstable_by_key(|&(key, _)| key);
-    keyed.into_iter().map(|(_, q)| q).collect()
-}
-
 /// The level's index array (fans joined by restarts) and its triangle count; new vertices get
 /// the next indices, which makes them this level's block.
 fn emit_fans(
@@ -535,7 +500,7 @@ pub fn fans_from_vertices(samples: &TileSamples, sets: &[Vec<(u32, u32)>]) -> Ve
                 vertex[lattice(x, y)] = true;
             }
             mesher.extend_to_vertices(|(x, y)| vertex[lattice(x, y)]);
-            let leaves = p_order(mesher.leaves());
+            let leaves = mesher.leaves_in_p_order();
             let start = vertices.lattice_of.len();
             vertices.number_for_decoding(&mesher, &leaves);
             let (indices, _) = emit_fans(&mesher, &leaves, &mut vertices, &mut cache);
@@ -588,7 +553,7 @@ pub fn rebuild_tile(
             vertex[lattice(x, y)] = true;
         }
         mesher.extend_to_vertices(|(x, y)| vertex[lattice(x, y)]);
-        let leaves = p_order(mesher.leaves());
+        let leaves = mesher.leaves_in_p_order();
         let errors = LevelEntry {
             error_bound: stored.error_bound,
             max_error: stored.max_error,
@@ -654,6 +619,17 @@ fn measure_level(
         limited_excess: 0.0,
     };
     for &q in leaves {
+        // A leaf away from the sides whose fan refinement found within `e` adds its largest
+        // error alone.
+        let ((x0, y0), s) = (q.origin(), q.size());
+        let inside = x0 > 0 && y0 > 0 && x0 + s < mesh_max.0 && y0 + s < mesh_max.1;
+        match mesher.fan_error(q) {
+            Some(fan) if inside && fan <= e => {
+                m.max_error = m.max_error.max(fan);
+                continue;
+            }
+            _ => {}
+        }
         for &t in mesher.fan_triangles(q).as_slice() {
             let err = mesher.triangle_error(q, t);
             m.max_error = m.max_error.max(err);
@@ -775,7 +751,7 @@ fn mesh_tile(
         }
         // In P-order either way: the surfaces below are written leaf by leaf, and points on
         // shared edges take the last leaf's rounding.
-        let leaves = p_order(mesher.leaves());
+        let leaves = mesher.leaves_in_p_order();
         // What the agreement reads (sides, deviations) does not depend on the measured
         // errors, and its last mesh of each tile is the mesh the build measures (a tile is
         // built with the forced sides it was last meshed with): the agreement's meshes skip
@@ -2196,6 +2172,35 @@ mod tests {
             let d = w[0].0.abs_diff(w[1].0) + w[0].1.abs_diff(w[1].1);
             assert_eq!(d, 1, "{:?} -> {:?}", w[0], w[1]);
         }
+    }
+
+    /// The walk in P-order meets a mesh's leaves in the order a sort by their cells' Hilbert
+    /// index gives (the sort it replaced), at every level of a real tile.
+    #[test]
+    fn leaves_in_p_order_are_the_leaves_sorted_along_the_curve() {
+        let heights = srtm3_crop(257);
+        let grid = square(&heights);
+        let samples = tile_samples(&grid, 0, 0);
+        let lo = samples
+            .heights
+            .iter()
+            .fold(f32::INFINITY, |lo, &h| lo.min(h));
+        let quantiser = Quantiser::for_tile(lo, height_step(&grid).expect("step"));
+        let mut mesher = Mesher::new(&samples, &quantiser, grid.spacing_x.min(grid.spacing_y));
+        let params = BuildParams::default();
+        let mut counts = Vec::new();
+        for level in 0..params.levels {
+            mesher.refine(params.level_error(level));
+            let mut sorted = mesher.leaves();
+            sorted.sort_by_key(|q| {
+                let (x, y) = q.origin();
+                hilbert_index(TILE_CELLS / 2, x / 2, y / 2)
+            });
+            assert_eq!(mesher.leaves_in_p_order(), sorted, "level {level}");
+            counts.push(sorted.len());
+        }
+        // Coarse and fine leaves side by side, not a uniform grid the sort could not misplace.
+        assert!(counts[1] >= 16 && counts[8] > 4 * counts[1], "{counts:?}");
     }
 
     #[test]

@@ -28,6 +28,8 @@ pub const TILE_CELLS: u32 = 256;
 /// Depth of the finest cells (size 2: a fan needs a centre sample).
 const MAX_DEPTH: u32 = 7;
 const NODE_COUNT: usize = ((1usize << (2 * (MAX_DEPTH + 1))) - 1) / 3;
+/// [`Mesher::fan_error`]'s mask of a cell whose fan error is not known.
+const NO_FAN: u8 = u8::MAX;
 
 /// The samples of one tile: 257 x 257 heights in metres, padded past the data by repeating the
 /// last real row and column, plus where the real data ends.
@@ -158,6 +160,31 @@ impl Quad {
     }
 }
 
+/// Position of a cell along the Hilbert curve over `n x n` cells (`n` a power of two).
+/// Leaves sorted by it are visited depth-first with every step to an adjacent cell: the
+/// P-order traversal of the paper, figure 3.
+#[cfg(test)]
+pub(crate) fn hilbert_index(n: u32, mut x: u32, mut y: u32) -> u32 {
+    let mut d = 0;
+    let mut s = n / 2;
+    while s > 0 {
+        let rx = u32::from(x & s > 0);
+        let ry = u32::from(y & s > 0);
+        d += s * s * ((3 * rx) ^ ry);
+        if ry == 0 {
+            if rx == 1 {
+                x = s - 1 - (x & (s - 1));
+                y = s - 1 - (y & (s - 1));
+            }
+            std::mem::swap(&mut x, &mut y);
+        }
+        x &= s - 1;
+        y &= s - 1;
+        s /= 2;
+    }
+    d
+}
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Node {
     /// Inside a leaf ancestor.
@@ -189,6 +216,12 @@ pub struct Mesher<'a> {
     /// Cached fan-triangle errors per cell (NaN = not computed yet; none made until the first
     /// is asked for).
     errors: Vec<[f64; 12]>,
+    /// Per cell, the largest error of its fan as a leaf, and the fan it is of (the mask of
+    /// its present midpoints, [`NO_FAN`] for none yet): what a leaf's check looks up first,
+    /// 9 bytes a cell against the errors' 96, so that the checks of the leaves that need no
+    /// work stay within the core's cache.
+    fan_max: Vec<f64>,
+    fan_mask: Vec<u8>,
     min_spacing: f64,
     mesh_max: (u32, u32),
 }
@@ -223,6 +256,8 @@ impl<'a> Mesher<'a> {
             present: vec![false; TILE_SIZE * TILE_SIZE],
             // Made on the first error asked for: a decoder's mesher asks none.
             errors: Vec::new(),
+            fan_max: Vec::new(),
+            fan_mask: Vec::new(),
             min_spacing,
             mesh_max: samples.mesh_max(),
         };
@@ -365,6 +400,27 @@ impl<'a> Mesher<'a> {
         self.present[lattice(x, y)]
     }
 
+    /// Which of `q`'s edge midpoints are present, bit `k` for edge `k`: what its fan's
+    /// triangles depend on besides `q`.
+    fn fan_mask(&self, q: Quad) -> u8 {
+        (0..4).fold(0, |m, k| m | u8::from(self.midpoint_present(q, k)) << k)
+    }
+
+    /// The largest error of leaf `q`'s fan as it is, if known ([`Self::refine`] records it).
+    pub fn fan_error(&self, q: Quad) -> Option<f64> {
+        let i = q.index();
+        (self.fan_mask.get(i) == Some(&self.fan_mask(q))).then(|| self.fan_max[i])
+    }
+
+    fn record_fan_error(&mut self, q: Quad, mask: u8, e: f64) {
+        if self.fan_mask.is_empty() {
+            self.fan_max = vec![0.0; NODE_COUNT];
+            self.fan_mask = vec![NO_FAN; NODE_COUNT];
+        }
+        self.fan_max[q.index()] = e;
+        self.fan_mask[q.index()] = mask;
+    }
+
     /// Max deviation of fan triangle `t` of `q` from the source samples, cached.
     pub fn triangle_error(&mut self, q: Quad, t: usize) -> f64 {
         if self.errors.is_empty() {
@@ -466,8 +522,13 @@ impl<'a> Mesher<'a> {
             if self.state(q) != Node::Leaf {
                 continue;
             }
+            let mask = self.fan_mask(q);
+            if self.fan_mask.get(q.index()) == Some(&mask) && self.fan_max[q.index()] <= e {
+                continue;
+            }
+            let mut fan_max = 0.0f64;
             for k in 0..4 {
-                if self.midpoint_present(q, k) {
+                if mask & 1 << k != 0 {
                     let worst = self
                         .triangle_error(q, 4 + 2 * k)
                         .max(self.triangle_error(q, 5 + 2 * k));
@@ -475,7 +536,13 @@ impl<'a> Mesher<'a> {
                         self.split(q, &mut work);
                         continue 'next;
                     }
-                } else if self.triangle_error(q, k) > e && self.may_activate(q, e) {
+                    fan_max = fan_max.max(worst);
+                } else {
+                    let error = self.triangle_error(q, k);
+                    if error <= e || !self.may_activate(q, e) {
+                        fan_max = fan_max.max(error);
+                        continue;
+                    }
                     match self.across(q, k) {
                         Across::Free(n) => {
                             let (x, y) = q.midpoint(k);
@@ -494,6 +561,7 @@ impl<'a> Mesher<'a> {
                     continue 'next;
                 }
             }
+            self.record_fan_error(q, mask, fan_max);
         }
     }
 
@@ -545,6 +613,43 @@ impl<'a> Mesher<'a> {
         } else {
             !self.may_split(q, e)
         }
+    }
+
+    /// The current leaves in P-order: the order of their cells along the Hilbert curve over
+    /// the tile's finest cells ([`hilbert_index`]), the paper's figure 3. A depth-first walk
+    /// that visits each split cell's children in the curve's order: a cell covers one run of
+    /// the curve, so the walk meets the leaves in the order a sort by [`hilbert_index`] of any
+    /// of their cells would give, without the keys or the sort.
+    pub fn leaves_in_p_order(&self) -> Vec<Quad> {
+        let mut out = Vec::new();
+        // A cell with the orientation of the curve through it, as the two symmetries of the
+        // square that `hilbert_index` applies to the bits below a quadrant: a swap of x and y
+        // and a flip of both. They commute and each undoes itself.
+        let mut stack = vec![(Quad::ROOT, false, false)];
+        while let Some((q, swap, flip)) = stack.pop() {
+            match self.state(q) {
+                Node::Leaf => out.push(q),
+                Node::Split => {
+                    let children = q.children();
+                    // The curve's quadrants in its order, pushed last first: (0, 0), (0, 1),
+                    // (1, 1), (1, 0) in the curve's frame.
+                    for (rx, ry) in [(1u32, 0u32), (1, 1), (0, 1), (0, 0)] {
+                        let (mut cx, mut cy) = (rx ^ u32::from(flip), ry ^ u32::from(flip));
+                        if swap {
+                            std::mem::swap(&mut cx, &mut cy);
+                        }
+                        let turns = ry == 0;
+                        stack.push((
+                            children[(cx + 2 * cy) as usize],
+                            swap ^ turns,
+                            flip ^ (turns && rx == 1),
+                        ));
+                    }
+                }
+                _ => {}
+            }
+        }
+        out
     }
 
     /// The current leaves (drawn cells), in no particular order.
