@@ -430,6 +430,12 @@ impl<'a> Mesher<'a> {
         if !cached.is_nan() {
             return cached;
         }
+        if q.size() == 2 {
+            // All twelve at once: they share their nine points, and refinement asks for most.
+            let fan = self.measure_finest(q);
+            self.errors[q.index()] = fan;
+            return fan[t];
+        }
         let e = self.measure(q, t);
         self.errors[q.index()][t] = e;
         e
@@ -445,7 +451,9 @@ impl<'a> Mesher<'a> {
             tri,
             tri.map(|(x, y)| f64::from(self.mesh_heights[lattice(x, y)])),
         );
-        let mut worst = 0.0f64;
+        // Four independent maxima so the loop vectorises (a single running max cannot be
+        // reordered without fast-math), kept over the rows: max is exact in any order.
+        let mut lanes = [0.0f64; 4];
         triangle_spans(
             q,
             t,
@@ -454,27 +462,61 @@ impl<'a> Mesher<'a> {
             |y, lo, hi| {
                 let row = &self.samples.heights[lattice(0, y)..][lo as usize..=hi as usize];
                 let z0 = a + c * f64::from(y) + b * f64::from(lo);
-                // Four independent maxima so the loop vectorises (a single running max cannot be
-                // reordered without fast-math).
-                let mut lanes = [0.0f64; 4];
+                // The column's offset from the integer (exact), so the lanes do not wait on
+                // one another's sum.
                 let mut chunks = row.chunks_exact(4);
-                let mut i = 0.0;
+                let mut i = 0u32;
                 for chunk in &mut chunks {
-                    for (l, &h) in lanes.iter_mut().zip(chunk) {
-                        let d = (f64::from(h) - (z0 + b * i)).abs();
+                    for (j, (l, &h)) in lanes.iter_mut().zip(chunk).enumerate() {
+                        let d = (f64::from(h) - (z0 + b * f64::from(i + j as u32))).abs();
                         *l = if d > *l { d } else { *l };
-                        i += 1.0;
                     }
+                    i += 4;
                 }
                 for &h in chunks.remainder() {
-                    let d = (f64::from(h) - (z0 + b * i)).abs();
+                    let d = (f64::from(h) - (z0 + b * f64::from(i))).abs();
                     lanes[0] = if d > lanes[0] { d } else { lanes[0] };
-                    i += 1.0;
+                    i += 1;
                 }
-                worst = lanes.iter().fold(worst, |w, &l| if l > w { l } else { w });
             },
         );
-        worst
+        lanes.iter().fold(0.0f64, |w, &l| if l > w { l } else { w })
+    }
+
+    /// [`Self::measure`] of all twelve fan triangles of a finest cell `q`, in
+    /// [`Quad::triangle`]'s order: the same values as [`Self::measure_smallest`] of each, with
+    /// each of the cell's nine points' deviations found once.
+    fn measure_finest(&self, q: Quad) -> [f64; 12] {
+        let (mx, my) = (self.samples.data_max_x, self.samples.data_max_y);
+        let deviation = |(x, y): (u32, u32)| {
+            if x <= mx && y <= my {
+                let l = lattice(x, y);
+                f64::from((self.samples.heights[l] - self.mesh_heights[l]).abs())
+            } else {
+                0.0
+            }
+        };
+        let centre = deviation(q.centre());
+        let corners = [0, 1, 2, 3].map(|k| deviation(q.corner(k)));
+        let midpoints = [0, 1, 2, 3].map(|k| deviation(q.midpoint(k)));
+        let mut fan = [0.0f64; 12];
+        for k in 0..4 {
+            let (a, b) = (q.corner(k), q.corner(k + 1));
+            let near = centre.max(corners[k]).max(corners[(k + 1) % 4]);
+            // The full triangle holds its long edge's midpoint, off its surface.
+            let (x, y) = q.midpoint(k);
+            fan[k] = if x <= mx && y <= my {
+                let z = (f64::from(self.mesh_heights[lattice(a.0, a.1)])
+                    + f64::from(self.mesh_heights[lattice(b.0, b.1)]))
+                    * 0.5;
+                near.max((f64::from(self.samples.heights[lattice(x, y)]) - z).abs())
+            } else {
+                near
+            };
+            fan[4 + 2 * k] = centre.max(corners[k]).max(midpoints[k]);
+            fan[5 + 2 * k] = centre.max(midpoints[k]).max(corners[(k + 1) % 4]);
+        }
+        fan
     }
 
     /// [`Self::measure`] for the fan triangles of the finest cells, which hold no samples but
@@ -769,6 +811,36 @@ pub(crate) fn plane(tri: [(u32, u32); 3], z: [f64; 3]) -> (f64, f64, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The twelve errors of a finest cell found at once are those of each triangle alone, to
+    /// the bit, over cells inside the data and past its last row and column.
+    #[test]
+    fn a_finest_cells_errors_at_once_are_each_triangles() {
+        // A rough field (a hash of the position, metres), quantised at 0.1 m so every vertex
+        // is off its sample.
+        let heights: Vec<f32> = (0..TILE_SIZE * TILE_SIZE)
+            .map(|l| ((l as u32).wrapping_mul(2_654_435_761) >> 20) as f32 * 0.0137)
+            .collect();
+        let samples = TileSamples {
+            heights,
+            data_max_x: 201,
+            data_max_y: 256,
+        };
+        let mesher = Mesher::new(&samples, &Quantiser::for_tile(0.0, 0.1), 1.0);
+        let mut off_surface = 0;
+        for j in 0..128 {
+            for i in 0..128 {
+                let q = Quad { d: MAX_DEPTH, i, j };
+                let fan = mesher.measure_finest(q);
+                for (t, &e) in fan.iter().enumerate() {
+                    assert_eq!(e.to_bits(), mesher.measure(q, t).to_bits(), "{q:?} {t}");
+                    off_surface += usize::from(e > 0.05);
+                }
+            }
+        }
+        // Past the quantisation's half step: a long edge's midpoint off the surface.
+        assert!(off_surface > 20_000, "{off_surface}: too smooth to test");
+    }
 
     /// The span table visits exactly the lattice points a brute-force inside test finds, for
     /// every fan triangle of cells of several sizes, clipped or not.
