@@ -319,19 +319,33 @@ impl FifoCache {
 /// before this fan's new ones push them out (the fan stays the same triangles, same winding).
 fn rotate_ring(fan: &mut [(u32, u32)], recent: impl Fn((u32, u32)) -> bool) {
     let ring = fan.len() - 2;
-    let mut seen = [false; 8];
-    for (s, &p) in seen.iter_mut().zip(&fan[1..=ring]) {
-        *s = recent(p);
-    }
-    let run = |s: usize| (0..ring).take_while(|&i| seen[(s + i) % ring]).count();
-    let Some(start) = (0..ring).max_by_key(|&s| (run(s), std::cmp::Reverse(s))) else {
+    let Some(start) = longest_run_start(ring, |i| recent(fan[1 + i])) else {
         return;
     };
-    if start == 0 || run(start) == 0 {
-        return;
-    }
     fan[1..=ring].rotate_left(start);
     fan[ring + 1] = fan[1];
+}
+
+/// Where the ring of `ring` (at most 8) vertices starts its longest run of vertices `seen`,
+/// going round; the first such start, and none where that is 0 or nothing is seen. As a bit
+/// mask turned once per start: a fan's ring is asked this once per fan of every level.
+fn longest_run_start(ring: usize, seen: impl Fn(usize) -> bool) -> Option<usize> {
+    let full = (1u32 << ring) - 1;
+    let mask = (0..ring).fold(0u32, |m, i| m | u32::from(seen(i)) << i);
+    if mask == 0 || mask == full {
+        // Every start has the same run: the first, 0.
+        return None;
+    }
+    let mut best = (0, 0);
+    for s in 1..ring {
+        let turned = ((mask >> s) | (mask << (ring - s))) & full;
+        let run = turned.trailing_ones();
+        if run > best.0 {
+            best = (run, s);
+        }
+    }
+    // Start 0 wins its ties, and keeps the ring as it is.
+    (best.0 > mask.trailing_ones()).then_some(best.1)
 }
 
 struct LevelOut {
@@ -2201,6 +2215,25 @@ mod tests {
         }
         // Coarse and fine leaves side by side, not a uniform grid the sort could not misplace.
         assert!(counts[1] >= 16 && counts[8] > 4 * counts[1], "{counts:?}");
+    }
+
+    /// The ring's longest run found by bit masks starts where the count from every start that
+    /// it replaced says, for every ring of 3 to 8 vertices and every set of them seen.
+    #[test]
+    fn a_rings_longest_run_starts_where_counting_finds_it() {
+        let mut turned = 0;
+        for ring in 3..=8usize {
+            for mask in 0u32..1 << ring {
+                let seen = |i: usize| mask >> (i % ring) & 1 == 1;
+                let run = |s: usize| (0..ring).take_while(|&i| seen(s + i)).count();
+                let counted = (0..ring)
+                    .max_by_key(|&s| (run(s), std::cmp::Reverse(s)))
+                    .filter(|&s| s != 0 && run(s) != 0);
+                assert_eq!(longest_run_start(ring, seen), counted, "{ring} {mask:b}");
+                turned += usize::from(counted.is_some());
+            }
+        }
+        assert!(turned > 200, "{turned}");
     }
 
     #[test]

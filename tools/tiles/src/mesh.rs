@@ -293,23 +293,19 @@ impl<'a> Mesher<'a> {
     /// [`Self::from_vertices`] from the current mesh, whose vertices `is_vertex` must hold (a
     /// finer level's set holds a coarser one's): splits and activations only add.
     pub fn extend_to_vertices(&mut self, is_vertex: impl Fn((u32, u32)) -> bool) {
-        let mut changed = Vec::new();
-        // Until no leaf has a child centre among the vertices (a split's 2:1 cascade can
-        // split cells a pass has passed).
-        loop {
-            let mut split = false;
-            for q in self.leaves() {
-                let wants = q.size() >= 4
-                    && q.children()
-                        .into_iter()
-                        .any(|c| !self.outside(c) && is_vertex(c.centre()));
-                if wants && self.state(q) == Node::Leaf {
-                    self.split(q, &mut changed);
-                    split = true;
-                }
+        // Until no leaf has a child centre among the vertices: every leaf is looked at, and
+        // every leaf a split makes or changes (its children, and those of the 2:1 cascade).
+        let mut work = self.leaves();
+        while let Some(q) = work.pop() {
+            if self.state(q) != Node::Leaf || q.size() < 4 {
+                continue;
             }
-            if !split {
-                break;
+            let wants = q
+                .children()
+                .into_iter()
+                .any(|c| !self.outside(c) && is_vertex(c.centre()));
+            if wants {
+                self.split(q, &mut work);
             }
         }
         for q in self.leaves() {
