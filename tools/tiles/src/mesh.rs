@@ -28,6 +28,9 @@ pub const TILE_CELLS: u32 = 256;
 /// Depth of the finest cells (size 2: a fan needs a centre sample).
 const MAX_DEPTH: u32 = 7;
 const NODE_COUNT: usize = ((1usize << (2 * (MAX_DEPTH + 1))) - 1) / 3;
+/// Cells whose fan errors are kept: all but the finest (size 2), which come first among the
+/// indices.
+const CACHED_NODES: usize = ((1usize << (2 * MAX_DEPTH)) - 1) / 3;
 /// [`Mesher::fan_error`]'s mask of a cell whose fan error is not known.
 const NO_FAN: u8 = u8::MAX;
 
@@ -213,8 +216,8 @@ pub struct Mesher<'a> {
     nodes: Vec<Node>,
     /// Midpoint presence per lattice point.
     present: Vec<bool>,
-    /// Cached fan-triangle errors per cell (NaN = not computed yet; none made until the first
-    /// is asked for).
+    /// Cached fan-triangle errors per cell but the finest (NaN = not computed yet; none made
+    /// until the first is asked for).
     errors: Vec<[f64; 12]>,
     /// Per cell, the largest error of its fan as a leaf, and the fan it is of (the mask of
     /// its present midpoints, [`NO_FAN`] for none yet): what a leaf's check looks up first,
@@ -420,17 +423,16 @@ impl<'a> Mesher<'a> {
     /// Max deviation of fan triangle `t` of `q` from the source samples, cached.
     pub fn triangle_error(&mut self, q: Quad, t: usize) -> f64 {
         if self.errors.is_empty() {
-            self.errors = vec![[f64::NAN; 12]; NODE_COUNT];
+            self.errors = vec![[f64::NAN; 12]; CACHED_NODES];
+        }
+        if q.size() == 2 {
+            // Found again rather than kept: the finest cells are three quarters of the cells,
+            // and a table with them would not stay in the core's cache.
+            return self.measure_finest(q)[t];
         }
         let cached = self.errors[q.index()][t];
         if !cached.is_nan() {
             return cached;
-        }
-        if q.size() == 2 {
-            // All twelve at once: they share their nine points, and refinement asks for most.
-            let fan = self.measure_finest(q);
-            self.errors[q.index()] = fan;
-            return fan[t];
         }
         let e = self.measure(q, t);
         self.errors[q.index()][t] = e;
@@ -565,18 +567,22 @@ impl<'a> Mesher<'a> {
                 continue;
             }
             let mut fan_max = 0.0f64;
+            // A finest cell's twelve errors at once: refinement asks for most of them.
+            let finest = (q.size() == 2).then(|| self.measure_finest(q));
+            let error = |mesher: &mut Self, t: usize| match &finest {
+                Some(fan) => fan[t],
+                None => mesher.triangle_error(q, t),
+            };
             for k in 0..4 {
                 if mask & 1 << k != 0 {
-                    let worst = self
-                        .triangle_error(q, 4 + 2 * k)
-                        .max(self.triangle_error(q, 5 + 2 * k));
+                    let worst = error(self, 4 + 2 * k).max(error(self, 5 + 2 * k));
                     if worst > e && self.may_split(q, e) {
                         self.split(q, &mut work);
                         continue 'next;
                     }
                     fan_max = fan_max.max(worst);
                 } else {
-                    let error = self.triangle_error(q, k);
+                    let error = error(self, k);
                     if error <= e || !self.may_activate(q, e) {
                         fan_max = fan_max.max(error);
                         continue;
