@@ -644,8 +644,7 @@ fn measure_level(
             }
             _ => {}
         }
-        for &t in mesher.fan_triangles(q).as_slice() {
-            let err = mesher.triangle_error(q, t);
+        for (t, err) in mesher.fan_triangle_errors(q) {
             m.max_error = m.max_error.max(err);
             for &p in &q.triangle(t) {
                 for (k, on) in on_sides(p, mesh_max).into_iter().enumerate() {

@@ -225,6 +225,10 @@ pub struct Mesher<'a> {
     /// work stay within the core's cache.
     fan_max: Vec<f64>,
     fan_mask: Vec<u8>,
+    /// The bound that fan last passed refinement's check at (some of its triangles over it
+    /// but not to be refined): a second call at the same bound (after forced side vertices)
+    /// passes over it too.
+    fan_passed: Vec<f64>,
     min_spacing: f64,
     mesh_max: (u32, u32),
 }
@@ -261,6 +265,7 @@ impl<'a> Mesher<'a> {
             errors: Vec::new(),
             fan_max: Vec::new(),
             fan_mask: Vec::new(),
+            fan_passed: Vec::new(),
             min_spacing,
             mesh_max: samples.mesh_max(),
         };
@@ -411,13 +416,17 @@ impl<'a> Mesher<'a> {
         (self.fan_mask.get(i) == Some(&self.fan_mask(q))).then(|| self.fan_max[i])
     }
 
-    fn record_fan_error(&mut self, q: Quad, mask: u8, e: f64) {
+    /// Records leaf `q`'s fan (`mask`) as passing refinement's check at `bound`, its largest
+    /// error `error`.
+    fn record_fan_error(&mut self, q: Quad, mask: u8, error: f64, bound: f64) {
         if self.fan_mask.is_empty() {
             self.fan_max = vec![0.0; NODE_COUNT];
             self.fan_mask = vec![NO_FAN; NODE_COUNT];
+            self.fan_passed = vec![f64::NAN; NODE_COUNT];
         }
-        self.fan_max[q.index()] = e;
+        self.fan_max[q.index()] = error;
         self.fan_mask[q.index()] = mask;
+        self.fan_passed[q.index()] = bound;
     }
 
     /// Max deviation of fan triangle `t` of `q` from the source samples, cached.
@@ -563,7 +572,10 @@ impl<'a> Mesher<'a> {
                 continue;
             }
             let mask = self.fan_mask(q);
-            if self.fan_mask.get(q.index()) == Some(&mask) && self.fan_max[q.index()] <= e {
+            let i = q.index();
+            if self.fan_mask.get(i) == Some(&mask)
+                && (self.fan_max[i] <= e || self.fan_passed[i] == e)
+            {
                 continue;
             }
             let mut fan_max = 0.0f64;
@@ -605,7 +617,7 @@ impl<'a> Mesher<'a> {
                     continue 'next;
                 }
             }
-            self.record_fan_error(q, mask, fan_max);
+            self.record_fan_error(q, mask, fan_max, e);
         }
     }
 
@@ -722,6 +734,19 @@ impl<'a> Mesher<'a> {
             }
             out.push(q.corner(k));
         }
+    }
+
+    /// The fan triangles of leaf `q` ([`Self::fan_triangles`]) with their errors
+    /// ([`Self::triangle_error`]; a finest cell's found together).
+    pub fn fan_triangle_errors(&mut self, q: Quad) -> impl Iterator<Item = (usize, f64)> {
+        let fan = self.fan_triangles(q);
+        let finest = (q.size() == 2).then(|| self.measure_finest(q));
+        let errors: [f64; 8] = std::array::from_fn(|i| match (i < fan.len, &finest) {
+            (false, _) => 0.0,
+            (true, Some(all)) => all[fan.ids[i]],
+            (true, None) => self.triangle_error(q, fan.ids[i]),
+        });
+        (0..fan.len).map(move |i| (fan.ids[i], errors[i]))
     }
 
     /// The fan triangles of leaf `q` as indices into [`Quad::triangle`].
