@@ -672,10 +672,10 @@ impl<'a> Mesher<'a> {
     }
 
     /// The current leaves in P-order: the order of their cells along the Hilbert curve over
-    /// the tile's finest cells ([`hilbert_index`]), the paper's figure 3. A depth-first walk
-    /// that visits each split cell's children in the curve's order: a cell covers one run of
-    /// the curve, so the walk meets the leaves in the order a sort by [`hilbert_index`] of any
-    /// of their cells would give, without the keys or the sort.
+    /// the tile's finest cells, the paper's figure 3. A depth-first walk that visits each
+    /// split cell's children in the curve's order: a cell covers one run of the curve, so the
+    /// walk meets the leaves in the order a sort by the Hilbert index of any of their cells
+    /// would give (the tests' `hilbert_index`), without the keys or the sort.
     pub fn leaves_in_p_order(&self) -> Vec<Quad> {
         let mut out = Vec::new();
         // A cell with the orientation of the curve through it, as the two symmetries of the
