@@ -228,35 +228,76 @@ pub fn base_errors(
     while y <= y_last {
         let end = (y + per_read).min(y_last + 1);
         let rows = base.rows(y, end)?;
-        worst.par_iter_mut().zip(tiles).for_each(|(worst, t)| {
-            let x0 = t.tx as usize * span;
-            let x_last = (x0 + t.data_max.0 as usize * f).min(w - 1);
-            let lattice_max = (t.data_max.0.div_ceil(2) * 2, t.data_max.1.div_ceil(2) * 2);
-            for yy in y..end {
-                let row = &rows[(yy - y) * w..][..w];
-                let b = (yy - y0) as f64 / f as f64;
-                for (xx, &z) in row.iter().enumerate().take(x_last + 1).skip(x0) {
-                    let a = (xx - x0) as f64 / f as f64;
-                    let [(i, wi), (j, wj), (k, wk)] = corners(a, b, lattice_max);
-                    let (si, sj, sk) = (
-                        &t.surfaces[i * levels..][..levels],
-                        &t.surfaces[j * levels..][..levels],
-                        &t.surfaces[k * levels..][..levels],
-                    );
-                    for l in 0..levels {
-                        let m =
-                            wi * f64::from(si[l]) + wj * f64::from(sj[l]) + wk * f64::from(sk[l]);
-                        worst[l] = worst[l].max((f64::from(z) - m).abs());
+        // In runs of rows, each over every tile of the row, the runs in parallel: the top
+        // layers' rows hold one or two tiles, over all of the base's samples, and taken a tile
+        // to a core they left the other cores idle. A maximum is the same in any order.
+        let runs: Vec<usize> = (y..end).step_by(ROWS_A_RUN).collect();
+        let none = || vec![vec![0.0f64; levels]; tiles.len()];
+        let band = runs
+            .par_iter()
+            .map(|&from| {
+                let mut run = none();
+                for (worst, t) in run.iter_mut().zip(tiles) {
+                    for yy in from..(from + ROWS_A_RUN).min(end) {
+                        let row = &rows[(yy - y) * w..][..w];
+                        row_errors(worst, t, row, yy - y0, f, w, levels);
                     }
                 }
-            }
-        });
+                run
+            })
+            .reduce(none, |mut a, b| {
+                fold_max(&mut a, &b);
+                a
+            });
+        fold_max(&mut worst, &band);
         y = end;
     }
     Ok(worst
         .into_iter()
         .map(|w| w.into_iter().map(round_up).collect())
         .collect())
+}
+
+/// Base rows a task of [`base_errors`] measures.
+const ROWS_A_RUN: usize = 16;
+
+/// Raises each tile's and level's figure in `into` to `from`'s where that is larger.
+fn fold_max(into: &mut [Vec<f64>], from: &[Vec<f64>]) {
+    for (a, b) in into.iter_mut().zip(from) {
+        for (a, &b) in a.iter_mut().zip(b) {
+            *a = a.max(b);
+        }
+    }
+}
+
+/// [`base_errors`] of tile `t`'s levels over base row `row`, `dy` rows below the tile row's
+/// first, into `worst`: `f` base samples to a layer sample, `w` samples to a base row.
+fn row_errors(
+    worst: &mut [f64],
+    t: &Surfaces,
+    row: &[f32],
+    dy: usize,
+    f: usize,
+    w: usize,
+    levels: usize,
+) {
+    let x0 = t.tx as usize * TILE_CELLS as usize * f;
+    let x_last = (x0 + t.data_max.0 as usize * f).min(w - 1);
+    let lattice_max = (t.data_max.0.div_ceil(2) * 2, t.data_max.1.div_ceil(2) * 2);
+    let b = dy as f64 / f as f64;
+    for (xx, &z) in row.iter().enumerate().take(x_last + 1).skip(x0) {
+        let a = (xx - x0) as f64 / f as f64;
+        let [(i, wi), (j, wj), (k, wk)] = corners(a, b, lattice_max);
+        let (si, sj, sk) = (
+            &t.surfaces[i * levels..][..levels],
+            &t.surfaces[j * levels..][..levels],
+            &t.surfaces[k * levels..][..levels],
+        );
+        for l in 0..levels {
+            let m = wi * f64::from(si[l]) + wj * f64::from(sj[l]) + wk * f64::from(sk[l]);
+            worst[l] = worst[l].max((f64::from(z) - m).abs());
+        }
+    }
 }
 
 /// The smallest f32 at or above `v`.
