@@ -1980,6 +1980,17 @@ impl TileSet {
         self.compact() && self.header.version != FIRST_COMPACT_VERSION
     }
 
+    /// Another view of the same mapping, with a cache of rebuilt tiles of its own: a reader
+    /// that goes over a compact set once takes a view per part of it and drops each, so that
+    /// the tiles it rebuilt do not all stay (a 64K set's are tens of gigabytes).
+    pub fn with_own_rebuilt(&self) -> TileSet {
+        let tiles = u64::from(self.header.tiles_x) * u64::from(self.header.tiles_y);
+        TileSet {
+            rebuilt: rebuilt_cache(&self.header, tiles),
+            ..self.clone()
+        }
+    }
+
     /// A compact tile's version 3 blob, rebuilt from its first `count` levels (all of them in
     /// version 4) once and kept (see [`rebuilt`]): a blob already made from as many levels or
     /// more serves too. `check` first compares the stored bytes with their checksum (a decoder

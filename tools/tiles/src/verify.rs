@@ -155,6 +155,29 @@ fn check_decimation(layer: &TileSet, tile: &Tile, base: &Grid, report: &mut Veri
 }
 
 /// [`verify`] for one layer's tiles (the base grid's, or a pyramid layer's).
+/// [`verify_layer`]'s report of tile `i` (row-major) alone.
+fn verify_tile(set: &TileSet, source: Option<&Grid>, i: u32, levels: usize) -> VerifyReport {
+    let tiles_x = set.header().tiles_x;
+    let (tx, ty) = (i % tiles_x, i / tiles_x);
+    let mut one = VerifyReport {
+        tiles: 1,
+        recomputed_max_error: vec![0.0; levels],
+        ..Default::default()
+    };
+    match set.tile(tx, ty) {
+        Ok(tile) => {
+            check_tile(set, &tile, source, 0..tile.header.levels, &mut one);
+            check_shared_edges(set, &tile, &mut one);
+        }
+        Err(e) => one.problems.push(e.to_string()),
+    }
+    // The texture: checksum, layout and every mip's size (None: the set has none).
+    if let Err(e) = set.texture(tx, ty) {
+        one.problems.push(e.to_string());
+    }
+    one
+}
+
 fn verify_layer(set: &TileSet, source: Option<&Grid>) -> VerifyReport {
     let h = set.header();
     let mut report = VerifyReport {
@@ -171,30 +194,22 @@ fn verify_layer(set: &TileSet, source: Option<&Grid>) -> VerifyReport {
         }
     }
     // Tile by tile on every core, each into a report of its own, joined in the tiles' order
-    // (so the problems read as one pass over the rows would list them).
+    // (so the problems read as one pass over the rows would list them). A compact set's tiles
+    // are rebuilt to be checked, and a view keeps what it rebuilt: so the rows go in runs of
+    // about 1,024 tiles, each through a view of its own, dropped after it (the run's last
+    // row's southern neighbours are rebuilt again by the next run).
     use rayon::prelude::*;
     let levels = h.levels as usize;
-    let each: Vec<VerifyReport> = (0..h.tiles_x * h.tiles_y)
-        .into_par_iter()
-        .map(|i| {
-            let (tx, ty) = (i % h.tiles_x, i / h.tiles_x);
-            let mut one = VerifyReport {
-                tiles: 1,
-                recomputed_max_error: vec![0.0; levels],
-                ..Default::default()
-            };
-            match set.tile(tx, ty) {
-                Ok(tile) => {
-                    check_tile(set, &tile, source, 0..tile.header.levels, &mut one);
-                    check_shared_edges(set, &tile, &mut one);
-                }
-                Err(e) => one.problems.push(e.to_string()),
-            }
-            // The texture: checksum, layout and every mip's size (None: the set has none).
-            if let Err(e) = set.texture(tx, ty) {
-                one.problems.push(e.to_string());
-            }
-            one
+    let rows_a_run = (1024 / h.tiles_x).max(1);
+    let each: Vec<VerifyReport> = (0..h.tiles_y)
+        .step_by(rows_a_run as usize)
+        .flat_map(|ty0| {
+            let set = set.with_own_rebuilt();
+            let rows = ty0..(ty0 + rows_a_run).min(h.tiles_y);
+            (rows.start * h.tiles_x..rows.end * h.tiles_x)
+                .into_par_iter()
+                .map(|i| verify_tile(&set, source, i, levels))
+                .collect::<Vec<_>>()
         })
         .collect();
     for one in each {
