@@ -429,7 +429,8 @@ impl<'a> Mesher<'a> {
         self.fan_passed[q.index()] = bound;
     }
 
-    /// Max deviation of fan triangle `t` of `q` from the source samples, cached.
+    /// Max deviation of fan triangle `t` of `q` from the source samples, cached for cells
+    /// above the finest (whose twelve are found again, together: [`Self::measure_finest`]).
     pub fn triangle_error(&mut self, q: Quad, t: usize) -> f64 {
         if self.errors.is_empty() {
             self.errors = vec![[f64::NAN; 12]; CACHED_NODES];
