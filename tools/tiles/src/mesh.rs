@@ -449,12 +449,14 @@ impl<'a> Mesher<'a> {
         e
     }
 
-    /// Max |source - interpolated| over the real data samples in a triangle (edges included).
+    /// Max |source - interpolated| over the real data samples in a triangle (edges included)
+    /// of a cell above the finest (a finest cell's: [`Self::measure_finest`]).
     fn measure(&self, q: Quad, t: usize) -> f64 {
+        debug_assert!(
+            q.size() > 2,
+            "{q:?}: a finest cell's errors come from measure_finest"
+        );
         let tri = q.triangle(t);
-        if q.size() == 2 {
-            return self.measure_smallest(tri);
-        }
         let (a, b, c) = plane(
             tri,
             tri.map(|(x, y)| f64::from(self.mesh_heights[lattice(x, y)])),
@@ -492,7 +494,7 @@ impl<'a> Mesher<'a> {
     }
 
     /// [`Self::measure`] of all twelve fan triangles of a finest cell `q`, in
-    /// [`Quad::triangle`]'s order: the same values as [`Self::measure_smallest`] of each, with
+    /// [`Quad::triangle`]'s order: the same values as `measure_smallest` of each, with
     /// each of the cell's nine points' deviations found once.
     fn measure_finest(&self, q: Quad) -> [f64; 12] {
         let (mx, my) = (self.samples.data_max_x, self.samples.data_max_y);
@@ -527,8 +529,10 @@ impl<'a> Mesher<'a> {
         fan
     }
 
-    /// [`Self::measure`] for the fan triangles of the finest cells, which hold no samples but
-    /// their vertices and, for a full triangle, the midpoint of its long edge.
+    /// The error of one fan triangle of a finest cell, which holds no samples but its vertices
+    /// and, for a full triangle, the midpoint of its long edge: what [`Self::measure_finest`]
+    /// finds for all twelve at once (the tests' reference for it).
+    #[cfg(test)]
     fn measure_smallest(&self, tri: [(u32, u32); 3]) -> f64 {
         let (mx, my) = (self.samples.data_max_x, self.samples.data_max_y);
         let deviation = |(x, y): (u32, u32), z: f32| {
@@ -580,12 +584,8 @@ impl<'a> Mesher<'a> {
                 continue;
             }
             let mut fan_max = 0.0f64;
-            // A finest cell's twelve errors at once: refinement asks for most of them.
-            let finest = (q.size() == 2).then(|| self.measure_finest(q));
-            let error = |mesher: &mut Self, t: usize| match &finest {
-                Some(fan) => fan[t],
-                None => mesher.triangle_error(q, t),
-            };
+            let errors = FanErrors::of(self, q);
+            let error = |mesher: &mut Self, t: usize| errors.get(mesher, t);
             for k in 0..4 {
                 if mask & 1 << k != 0 {
                     let worst = error(self, 4 + 2 * k).max(error(self, 5 + 2 * k));
@@ -737,15 +737,13 @@ impl<'a> Mesher<'a> {
         }
     }
 
-    /// The fan triangles of leaf `q` ([`Self::fan_triangles`]) with their errors
-    /// ([`Self::triangle_error`]; a finest cell's found together).
+    /// The fan triangles of leaf `q` ([`Self::fan_triangles`]) with their errors ([`FanErrors`]).
     pub fn fan_triangle_errors(&mut self, q: Quad) -> impl Iterator<Item = (usize, f64)> {
         let fan = self.fan_triangles(q);
-        let finest = (q.size() == 2).then(|| self.measure_finest(q));
-        let errors: [f64; 8] = std::array::from_fn(|i| match (i < fan.len, &finest) {
-            (false, _) => 0.0,
-            (true, Some(all)) => all[fan.ids[i]],
-            (true, None) => self.triangle_error(q, fan.ids[i]),
+        let found = FanErrors::of(self, q);
+        let errors: [f64; 8] = std::array::from_fn(|i| match i < fan.len {
+            true => found.get(self, fan.ids[i]),
+            false => 0.0,
         });
         (0..fan.len).map(move |i| (fan.ids[i], errors[i]))
     }
@@ -767,6 +765,32 @@ impl<'a> Mesher<'a> {
             }
         }
         out
+    }
+}
+
+/// The errors of a leaf's fan triangles as [`Mesher::refine`] and
+/// [`Mesher::fan_triangle_errors`] read them: a finest cell's twelve found at once
+/// ([`Mesher::measure_finest`]; those who ask ask for most of them), a coarser cell's one by
+/// one through the cache ([`Mesher::triangle_error`]).
+enum FanErrors {
+    Finest([f64; 12]),
+    Cached(Quad),
+}
+
+impl FanErrors {
+    fn of(mesher: &Mesher<'_>, q: Quad) -> FanErrors {
+        match q.size() {
+            2 => FanErrors::Finest(mesher.measure_finest(q)),
+            _ => FanErrors::Cached(q),
+        }
+    }
+
+    /// The error of fan triangle `t` ([`Quad::triangle`]'s numbering).
+    fn get(&self, mesher: &mut Mesher<'_>, t: usize) -> f64 {
+        match self {
+            FanErrors::Finest(all) => all[t],
+            FanErrors::Cached(q) => mesher.triangle_error(*q, t),
+        }
     }
 }
 
@@ -861,7 +885,8 @@ mod tests {
                 let q = Quad { d: MAX_DEPTH, i, j };
                 let fan = mesher.measure_finest(q);
                 for (t, &e) in fan.iter().enumerate() {
-                    assert_eq!(e.to_bits(), mesher.measure(q, t).to_bits(), "{q:?} {t}");
+                    let one = mesher.measure_smallest(q.triangle(t));
+                    assert_eq!(e.to_bits(), one.to_bits(), "{q:?} {t}");
                     off_surface += usize::from(e > 0.05);
                 }
             }
