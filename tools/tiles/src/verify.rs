@@ -49,7 +49,7 @@ fn tolerance(e: f64) -> f64 {
 /// errors against it (a layer's against the source subsampled) and checks each layer tile's
 /// decimation error against every source sample under it.
 pub fn verify(set: &TileSet, source: Option<&Grid>) -> VerifyReport {
-    verify_in_runs(set, source, TILES_A_RUN)
+    verify_in_runs(set, source, TILES_A_RUN, &|| {})
 }
 
 /// How many tiles (whole rows of them, at least one row) [`verify`] checks through one view of
@@ -58,9 +58,15 @@ pub fn verify(set: &TileSet, source: Option<&Grid>) -> VerifyReport {
 pub const TILES_A_RUN: u32 = 1024;
 
 /// [`verify`], each layer's rows taken in runs of about `tiles_a_run` tiles (at least a row),
-/// each run through a view of its own. The report does not depend on `tiles_a_run`.
-pub fn verify_in_runs(set: &TileSet, source: Option<&Grid>, tiles_a_run: u32) -> VerifyReport {
-    let mut report = verify_layer(set, source, tiles_a_run);
+/// each run through a view of its own, calling `progress` once a tile checked (of every
+/// layer). The report does not depend on `tiles_a_run`.
+pub fn verify_in_runs(
+    set: &TileSet,
+    source: Option<&Grid>,
+    tiles_a_run: u32,
+    progress: &(dyn Fn() + Sync),
+) -> VerifyReport {
+    let mut report = verify_layer(set, source, tiles_a_run, progress);
     if set.layer_index() != 0 || (!report.problems.is_empty() && report.tiles == 0) {
         return report;
     }
@@ -82,7 +88,7 @@ pub fn verify_in_runs(set: &TileSet, source: Option<&Grid>, tiles_a_run: u32) ->
                 spacing_y: g.spacing_y * f64::from(1u32 << p),
             }
         });
-        let sub = verify_layer(&layer, grid.as_ref(), tiles_a_run);
+        let sub = verify_layer(&layer, grid.as_ref(), tiles_a_run, progress);
         report.tiles += sub.tiles;
         report.levels_checked += sub.levels_checked;
         report.problems.extend(sub.problems);
@@ -189,7 +195,12 @@ fn verify_tile(set: &TileSet, source: Option<&Grid>, i: u32, levels: usize) -> V
     one
 }
 
-fn verify_layer(set: &TileSet, source: Option<&Grid>, tiles_a_run: u32) -> VerifyReport {
+fn verify_layer(
+    set: &TileSet,
+    source: Option<&Grid>,
+    tiles_a_run: u32,
+    progress: &(dyn Fn() + Sync),
+) -> VerifyReport {
     let h = set.header();
     let mut report = VerifyReport {
         recomputed_max_error: vec![0.0; h.levels as usize],
@@ -219,7 +230,11 @@ fn verify_layer(set: &TileSet, source: Option<&Grid>, tiles_a_run: u32) -> Verif
             let rows = ty0..ty0.saturating_add(rows_a_run).min(h.tiles_y);
             (rows.start * h.tiles_x..rows.end * h.tiles_x)
                 .into_par_iter()
-                .map(|i| verify_tile(&set, source, i, levels))
+                .map(|i| {
+                    let one = verify_tile(&set, source, i, levels);
+                    progress();
+                    one
+                })
                 .collect::<Vec<_>>()
         })
         .collect();

@@ -538,8 +538,11 @@ fn verify_in_runs_of_a_row_reports_what_one_run_does() {
     let set = TileSet::open(&damaged).expect("open");
 
     for (name, set) in [("sound", &sound), ("damaged", &set)] {
-        let whole = verify_in_runs(set, Some(&grid), u32::MAX);
-        let by_row = verify_in_runs(set, Some(&grid), 1);
+        let whole = verify_in_runs(set, Some(&grid), u32::MAX, &|| {});
+        let checked = std::sync::atomic::AtomicU64::new(0);
+        let by_row = verify_in_runs(set, Some(&grid), 1, &|| {
+            checked.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        });
         eprintln!("{name}: {:#?}", by_row.problems);
         assert_eq!(by_row.problems, whole.problems, "{name}");
         assert_eq!(
@@ -548,6 +551,11 @@ fn verify_in_runs_of_a_row_reports_what_one_run_does() {
             "{name}"
         );
         assert_eq!(by_row.tiles, every_tile, "{name}");
+        assert_eq!(
+            checked.into_inner(),
+            every_tile,
+            "{name}: progress once a tile"
+        );
         assert_eq!(
             by_row.recomputed_max_error, whole.recomputed_max_error,
             "{name}"

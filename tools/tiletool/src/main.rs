@@ -139,6 +139,9 @@ enum Command {
         /// every tile of every layer must read back the same, byte for byte.
         #[arg(long)]
         against: Option<PathBuf>,
+        /// No progress bar (it appears on a terminal for a verify that takes over a second).
+        #[arg(long)]
+        quiet: bool,
         #[command(flatten)]
         read: ReadArgs,
     },
@@ -399,7 +402,8 @@ fn main() -> ExitCode {
             source,
             against,
             read,
-        } => verify(&file, &source, against.as_deref(), &read),
+            quiet,
+        } => verify(&file, &source, against.as_deref(), &read, quiet),
         Command::Export {
             file,
             tile,
@@ -867,6 +871,7 @@ fn verify(
     source: &[PathBuf],
     against: Option<&Path>,
     read: &ReadArgs,
+    quiet: bool,
 ) -> Result<ExitCode> {
     let set = tiles::TileSet::open(file)?;
     let other = against.map(tiles::TileSet::open).transpose()?;
@@ -876,7 +881,20 @@ fn verify(
         Some(read_dem(source, read)?)
     };
     let view = grid.as_ref().map(view);
-    let mut report = tiles::verify::verify(&set, view.as_ref());
+    let all_tiles: u64 = (0..=set.pyramid_layers())
+        .filter_map(|p| set.layer(p))
+        .map(|l| u64::from(l.header().tiles_x) * u64::from(l.header().tiles_y))
+        .sum();
+    let bar = Progress::new(
+        Some(all_tiles),
+        "{elapsed_precise} [{bar:40}] {pos}/{len} tiles checked ({eta} left)",
+        quiet,
+    );
+    let mut report =
+        tiles::verify::verify_in_runs(&set, view.as_ref(), tiles::verify::TILES_A_RUN, &|| {
+            bar.tick()
+        });
+    bar.bar.finish_and_clear();
     if let Some(other) = &other {
         report
             .problems
