@@ -770,7 +770,7 @@ impl<'a> Mesher<'a> {
 
 /// The errors of a leaf's fan triangles as [`Mesher::refine`] and
 /// [`Mesher::fan_triangle_errors`] read them: a finest cell's twelve found at once
-/// ([`Mesher::measure_finest`]; those who ask ask for most of them), a coarser cell's one by
+/// ([`Mesher::measure_finest`]; refinement asks for most of them), a coarser cell's one by
 /// one through the cache ([`Mesher::triangle_error`]).
 enum FanErrors {
     Finest([f64; 12]),
