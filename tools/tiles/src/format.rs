@@ -1991,6 +1991,25 @@ impl TileSet {
         }
     }
 
+    /// Drops what this view rebuilt of tile rows `rows` (a reader done with them), if the view's
+    /// rebuilt tiles are its own ([`Self::with_own_rebuilt`], no clone since); otherwise keeps
+    /// everything and says false. No tile read from the view can outlive this (`&mut self`).
+    pub fn forget_rebuilt_rows(&mut self, rows: std::ops::Range<u32>) -> bool {
+        let tiles_x = self.header.tiles_x as usize;
+        let Some(cache) = std::sync::Arc::get_mut(&mut self.rebuilt) else {
+            return false;
+        };
+        let end = (rows.end as usize * tiles_x).min(cache.len());
+        for slot in cache
+            .iter_mut()
+            .take(end)
+            .skip(rows.start as usize * tiles_x)
+        {
+            slot.take();
+        }
+        true
+    }
+
     /// A compact tile's version 3 blob, rebuilt from its first `count` levels (all of them in
     /// version 4) once and kept (see [`rebuilt`]): a blob already made from as many levels or
     /// more serves too. `check` first compares the stored bytes with their checksum (a decoder

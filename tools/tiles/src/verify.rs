@@ -52,14 +52,14 @@ pub fn verify(set: &TileSet, source: Option<&Grid>) -> VerifyReport {
     verify_in_runs(set, source, TILES_A_RUN, &|| {})
 }
 
-/// How many tiles (whole rows of them, at least one row) [`verify`] checks through one view of
-/// a compact set: a view keeps every tile it rebuilt (on the 64K mirror set a run's tiles held
-/// 0.7 to 1.6 GB).
+/// How many tiles (whole rows of them, at least one row) [`verify`] checks of a compact set
+/// before it forgets the tiles it rebuilt for them (a view keeps every tile it rebuilt; on the
+/// 64K mirror set a run's tiles held 0.7 to 1.6 GB).
 pub const TILES_A_RUN: u32 = 1024;
 
 /// [`verify`], each layer's rows taken in runs of about `tiles_a_run` tiles (at least a row),
-/// each run through a view of its own, calling `progress` once a tile checked (of every
-/// layer). The report does not depend on `tiles_a_run`.
+/// the view forgetting each run's rows after it, calling `progress` once a tile checked (of
+/// every layer). The report does not depend on `tiles_a_run`.
 pub fn verify_in_runs(
     set: &TileSet,
     source: Option<&Grid>,
@@ -218,26 +218,28 @@ fn verify_layer(
     // Tile by tile on every core, each into a report of its own, joined in the tiles' order
     // (so the problems read as one pass over the rows would list them). A compact set's tiles
     // are rebuilt to be checked, and a view keeps what it rebuilt: so the rows go in runs of
-    // about `tiles_a_run` tiles, each through a view of its own, dropped after it (the run's
-    // last row's southern neighbours are rebuilt again by the next run).
+    // about `tiles_a_run` tiles through a view of their own, which forgets each run's rows
+    // after it. The next run's first row stays: this run rebuilt it for its seams.
     use rayon::prelude::*;
     let levels = h.levels as usize;
     let rows_a_run = (tiles_a_run / h.tiles_x).max(1);
-    let each: Vec<VerifyReport> = (0..h.tiles_y)
-        .step_by(rows_a_run as usize)
-        .flat_map(|ty0| {
-            let set = set.with_own_rebuilt();
-            let rows = ty0..ty0.saturating_add(rows_a_run).min(h.tiles_y);
+    let mut view = set.with_own_rebuilt();
+    let mut each: Vec<VerifyReport> = Vec::with_capacity(h.tiles_x as usize * h.tiles_y as usize);
+    for ty0 in (0..h.tiles_y).step_by(rows_a_run as usize) {
+        let rows = ty0..ty0.saturating_add(rows_a_run).min(h.tiles_y);
+        each.par_extend(
             (rows.start * h.tiles_x..rows.end * h.tiles_x)
                 .into_par_iter()
                 .map(|i| {
-                    let one = verify_tile(&set, source, i, levels);
+                    let one = verify_tile(&view, source, i, levels);
                     progress();
                     one
-                })
-                .collect::<Vec<_>>()
-        })
-        .collect();
+                }),
+        );
+        if !view.forget_rebuilt_rows(rows) {
+            view = set.with_own_rebuilt();
+        }
+    }
     for one in each {
         report.tiles += one.tiles;
         report.levels_checked += one.levels_checked;

@@ -492,10 +492,10 @@ fn a_compact_tile_sealed_again_keeps_its_stream_and_checks_a_sample() {
     }
 }
 
-/// `verify` takes a compact set's rows in runs, each through a view of its own (a view keeps
-/// every tile it rebuilt: one view over the 64K set's 65,536 tiles ran the machine out of
-/// memory). A run's last row checks its seams against the next run's first, rebuilt again
-/// there. So a run of one row at a time must report what one run over every row reports, on
+/// `verify` takes a compact set's rows in runs, its view forgetting what it rebuilt of each
+/// run's rows after it (a view keeps every tile it rebuilt: one view over the 64K set's 65,536
+/// tiles ran the machine out of memory). A run's last row checks its seams against the next
+/// run's first, which stays. So a run of one row at a time must report what one run over every row reports, on
 /// a set with a damaged tile in its middle row and a pyramid above it. The control that the
 /// runs happened: the damaged tile is named once in each report, and the rows it checks are
 /// all there (every tile of every layer counted once).
@@ -567,6 +567,19 @@ fn verify_in_runs_of_a_row_reports_what_one_run_does() {
                 .filter(|p| p.contains("damaged.vkt") && p.contains("1,1"))
                 .count()
         };
+        // A view forgets what it rebuilt of rows it is done with, when the rebuilt tiles are
+        // its own, and reads them again after; a view whose cache another shares keeps it.
+        let mut own = set.with_own_rebuilt();
+        let first = own.blob(0, 0).map(<[u8]>::to_vec);
+        assert!(first.is_some(), "{name}");
+        let shared = own.clone();
+        assert!(
+            !own.forget_rebuilt_rows(0..1),
+            "{name}: another view shares the cache"
+        );
+        drop(shared);
+        assert!(own.forget_rebuilt_rows(0..1), "{name}");
+        assert_eq!(own.blob(0, 0).map(<[u8]>::to_vec), first, "{name}");
         match name {
             "sound" => assert!(by_row.ok(), "{:#?}", by_row.problems),
             _ => assert_eq!(
