@@ -1134,7 +1134,8 @@ pub struct TileSet {
 /// Per tile of a view, once it is first read: per count of levels `1..=levels`, the blob
 /// rebuilt from its first levels (see [`rebuilt`]) or why there is none, once asked for. A
 /// reader asks for the levels it checks, so a tile first drawn coarse rebuilds its coarse
-/// levels alone; every blob made stays while the view does (readers hold slices of them).
+/// levels alone; every blob made stays while the view does (readers hold slices of them), or
+/// until a reader done with its rows has the view forget them ([`TileSet::forget_rebuilt_rows`]).
 type RebuiltTiles = Vec<std::sync::OnceLock<Box<[Rebuilt]>>>;
 
 /// One tile's blob rebuilt from some count of its levels, or why it could not be.

@@ -218,8 +218,8 @@ fn verify_layer(
     // Tile by tile on every core, each into a report of its own, joined in the tiles' order
     // (so the problems read as one pass over the rows would list them). A compact set's tiles
     // are rebuilt to be checked, and a view keeps what it rebuilt: so the rows go in runs of
-    // about `tiles_a_run` tiles through a view of their own, which forgets each run's rows
-    // after it. The next run's first row stays: this run rebuilt it for its seams.
+    // about `tiles_a_run` tiles through one view of the layer's own, which forgets each run's
+    // rows after it. The next run's first row stays: this run rebuilt it for its seams.
     use rayon::prelude::*;
     let levels = h.levels as usize;
     let rows_a_run = (tiles_a_run / h.tiles_x).max(1);
