@@ -1982,8 +1982,9 @@ impl TileSet {
     }
 
     /// Another view of the same mapping, with a cache of rebuilt tiles of its own: a reader
-    /// that goes over a compact set once takes a view per part of it and drops each, so that
-    /// the tiles it rebuilt do not all stay (a 64K set's are tens of gigabytes).
+    /// that goes over a compact set once has it forget the rows it is done with
+    /// ([`Self::forget_rebuilt_rows`]), so that the tiles it rebuilt do not all stay (a 64K
+    /// set's are tens of gigabytes).
     pub fn with_own_rebuilt(&self) -> TileSet {
         let tiles = u64::from(self.header.tiles_x) * u64::from(self.header.tiles_y);
         TileSet {

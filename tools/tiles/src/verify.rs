@@ -171,7 +171,6 @@ fn check_decimation(layer: &TileSet, tile: &Tile, base: &Grid, report: &mut Veri
     }
 }
 
-/// [`verify`] for one layer's tiles (the base grid's, or a pyramid layer's).
 /// [`verify_layer`]'s report of tile `i` (row-major) alone.
 fn verify_tile(set: &TileSet, source: Option<&Grid>, i: u32, levels: usize) -> VerifyReport {
     let tiles_x = set.header().tiles_x;
@@ -195,6 +194,7 @@ fn verify_tile(set: &TileSet, source: Option<&Grid>, i: u32, levels: usize) -> V
     one
 }
 
+/// [`verify`] for one layer's tiles (the base grid's, or a pyramid layer's).
 fn verify_layer(
     set: &TileSet,
     source: Option<&Grid>,
