@@ -560,6 +560,55 @@ impl<'a> Mesher<'a> {
         worst
     }
 
+    /// The padded column and row (`mesh_max` past the data's last, odd, column or row): meshed
+    /// and drawn, their heights copies of the last data column's and row's. `None` where the
+    /// data reach the mesh's extent.
+    fn padding(&self) -> (Option<u32>, Option<u32>) {
+        let (mx, my) = self.mesh_max;
+        (
+            (mx > self.samples.data_max_x).then_some(mx),
+            (my > self.samples.data_max_y).then_some(my),
+        )
+    }
+
+    /// Whether leaf `q`'s closure holds a point of the padded column or row.
+    fn touches_padding(&self, q: Quad) -> bool {
+        let ((x0, y0), s) = (q.origin(), q.size());
+        let (px, py) = self.padding();
+        px.is_some_and(|px| x0 <= px && px <= x0 + s)
+            || py.is_some_and(|py| y0 <= py && py <= y0 + s)
+    }
+
+    /// Max |copied source - interpolated| over the padded column's and row's points in fan
+    /// triangle `t` of `q`. Not an error against data, so never stored as one; refinement
+    /// holds it within `e` too, so that every vertex a finer level adds, padded or not, lies
+    /// within `e` of the coarser surface (what the set's morph units are bounded by,
+    /// [`crate::units`]).
+    fn padding_error(&self, q: Quad, t: usize) -> f64 {
+        let (px, py) = self.padding();
+        let tri = q.triangle(t);
+        let (a, b, c) = plane(
+            tri,
+            tri.map(|(x, y)| f64::from(self.mesh_heights[lattice(x, y)])),
+        );
+        let deviation = |x: u32, y: u32| {
+            let z = a + b * f64::from(x) + c * f64::from(y);
+            (f64::from(self.samples.heights[lattice(x, y)]) - z).abs()
+        };
+        let mut worst = 0.0f64;
+        let (mx, my) = self.mesh_max;
+        triangle_spans(q, t, mx, my, |y, lo, hi| {
+            if Some(y) == py {
+                for x in lo..=hi {
+                    worst = worst.max(deviation(x, y));
+                }
+            } else if let Some(px) = px.filter(|&px| lo <= px && px <= hi) {
+                worst = worst.max(deviation(px, y));
+            }
+        });
+        worst
+    }
+
     fn may_activate(&self, q: Quad, e: f64) -> bool {
         f64::from(q.size() / 2) * self.min_spacing >= e
     }
@@ -585,7 +634,11 @@ impl<'a> Mesher<'a> {
             }
             let mut fan_max = 0.0f64;
             let errors = FanErrors::of(self, q);
-            let error = |mesher: &mut Self, t: usize| errors.get(mesher, t);
+            let padded = self.touches_padding(q);
+            let error = |mesher: &mut Self, t: usize| match padded {
+                false => errors.get(mesher, t),
+                true => errors.get(mesher, t).max(mesher.padding_error(q, t)),
+            };
             for k in 0..4 {
                 if mask & 1 << k != 0 {
                     let worst = error(self, 4 + 2 * k).max(error(self, 5 + 2 * k));
