@@ -22,6 +22,7 @@ use crate::pack::{morph_offset, morph_unit, pack};
 use crate::pyramid::{base_errors, decimation_errors, level_floor, Decimated, Surfaces};
 use crate::quantise::{lattice_step, Quantiser};
 use crate::texture::{self, Prepared, Source, Texturing};
+use crate::units::{cell_spans, deviation_bounds, layer_bounds, CellSpans};
 use crate::BuildError;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -1268,11 +1269,13 @@ pub fn build_tileset_textured(
     build_tileset_from(grid, params, texturing, meta, out, progress)
 }
 
-/// What a first pass over the heights finds: the range, and the height lattice's step.
+/// What a first pass over the heights finds: the range, the height lattice's step, and the
+/// cell spans that bound the set's morph units ([`crate::units`]).
 pub(crate) struct Scanned {
     pub lo: f32,
     pub hi: f32,
     pub step: f32,
+    pub spans: CellSpans,
 }
 
 /// One pass over the grid, band by band: refuses a non-finite height and finds the range of
@@ -1280,6 +1283,7 @@ pub(crate) struct Scanned {
 pub(crate) fn scan(bands: &Bands) -> Result<Scanned, BuildError> {
     let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
     let (mut max_range, mut max_abs) = (0.0f32, 0.0f32);
+    let mut spans = CellSpans::default();
     for b in 0..bands.count() {
         let band = bands.load(b, 0)?;
         if let Some(bad) = band.rows.iter().find(|h| !h.is_finite()) {
@@ -1295,11 +1299,16 @@ pub(crate) fn scan(bands: &Bands) -> Result<Scanned, BuildError> {
         let (range, abs) = tile_ranges(&grid, bands.tiles.0, band.tile_rows.clone());
         max_range = max_range.max(range);
         max_abs = max_abs.max(abs);
+        let found = cell_spans(&grid, bands.tiles.0, band.tile_rows.clone());
+        for (s, f) in spans.iter_mut().zip(found) {
+            *s = s.max(f);
+        }
     }
     Ok(Scanned {
         lo,
         hi,
         step: lattice_step(max_range, max_abs),
+        spans,
     })
 }
 
@@ -1325,7 +1334,7 @@ pub(crate) fn set_header(
     params: &BuildParams,
     texturing: Option<&Texturing>,
     meta: &TileSetMeta,
-    &Scanned { lo, hi, step }: &Scanned,
+    &Scanned { lo, hi, step, .. }: &Scanned,
 ) -> Result<FileHeader, BuildError> {
     let (tiles_x, tiles_y) = tile_count(shape.width, shape.height).map_err(BuildError::Params)?;
     let mut description = [0u8; 128];
@@ -1400,7 +1409,7 @@ pub fn build_tileset_from(
     let (tiles_x, tiles_y) = tile_count(shape.width, shape.height).map_err(BuildError::Params)?;
     let bands = Bands::new(heights, (tiles_x, tiles_y));
     let scanned = scan(&bands)?;
-    let Scanned { lo, hi, step } = scanned;
+    let Scanned { lo, hi, step, .. } = scanned;
     let header = set_header(&shape, params, texturing, meta, &scanned)?;
     // The relief's tint spans the base grid's heights in every layer, so that colours match.
     let prepared = texturing.map(|t| (Prepared::new((lo, hi), &t.source), t.layout));
@@ -1419,10 +1428,12 @@ pub fn build_tileset_from(
             .unwrap_or_default(),
         ..Default::default()
     };
+    let spacing = shape.spacing_x.min(shape.spacing_y);
     let base = Layer {
         index: 0,
         bands: &bands,
         step,
+        bounds: deviation_bounds(params, spacing, step, &scanned.spans),
         decimation: None,
         prepared: prepared.as_ref().map(|(p, l)| (p.for_layer(0), *l)),
         base: None,
@@ -1485,6 +1496,7 @@ pub(crate) fn build_pyramid(
             index: p,
             bands: &layer_bands,
             step: scanned.step,
+            bounds: layer_bounds(params),
             decimation: Some(&decimation),
             prepared: prepared.map(|(s, l)| (s.for_layer(p), *l)),
             base: Some(heights),
@@ -1511,6 +1523,8 @@ pub(crate) struct Layer<'a> {
     pub bands: &'a Bands<'a>,
     /// The layer's height lattice step.
     pub step: f32,
+    /// Per level, the floor of its morph units ([`crate::units`]).
+    pub bounds: Vec<f64>,
     /// Per tile (row-major), its decimation error (None: the base grid, all 0).
     pub decimation: Option<&'a [f32]>,
     pub prepared: Option<(Prepared<'a>, texture::Layout)>,
@@ -1532,7 +1546,7 @@ fn build_layer(
         let agreed = agree_sides(
             layer.bands,
             params,
-            layer.step,
+            (layer.step, &layer.bounds),
             layer.decimation,
             Remesh::Changed,
         )?;
@@ -1714,8 +1728,8 @@ fn write_tile(
 /// tile holds its neighbour's set and the neighbour holds its, so the two are equal. A tile
 /// is meshed again only when its forced sides changed, since a mesh is a function of them
 /// (the rule before meshed every tile next to a change: a third more meshes, the same
-/// result). The morph units are then the largest any tile needs per level, so a side
-/// vertex's offsets (same surface, same height) are the same bytes in both tiles.
+/// result). The morph units are then the set's, the same for every tile ([`units_of`]), so a
+/// side vertex's offsets (same surface, same height) are the same bytes in both tiles.
 ///
 /// The sides settled are the least fixed point of "a tile's sides are those of its mesh with
 /// its own and its neighbours' sides forced": the passes climb to it from nothing, and reach
@@ -1724,30 +1738,31 @@ fn write_tile(
 fn agree_sides(
     bands: &Bands,
     params: &BuildParams,
-    step: f32,
+    (step, bounds): (f32, &[f64]),
     floors: Option<&[f32]>,
     remesh: Remesh,
 ) -> Result<Agreed, BuildError> {
     let mut agreed = settle(bands, params, step, floors, remesh, 0..bands.tiles.1, None)?;
-    agreed.units = units_of(params, &agreed.deviation);
+    agreed.units = units_of(bounds, &agreed.deviation);
     Ok(agreed)
 }
 
 /// Per level, the morph unit of a set whose tiles' deviations are `deviation` (per tile, per
-/// level): the largest any tile needs, so that a shared vertex's offsets are the same bytes
-/// in both its tiles.
+/// level): the largest any tile needs, and at least the layer's bound (`bounds`,
+/// [`crate::units`]), so that a shared vertex's offsets are the same bytes in both its tiles
+/// and a shard, seeing some of the tiles, finds the set's units.
 pub(crate) fn units_of<'d>(
-    params: &BuildParams,
+    bounds: &[f64],
     deviation: impl IntoIterator<Item = &'d Vec<f64>> + Clone,
 ) -> Vec<f64> {
-    (0..params.levels as usize)
+    (0..bounds.len())
         .map(|k| {
             let widest = deviation
                 .clone()
                 .into_iter()
                 .map(|d| d[k])
                 .fold(0.0, f64::max);
-            morph_unit(params.level_error(k as u32), widest)
+            morph_unit(bounds[k], widest)
         })
         .collect()
 }
@@ -2126,7 +2141,9 @@ mod tests {
         let params = BuildParams::default();
         let step = height_step(&grid).expect("step");
         let bands = Bands::new(&grid, (4, 4));
-        let agree = |remesh| agree_sides(&bands, &params, step, None, remesh).expect("agreed");
+        let bounds = layer_bounds(&params);
+        let agree =
+            |remesh| agree_sides(&bands, &params, (step, &bounds), None, remesh).expect("agreed");
         let (fewer, every) = (agree(Remesh::Changed), agree(Remesh::NextToChange));
         let jacobi = agree(Remesh::FromThePassBefore);
         assert!(fewer.passes > 1, "the sides did not need agreeing: no test");

@@ -27,6 +27,7 @@ pub mod quantise;
 pub mod rings;
 pub mod shard;
 pub mod texture;
+pub mod units;
 pub mod verify;
 
 pub use build::{

@@ -10,12 +10,13 @@
 //! meshes `k < j`, so for each of them it stores where that mesh's surface lies at its position:
 //! `height_on_k = height + offset_k * unit_k`, with `offset_k` an `i8` and `unit_k` the
 //! `morph_unit` of level `k`'s [`LevelEntry`](crate::format::LevelEntry). The unit is
-//! `max(e_k, d_k) / 127`, where `d_k` is the largest distance of any finer vertex from level
-//! `k`'s surface, measured by the builder; every offset therefore fits in `-127..=127`, also
-//! where the spacing rule let level `k` exceed `e_k`. Inside the data `d_k` is at most the
-//! measured error plus half a quantisation step (the vertex is a source sample), so in the
-//! common case the unit is `e_k / 127`. The offset's own rounding (half a unit) only touches
-//! heights mid-morph, never the stored level meshes, whose error is measured exactly.
+//! `max(b_k, d_k) / 127`, where `d_k` is the largest distance of any finer vertex from level
+//! `k`'s surface, measured by the builder, and `b_k` (with shared sides) a bound on it from
+//! the input's scan ([`crate::units`]: `e_k` plus two lattice steps, or where the spacing rule
+//! stops refinement the heights' range over the cells it leaves), so that every shard of a
+//! distributed build finds the same unit; every offset fits in `-127..=127`. The offset's own
+//! rounding (half a unit) only touches heights mid-morph under the rules that read the
+//! offsets, never the stored level meshes, whose error is measured exactly.
 
 pub const COORD_BITS: u32 = 9;
 pub const HEIGHT_BITS: u32 = 14;

@@ -6,10 +6,11 @@
 //!
 //! A tile's bytes depend on more than its own samples:
 //!
-//! - **The height range and the height lattice's step**, from a scan of the whole grid. A
-//!   shard scans the whole input, as the build does, unless it is given every shard's scan
-//!   ([`ShardScan`], `tiletool build --shard K/N --scan-only`, which reads only shard K's
-//!   rows): their extremes are the whole grid's, so the step is the same.
+//! - **The height range, the height lattice's step and the cell spans** (the morph units'
+//!   bounds, below), from a scan of the whole grid. A shard scans the whole input, as the
+//!   build does, unless it is given every shard's scan ([`ShardScan`], `tiletool build
+//!   --shard K/N --scan-only`, which reads only shard K's rows): their extremes are the whole
+//!   grid's, so the step and the spans are the same.
 //! - **The void fill**, which is global (`dem::banded`): the reader's open plans it, as for a
 //!   build. With scans, each scan carries its rows' share of the plan's pass ([`pull_rows`]),
 //!   and the shares join into the pass's plan. A fill changes the tiles' ranges, so a grid
@@ -29,9 +30,11 @@
 //!   build's. Where it does not (a cascade longer than the halo), the merge resumes the passes
 //!   from that state, reading the input again, and climbs to the same point
 //!   ([`crate::build::settle`]); the tiles whose forced sides changed are built again there.
-//! - **The morph units**: per level, the largest any tile needs. A part records its own
-//!   tiles' deviations and the units its blobs were sealed with; where the set's units are
-//!   larger, the merge seals those tiles again from their own vertices
+//! - **The morph units**: per level, a bound from the scan ([`crate::units`]), raised by a
+//!   tile whose deviation passes it. So a shard, which sees the scan and its own tiles, finds
+//!   the set's units unless a tile elsewhere passes the bound. A part records its own
+//!   tiles' deviations, the bounds and the units its blobs were sealed with; where the set's
+//!   units are larger, the merge seals those tiles again from their own vertices
 //!   ([`crate::build::rebuild_tile`], which makes the build's bytes from a tile's vertex
 //!   sets; a compact tile keeps its stream, [`reseal_compact_tile`]).
 //!
@@ -46,13 +49,14 @@
 //! Little-endian: `PART_MAGIC`, the part format's version, the shard's index and count and
 //! its halo, the recipe (the inputs and options, as text: parts of one set must hold the
 //! same), the set's header as the writer is given it, the owned tile rows, the units its
-//! blobs were sealed with, the agreement's passes and meshes, then per owned tile (row-major)
+//! blobs were sealed with and the bounds under them (from the scan, [`crate::units`]), the
+//! agreement's passes and meshes, then per owned tile (row-major)
 //! its forced sides and sides (bitmaps), its deviations, its blob (with compact levels, the
 //! bytes the set stores, [`compact_tile`]: compacted on the shard, copied by the merge) and
 //! its texture; last, the crc32 of everything before it and `END_MAGIC`. It is written to a
 //! temporary file and renamed when complete, so a shard killed at any point leaves no part
-//! that reads as whole. Version 2 (the compact bytes); version 1 parts held version 3 blobs
-//! and are refused.
+//! that reads as whole. Version 3 (the bounds); version 2 parts held no bounds and version 1
+//! parts version 3 blobs, and both are refused.
 
 use std::io::{BufWriter, Write};
 use std::ops::Range;
@@ -67,6 +71,7 @@ use crate::format::{
     TileSetWriter, FLAG_COMPACT_LEVELS, FLAG_SHARED_SIDES,
 };
 use crate::texture::{Prepared, Source, Texturing};
+use crate::units::{cell_spans, deviation_bounds, CellSpans, CELL_SIZES};
 use crate::BuildError;
 
 /// The first bytes of a part file.
@@ -76,7 +81,7 @@ const END_MAGIC: [u8; 8] = *b"VKTPEND\0";
 /// Where a part's blobs start: a multiple of this many bytes from the file's start.
 const ALIGN: usize = 16;
 /// The part format's version.
-pub const PART_VERSION: u32 = 2;
+pub const PART_VERSION: u32 = 3;
 /// Tile rows beyond its own that a shard settles the sides over, by default. On the sets
 /// measured (bench/README.md, "Distributed builds") one row already left no seam to settle
 /// again in the merge; two give margin for longer cascades at the cost of about `4 / rows`
@@ -188,6 +193,8 @@ pub fn build_shard(
         None => scan(&Bands::new(heights, (tiles_x, tiles_y)))?,
     };
     let header = set_header(&shape, params, texturing, meta, &scanned)?;
+    let spacing = shape.spacing_x.min(shape.spacing_y);
+    let bounds = deviation_bounds(params, spacing, scanned.step, &scanned.spans);
     let window = rows.start.saturating_sub(halo)..(rows.end + halo).min(tiles_y);
     // The agreement reads the window's rows, the build the shard's own: no band holds more.
     let (around, own) = (
@@ -204,11 +211,11 @@ pub fn build_shard(
             window.clone(),
             None,
         )?;
-        // Sealed with the units its own tiles need: the merge seals again where the set's
-        // are larger.
+        // Sealed with the units its own tiles need, at least the scan's bounds: the merge
+        // seals again where the set's are larger, which the bounds leave to tiles past them.
         let own = (rows.start - window.start) as usize * tiles_x as usize;
         let count = rows.len() * tiles_x as usize;
-        agreed.units = units_of(params, &agreed.deviation[own..own + count]);
+        agreed.units = units_of(&bounds, &agreed.deviation[own..own + count]);
         Some(agreed)
     } else {
         None
@@ -220,6 +227,7 @@ pub fn build_shard(
         index: 0,
         bands: &own,
         step: scanned.step,
+        bounds: bounds.clone(),
         decimation: None,
         prepared: prepared.as_ref().map(|(p, l)| (p.for_layer(0), *l)),
         base: None,
@@ -238,6 +246,9 @@ pub fn build_shard(
     let units = agreed.as_ref().map(|a| a.units.clone()).unwrap_or_default();
     for level in 0..params.levels as usize {
         part.f64(units.get(level).copied().unwrap_or(0.0))?;
+    }
+    for &b in &bounds {
+        part.f64(b)?;
     }
     part.u32(agreed.as_ref().map_or(0, |a| a.passes))?;
     part.u64(agreed.as_ref().map_or(0, |a| a.meshes))?;
@@ -320,13 +331,15 @@ pub struct ShardScan {
     pub hi: f32,
     pub max_range: f32,
     pub max_abs: f32,
+    /// The cell spans of its tile rows ([`crate::units`]).
+    pub spans: CellSpans,
     pub voids: u64,
     pub fill: Option<String>,
 }
 
 /// The first line of a scan file, with its version; its first bytes are [`SCAN_MAGIC`].
-/// Version 1 held no fill.
-const SCAN_HEAD: &str = "VKTSCAN1 vkterrain shard scan, version 2";
+/// Version 1 held no fill, version 2 no cell spans.
+const SCAN_HEAD: &str = "VKTSCAN1 vkterrain shard scan, version 3";
 /// The first bytes of a scan file.
 pub const SCAN_MAGIC: [u8; 8] = *b"VKTSCAN1";
 
@@ -338,10 +351,12 @@ pub const SCAN_MAGIC: [u8; 8] = *b"VKTSCAN1";
 pub struct ShardRanges {
     pub max_range: f32,
     pub max_abs: f32,
+    pub spans: CellSpans,
 }
 
 /// The first line of a ranges file; its first bytes are [`RANGES_MAGIC`].
-const RANGES_HEAD: &str = "VKTRANGE vkterrain shard ranges, version 1";
+/// Version 1 held no cell spans.
+const RANGES_HEAD: &str = "VKTRANGE vkterrain shard ranges, version 2";
 /// The first bytes of a ranges file.
 pub const RANGES_MAGIC: [u8; 8] = *b"VKTRANGE";
 
@@ -406,6 +421,18 @@ fn height_of(v: &str) -> Result<f32, String> {
         .map_err(|_| format!("a bad height `{v}`"))
 }
 
+/// Cell spans as heights ([`height_text`]) joined by commas.
+fn spans_text(spans: &CellSpans) -> String {
+    spans.map(height_text).join(",")
+}
+
+fn spans_of(v: &str) -> Result<CellSpans, String> {
+    let spans: Vec<f32> = v.split(',').map(height_of).collect::<Result<_, _>>()?;
+    spans
+        .try_into()
+        .map_err(|_| format!("not {CELL_SIZES} cell spans"))
+}
+
 impl ShardScan {
     /// The scan file: its figures, the fill's share (`-` for none), the input's recipe.
     pub fn to_text(&self, shard: Shard, recipe: &str) -> String {
@@ -414,6 +441,7 @@ impl ShardScan {
             ("hi", height_text(self.hi)),
             ("max-range", height_text(self.max_range)),
             ("max-abs", height_text(self.max_abs)),
+            ("spans", spans_text(&self.spans)),
             ("voids", self.voids.to_string()),
             ("fill", self.fill.clone().unwrap_or_else(|| "-".into())),
         ];
@@ -422,36 +450,40 @@ impl ShardScan {
 
     /// A scan file read back: its shard, figures and recipe.
     pub fn from_text(text: &str) -> Result<(Shard, ShardScan, String), String> {
-        let names = ["lo", "hi", "max-range", "max-abs", "voids", "fill"];
+        let names = ["lo", "hi", "max-range", "max-abs", "spans", "voids", "fill"];
         let (shard, v, recipe) = record_fields(text, SCAN_HEAD, &names)?;
         let scan = ShardScan {
             lo: height_of(&v[0])?,
             hi: height_of(&v[1])?,
             max_range: height_of(&v[2])?,
             max_abs: height_of(&v[3])?,
-            voids: v[4].parse().map_err(|_| "a bad void count")?,
-            fill: (v[5] != "-").then(|| v[5].clone()),
+            spans: spans_of(&v[4])?,
+            voids: v[5].parse().map_err(|_| "a bad void count")?,
+            fill: (v[6] != "-").then(|| v[6].clone()),
         };
         Ok((shard, scan, recipe))
     }
 }
 
 impl ShardRanges {
-    /// The ranges file: the two figures, then the input's recipe.
+    /// The ranges file: the figures, then the input's recipe.
     pub fn to_text(&self, shard: Shard, recipe: &str) -> String {
         let fields = [
             ("max-range", height_text(self.max_range)),
             ("max-abs", height_text(self.max_abs)),
+            ("spans", spans_text(&self.spans)),
         ];
         record_text(RANGES_HEAD, shard, &fields, recipe)
     }
 
     /// A ranges file read back: its shard, figures and recipe.
     pub fn from_text(text: &str) -> Result<(Shard, ShardRanges, String), String> {
-        let (shard, v, recipe) = record_fields(text, RANGES_HEAD, &["max-range", "max-abs"])?;
+        let names = ["max-range", "max-abs", "spans"];
+        let (shard, v, recipe) = record_fields(text, RANGES_HEAD, &names)?;
         let ranges = ShardRanges {
             max_range: height_of(&v[0])?,
             max_abs: height_of(&v[1])?,
+            spans: spans_of(&v[2])?,
         };
         Ok((shard, ranges, recipe))
     }
@@ -464,6 +496,7 @@ pub struct Scans {
     pub hi: f32,
     pub max_range: f32,
     pub max_abs: f32,
+    pub spans: CellSpans,
     pub voids: u64,
 }
 
@@ -477,6 +510,7 @@ impl Scans {
                 hi: first.hi,
                 max_range: 0.0,
                 max_abs: 0.0,
+                spans: CellSpans::default(),
                 voids: 0,
             },
             |a, s| Scans {
@@ -484,6 +518,7 @@ impl Scans {
                 hi: a.hi.max(s.hi),
                 max_range: a.max_range.max(s.max_range),
                 max_abs: a.max_abs.max(s.max_abs),
+                spans: widest(&a.spans, &s.spans),
                 voids: a.voids + s.voids,
             },
         ))
@@ -494,6 +529,9 @@ impl Scans {
         Scans {
             max_range: ranges.iter().fold(0.0, |m, r| m.max(r.max_range)),
             max_abs: ranges.iter().fold(0.0, |m, r| m.max(r.max_abs)),
+            spans: ranges
+                .iter()
+                .fold(CellSpans::default(), |m, r| widest(&m, &r.spans)),
             ..self
         }
     }
@@ -504,8 +542,14 @@ impl Scans {
             lo: self.lo,
             hi: self.hi,
             step: crate::quantise::lattice_step(self.max_range, self.max_abs),
+            spans: self.spans,
         }
     }
+}
+
+/// The larger of two cell spans, size by size.
+fn widest(a: &CellSpans, b: &CellSpans) -> CellSpans {
+    std::array::from_fn(|i| a[i].max(b[i]))
 }
 
 /// Grid rows whose share of the void fill's pass a shard's scan pulls: its tile rows' samples
@@ -543,22 +587,29 @@ fn grid_rows(
     Ok((grid, rows.end == tiles_y))
 }
 
-/// The largest tile range and absolute height over shard `shard`'s tile rows, reading only
-/// their rows of `heights` (as stored: meaningful when they hold no void).
-pub fn tile_ranges(heights: &dyn Heights, shard: Shard) -> Result<(f32, f32), BuildError> {
+/// The largest tile range and absolute height, and the cell spans ([`crate::units`]), over
+/// shard `shard`'s tile rows, reading only their rows of `heights` (as stored: meaningful when
+/// they hold no void).
+pub fn tile_ranges(heights: &dyn Heights, shard: Shard) -> Result<ShardRanges, BuildError> {
     let shape = heights.shape();
     let tiles = tile_count(shape.width, shape.height).map_err(BuildError::Params)?;
     let rows = shard.rows(tiles.1);
     let bands = Bands::within(heights, tiles, rows);
-    let (mut max_range, mut max_abs) = (0.0f32, 0.0f32);
+    let mut found = ShardRanges {
+        max_range: 0.0,
+        max_abs: 0.0,
+        spans: CellSpans::default(),
+    };
     for b in 0..bands.count() {
         let band = bands.load(b, 0)?;
         let grid = band.grid(&shape);
         let (range, abs) = crate::build::tile_ranges(&grid, tiles.0, band.tile_rows.clone());
-        max_range = max_range.max(range);
-        max_abs = max_abs.max(abs);
+        found.max_range = found.max_range.max(range);
+        found.max_abs = found.max_abs.max(abs);
+        let spans = cell_spans(&grid, tiles.0, band.tile_rows.clone());
+        found.spans = widest(&found.spans, &spans);
     }
-    Ok((max_range, max_abs))
+    Ok(found)
 }
 
 /// A part file being written: to its temporary name, checksummed as it goes, renamed when
@@ -661,6 +712,8 @@ pub struct Part {
     pub levels: u32,
     /// The units its blobs were sealed with (0s with independent sides).
     pub units: Vec<f64>,
+    /// Per level, the floor of the set's morph units from the input's scan ([`crate::units`]).
+    pub bounds: Vec<f64>,
     pub agreement_passes: u32,
     pub agreement_meshes: u64,
     map: memmap2::Mmap,
@@ -678,6 +731,7 @@ struct Preamble {
     tiles_x: u32,
     levels: u32,
     units: Vec<f64>,
+    bounds: Vec<f64>,
     passes: u32,
     meshes: u64,
     tiles: Vec<usize>,
@@ -796,6 +850,7 @@ impl Part {
             tiles_x: p.tiles_x,
             levels: p.levels,
             units: p.units,
+            bounds: p.bounds,
             agreement_passes: p.passes,
             agreement_meshes: p.meshes,
             map,
@@ -839,6 +894,7 @@ impl Part {
             ));
         }
         let units = (0..levels).map(|_| c.f64()).collect::<Result<_, _>>()?;
+        let bounds = (0..levels).map(|_| c.f64()).collect::<Result<_, _>>()?;
         let (passes, meshes) = (c.u32()?, c.u64()?);
         let mut tiles = Vec::new();
         for _ in 0..(r1 - r0) as usize * tiles_x as usize {
@@ -861,6 +917,7 @@ impl Part {
             tiles_x,
             levels,
             units,
+            bounds,
             passes,
             meshes,
             tiles,
@@ -996,6 +1053,12 @@ pub fn merge(
                 first.path.display()
             )));
         }
+        if part.bounds != first.bounds {
+            return Err(refuse(format!(
+                "its scan's morph unit bounds differ from {}'s (the input changed between shards?)",
+                first.path.display()
+            )));
+        }
         let slot = &mut by_index[part.shard.index as usize];
         if let Some(other) = slot {
             return Err(refuse(format!(
@@ -1073,7 +1136,7 @@ pub fn merge(
                 Some(start),
             )?;
             summary.remeshed = agreed.meshes;
-            agreed.units = units_of(&params, &agreed.deviation);
+            agreed.units = units_of(&first.bounds, &agreed.deviation);
             let changed: Vec<usize> = (0..count)
                 .filter(|&t| agreed.forced[t] != recorded[t])
                 .collect();
@@ -1083,6 +1146,7 @@ pub fn merge(
                     index: 0,
                     bands: &bands,
                     step,
+                    bounds: first.bounds.clone(),
                     decimation: None,
                     prepared: None,
                     base: None,
@@ -1110,7 +1174,7 @@ pub fn merge(
             }
             deviation = agreed.deviation;
         }
-        units = units_of(&params, &deviation);
+        units = units_of(&first.bounds, &deviation);
     }
     let mut writer = TileSetWriter::create(out, header)?;
     let step = header.height_step;

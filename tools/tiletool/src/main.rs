@@ -96,13 +96,13 @@ enum Command {
         /// every shard's ranges in DIR too (`--ranges-only`).
         #[arg(long, requires = "shard", value_name = "DIR")]
         scans: Option<PathBuf>,
-        /// Only scan shard K/N's rows of the input (their range of heights, tile ranges and
-        /// voids, and the void fill's share of the pass, reading only those rows) into
+        /// Only scan shard K/N's rows of the input (their range of heights, tile ranges, cell
+        /// spans and voids, and the void fill's share of the pass, reading only those rows) into
         /// OUTPUT, by convention DIR/scan-K-of-N.vktscan, for the shards' `--scans DIR`.
         #[arg(long, requires = "shard", conflicts_with = "scans")]
         scan_only: bool,
         /// With --scans: only fill shard K/N's rows as the scans plan and write their tile
-        /// ranges into OUTPUT, by convention DIR/ranges-K-of-N.vktranges (the second stage of
+        /// ranges and cell spans into OUTPUT, by convention DIR/ranges-K-of-N.vktranges (the second stage of
         /// a scanned build, which an input with voids needs).
         #[arg(long, requires = "scans", conflicts_with = "scan_only")]
         ranges_only: bool,

@@ -334,12 +334,13 @@ pub fn scan(input: &InputArgs, shard: tiles::shard::Shard, output: &Path) -> Res
     let read = dem::scan_rows(&input.inputs, &opts, rows, pull)?;
     let per_band = default_band_rows(stream.width, Some((shard, stream.height)));
     let heights = StreamHeights { stream, per_band };
-    let (max_range, max_abs) = tiles::shard::tile_ranges(&heights, shard)?;
+    let ranges = tiles::shard::tile_ranges(&heights, shard)?;
     let found = tiles::shard::ShardScan {
         lo: read.lo,
         hi: read.hi,
-        max_range,
-        max_abs,
+        max_range: ranges.max_range,
+        max_abs: ranges.max_abs,
+        spans: ranges.spans,
         voids: read.voids,
         fill: read.pulled.map(|p| p.to_line()),
     };
@@ -370,13 +371,13 @@ pub fn ranges(
         None => tiles::shard::ShardRanges {
             max_range: own.max_range,
             max_abs: own.max_abs,
+            spans: own.spans,
         },
         Some(plan) => {
             let per_band = default_band_rows(stream.width, Some((shard, stream.height)));
             let stream = stream.with_plan(plan);
             let heights = StreamHeights { stream, per_band };
-            let (max_range, max_abs) = tiles::shard::tile_ranges(&heights, shard)?;
-            tiles::shard::ShardRanges { max_range, max_abs }
+            tiles::shard::tile_ranges(&heights, shard)?
         }
     };
     tiles::format::write_atomically(output, figures.to_text(shard, &ours).as_bytes())
