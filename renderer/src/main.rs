@@ -98,6 +98,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Terrain::open_layer(&cli.tileset, cli.layer)?
     };
     let open_ms = opening.elapsed().as_secs_f64() * 1000.0;
+    if cli.morph_shader != crate::cli::MorphShaderArg::Hierarchical {
+        terrain.read_stored_offsets();
+    }
     if cli.pyramid && terrain.top() == 0 {
         bail!(
             "{}: --pyramid: the tile set has no pyramid (build it with tiletool build --pyramid)",

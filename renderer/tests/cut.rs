@@ -456,10 +456,7 @@ fn a_layer_tiles_table_ends_at_its_last_level_that_adds_vertices() {
             tile.tx,
             tile.ty
         );
-        let errors: Vec<f32> = levels
-            .iter()
-            .map(|l| l.max_error + 0.5 * l.morph_unit)
-            .collect();
+        let errors: Vec<f32> = levels.iter().map(|l| l.max_error).collect();
         for (k, e) in errors.iter().enumerate().take(table.levels) {
             assert!(table.errors[k] >= *e, "level {k}: {table:?}");
         }

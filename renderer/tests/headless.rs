@@ -1554,7 +1554,8 @@ fn the_gpus_morphed_heights_equal_the_cpu_mirror() {
 /// The previous per-vertex rule's two builds, forward differences over every level (the
 /// paper's) and the two levels around each vertex's level, draw the same terrain: the same
 /// triangles, and frames that differ at most in rounding (a handful of pixels). The morph pass
-/// (the default) draws the same triangles, and its frames differ from the discrete ones (the
+/// (the default) reads no stored offset, so its tables leave out their rounding (half a morph
+/// unit): it draws no more triangles, and its frames differ from the discrete ones (the
 /// morph does something).
 #[test]
 fn the_morph_shaders_draw_the_same_terrain() {
@@ -1587,7 +1588,10 @@ fn the_morph_shaders_draw_the_same_terrain() {
         serde_json::from_str(&std::fs::read_to_string(summary).expect("summary")).expect("json");
     assert_eq!(summary["frames_unmorphed"], 0, "{summary}");
     assert_eq!(two_tris, fd_tris);
-    assert_eq!(pass_tris, two_tris);
+    assert!(
+        pass_tris.iter().zip(&two_tris).all(|(p, t)| p <= t),
+        "the morph pass drew more triangles than the two-levels rule: {pass_tris:?} against {two_tris:?}"
+    );
     let differing = |a: &image::RgbaImage, b: &image::RgbaImage| {
         a.pixels().zip(b.pixels()).filter(|(p, q)| p != q).count()
     };

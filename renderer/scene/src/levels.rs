@@ -2,7 +2,8 @@
 //! (the renderer's `morph` module, "The error of a blend, and `Λ`"), and the coefficients of `Λ`, the inverse
 //! of their linear blend, as the vertex shader evaluates it.
 //!
-//! A tile's own table is its levels' measured errors plus half a morph unit. A vertex on a side
+//! A tile's own table is its levels' measured errors (plus half a morph unit where the morph
+//! reads the stored offsets, [`crate::terrain::Terrain::read_stored_offsets`]). A vertex on a side
 //! takes the larger errors of the two tiles there, a corner those of the tiles around it
 //! ([`crate::tile::TileInfo::tables`]): every tile holding a vertex gives it one table, and a
 //! tile is drawn at the finest level any of its tables asks for where that table's part of the

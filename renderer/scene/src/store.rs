@@ -63,6 +63,10 @@ pub struct Tiles {
     /// so most outlines are asked for by up to nine tiles.
     outlines: Box<[OnceLock<Box<Outline>>]>,
     read: AtomicUsize,
+    /// Whether the level tables hold half a morph unit over the measured errors: the rounding
+    /// of the stored offsets, for the morph rules that read them
+    /// ([`crate::terrain::Terrain::read_stored_offsets`]).
+    rounding: bool,
 }
 
 impl Tiles {
@@ -73,7 +77,19 @@ impl Tiles {
             infos: (0..n).map(|_| OnceLock::new()).collect(),
             outlines: (0..n).map(|_| OnceLock::new()).collect(),
             read: AtomicUsize::new(0),
+            rounding: false,
         }
+    }
+
+    /// The level tables made for a morph that reads the stored offsets (see `rounding`);
+    /// before any outline is read.
+    pub(crate) fn set_rounding(&mut self, rounding: bool) {
+        debug_assert_eq!(
+            self.outlines_read(),
+            0,
+            "outlines read before the tables' rule"
+        );
+        self.rounding = rounding;
     }
 
     pub fn len(&self) -> usize {
@@ -133,7 +149,10 @@ impl Tiles {
             self.read.fetch_add(1, Ordering::Relaxed);
             let (p, tx, ty) = self.place(i);
             let set = &self.layers[p as usize].set;
-            Box::new(read_outline(set, tx, ty).unwrap_or_else(|e| placeholder(set, tx, ty, e)))
+            Box::new(
+                read_outline(set, (tx, ty), self.rounding)
+                    .unwrap_or_else(|e| placeholder(set, tx, ty, e)),
+            )
         })
     }
 
@@ -200,7 +219,7 @@ impl Index<usize> for Tiles {
 /// One tile's header, level table, box and own level table, from its outline (no checksum:
 /// the tile's check comes when it is first needed). The problem as one line naming the file
 /// and the tile when the outline does not read.
-fn read_outline(set: &TileSet, tx: u32, ty: u32) -> Result<Outline, String> {
+fn read_outline(set: &TileSet, (tx, ty): (u32, u32), rounding: bool) -> Result<Outline, String> {
     let h = *set.header();
     let (sx, sy) = (h.spacing_x, h.spacing_y);
     let (th, mut levels, streams) = set
@@ -229,11 +248,13 @@ fn read_outline(set: &TileSet, tx: u32, ty: u32) -> Result<Outline, String> {
         -r0 * sy,
         f64::from(z_max),
     );
-    // Its levels' errors as the morph sees them: measured, plus half a morph unit
-    // (the stored offsets are rounded to whole units).
+    // Its levels' errors as the morph sees them: measured, plus half a morph unit where the
+    // morph reads the stored offsets, which are rounded to whole units. The morph pass reads
+    // none (it blends the levels' own surfaces), so its tables are the measured errors.
+    let rounding = if rounding { 0.5 } else { 0.0 };
     let errors: Vec<f32> = levels
         .iter()
-        .map(|l| l.max_error.max(0.0) + 0.5 * l.morph_unit.max(0.0))
+        .map(|l| l.max_error.max(0.0) + rounding * l.morph_unit.max(0.0))
         .collect();
     let table = LevelTable::over(&errors, distinct_levels(&levels));
     Ok(Outline {

@@ -99,6 +99,16 @@ impl Terrain {
         Ok(Terrain::of_layers(layers.collect()))
     }
 
+    /// Level tables for a morph rule that reads the stored offsets (`--morph-shader
+    /// two-levels` and `forward-differences`): each level's measured error plus half its
+    /// morph unit, the offsets' rounding. The default, the morph pass, blends the levels' own
+    /// surfaces and takes the measured errors. Called before anything reads a tile.
+    pub fn read_stored_offsets(&mut self) {
+        Arc::get_mut(&mut self.tiles)
+            .expect("the tables' rule is set on a terrain just opened")
+            .set_rounding(true);
+    }
+
     /// The terrain of a tile set already open (a layer's view, [`TileSet::layer`], or the
     /// base grid).
     pub fn of_layer(set: TileSet) -> Result<Terrain, tiles::FormatError> {

@@ -37,8 +37,9 @@
 //! `E_(k+1) 2^(1 - t)`, up to 6% more near `t = 0.56`. So `Λ` inverts the linear `E`, not the
 //! geometric one: `E(l(v)) <= τ / S(v)`, the vertex's error projects to at most `τ` pixels.
 //! `E_k` is the level table of where the vertex lies ([`crate::levels`]): inside a tile, that
-//! tile's measured error of level `k` plus half its morph unit (the stored offsets are rounded
-//! to whole units); on a side, the larger of the two tiles'; at a corner, the largest of the
+//! tile's measured error of level `k` (plus half its morph unit under the rules that read the
+//! stored offsets, which are rounded to whole units: `--morph-shader two-levels` and
+//! `forward-differences`); on a side, the larger of the two tiles'; at a corner, the largest of the
 //! tiles there. So the table, too, is the same in every tile holding the vertex. Each table
 //! falls by at least [`crate::levels::MIN_RATIO`] a level (a coarser level is taken as worse
 //! where the spacing rule left it better than a finer one), so `Λ` is continuous:
@@ -68,7 +69,9 @@
 //!
 //! its parents' placed mean plus its share of its own detail; block 0 stays at its own height.
 //! It reads no stored offset (the coarser surfaces come from the parents' own heights, exact
-//! where the offsets are rounded), so the tables' half unit is a margin here.
+//! where the offsets are rounded), so its tables hold the measured errors alone, and the
+//! set's morph units, which a distributed build takes from the input's scan
+//! (`tiles::units`), do not change what it draws.
 //! Unrolled, the drawn surface is `D = Σ_v w_v d_v φ_v` over the hierarchical hat functions
 //! `φ_v` (linear on every mesh holding `v`, 1 at `v`, 0 at every other vertex of it), and the
 //! level-`k` surface is the same sum with `w = 1` on blocks `0..=k` and 0 beyond.
