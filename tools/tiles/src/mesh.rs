@@ -583,7 +583,8 @@ impl<'a> Mesher<'a> {
     /// triangle `t` of `q`. Not an error against data, so never stored as one; refinement
     /// holds it within `e` too, so that every vertex a finer level adds, padded or not, lies
     /// within `e` of the coarser surface (what the set's morph units are bounded by,
-    /// [`crate::units`]).
+    /// [`crate::units`]). Out of line: refinement's loop asks it of few leaves.
+    #[inline(never)]
     fn padding_error(&self, q: Quad, t: usize) -> f64 {
         let (px, py) = self.padding();
         let tri = q.triangle(t);
