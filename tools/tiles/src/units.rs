@@ -34,10 +34,10 @@
 //! the set's (the merge then seals the other shards' tiles again). Pyramid layers, built in
 //! the merge, keep `bound_k = e_k`: a layer tile's floor raises its errors, tile by tile.
 
-use crate::build::BuildParams;
-use crate::grid::Grid;
 use rayon::prelude::*;
 
+use crate::build::BuildParams;
+use crate::grid::Grid;
 use crate::mesh::TILE_CELLS;
 
 /// Aligned cell sizes the scan measures: 2, 4, ..., 256 samples.

@@ -482,6 +482,24 @@ fn parts_that_do_not_belong_are_refused() {
         "do not add up",
     );
     assert!(err.contains("do not add up"), "{err}");
+    // A part whose scan's bounds on the morph units (after its units, 8 bytes a level) differ
+    // from the others', resealed: its tiles were sealed at other units, so it is refused.
+    let (rows_at, levels, _) = part_layout(&bytes);
+    let at = rows_at + 16 + 8 * levels as usize;
+    let mut forged = bytes[..bytes.len() - 12].to_vec();
+    let bound = f64::from_le_bytes(forged[at..at + 8].try_into().expect("8"));
+    forged[at..at + 8].copy_from_slice(&(bound * 2.0).to_le_bytes());
+    let crc = crc32fast::hash(&forged);
+    forged.extend(crc.to_le_bytes());
+    forged.extend(b"VKTPEND\0");
+    let bounded = dir.path().join("bounded");
+    std::fs::write(&bounded, &forged).expect("write");
+    let err = refused(
+        &[parts[0].clone(), bounded.clone(), parts[2].clone()],
+        &bounded,
+        "bounds differ",
+    );
+    assert!(err.contains("bounds differ"), "{err}");
     // A compact part whose first tile's stored level length is wrong, the part's checksum made
     // to match: the merge checks what it copies (decoded against the tile's table and
     // lengths), so it is refused, naming the part and the tile. The control: the same part
