@@ -730,6 +730,10 @@ enum Output {
     /// The whole tile and every level's surface.
     LayerTile,
     Sides,
+    /// [`Output::Sides`] without the deviations (all 0), so without the levels' surfaces: the
+    /// base grid's agreement, whose morph units come from the scan ([`crate::units`]); each
+    /// tile's deviations come from its final build.
+    SidesBare,
 }
 
 /// [`build_tile`], or with `Output::Sides` the same meshes with only `sides` and `deviation`
@@ -772,7 +776,7 @@ fn mesh_tile(
         // errors, and its last mesh of each tile is the mesh the build measures (a tile is
         // built with the forced sides it was last meshed with): the agreement's meshes skip
         // the walk over every triangle of every level.
-        let errors = if output == Output::Sides {
+        let errors = if matches!(output, Output::Sides | Output::SidesBare) {
             LevelEntry::default()
         } else {
             level_errors(&mut mesher, &leaves, e, mesh_max).map_err(|q| {
@@ -791,7 +795,7 @@ fn mesh_tile(
         &assembly.vertices.lattice_of,
         heights,
     );
-    if output == Output::Sides {
+    if matches!(output, Output::Sides | Output::SidesBare) {
         return Ok(BuiltTile {
             tx,
             ty,
@@ -803,17 +807,11 @@ fn mesh_tile(
             data_max: (samples.data_max_x, samples.data_max_y),
         });
     }
+    // A tile whose deviation passes the set's units (past the scan's bounds, which no input
+    // here reaches) is sealed with its offsets clamped: its caller sees the deviation, raises
+    // the units and seals it again ([`build_layer`], the merge).
     let units: Vec<f64> = match &agreement.units {
-        Some(units) => {
-            if let Some(k) = (0..n).find(|&k| deviation[k] > units[k] * 127.0) {
-                return Err(BuildError::Internal(format!(
-                    "tile {tx},{ty} level {k}: a vertex lies {} m from the level's surface, \
-                     past the tile set's morph unit",
-                    deviation[k]
-                )));
-            }
-            units.clone()
-        }
+        Some(units) => units.clone(),
         None => (0..n)
             .map(|k| morph_unit(assembly.levels[k].entry.error_bound.into(), deviation[k]))
             .collect(),
@@ -899,7 +897,7 @@ impl Assembly {
         code_of: &dyn Fn(usize) -> u16,
         set: Option<&[(u32, u32, u16)]>,
     ) {
-        let full = self.output != Output::Sides;
+        let full = !matches!(self.output, Output::Sides | Output::SidesBare);
         let (level, n, mesh_max) = (self.levels.len(), self.levels_wanted, self.mesh_max);
         let vertices = &mut self.vertices;
         let block_start = vertices.lattice_of.len();
@@ -951,7 +949,8 @@ impl Assembly {
         });
         self.positions
             .push([0, 1, 2, 3].map(|k| sides[k].iter().map(|&(at, _)| at as u16).collect()));
-        if level + 1 < n || self.output == Output::LayerTile {
+        // The agreement's meshes of the base grid want no surface: they are for the deviations.
+        if (level + 1 < n && self.output != Output::SidesBare) || self.output == Output::LayerTile {
             let mut surface = rasterise_surface(mesher, leaves, mesh_max);
             along_sides(&mut surface, &self.positions[level], heights, mesh_max);
             if level + 1 < n {
@@ -1404,6 +1403,21 @@ pub fn build_tileset_from(
     out: &Path,
     progress: &(dyn Fn() + Sync),
 ) -> Result<BuildSummary, BuildError> {
+    build_tileset_at(heights, params, (texturing, meta), out, progress, None)
+}
+
+/// [`build_tileset_from`] with the base grid's morph unit bounds given (`None`: from the
+/// scan, [`crate::units`]): for the tests of a tile that passes its bound, which no input
+/// here reaches.
+#[doc(hidden)]
+pub fn build_tileset_at(
+    heights: &dyn Heights,
+    params: &BuildParams,
+    (texturing, meta): (Option<&Texturing>, &TileSetMeta),
+    out: &Path,
+    progress: &(dyn Fn() + Sync),
+    bounds: Option<Vec<f64>>,
+) -> Result<BuildSummary, BuildError> {
     validate(params, texturing)?;
     let shape = heights.shape();
     let (tiles_x, tiles_y) = tile_count(shape.width, shape.height).map_err(BuildError::Params)?;
@@ -1413,8 +1427,7 @@ pub fn build_tileset_from(
     let header = set_header(&shape, params, texturing, meta, &scanned)?;
     // The relief's tint spans the base grid's heights in every layer, so that colours match.
     let prepared = texturing.map(|t| (Prepared::new((lo, hi), &t.source), t.layout));
-    let mut writer = TileSetWriter::create(out, header)?;
-    let mut summary = BuildSummary {
+    let fresh = || BuildSummary {
         levels: vec![LevelStats::default(); params.levels as usize],
         texture_mips: texturing
             .map(|t| {
@@ -1429,16 +1442,31 @@ pub fn build_tileset_from(
         ..Default::default()
     };
     let spacing = shape.spacing_x.min(shape.spacing_y);
-    let base = Layer {
-        index: 0,
-        bands: &bands,
-        step,
-        bounds: deviation_bounds(params, spacing, step, &scanned.spans),
-        decimation: None,
-        prepared: prepared.as_ref().map(|(p, l)| (p.for_layer(0), *l)),
-        base: None,
-    };
-    build_layer(&mut writer, &base, params, progress, &mut summary)?;
+    let mut bounds =
+        bounds.unwrap_or_else(|| deviation_bounds(params, spacing, step, &scanned.spans));
+    let (mut writer, mut summary) =
+        loop {
+            let (mut writer, mut summary) = (TileSetWriter::create(out, header)?, fresh());
+            let base = Layer {
+                index: 0,
+                bands: &bands,
+                step,
+                bounds: bounds.clone(),
+                decimation: None,
+                prepared: prepared.as_ref().map(|(p, l)| (p.for_layer(0), *l)),
+                base: None,
+            };
+            match build_layer(&mut writer, &base, params, progress, &mut summary)? {
+                None => break (writer, summary),
+                // A tile passed the scan's bounds (`crate::units`): the units rise to hold it, and
+                // the base grid is built again at them, the same meshes sealed again.
+                Some(raised) if raised != bounds => bounds = raised,
+                Some(_) => return Err(BuildError::Internal(
+                    "the morph units did not hold at the bounds raised to the tiles' deviations"
+                        .into(),
+                )),
+            }
+        };
     build_pyramid(
         &mut writer,
         heights,
@@ -1501,7 +1529,12 @@ pub(crate) fn build_pyramid(
             prepared: prepared.map(|(s, l)| (s.for_layer(p), *l)),
             base: Some(heights),
         };
-        build_layer(writer, &layer, params, progress, &mut layer_summary)?;
+        if build_layer(writer, &layer, params, progress, &mut layer_summary)?.is_some() {
+            // Its units follow its tiles' deviations, found by the same meshes as its build.
+            return Err(BuildError::Internal(format!(
+                "pyramid layer {p}: a tile passed the layer's morph units"
+            )));
+        }
         summary.pyramid.push(PyramidLayerSummary {
             tiles: layer_summary.tiles,
             triangles: layer_summary.levels.iter().map(|l| l.triangles).sum(),
@@ -1534,14 +1567,17 @@ pub(crate) struct Layer<'a> {
 
 /// Builds one layer's tiles, shared sides agreed first where the build asks for them, and
 /// writes them (with their textures) in row-major order, whatever order they finish in, so
-/// that the same input and options give the same bytes.
+/// that the same input and options give the same bytes. With shared sides, the bounds the
+/// layer's units must rise to where a tile's final build found a deviation past them (then
+/// its tiles were sealed with offsets clamped, and the layer is to be built again at those
+/// bounds: [`build_tileset_from`]); `None` where the units held.
 fn build_layer(
     writer: &mut TileSetWriter,
     layer: &Layer,
     params: &BuildParams,
     progress: &(dyn Fn() + Sync),
     summary: &mut BuildSummary,
-) -> Result<(), BuildError> {
+) -> Result<Option<Vec<f64>>, BuildError> {
     let agreements = if params.shared_sides {
         let agreed = agree_sides(
             layer.bands,
@@ -1557,13 +1593,30 @@ fn build_layer(
         None
     };
     let rows = 0..layer.bands.tiles.1;
+    let mut widest = vec![0.0f64; params.levels as usize];
     build_tiles(
         layer,
         params,
         agreements.as_ref(),
         rows,
-        &mut |t, made, errors| write_tile(writer, layer, summary, t, made, errors, progress),
-    )
+        &mut |t, made, errors| {
+            for (w, &d) in widest.iter_mut().zip(&made.0.deviation) {
+                *w = w.max(d);
+            }
+            write_tile(writer, layer, summary, t, made, errors, progress)
+        },
+    )?;
+    Ok(agreements.and_then(|a| {
+        let held = units_of(&layer.bounds, [&widest]) == a.units;
+        (!held).then(|| {
+            layer
+                .bounds
+                .iter()
+                .zip(&widest)
+                .map(|(b, w)| b.max(*w))
+                .collect()
+        })
+    }))
 }
 
 /// Where [`build_tiles`] hands each tile: its index in the layer (row-major), the tile and
@@ -1768,7 +1821,8 @@ pub(crate) fn units_of<'d>(
 }
 
 /// Where [`settle`] starts from: each tile's sides, the forced sides it was last meshed with
-/// and that mesh's deviations (a shard's state, or the tiles meshed by several shards).
+/// and that mesh's deviations (a shard's state, or the tiles meshed by several shards; in the
+/// base grid, whose agreement finds none, the final builds' that the parts recorded).
 pub(crate) struct Start {
     pub sides: Vec<CompactSides>,
     pub forced: Vec<CompactSides>,
@@ -1798,6 +1852,12 @@ pub(crate) fn settle(
     let window = (tiles_x, rows.len() as u32);
     let neighbour = |t: usize, k: usize| neighbour_of(t, k, window);
     let forced = |t: usize, sides: &[CompactSides]| forced_sides(t, sides, levels, window);
+    // A pyramid layer's units follow its tiles' deviations; the base grid's come from the
+    // scan, so its meshes here find none (each tile's final build does).
+    let output = match floors {
+        Some(_) => Output::Sides,
+        None => Output::SidesBare,
+    };
     // The state is per tile, so it grows with the set: side vertices are held as bitmaps
     // (1.4 KB a tile and copy at 9 levels; lists of u16 took about 40 KB a tile in all).
     // `meshed_with` is what each tile was last meshed with: a build is a function of its
@@ -1895,7 +1955,7 @@ pub(crate) fn settle(
                             units: None,
                             floor: floors.map_or(0.0, |d| level_floor(d[g])),
                         };
-                        mesh_tile(&grid, (tx, ty), params, step, &agreement, Output::Sides)
+                        mesh_tile(&grid, (tx, ty), params, step, &agreement, output)
                             .map(|b| (*t, compact(&b.sides), b.deviation))
                     })
                     .collect::<Result<_, _>>()?;
@@ -2048,7 +2108,8 @@ pub(crate) struct Agreed {
     /// The layer's index of the first tile below (0 but for a shard's window).
     pub first: usize,
     /// Per tile (row-major from `first`): the side vertices to build it with (its
-    /// [`Agreement::forced`]), the sides it will then have, and its deviations per level.
+    /// [`Agreement::forced`]), the sides it will then have, and its deviations per level
+    /// (pyramid layers'; the base grid's meshes here find none, [`Output::SidesBare`]).
     pub forced: Vec<CompactSides>,
     pub sides: Vec<CompactSides>,
     pub deviation: Vec<Vec<f64>>,

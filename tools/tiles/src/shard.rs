@@ -30,11 +30,11 @@
 //!   build's. Where it does not (a cascade longer than the halo), the merge resumes the passes
 //!   from that state, reading the input again, and climbs to the same point
 //!   ([`crate::build::settle`]); the tiles whose forced sides changed are built again there.
-//! - **The morph units**: per level, a bound from the scan ([`crate::units`]), raised by a
-//!   tile whose deviation passes it. So a shard, which sees the scan and its own tiles, finds
-//!   the set's units unless a tile elsewhere passes the bound. A part records its own
-//!   tiles' deviations, the bounds and the units its blobs were sealed with; where the set's
-//!   units are larger, the merge seals those tiles again from their own vertices
+//! - **The morph units**: per level, a bound from the scan ([`crate::units`]), the same in
+//!   every shard, raised where a tile's final build finds a deviation past it. A shard seals
+//!   its tiles at the bounds' units (offsets clamped where a deviation passes them) and
+//!   records its tiles' final deviations, the bounds and the units; where the set's units
+//!   come out larger, the merge seals those tiles again from their own vertices
 //!   ([`crate::build::rebuild_tile`], which makes the build's bytes from a tile's vertex
 //!   sets; a compact tile keeps its stream, [`reseal_compact_tile`]).
 //!
@@ -51,7 +51,7 @@
 //! same), the set's header as the writer is given it, the owned tile rows, the units its
 //! blobs were sealed with and the bounds under them (from the scan, [`crate::units`]), the
 //! agreement's passes and meshes, then per owned tile (row-major)
-//! its forced sides and sides (bitmaps), its deviations, its blob (with compact levels, the
+//! its forced sides and sides (bitmaps), its final build's deviations, its blob (with compact levels, the
 //! bytes the set stores, [`compact_tile`]: compacted on the shard, copied by the merge) and
 //! its texture; last, the crc32 of everything before it and `END_MAGIC`. It is written to a
 //! temporary file and renamed when complete, so a shard killed at any point leaves no part
@@ -211,8 +211,8 @@ pub fn build_shard(
             window.clone(),
             None,
         )?;
-        // Sealed with the units its own tiles need, at least the scan's bounds: the merge
-        // seals again where the set's are larger, which the bounds leave to tiles past them.
+        // Sealed at the scan's bounds' units (the agreement's meshes of the base grid find no
+        // deviations): the merge seals again where a tile's final build passed them.
         let own = (rows.start - window.start) as usize * tiles_x as usize;
         let count = rows.len() * tiles_x as usize;
         agreed.units = units_of(&bounds, &agreed.deviation[own..own + count]);
@@ -269,17 +269,15 @@ pub fn build_shard(
         agreed.as_ref(),
         rows,
         &mut |t, (built, texture), _| {
-            let (forced, sides, deviation) = match &agreed {
-                Some(a) => (
-                    &a.forced[t - a.first],
-                    &a.sides[t - a.first],
-                    &a.deviation[t - a.first],
-                ),
-                None => (&none, &none, &built.deviation),
+            let (forced, sides) = match &agreed {
+                Some(a) => (&a.forced[t - a.first], &a.sides[t - a.first]),
+                None => (&none, &none),
             };
             part.sides(forced)?;
             part.sides(sides)?;
-            for &d in deviation {
+            // The final build's deviations (the agreement's meshes find none: the units
+            // come from the scan): the merge raises the set's units where one passes them.
+            for &d in &built.deviation {
                 part.f64(d)?;
             }
             // A compact set's tiles are compacted here, on the shards: the merge copies them.
@@ -1118,10 +1116,9 @@ pub fn merge(
         let recorded = start.forced.clone();
         let unsettled = unsettled_tiles(&start, tiles_x, params.levels);
         summary.unsettled = unsettled as u64;
-        let deviation;
-        if unsettled == 0 {
-            deviation = start.deviation;
-        } else {
+        // Each tile's final build's deviations, as its part recorded them.
+        let mut deviation = start.deviation.clone();
+        if unsettled > 0 {
             let (heights, _) = reopen(&first.recipe)?;
             let bands = Bands::new(heights.as_ref(), (tiles_x, tiles_y));
             let step = header.height_step;
@@ -1136,7 +1133,8 @@ pub fn merge(
                 Some(start),
             )?;
             summary.remeshed = agreed.meshes;
-            agreed.units = units_of(&first.bounds, &agreed.deviation);
+            // (The agreement's meshes of the base grid find no deviations: the recorded ones.)
+            agreed.units = units_of(&first.bounds, &deviation);
             let changed: Vec<usize> = (0..count)
                 .filter(|&t| agreed.forced[t] != recorded[t])
                 .collect();
@@ -1165,6 +1163,7 @@ pub fn merge(
                         row..row + 1,
                         &mut |i, (b, _), _| {
                             if changed.binary_search(&i).is_ok() {
+                                deviation[i] = b.deviation;
                                 rebuilt.insert(i, b.blob);
                             }
                             Ok(())
@@ -1172,7 +1171,11 @@ pub fn merge(
                     )?;
                 }
             }
-            deviation = agreed.deviation;
+            if units_of(&first.bounds, &deviation) != agreed.units {
+                return Err(BuildError::Internal(
+                    "a tile built again at the seams passed the set's morph units".into(),
+                ));
+            }
         }
         units = units_of(&first.bounds, &deviation);
     }

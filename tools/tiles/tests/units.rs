@@ -161,15 +161,15 @@ fn a_sets_morph_units_are_the_bounds_of_its_scan() {
     let heights = alps();
     let grid = grid(&heights);
 
-    // The control: one shard of all the tiles, its scan without cell spans.
-    let (summary, without) = sharded(
+    // The control: one shard of all the tiles, its scan without cell spans (its tiles sealed
+    // at the scan's units, which the merge raises to their deviations).
+    let (_, without) = sharded(
         &grid,
         &scans_of(&grid, Some([0.0; 8])),
         1,
         false,
         dir.path(),
     );
-    assert_eq!(summary.resealed, 0);
     let plain = deviation_bounds(&params(), spacing, step, &[0.0; 8]);
     let units = stored_units(&without);
     let raised: Vec<usize> = (0..units.len())
@@ -181,12 +181,15 @@ fn a_sets_morph_units_are_the_bounds_of_its_scan() {
     );
 }
 
-/// Where a tile's deviation passes the bound, the shards' units differ from the set's and the
-/// merge seals their tiles again, version 3 blobs and compact streams alike: the set is the
-/// bytes of one shard holding every tile. Forced here by scans without cell spans; with the
-/// scan's spans, the same shards' merge copies every tile (and is the build's bytes).
+/// Where a tile's final deviation passes the bound, the units rise to it: a shard seals its
+/// tiles at the scan's units (their offsets clamped) and records the deviations, and the
+/// merge raises the set's units and seals every tile again, version 3 blobs and compact
+/// streams alike; an unsharded build is built again at the raised bounds. All three give the
+/// same bytes, which verify against the source (the offsets are not clamped). Forced here by
+/// scans (and bounds) without cell spans; with the scan's spans the same shards' merge copies
+/// every tile, and is the build's bytes.
 #[test]
-fn tiles_past_their_bounds_are_sealed_again_by_the_merge() {
+fn tiles_past_their_bounds_raise_the_units() {
     let heights = alps();
     let grid = grid(&heights);
     for compact in [false, true] {
@@ -194,15 +197,41 @@ fn tiles_past_their_bounds_are_sealed_again_by_the_merge() {
         let forged = scans_of(&grid, Some([0.0; 8]));
         let (one, whole) = sharded(&grid, &forged, 1, compact, dir.path());
         let (three, merged) = sharded(&grid, &forged, 3, compact, dir.path());
-        assert_eq!(one.resealed, 0);
         assert!(
-            three.resealed > 0,
-            "compact {compact}: nothing sealed again"
+            one.resealed == 9 && three.resealed == 9,
+            "compact {compact}: {} and {} of 9 tiles sealed again",
+            one.resealed,
+            three.resealed
         );
         assert_eq!(
             std::fs::read(&merged).expect("merged"),
             std::fs::read(&whole).expect("whole"),
             "compact {compact}: sealed again, the set differs from one shard's"
+        );
+        let set = TileSet::open(&merged).expect("open");
+        let report = tiles::verify::verify(&set, Some(&grid));
+        assert!(report.ok(), "compact {compact}: {:#?}", report.problems);
+        // The unsharded build at the same bounds: built again at raised ones, the same bytes.
+        let step = set.header().height_step;
+        let plain = deviation_bounds(&params(), SPACING.0.min(SPACING.1), step, &[0.0; 8]);
+        let again = dir.path().join("again.vkt");
+        let meta = TileSetMeta {
+            compact,
+            ..TileSetMeta::default()
+        };
+        tiles::build::build_tileset_at(
+            &grid,
+            &params(),
+            (None, &meta),
+            &again,
+            &|| {},
+            Some(plain),
+        )
+        .expect("build");
+        assert_eq!(
+            std::fs::read(&again).expect("again"),
+            std::fs::read(&whole).expect("whole"),
+            "compact {compact}: built again at raised bounds, the set differs from the merge's"
         );
 
         let real = scans_of(&grid, None);
