@@ -1444,29 +1444,28 @@ pub fn build_tileset_at(
     let spacing = shape.spacing_x.min(shape.spacing_y);
     let mut bounds =
         bounds.unwrap_or_else(|| deviation_bounds(params, spacing, step, &scanned.spans));
-    let (mut writer, mut summary) =
-        loop {
-            let (mut writer, mut summary) = (TileSetWriter::create(out, header)?, fresh());
-            let base = Layer {
-                index: 0,
-                bands: &bands,
-                step,
-                bounds: bounds.clone(),
-                decimation: None,
-                prepared: prepared.as_ref().map(|(p, l)| (p.for_layer(0), *l)),
-                base: None,
-            };
-            match build_layer(&mut writer, &base, params, progress, &mut summary)? {
-                None => break (writer, summary),
-                // A tile passed the scan's bounds (`crate::units`): the units rise to hold it, and
-                // the base grid is built again at them, the same meshes sealed again.
-                Some(raised) if raised != bounds => bounds = raised,
-                Some(_) => return Err(BuildError::Internal(
-                    "the morph units did not hold at the bounds raised to the tiles' deviations"
-                        .into(),
-                )),
-            }
+    let (mut writer, mut summary) = loop {
+        let (mut writer, mut summary) = (TileSetWriter::create(out, header)?, fresh());
+        let base = Layer {
+            index: 0,
+            bands: &bands,
+            step,
+            bounds: bounds.clone(),
+            decimation: None,
+            prepared: prepared.as_ref().map(|(p, l)| (p.for_layer(0), *l)),
+            base: None,
         };
+        match build_layer(&mut writer, &base, params, progress, &mut summary)? {
+            None => break (writer, summary),
+            // A tile passed the scan's bounds: the units rise to hold it, and the
+            // base grid is built again at them, the same meshes sealed again.
+            Some(raised) if raised != bounds => bounds = raised,
+            Some(_) => {
+                let what = "the morph units did not hold at bounds raised to the deviations";
+                return Err(BuildError::Internal(what.into()));
+            }
+        }
+    };
     build_pyramid(
         &mut writer,
         heights,

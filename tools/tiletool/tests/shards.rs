@@ -393,6 +393,15 @@ fn part_layout(bytes: &[u8]) -> (usize, u32, usize) {
     (rows_at, levels, rows_at + 16 + 16 * levels as usize + 12)
 }
 
+/// A part's bytes before its checksum, sealed as the writer seals them: the crc32 of
+/// everything before it, then the end mark.
+fn sealed(mut body: Vec<u8>) -> Vec<u8> {
+    let crc = crc32fast::hash(&body);
+    body.extend(crc.to_le_bytes());
+    body.extend(b"VKTPEND\0");
+    body
+}
+
 #[test]
 fn parts_that_do_not_belong_are_refused() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -471,9 +480,7 @@ fn parts_that_do_not_belong_are_refused() {
     forged[12..16].copy_from_slice(&0u32.to_le_bytes());
     forged[16..20].copy_from_slice(&u32::MAX.to_le_bytes());
     forged[rows_at..rows_at + 8].fill(0);
-    let crc = crc32fast::hash(&forged);
-    forged.extend(crc.to_le_bytes());
-    forged.extend(b"VKTPEND\0");
+    let forged = sealed(forged);
     let resealed = dir.path().join("resealed");
     std::fs::write(&resealed, &forged).expect("write");
     let err = refused(
@@ -489,9 +496,7 @@ fn parts_that_do_not_belong_are_refused() {
     let mut forged = bytes[..bytes.len() - 12].to_vec();
     let bound = f64::from_le_bytes(forged[at..at + 8].try_into().expect("8"));
     forged[at..at + 8].copy_from_slice(&(bound * 2.0).to_le_bytes());
-    let crc = crc32fast::hash(&forged);
-    forged.extend(crc.to_le_bytes());
-    forged.extend(b"VKTPEND\0");
+    let forged = sealed(forged);
     let bounded = dir.path().join("bounded");
     std::fs::write(&bounded, &forged).expect("write");
     let err = refused(
@@ -522,9 +527,7 @@ fn parts_that_do_not_belong_are_refused() {
             .expect("4"),
     );
     forged[first_length..first_length + 4].copy_from_slice(&(n + 1).to_le_bytes());
-    let crc = crc32fast::hash(&forged);
-    forged.extend(crc.to_le_bytes());
-    forged.extend(b"VKTPEND\0");
+    let forged = sealed(forged);
     let forged_part = compact_dir.join("forged");
     std::fs::write(&forged_part, &forged).expect("write");
     let err = refused(
