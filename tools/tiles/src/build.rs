@@ -22,7 +22,7 @@ use crate::pack::{morph_offset, morph_unit, pack};
 use crate::pyramid::{base_errors, decimation_errors, level_floor, Decimated, Surfaces};
 use crate::quantise::{lattice_step, Quantiser};
 use crate::texture::{self, Prepared, Source, Texturing};
-use crate::units::{cell_spans, deviation_bounds, layer_bounds, CellSpans};
+use crate::units::{cell_spans, deviation_bounds, layer_bounds, CellSpans, CELL_SIZES};
 use crate::BuildError;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -80,29 +80,10 @@ pub fn height_step(grid: &Grid) -> Result<f32, String> {
 }
 
 /// The largest height range of one tile and the largest absolute height, over the tiles of
-/// tile rows `rows` (which `grid` holds).
+/// tile rows `rows` (which `grid` holds): the largest cell span is a whole tile's.
 pub(crate) fn tile_ranges(grid: &Grid, tiles_x: u32, rows: std::ops::Range<u32>) -> (f32, f32) {
-    let cells = TILE_CELLS as usize;
-    let (mut max_range, mut max_abs) = (0.0f32, 0.0f32);
-    for ty in rows.map(|t| t as usize) {
-        for tx in 0..tiles_x as usize {
-            let (x0, y0) = (tx * cells, ty * cells);
-            let (x1, y1) = (
-                (x0 + cells).min(grid.width - 1),
-                (y0 + cells).min(grid.height - 1),
-            );
-            let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-            for y in y0..=y1 {
-                for &h in &grid.row(y)[x0..=x1] {
-                    lo = lo.min(h);
-                    hi = hi.max(h);
-                }
-            }
-            max_range = max_range.max(hi - lo);
-            max_abs = max_abs.max(lo.abs()).max(hi.abs());
-        }
-    }
-    (max_range, max_abs)
+    let (spans, max_abs) = cell_spans(grid, tiles_x, rows);
+    (spans[CELL_SIZES - 1], max_abs)
 }
 
 /// Where a build reads its heights: a grid held whole ([`Grid`]), or a grid read a band of
@@ -1281,7 +1262,7 @@ pub(crate) struct Scanned {
 /// heights and the lattice step ([`height_step`]'s, over the bands' tiles).
 pub(crate) fn scan(bands: &Bands) -> Result<Scanned, BuildError> {
     let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-    let (mut max_range, mut max_abs) = (0.0f32, 0.0f32);
+    let mut max_abs = 0.0f32;
     let mut spans = CellSpans::default();
     for b in 0..bands.count() {
         let band = bands.load(b, 0)?;
@@ -1295,18 +1276,16 @@ pub(crate) fn scan(bands: &Bands) -> Result<Scanned, BuildError> {
             hi = hi.max(h);
         }
         let grid = band.grid(&bands.shape);
-        let (range, abs) = tile_ranges(&grid, bands.tiles.0, band.tile_rows.clone());
-        max_range = max_range.max(range);
-        max_abs = max_abs.max(abs);
-        let found = cell_spans(&grid, bands.tiles.0, band.tile_rows.clone());
+        let (found, abs) = cell_spans(&grid, bands.tiles.0, band.tile_rows.clone());
         for (s, f) in spans.iter_mut().zip(found) {
             *s = s.max(f);
         }
+        max_abs = max_abs.max(abs);
     }
     Ok(Scanned {
         lo,
         hi,
-        step: lattice_step(max_range, max_abs),
+        step: lattice_step(spans[CELL_SIZES - 1], max_abs),
         spans,
     })
 }

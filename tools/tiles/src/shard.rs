@@ -601,11 +601,10 @@ pub fn tile_ranges(heights: &dyn Heights, shard: Shard) -> Result<ShardRanges, B
     for b in 0..bands.count() {
         let band = bands.load(b, 0)?;
         let grid = band.grid(&shape);
-        let (range, abs) = crate::build::tile_ranges(&grid, tiles.0, band.tile_rows.clone());
-        found.max_range = found.max_range.max(range);
-        found.max_abs = found.max_abs.max(abs);
-        let spans = cell_spans(&grid, tiles.0, band.tile_rows.clone());
+        let (spans, abs) = cell_spans(&grid, tiles.0, band.tile_rows.clone());
         found.spans = widest(&found.spans, &spans);
+        found.max_range = found.spans[CELL_SIZES - 1];
+        found.max_abs = found.max_abs.max(abs);
     }
     Ok(found)
 }

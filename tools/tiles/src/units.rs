@@ -51,23 +51,24 @@ pub const CELL_SIZES: usize = 8;
 /// any cell of that size aligned to the tiles' quadtrees. 0 where no sample was seen.
 pub type CellSpans = [f32; CELL_SIZES];
 
-/// The cell spans of the tiles of tile rows `rows` (which `grid` holds), `tiles_x` wide.
-pub fn cell_spans(grid: &Grid, tiles_x: u32, rows: std::ops::Range<u32>) -> CellSpans {
+/// The cell spans of the tiles of tile rows `rows` (which `grid` holds), `tiles_x` wide, and
+/// their largest absolute height: with the largest span (a whole tile's closure, its range of
+/// heights) what the height lattice's step needs ([`crate::build::tile_ranges`]).
+pub fn cell_spans(grid: &Grid, tiles_x: u32, rows: std::ops::Range<u32>) -> (CellSpans, f32) {
     let tiles: Vec<(u32, u32)> = rows
         .flat_map(|ty| (0..tiles_x).map(move |tx| (tx, ty)))
         .collect();
-    tiles
-        .par_iter()
-        .map(|&t| tile_spans(grid, t))
-        .reduce(CellSpans::default, |a, b| {
-            std::array::from_fn(|i| a[i].max(b[i]))
-        })
+    tiles.par_iter().map(|&t| tile_spans(grid, t)).reduce(
+        || (CellSpans::default(), 0.0),
+        |(a, x), (b, y)| (std::array::from_fn(|i| a[i].max(b[i])), x.max(y)),
+    )
 }
 
 /// One tile's cell spans: the closures of its cells of size 2 first, row by row (a row's
 /// least and largest height over each cell's three columns, then over the cell's three
-/// rows), then each size from the four cells of half its size, whose closures make its own.
-fn tile_spans(grid: &Grid, (tx, ty): (u32, u32)) -> CellSpans {
+/// rows), then each size from the four cells of half its size, whose closures make its own;
+/// and the tile's largest absolute height.
+fn tile_spans(grid: &Grid, (tx, ty): (u32, u32)) -> (CellSpans, f32) {
     let cells = TILE_CELLS as usize;
     let n = cells / 2;
     let (x0, y0) = (tx as usize * cells, ty as usize * cells);
@@ -128,7 +129,8 @@ fn tile_spans(grid: &Grid, (tx, ty): (u32, u32)) -> CellSpans {
         }
         n = half;
     }
-    spans
+    // The last cell is the whole tile.
+    (spans, lo[0].abs().max(hi[0].abs()))
 }
 
 /// The largest aligned cell (samples) that the mesher's spacing rule may leave unrefined with
@@ -222,9 +224,10 @@ mod tests {
                 }
             }
         }
-        assert_eq!(cell_spans(&grid, 2, 0..2), want);
+        let abs = heights.iter().fold(0.0f32, |m, h| m.max(h.abs()));
+        assert_eq!(cell_spans(&grid, 2, 0..2), (want, abs));
         // The control: the first tile row alone misses the second's rougher cells.
-        assert_ne!(cell_spans(&grid, 2, 0..1), want);
+        assert_ne!(cell_spans(&grid, 2, 0..1).0, want);
     }
 
     /// The cell the spacing rule can leave over `e`: none at a spacing of `e` or more; a
