@@ -16,7 +16,7 @@ use crate::grid::{tile_samples, Grid};
 #[cfg(test)]
 use crate::mesh::hilbert_index;
 use crate::mesh::{
-    lattice, plane, triangle_spans, Mesher, Quad, TileSamples, TILE_CELLS, TILE_SIZE,
+    lattice, plane, triangle_spans, MeshHistory, Mesher, Quad, TileSamples, TILE_CELLS, TILE_SIZE,
 };
 use crate::pack::{morph_offset, morph_unit, pack};
 use crate::pyramid::{base_errors, decimation_errors, level_floor, Decimated, Surfaces};
@@ -240,6 +240,9 @@ pub struct BuiltTile {
     pub surfaces: Vec<f32>,
     /// The last column and row of real data.
     pub data_max: (u32, u32),
+    /// The agreement's meshes ([`Output::Sides`], [`Output::SidesBare`]): when each cell and
+    /// vertex came, for meshing the tile again with more forced; `None` for a built tile.
+    pub history: Option<MeshHistory>,
 }
 
 /// The side vertices of a tile, per level and side (north, east, south, west): each vertex's
@@ -700,7 +703,14 @@ pub fn build_tile(
     step: f32,
     agreement: &Agreement,
 ) -> Result<BuiltTile, BuildError> {
-    mesh_tile(grid, (tx, ty), params, step, agreement, Output::Tile)
+    mesh_tile(
+        grid,
+        (tx, ty),
+        params,
+        step,
+        agreement,
+        (Output::Tile, None),
+    )
 }
 
 /// What [`mesh_tile`] makes: the whole tile, or only what the shared-sides agreement reads of
@@ -717,15 +727,18 @@ enum Output {
     SidesBare,
 }
 
-/// [`build_tile`], or with `Output::Sides` the same meshes with only `sides` and `deviation`
-/// of the result filled in: they depend on each level's set of vertices, not on their order.
+/// [`build_tile`], or with `Output::Sides` the same meshes with only `sides`, `deviation`
+/// and `history` of the result filled in: they depend on each level's set of vertices, not on
+/// their order. `earlier`: the history of a mesh of the same tile at the same bounds with
+/// forced sides that this `agreement`'s hold (the agreement's last mesh of it), so that only
+/// what the new forced vertices change is refined ([`Mesher::refine_changed`]).
 fn mesh_tile(
     grid: &Grid,
     (tx, ty): (u32, u32),
     params: &BuildParams,
     step: f32,
     agreement: &Agreement,
-    output: Output,
+    (output, earlier): (Output, Option<&MeshHistory>),
 ) -> Result<BuiltTile, BuildError> {
     let samples = tile_samples(grid, tx, ty);
     let lo = samples
@@ -738,17 +751,39 @@ fn mesh_tile(
     let n = params.levels as usize;
     let mut assembly = Assembly::new(n, mesh_max, output, Numbering::Decode);
     let code_of = |l: usize| quantiser.quantise(samples.heights[l]);
+    let agreeing = matches!(output, Output::Sides | Output::SidesBare);
+    let mut history = agreeing.then(MeshHistory::new);
+    let mut bare_sides = Sides::new();
     for level in 0..n {
         let e = params.level_error(level as u32).max(agreement.floor);
-        mesher.refine(e);
+        if let Some(earlier) = earlier {
+            mesher.replay(earlier, level);
+        }
+        // Forced first, then refined once: the level is the least mesh closed under
+        // refinement's rules that holds both (see `Mesher::refine_changed`), whatever the order.
         if let Some(forced) = agreement.forced.get(level) {
             for (k, side) in forced.iter().enumerate() {
                 for &at in side {
                     mesher.insert_side_vertex(side_point(k, at, mesh_max));
                 }
             }
-            // A forced split can leave finer cells over `e`.
-            mesher.refine(e);
+        }
+        match earlier {
+            Some(earlier) => mesher.refine_changed(e, earlier, level),
+            None => mesher.refine(e),
+        }
+        if let Some(history) = &mut history {
+            mesher.record(history, level);
+        }
+        if output == Output::SidesBare {
+            // Only the sides are read: no leaves, fans or vertex numbers.
+            bare_sides.push(std::array::from_fn(|k| {
+                let end = if k % 2 == 0 { mesh_max.0 } else { mesh_max.1 };
+                (0..=end as u16)
+                    .filter(|&at| mesher.is_vertex(side_point(k, at, mesh_max)))
+                    .collect()
+            }));
+            continue;
         }
         // In P-order either way: the surfaces below are written leaf by leaf, and points on
         // shared edges take the last leaf's rounding.
@@ -757,7 +792,7 @@ fn mesh_tile(
         // errors, and its last mesh of each tile is the mesh the build measures (a tile is
         // built with the forced sides it was last meshed with): the agreement's meshes skip
         // the walk over every triangle of every level.
-        let errors = if matches!(output, Output::Sides | Output::SidesBare) {
+        let errors = if agreeing {
             LevelEntry::default()
         } else {
             level_errors(&mut mesher, &leaves, e, mesh_max).map_err(|q| {
@@ -770,22 +805,29 @@ fn mesh_tile(
     }
 
     let heights = mesher.quantised_heights();
-    let deviation = deviations(
-        &assembly.levels,
-        &assembly.surfaces,
-        &assembly.vertices.lattice_of,
-        heights,
-    );
-    if matches!(output, Output::Sides | Output::SidesBare) {
+    let deviation = match output {
+        Output::SidesBare => vec![0.0; n],
+        _ => deviations(
+            &assembly.levels,
+            &assembly.surfaces,
+            &assembly.vertices.lattice_of,
+            heights,
+        ),
+    };
+    if agreeing {
         return Ok(BuiltTile {
             tx,
             ty,
             blob: Vec::new(),
             levels: Vec::new(),
-            sides: assembly.positions,
+            sides: match output {
+                Output::SidesBare => bare_sides,
+                _ => assembly.positions,
+            },
             deviation,
             surfaces: Vec::new(),
             data_max: (samples.data_max_x, samples.data_max_y),
+            history,
         });
     }
     // A tile whose deviation passes the set's units (past the scan's bounds, which no input
@@ -822,6 +864,7 @@ fn mesh_tile(
         deviation,
         surfaces,
         data_max: (samples.data_max_x, samples.data_max_y),
+        history: None,
     })
 }
 
@@ -1179,6 +1222,8 @@ pub struct BuildSummary {
     /// them (0 and 0 with independent sides); the written tiles are one more pass.
     pub agreement_passes: u32,
     pub agreement_meshes: u64,
+    /// Of those, the meshes that started from the tile's last (kept within a budget).
+    pub agreement_resumed: u64,
     /// Per texture mip, summed over tiles (empty without textures).
     pub texture_mips: Vec<MipStats>,
     /// Thread-seconds spent making textures (filtering, compressing), over all workers.
@@ -1566,6 +1611,7 @@ fn build_layer(
         )?;
         summary.agreement_passes = agreed.passes;
         summary.agreement_meshes = agreed.meshes;
+        summary.agreement_resumed = agreed.resumed;
         Some(agreed)
     } else {
         None
@@ -1641,8 +1687,9 @@ pub(crate) fn build_tiles(
             } else {
                 Output::Tile
             };
-            let mesh =
-                |agreement: &Agreement| mesh_tile(&grid, (tx, ty), params, step, agreement, output);
+            let mesh = |agreement: &Agreement| {
+                mesh_tile(&grid, (tx, ty), params, step, agreement, (output, None))
+            };
             let built = match agreements {
                 Some(a) => {
                     let agreement = Agreement {
@@ -1866,7 +1913,14 @@ pub(crate) fn settle(
     let mut dirty: Vec<usize> = (0..count)
         .filter(|&t| stale(t, &sides, &meshed_with))
         .collect();
-    let (mut passes, mut rebuilt) = (0u32, 0u64);
+    let (mut passes, mut rebuilt, mut resumed) = (0u32, 0u64, 0u64);
+    // Each tile's last mesh, kept while they fit a budget (a start's tiles have none: their
+    // first mesh here is from nothing).
+    let budget = match remesh {
+        Remesh::FromNothing => 0,
+        _ => HISTORY_BUDGET,
+    };
+    let mut histories = Histories::new(count, budget);
     while !dirty.is_empty() {
         passes += 1;
         if passes > MAX_PASSES {
@@ -1923,7 +1977,11 @@ pub(crate) fn settle(
                     })
                     .collect();
                 rebuilt += batch.len() as u64;
-                let meshed: Vec<(usize, CompactSides, Vec<f64>)> = batch
+                resumed += batch
+                    .iter()
+                    .filter(|(t, _)| histories.get(*t).is_some())
+                    .count() as u64;
+                let meshed: Vec<Meshed> = batch
                     .par_iter()
                     .map(|(t, forced)| {
                         let g = first + *t;
@@ -1933,11 +1991,17 @@ pub(crate) fn settle(
                             units: None,
                             floor: floors.map_or(0.0, |d| level_floor(d[g])),
                         };
-                        mesh_tile(&grid, (tx, ty), params, step, &agreement, output)
-                            .map(|b| (*t, compact(&b.sides), b.deviation))
+                        // Forced sides only grow, so the tile's last mesh (if kept) holds
+                        // less than this one: it is where this mesh starts.
+                        let earlier = histories.get(*t);
+                        mesh_tile(&grid, (tx, ty), params, step, &agreement, (output, earlier))
+                            .map(|b| (*t, compact(&b.sides), b.deviation, b.history))
                     })
                     .collect::<Result<_, _>>()?;
-                for ((t, new, d), (_, used)) in meshed.into_iter().zip(batch) {
+                for ((t, new, d, history), (_, used)) in meshed.into_iter().zip(batch) {
+                    if let Some(history) = history {
+                        histories.put(t, history);
+                    }
                     deviation[t] = d;
                     meshed_with[t] = Some(used);
                     if new != sides[t] {
@@ -1989,7 +2053,49 @@ pub(crate) fn settle(
         units: Vec::new(),
         passes,
         meshes: rebuilt,
+        resumed,
     })
+}
+
+/// A tile meshed by the agreement: its number, sides, deviations and mesh history.
+type Meshed = (usize, CompactSides, Vec<f64>, Option<MeshHistory>);
+
+/// Bytes of mesh histories the agreement keeps: every tile of a 16K set (4,096 tiles, 88 KB
+/// each); a larger set's tiles past it are meshed again from nothing, as before histories.
+const HISTORY_BUDGET: usize = 400 << 20;
+
+/// The agreement's last mesh of each tile, as many as fit a budget; when full, the oldest
+/// kept makes room (a pass sweeps the bands in order, so the oldest is the furthest from the
+/// tiles being meshed).
+struct Histories {
+    kept: Vec<Option<MeshHistory>>,
+    order: std::collections::VecDeque<usize>,
+    room: usize,
+}
+
+impl Histories {
+    fn new(tiles: usize, budget: usize) -> Histories {
+        Histories {
+            kept: vec![None; tiles],
+            order: std::collections::VecDeque::new(),
+            room: budget / MeshHistory::BYTES,
+        }
+    }
+
+    fn get(&self, t: usize) -> Option<&MeshHistory> {
+        self.kept[t].as_ref()
+    }
+
+    fn put(&mut self, t: usize, history: MeshHistory) {
+        if self.kept[t].replace(history).is_none() {
+            self.order.push_back(t);
+        }
+        while self.order.len() > self.room {
+            if let Some(oldest) = self.order.pop_front() {
+                self.kept[oldest] = None;
+            }
+        }
+    }
 }
 
 /// Tile `t`'s neighbour across side `k` (north, east, south, west) among `tiles_x` x
@@ -2041,6 +2147,10 @@ pub(crate) enum Remesh {
     /// reference for it).
     #[cfg_attr(not(test), allow(dead_code))]
     FromThePassBefore,
+    /// [`Remesh::Changed`] with every mesh from nothing, none from the tile's last (the rule
+    /// before mesh histories; the tests' reference for them).
+    #[cfg_attr(not(test), allow(dead_code))]
+    FromNothing,
 }
 
 /// One side's vertices at one level: bit `i` for position `i` (0..=256).
@@ -2096,6 +2206,8 @@ pub(crate) struct Agreed {
     pub passes: u32,
     /// Tiles meshed over all passes.
     pub meshes: u64,
+    /// Of those, the meshes that started from the tile's last ([`Mesher::refine_changed`]).
+    pub resumed: u64,
 }
 
 #[cfg(test)]
@@ -2108,10 +2220,27 @@ mod tests {
     fn a_mesh_for_the_agreement_has_the_whole_builds_sides_and_deviations() {
         let heights = srtm3_crop(2 * 256 + 1);
         let grid = square(&heights);
+        agreement_meshes_of(&grid);
+        // A tile whose data end on an odd column and row (272 x 300 samples: tile (1, 1)
+        // holds 16 x 44 of them, meshed to 16 x 44 with a copied column): its east and south
+        // sides meet vertices at the centres of the cells the extent crosses.
+        let (width, height) = (256 + 16, 256 + 44);
+        let cropped: Vec<f32> = (0..width * height)
+            .map(|i| heights[(i / width) * grid.width + i % width])
+            .collect();
+        agreement_meshes_of(&Grid {
+            width,
+            height,
+            heights: &cropped,
+            ..square(&heights)
+        });
+    }
+
+    fn agreement_meshes_of(grid: &Grid) {
         let params = BuildParams::default();
-        let step = height_step(&grid).expect("step");
+        let step = height_step(grid).expect("step");
         let alone = Agreement::default();
-        let first = mesh_tile(&grid, (1, 1), &params, step, &alone, Output::Tile);
+        let first = mesh_tile(grid, (1, 1), &params, step, &alone, (Output::Tile, None));
         let first = first.expect("built");
         // Force the west side to hold every vertex the tile has on its east side.
         let forced: Sides = first
@@ -2120,26 +2249,46 @@ mod tests {
             .map(|s| [vec![], vec![], vec![], s[1].clone()])
             .collect();
         let mut seen = Vec::new();
-        for agreement in [
-            alone,
-            Agreement {
-                forced,
-                units: None,
-                floor: 0.0,
-            },
-        ] {
-            let whole = mesh_tile(&grid, (1, 1), &params, step, &agreement, Output::Tile);
-            let sides = mesh_tile(&grid, (1, 1), &params, step, &agreement, Output::Sides);
-            let (whole, sides) = (whole.expect("built"), sides.expect("meshed"));
+        let forced = Agreement {
+            forced,
+            units: None,
+            floor: 0.0,
+        };
+        let mesh = |agreement: &Agreement, output, earlier: Option<&MeshHistory>| {
+            mesh_tile(grid, (1, 1), &params, step, agreement, (output, earlier)).expect("meshed")
+        };
+        for agreement in [&alone, &forced] {
+            let whole = mesh(agreement, Output::Tile, None);
+            let sides = mesh(agreement, Output::Sides, None);
+            let bare = mesh(agreement, Output::SidesBare, None);
             assert!(sides.blob.is_empty() && !whole.blob.is_empty());
             assert_eq!(sides.sides, whole.sides);
             assert_eq!(sides.deviation, whole.deviation);
+            assert_eq!(bare.sides, whole.sides, "sides read from the mesh");
+            assert_eq!(bare.deviation, vec![0.0; params.levels as usize]);
+            assert_eq!(bare.history, sides.history);
             seen.push(whole.sides);
         }
         assert_ne!(
             seen[0], seen[1],
             "forcing the west side changed nothing: no test"
         );
+        // Meshed again from the mesh without forced sides: the same as meshed afresh.
+        for output in [Output::Sides, Output::SidesBare] {
+            let before = mesh(&alone, output, None);
+            let fresh = mesh(&forced, output, None);
+            let again = mesh(&forced, output, before.history.as_ref());
+            assert_eq!(again.sides, fresh.sides, "{output:?}");
+            assert_eq!(again.deviation, fresh.deviation, "{output:?}");
+            assert_eq!(again.history, fresh.history, "{output:?}");
+            // The control: from a mesh that held more than the agreement forces, the forced
+            // vertices stay, and the result is not the mesh without them.
+            let wrong = mesh(&alone, output, fresh.history.as_ref());
+            assert_ne!(
+                wrong.sides, before.sides,
+                "{output:?}: the history was not read"
+            );
+        }
     }
 
     /// `side * side` heights of the SRTM3 tile N55W003 (no voids), from (100, 100).
@@ -2171,7 +2320,8 @@ mod tests {
     /// Meshing again only the tiles whose forced sides changed settles on the same sides
     /// and agreements as meshing every tile next to a change, with fewer meshes; and so does
     /// meshing each pass's tiles from the state before the pass, the order before the
-    /// checkerboard, with more (real SRTM3 heights, 4 x 4 tiles).
+    /// checkerboard, with more; and meshing every tile from nothing rather than from its last
+    /// mesh, with as many (real SRTM3 heights, 4 x 4 tiles).
     #[test]
     fn agreement_remeshes_only_what_changed_and_settles_the_same() {
         let side = 4 * 256 + 1;
@@ -2185,6 +2335,13 @@ mod tests {
             |remesh| agree_sides(&bands, &params, (step, &bounds), None, remesh).expect("agreed");
         let (fewer, every) = (agree(Remesh::Changed), agree(Remesh::NextToChange));
         let jacobi = agree(Remesh::FromThePassBefore);
+        let afresh = agree(Remesh::FromNothing);
+        assert_eq!(fewer.meshes, afresh.meshes);
+        assert!(
+            fewer.resumed > 0 && afresh.resumed == 0,
+            "{}",
+            fewer.resumed
+        );
         assert!(fewer.passes > 1, "the sides did not need agreeing: no test");
         assert!(
             fewer.meshes < every.meshes,
@@ -2200,7 +2357,7 @@ mod tests {
             fewer.meshes,
             jacobi.meshes
         );
-        for other in [&every, &jacobi] {
+        for other in [&every, &jacobi, &afresh] {
             assert_eq!(fewer.units, other.units, "morph units");
             assert_eq!(fewer.forced.len(), other.forced.len());
             for t in 0..fewer.forced.len() {

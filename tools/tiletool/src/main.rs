@@ -749,8 +749,9 @@ fn build(
         );
         if params.shared_sides {
             println!(
-                "  sides     shared: neighbours agreed after {} passes ({} tile meshes)",
-                summary.agreement_passes, summary.agreement_meshes
+                "  sides     shared: neighbours agreed after {} passes ({} tile meshes, {} from \
+                 the tile's last)",
+                summary.agreement_passes, summary.agreement_meshes, summary.agreement_resumed
             );
         } else {
             println!("  sides     independent");
