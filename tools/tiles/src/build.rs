@@ -380,26 +380,11 @@ impl VertexOrder {
         self.index_of[l]
     }
 
-    /// Numbers the vertices the mesh of `leaves` adds in [`Numbering::Decode`]'s order, before
-    /// its fans are emitted (which then find every vertex numbered).
-    fn number_for_decoding(&mut self, mesher: &Mesher, leaves: &[Quad]) {
-        let mut new = Vec::new();
-        let mut fan = Vec::with_capacity(10);
-        for &q in leaves {
-            fan.clear();
-            mesher.fan(q, &mut fan);
-            for &(x, y) in &fan {
-                self.meet(lattice(x, y), &mut new);
-            }
-        }
-        self.number_met(new);
-    }
-
-    /// [`Self::number_for_decoding`] where the level's new vertices are known, `set` (a
-    /// rebuild's decoded level), without walking its fans: the same numbers where the fans use
-    /// exactly the set's points and the coarser levels', as a sound level's do (where they do
-    /// not, the fans number the points they meet after these, and the rebuilt tile fails its
-    /// checksum).
+    /// Numbers the vertices a level adds in [`Numbering::Decode`]'s order where they are
+    /// known, `set` (a rebuild's decoded level), before its fans are emitted: the same numbers
+    /// where the fans use exactly the set's points and the coarser levels', as a sound level's
+    /// do (where they do not, the fans number the points they meet after these, and the
+    /// rebuilt tile fails its checksum).
     fn number_set_for_decoding(&mut self, set: &[(u32, u32, u16)]) {
         let mut new = Vec::with_capacity(set.len());
         for &(x, y, _) in set {
@@ -422,7 +407,11 @@ impl VertexOrder {
     /// scale, coarsest first, each scale row-major.
     fn number_met(&mut self, new: Vec<u32>) {
         let is_vertex = |index_of: &[u32], (x, y): (u32, u32)| index_of[lattice(x, y)] != NO_VERTEX;
-        let mut keyed: Vec<(u32, u32, u32)> = new
+        // The key (class, scale, lattice point) packed in one word, in the same order: a point
+        // takes 17 bits (257² < 2^17), a scale 4.
+        const POINT_BITS: u32 = 17;
+        const _: () = assert!(TILE_SIZE * TILE_SIZE <= 1 << POINT_BITS);
+        let mut keyed: Vec<u32> = new
             .iter()
             .map(|&l| {
                 let (x, y) = xy(l);
@@ -430,9 +419,10 @@ impl VertexOrder {
                     Some([a, b])
                         if is_vertex(&self.index_of, a) && is_vertex(&self.index_of, b) =>
                     {
-                        (1, 8 - crate::compact::scale_of(x, y).trailing_zeros(), l)
+                        let scale = 8 - crate::compact::scale_of(x, y).trailing_zeros();
+                        1 << (POINT_BITS + 4) | scale << POINT_BITS | l
                     }
-                    _ => (0, 0, l),
+                    _ => l,
                 }
             })
             .collect();
@@ -440,8 +430,8 @@ impl VertexOrder {
         for &l in &new {
             self.index_of[l as usize] = NO_VERTEX;
         }
-        for (_, _, l) in keyed {
-            self.index(l as usize);
+        for key in keyed {
+            self.index((key & ((1 << POINT_BITS) - 1)) as usize);
         }
     }
 }
@@ -451,16 +441,20 @@ fn xy(l: u32) -> (u32, u32) {
 }
 
 /// The level's index array (fans joined by restarts) and its triangle count; new vertices get
-/// the next indices, which makes them this level's block.
+/// the next indices, which makes them this level's block: in the order the fans first use
+/// them, or with `decode` in [`Numbering::Decode`]'s (the fans are walked once, their lattice
+/// points written and then mapped to the numbers the level's new points get).
 fn emit_fans(
     mesher: &Mesher,
     leaves: &[Quad],
     vertices: &mut VertexOrder,
     cache: &mut FifoCache,
+    decode: bool,
 ) -> (Vec<u32>, u32) {
     let mut indices = Vec::with_capacity(leaves.len() * 10);
     let mut triangles = 0u32;
     let mut fan = Vec::with_capacity(10);
+    let mut new = Vec::new();
     cache.clear();
     for &q in leaves {
         fan.clear();
@@ -470,11 +464,25 @@ fn emit_fans(
         for &(x, y) in &fan {
             let l = lattice(x, y);
             cache.touch(l);
-            indices.push(vertices.index(l));
+            if decode {
+                vertices.meet(l, &mut new);
+                indices.push(l as u32);
+            } else {
+                indices.push(vertices.index(l));
+            }
         }
         indices.push(NO_VERTEX);
     }
     indices.pop();
+    if decode {
+        // Numbered by the set the fans met, whatever order they met it in.
+        vertices.number_met(new);
+        for i in &mut indices {
+            if *i != NO_VERTEX {
+                *i = vertices.index_of[*i as usize];
+            }
+        }
+    }
     (indices, triangles)
 }
 
@@ -503,8 +511,7 @@ pub fn fans_from_vertices(samples: &TileSamples, sets: &[Vec<(u32, u32)>]) -> Ve
             mesher.extend_to_vertices(|(x, y)| vertex[lattice(x, y)]);
             let leaves = mesher.leaves_in_p_order();
             let start = vertices.lattice_of.len();
-            vertices.number_for_decoding(&mesher, &leaves);
-            let (indices, _) = emit_fans(&mesher, &leaves, &mut vertices, &mut cache);
+            let (indices, _) = emit_fans(&mesher, &leaves, &mut vertices, &mut cache, true);
             let block = vertices.lattice_of[start..]
                 .iter()
                 .map(|&l| xy(l))
@@ -926,12 +933,15 @@ impl Assembly {
         let vertices = &mut self.vertices;
         let block_start = vertices.lattice_of.len();
         let (indices, triangles) = if full {
-            match (self.numbering, set) {
-                (Numbering::Decode, Some(set)) => vertices.number_set_for_decoding(set),
-                (Numbering::Decode, None) => vertices.number_for_decoding(mesher, leaves),
-                (Numbering::FirstUse, _) => {}
-            }
-            emit_fans(mesher, leaves, vertices, &mut self.cache)
+            let decode = match (self.numbering, set) {
+                (Numbering::Decode, Some(set)) => {
+                    vertices.number_set_for_decoding(set);
+                    false
+                }
+                (Numbering::Decode, None) => true,
+                (Numbering::FirstUse, _) => false,
+            };
+            emit_fans(mesher, leaves, vertices, &mut self.cache, decode)
         } else {
             let mut fan = Vec::with_capacity(10);
             for &q in leaves {
