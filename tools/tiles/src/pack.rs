@@ -43,9 +43,7 @@ pub fn morph_unit(error_bound: f64, max_deviation: f64) -> f64 {
 
 /// The morph offset that moves a vertex of height `h` to `target`.
 pub fn morph_offset(h: f32, target: f32, unit: f64) -> i8 {
-    ((f64::from(target) - f64::from(h)) / unit)
-        .round()
-        .clamp(-127.0, 127.0) as i8
+    crate::quantise::round((f64::from(target) - f64::from(h)) / unit).clamp(-127.0, 127.0) as i8
 }
 
 #[cfg(test)]

@@ -66,7 +66,7 @@ impl Quantiser {
 /// target makes of it (no `roundsd` before SSE4.1): the truncation is one instruction, and
 /// `v - trunc(v)` is exact. Past 2^52 every float is an integer already.
 #[inline]
-fn round(v: f64) -> f64 {
+pub(crate) fn round(v: f64) -> f64 {
     if v.is_nan() || v.abs() >= (1u64 << 52) as f64 {
         return v.round();
     }
