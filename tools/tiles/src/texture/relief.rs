@@ -192,18 +192,38 @@ pub fn render(
         .collect();
     let mut image = Image::new(width, height);
     let row_of = |y: usize| &lit.colours[(y - lit.y0) * lit.width..][..lit.width];
+    // A grid row interpolated across to every column: the texels' upper or lower values.
+    // Several rows of texels (about three at the relief's scale) read the same grid rows, and
+    // the next grid row's upper values are this one's lower: each is found once, by the same
+    // expression, so the texels are the same bits as interpolating each one on its own.
+    let across = |y: usize, into: &mut Vec<[f32; 3]>| {
+        let row = row_of(y);
+        into.clear();
+        into.extend(columns.iter().map(|&(xa, xb, fx)| {
+            let (a, b) = (row[xa], row[xb]);
+            [0, 1, 2].map(|k| a[k] + fx * (b[k] - a[k]))
+        }));
+    };
+    let (mut upper, mut lower) = (Vec::with_capacity(width), Vec::with_capacity(width));
+    let mut held: Option<(usize, usize)> = None;
     for (&y, out) in ys.iter().zip(image.texels.chunks_exact_mut(width)) {
         let ya = y.floor() as usize;
         let yb = (ya + 1).min(grid.height - 1);
         let fy = (y - ya as f64) as f32;
-        let (upper, lower) = (row_of(ya), row_of(yb));
-        for (texel, &(xa, xb, fx)) in out.iter_mut().zip(&columns) {
-            let (a, b, c, d) = (upper[xa], upper[xb], lower[xa], lower[xb]);
-            *texel = [0, 1, 2].map(|k| {
-                let top = a[k] + fx * (b[k] - a[k]);
-                let bottom = c[k] + fx * (d[k] - c[k]);
-                top + fy * (bottom - top)
-            });
+        match held {
+            Some(rows) if rows == (ya, yb) => {}
+            Some((_, was)) if was == ya => {
+                std::mem::swap(&mut upper, &mut lower);
+                across(yb, &mut lower);
+            }
+            _ => {
+                across(ya, &mut upper);
+                across(yb, &mut lower);
+            }
+        }
+        held = Some((ya, yb));
+        for ((texel, top), bottom) in out.iter_mut().zip(&upper).zip(&lower) {
+            *texel = [0, 1, 2].map(|k| top[k] + fy * (bottom[k] - top[k]));
         }
     }
     image
@@ -234,6 +254,43 @@ mod tests {
     fn grey(relief: &Relief, heights: &[f32]) -> f32 {
         let g = grid(heights);
         render(&g, &Lighting::new(&g, *relief), (10.0, 10.0), 1.0, (1, 1)).texels[0][0]
+    }
+
+    /// Texels from grid rows interpolated once and shared are the bits of each texel
+    /// interpolated from its four samples on its own: a rough field, a fractional step
+    /// (several texel rows a grid row), an origin off the lattice, and texels clamped past
+    /// the last row and column.
+    #[test]
+    fn shared_rows_render_each_texels_bits() {
+        let heights: Vec<f32> = (0..32 * 32u32)
+            .map(|i| (i.wrapping_mul(2_654_435_761) >> 22) as f32 * 0.37)
+            .collect();
+        let g = grid(&heights);
+        let lighting = Lighting::new(&g, Relief::default());
+        for (origin, step, size) in [((0.3, 0.7), 0.35, (90, 95)), ((20.1, 25.6), 0.6, (40, 30))] {
+            let image = render(&g, &lighting, origin, step, size);
+            let lit = light(&g, &lighting, (0, 0), (31, 31));
+            let at = |x: usize, y: usize| lit.colours[y * lit.width + x];
+            for (t, texel) in image.texels.iter().enumerate() {
+                let (i, j) = (t % size.0, t / size.0);
+                let x = (origin.0 + i as f64 * step).clamp(0.0, 31.0);
+                let y = (origin.1 + j as f64 * step).clamp(0.0, 31.0);
+                let (xa, ya) = (x.floor() as usize, y.floor() as usize);
+                let (xb, yb) = ((xa + 1).min(31), (ya + 1).min(31));
+                let (fx, fy) = ((x - xa as f64) as f32, (y - ya as f64) as f32);
+                let (a, b, c, d) = (at(xa, ya), at(xb, ya), at(xa, yb), at(xb, yb));
+                let want = [0, 1, 2].map(|k| {
+                    let top = a[k] + fx * (b[k] - a[k]);
+                    let bottom = c[k] + fx * (d[k] - c[k]);
+                    top + fy * (bottom - top)
+                });
+                assert_eq!(
+                    texel.map(f32::to_bits),
+                    want.map(f32::to_bits),
+                    "texel {i},{j}"
+                );
+            }
+        }
     }
 
     #[test]
