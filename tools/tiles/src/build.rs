@@ -1927,7 +1927,7 @@ pub(crate) fn settle(
     // Each tile's last mesh, kept while they fit a budget (a start's tiles have none: their
     // first mesh here is from nothing).
     let budget = match remesh {
-        Remesh::FromNothing => 0,
+        Remesh::KeepingAtMost(tiles) => tiles * MeshHistory::BYTES,
         _ => HISTORY_BUDGET,
     };
     let mut histories = Histories::new(count, budget);
@@ -2157,10 +2157,11 @@ pub(crate) enum Remesh {
     /// reference for it).
     #[cfg_attr(not(test), allow(dead_code))]
     FromThePassBefore,
-    /// [`Remesh::Changed`] with every mesh from nothing, none from the tile's last (the rule
-    /// before mesh histories; the tests' reference for them).
+    /// [`Remesh::Changed`] keeping the last meshes of at most this many tiles, not the
+    /// budget's (0: every mesh from nothing, the rule before mesh histories; the tests'
+    /// reference for them, and for a budget that drops some).
     #[cfg_attr(not(test), allow(dead_code))]
-    FromNothing,
+    KeepingAtMost(usize),
 }
 
 /// One side's vertices at one level: bit `i` for position `i` (0..=256).
@@ -2331,7 +2332,8 @@ mod tests {
     /// and agreements as meshing every tile next to a change, with fewer meshes; and so does
     /// meshing each pass's tiles from the state before the pass, the order before the
     /// checkerboard, with more; and meshing every tile from nothing rather than from its last
-    /// mesh, with as many (real SRTM3 heights, 4 x 4 tiles).
+    /// mesh, or from the last meshes a small budget still holds, with as many (real SRTM3
+    /// heights, 4 x 4 tiles).
     #[test]
     fn agreement_remeshes_only_what_changed_and_settles_the_same() {
         let side = 4 * 256 + 1;
@@ -2345,11 +2347,17 @@ mod tests {
             |remesh| agree_sides(&bands, &params, (step, &bounds), None, remesh).expect("agreed");
         let (fewer, every) = (agree(Remesh::Changed), agree(Remesh::NextToChange));
         let jacobi = agree(Remesh::FromThePassBefore);
-        let afresh = agree(Remesh::FromNothing);
+        let afresh = agree(Remesh::KeepingAtMost(0));
+        // Twelve of the sixteen tiles' last meshes kept: the oldest are dropped as the passes
+        // go, and some tiles are meshed again from nothing.
+        let dropping = agree(Remesh::KeepingAtMost(12));
         assert_eq!(fewer.meshes, afresh.meshes);
+        assert_eq!(fewer.meshes, dropping.meshes);
         assert!(
-            fewer.resumed > 0 && afresh.resumed == 0,
-            "{}",
+            afresh.resumed == 0 && 0 < dropping.resumed && dropping.resumed < fewer.resumed,
+            "{} {} {}",
+            afresh.resumed,
+            dropping.resumed,
             fewer.resumed
         );
         assert!(fewer.passes > 1, "the sides did not need agreeing: no test");
@@ -2367,7 +2375,7 @@ mod tests {
             fewer.meshes,
             jacobi.meshes
         );
-        for other in [&every, &jacobi, &afresh] {
+        for other in [&every, &jacobi, &afresh, &dropping] {
             assert_eq!(fewer.units, other.units, "morph units");
             assert_eq!(fewer.forced.len(), other.forced.len());
             for t in 0..fewer.forced.len() {
