@@ -36,6 +36,7 @@ fn data(rel: &str) -> Result<PathBuf> {
 }
 
 fn main() -> std::process::ExitCode {
+    tiles::hold_freed_memory();
     match run() {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {

@@ -52,6 +52,7 @@ fn error_meter(cli: &Cli, terrain: &Terrain, sources: &[PathBuf]) -> Result<Erro
 }
 
 fn main() -> ExitCode {
+    tiles::hold_freed_memory();
     match run(Cli::parse()) {
         Ok(code) => code,
         Err(e) => {

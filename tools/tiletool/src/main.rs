@@ -334,6 +334,7 @@ fn remove_on_signal(output: &Path) -> Result<()> {
 }
 
 fn main() -> ExitCode {
+    tiles::hold_freed_memory();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Build {
