@@ -1,14 +1,15 @@
 //! Structured mutation fuzzing of every reader of untrusted input: the `.vkt` reader with its
-//! per-tile validation (and the renderer's open), each DEM decoder, the camera-path parser and
-//! the frame-log reader.
+//! per-tile validation (and the renderer's open), each DEM decoder, the camera-path parser, the
+//! frame-log reader and the merge of a distributed build's part files.
 //!
 //! Each target starts from seed files (`fuzz/corpus/<target>/`, plus real data from
 //! `../shared/data` where a seed would be too large to keep), mutates them with a fixed-seed
 //! generator (bit flips, random and boundary bytes, boundary 32-bit integers and floats at
 //! aligned offsets, truncation, deletion, duplication, splicing two inputs) and runs the reader
 //! on the result. A reader may refuse any input; it may not panic, and an input that takes
-//! over [`SLOW`] is reported as a hang. Tile sets are resealed (checksums recomputed) half of
-//! the time, so that the semantic checks, not only the checksums, meet the mutations.
+//! over [`SLOW`] is reported as a hang. Tile sets and part files are resealed (checksums
+//! recomputed) half of the time, so that the semantic checks, not only the checksums, meet the
+//! mutations.
 //!
 //! `mutfuzz TARGET --seconds N [--seed S]` runs one target; failing inputs are saved under
 //! `fuzz/crashes/`. A short run of every target is part of the tests (`fuzz/tests/short.rs`).
@@ -31,8 +32,8 @@ pub struct Target {
     /// Seeds: files in the corpus folder of this name, and files from `../shared/data`.
     pub corpus: &'static str,
     pub shared: &'static [&'static str],
-    /// Recompute tile set checksums on half of the mutations.
-    pub reseal: bool,
+    /// Recomputes the input's checksums (on half of the mutations).
+    pub reseal: Option<fn(&mut [u8])>,
     pub run: fn(&Path),
 }
 
@@ -42,7 +43,7 @@ pub const TARGETS: &[Target] = &[
         file: "input.vkt",
         corpus: "vkt",
         shared: &[],
-        reseal: true,
+        reseal: Some(reseal_vkt),
         run: run_vkt,
     },
     Target {
@@ -50,7 +51,7 @@ pub const TARGETS: &[Target] = &[
         file: "N43E007.hgt",
         corpus: "hgt",
         shared: &["srtm/N55W003.hgt"],
-        reseal: false,
+        reseal: None,
         run: run_dem,
     },
     Target {
@@ -58,7 +59,7 @@ pub const TARGETS: &[Target] = &[
         file: "input.tif",
         corpus: "tiff",
         shared: &["geotiff/bigtujunga.tif"],
-        reseal: false,
+        reseal: None,
         run: run_dem,
     },
     Target {
@@ -66,7 +67,7 @@ pub const TARGETS: &[Target] = &[
         file: "input.png",
         corpus: "png",
         shared: &[],
-        reseal: false,
+        reseal: None,
         run: run_dem_spaced,
     },
     Target {
@@ -74,7 +75,7 @@ pub const TARGETS: &[Target] = &[
         file: "14-2625-6369.png",
         corpus: "terrain-rgb",
         shared: &[],
-        reseal: false,
+        reseal: None,
         run: run_terrain_rgb,
     },
     Target {
@@ -82,7 +83,7 @@ pub const TARGETS: &[Target] = &[
         file: "input.jpg",
         corpus: "jpeg",
         shared: &[],
-        reseal: false,
+        reseal: None,
         run: run_dem_spaced,
     },
     Target {
@@ -90,7 +91,7 @@ pub const TARGETS: &[Target] = &[
         file: "input.r16",
         corpus: "raw",
         shared: &[],
-        reseal: false,
+        reseal: None,
         run: run_raw,
     },
     Target {
@@ -98,7 +99,7 @@ pub const TARGETS: &[Target] = &[
         file: "path.csv",
         corpus: "path",
         shared: &[],
-        reseal: false,
+        reseal: None,
         run: run_path,
     },
     Target {
@@ -106,10 +107,26 @@ pub const TARGETS: &[Target] = &[
         file: "frames.csv",
         corpus: "log",
         shared: &[],
-        reseal: false,
+        reseal: None,
         run: run_log,
     },
+    Target {
+        name: "part",
+        file: "input.part",
+        corpus: "part",
+        shared: &[],
+        reseal: Some(reseal_part),
+        run: run_part,
+    },
 ];
+
+fn reseal_vkt(bytes: &mut [u8]) {
+    let _ = tiles::format::reseal(bytes);
+}
+
+fn reseal_part(bytes: &mut [u8]) {
+    let _ = tiles::shard::reseal_part(bytes);
+}
 
 fn run_vkt(p: &Path) {
     if let Ok(file) = tiles::TileSet::open(p) {
@@ -144,6 +161,33 @@ fn run_vkt(p: &Path) {
         let _ = terrain.take_failures();
         let (lo, hi) = terrain.bounds();
         let _ = terrain.max_height_near(0.5 * (lo.x + hi.x), 0.5 * (lo.y + hi.y), 1e4);
+    }
+}
+
+/// A one-shard part merged alone (the seeds are `--shard 0/1` parts, whose merge needs no input):
+/// the merge refuses it or writes a set, and a refusal leaves nothing behind, neither the set
+/// nor its temporary file. A set it writes is opened and verified as a user would next.
+fn run_part(p: &Path) {
+    let out = p.with_file_name("merged.vkt");
+    let _ = std::fs::remove_file(&out);
+    let inputs = |_: &str| -> Result<_, tiles::BuildError> {
+        Err(tiles::BuildError::Input(
+            "no input is read while fuzzing".into(),
+        ))
+    };
+    match tiles::shard::merge(&[p.to_path_buf()], &out, &inputs, &|| {}) {
+        Ok(_) => {
+            if let Ok(set) = tiles::TileSet::open(&out) {
+                let _ = tiles::verify::verify(&set, None);
+            }
+        }
+        Err(_) => {
+            let tmp = tiles::format::temp_path(&out).expect("a file name");
+            assert!(
+                !out.exists() && !tmp.exists(),
+                "a refused merge left a file behind"
+            );
+        }
     }
 }
 
@@ -343,8 +387,8 @@ pub fn fuzz(
         } else {
             mutate(a, b, &mut rng)
         };
-        if target.reseal && rng.below(2) == 0 {
-            let _ = tiles::format::reseal(&mut bytes);
+        if let Some(reseal) = target.reseal.filter(|_| rng.below(2) == 0) {
+            reseal(&mut bytes);
         }
         std::fs::write(&input, &bytes).map_err(|e| format!("{}: {e}", input.display()))?;
         let t = Instant::now();

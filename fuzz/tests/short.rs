@@ -25,7 +25,7 @@ fn every_target_survives_a_short_run() {
     for target in TARGETS {
         // The SRTM and GeoTIFF seeds are megabytes: fewer inputs.
         let inputs = match target.name {
-            "hgt" | "tiff" => 300,
+            "hgt" | "tiff" | "part" => 300,
             "vkt" => 1500,
             _ => 3000,
         };
@@ -53,7 +53,7 @@ fn the_runner_catches_a_panicking_reader() {
         file: "input.csv",
         corpus: "path",
         shared: &[],
-        reseal: false,
+        reseal: None,
         run: panics_on_a_bang,
     };
     let report = run(&target, 3000, 1);

@@ -693,6 +693,19 @@ impl Drop for PartWriter {
     }
 }
 
+/// Seals a part's bytes again after they were changed: the crc32 of everything before the
+/// checksum, written where the checksum is (the fuzzer's mutations then meet the merge's
+/// checks beyond the checksum). Bytes that do not end in the end mark are left as they are.
+pub fn reseal_part(bytes: &mut [u8]) -> Result<(), String> {
+    let n = bytes.len();
+    if n < 12 || bytes[n - 8..] != END_MAGIC {
+        return Err("no end mark".into());
+    }
+    let crc = crc32fast::hash(&bytes[..n - 12]);
+    bytes[n - 12..n - 8].copy_from_slice(&crc.to_le_bytes());
+    Ok(())
+}
+
 fn io_error(path: &Path, e: std::io::Error) -> BuildError {
     BuildError::Input(format!("{}: {e}", path.display()))
 }
