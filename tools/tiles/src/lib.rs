@@ -64,8 +64,9 @@ pub const HELD_FREE_BYTES: usize = 64 << 20;
 /// zeroed by the kernel. A build allocates and frees a few megabytes per tile on each thread
 /// (the relief texture's images and mips above all): the GENERATED 4K mirror's build spent
 /// 2.2-2.8 s of system time against 10-15 s of user time, and its threads waited on each
-/// other's page faults. Lavapipe, which bins every frame's triangles in memory it allocates and
-/// frees, spent 1.7-2.9 s of system time on a 60-frame brute-force flight. Holding the memory
+/// other's page faults. Lavapipe, whose compiled shaders write each frame's vertices into memory
+/// it allocates and frees (perf: most page faults in its JIT code), spent 1.7-2.9 s of system
+/// time on a 60-frame brute-force flight. Holding the memory
 /// keeps the process at about what it touched at its peak (bench/README.md, "Freed memory
 /// held"). `MALLOC_TOP_PAD_` in the environment, where set, stands instead. Elsewhere than
 /// glibc this does nothing.
