@@ -1535,7 +1535,13 @@ pub(crate) fn build_pyramid(
         let finer = Decimated::new(heights, p - 1);
         let finer: &dyn Heights = if p == 1 { heights } else { &finer };
         let l = writer.layers()[p as usize - 1];
-        let decimation = decimation_errors(finer, &below, below_tiles_x, (l.tiles_x, l.tiles_y))?;
+        let decimation = decimation_errors(
+            finer,
+            &below,
+            below_tiles_x,
+            (l.tiles_x, l.tiles_y),
+            0..l.tiles_y,
+        )?;
         let layer_bands = Bands::new(&layer_heights, (l.tiles_x, l.tiles_y));
         let scanned = scan(&layer_bands)?;
         writer.set_layer_heights(p, scanned.step, scanned.lo, scanned.hi);

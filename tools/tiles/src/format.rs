@@ -851,6 +851,20 @@ impl TileSetWriter {
         self.put_layer_tile(0, (tx, ty), stored, 0.0, &[])
     }
 
+    /// [`add_stored_tile`](Self::add_stored_tile) for a tile of pyramid layer `layer`, with its
+    /// decimation error and its levels' errors against the base grid (a merge copies the
+    /// layers' tiles that the shards built).
+    pub fn add_stored_layer_tile(
+        &mut self,
+        layer: u32,
+        (tx, ty): (u32, u32),
+        stored: &[u8],
+        decimation_error: f32,
+        base_errors: &[f32],
+    ) -> Result<(), FormatError> {
+        self.put_layer_tile(layer, (tx, ty), stored, decimation_error, base_errors)
+    }
+
     fn put_layer_tile(
         &mut self,
         layer: u32,

@@ -137,19 +137,22 @@ impl Heights for Decimated<'_> {
 
 /// The decimation error of every tile of layer `p >= 1` (row-major): the largest error of its
 /// children in layer `p-1` (`below`, row-major over `below_tiles_x` columns) plus the largest
-/// `|h - S_p|` over layer `p-1`'s samples in the tile. `finer` is layer `p-1`'s grid.
+/// `|h - S_p|` over layer `p-1`'s samples in the tile. `finer` is layer `p-1`'s grid. Only the
+/// tiles of tile rows `rows` are measured (a shard's; the others are left 0), and only their
+/// children's errors in `below` are read.
 pub fn decimation_errors(
     finer: &dyn Heights,
     below: &[f32],
     below_tiles_x: u32,
     tiles: (u32, u32),
+    rows: std::ops::Range<u32>,
 ) -> Result<Vec<f32>, BuildError> {
     let shape = finer.shape();
     let (w, h) = (shape.width, shape.height);
     let cells = TILE_CELLS as usize;
     let below_tiles_y = below.len() as u32 / below_tiles_x.max(1);
-    let mut out = Vec::with_capacity((tiles.0 * tiles.1) as usize);
-    for ty in 0..tiles.1 {
+    let mut out = vec![0.0f32; (tiles.0 * tiles.1) as usize];
+    for ty in rows.start..rows.end.min(tiles.1) {
         // The tile row's samples of layer p-1: 2 * 256 rows from 2 * 256 * ty, and the layer-p
         // quads' far rows, clamped into the grid.
         let y0 = (2 * cells * ty as usize).min(h - 1);
@@ -190,7 +193,7 @@ pub fn decimation_errors(
                 }
             })
             .collect();
-        out.extend(row_errors);
+        out[(ty * tiles.0) as usize..][..tiles.0 as usize].copy_from_slice(&row_errors);
     }
     Ok(out)
 }
@@ -390,7 +393,7 @@ mod tests {
             spacing_x: 1.0,
             spacing_y: 1.0,
         };
-        let d = decimation_errors(&g, &[0.0; 4], 2, (1, 1)).unwrap();
+        let d = decimation_errors(&g, &[0.0; 4], 2, (1, 1), 0..1).unwrap();
         assert!(d[0] < 1e-3, "{d:?}");
         // The control: one odd sample raised 7 m is 7 m off S_p (its neighbours are even or
         // their fans do not reach it), and a child's error adds on.
@@ -400,7 +403,7 @@ mod tests {
             heights: &bump,
             ..g
         };
-        let d = decimation_errors(&g, &[0.0, 0.5, 0.0, 0.25], 2, (1, 1)).unwrap();
+        let d = decimation_errors(&g, &[0.0, 0.5, 0.0, 0.25], 2, (1, 1), 0..1).unwrap();
         assert!((d[0] - 7.5).abs() < 1e-3, "{d:?}");
     }
 

@@ -38,11 +38,14 @@
 //!   ([`crate::build::rebuild_tile`], which makes the build's bytes from a tile's vertex
 //!   sets; a compact tile keeps its stream, [`reseal_compact_tile`]).
 //!
-//! The tile pyramid (`--pyramid`) is built in the merge: its layers are built from the
-//! subsampled whole grid and measured against the base grid, so the merge reads the input
-//! again and runs the build's last step ([`crate::build::build_pyramid`]) after the base
-//! tiles. Its cost (+60-88% of a build at 16K) is the merge's. A photo-textured pyramid is
-//! refused at the shard: the merge does not read the photo.
+//! The tile pyramid (`--pyramid`) is built on the shards, each its rows of every layer
+//! ([`Shard::rows`] of the layer's tile rows), the same way: a layer's shared sides and
+//! morph units are settled as the base grid's are (the layer's units follow its tiles'
+//! deviations, so the merge seals again the tiles of a part whose units were smaller), and
+//! what else a layer tile depends on beyond its samples (the layer's range and step, its
+//! decimation error from its children's, its errors against the base grid) each shard
+//! finds for itself (`ShardLayers::build` says how). The merge then copies the layers as it
+//! does the base grid.
 //!
 //! # The part file
 //!
@@ -53,10 +56,14 @@
 //! agreement's passes and meshes, then per owned tile (row-major)
 //! its forced sides and sides (bitmaps), its final build's deviations, its blob (with compact levels, the
 //! bytes the set stores, [`compact_tile`]: compacted on the shard, copied by the merge) and
-//! its texture; last, the crc32 of everything before it and `END_MAGIC`. It is written to a
+//! its texture; then the number of pyramid layers (0 without a pyramid) and per layer its
+//! index, owned rows (possibly none) and tile counts, its scan's lattice step and range, its
+//! units, passes and meshes, and per owned tile the same record with its agreement's
+//! deviations, its decimation error and its levels' errors against the base grid before the
+//! blob; last, the crc32 of everything before it and `END_MAGIC`. It is written to a
 //! temporary file and renamed when complete, so a shard killed at any point leaves no part
-//! that reads as whole. Version 3 (the bounds); version 2 parts held no bounds and version 1
-//! parts version 3 blobs, and both are refused.
+//! that reads as whole. Version 4 (the layers); version 3 parts held no layers (the merge
+//! built them), version 2 no bounds and version 1 version 3 blobs, and all are refused.
 
 use std::io::{BufWriter, Write};
 use std::ops::Range;
@@ -67,11 +74,12 @@ use crate::build::{
     CompactSides, Heights, Layer, LevelStats, Remesh, SideBits, Start, TileSetMeta,
 };
 use crate::format::{
-    compact_tile, reseal_compact_tile, stored_tile_table, temp_path, tile_count, FileHeader, Tile,
-    TileSetWriter, FLAG_COMPACT_LEVELS, FLAG_SHARED_SIDES,
+    compact_tile, layer_layout, reseal_compact_tile, stored_tile_table, temp_path, tile_count,
+    FileHeader, LayerHeader, Tile, TileSetWriter, FLAG_COMPACT_LEVELS, FLAG_SHARED_SIDES,
 };
-use crate::texture::{Prepared, Source, Texturing};
-use crate::units::{cell_spans, deviation_bounds, CellSpans, CELL_SIZES};
+use crate::pyramid::{decimation_errors, Decimated};
+use crate::texture::{self, Prepared, Texturing};
+use crate::units::{cell_spans, deviation_bounds, layer_bounds, CellSpans, CELL_SIZES};
 use crate::BuildError;
 
 /// The first bytes of a part file.
@@ -81,7 +89,7 @@ const END_MAGIC: [u8; 8] = *b"VKTPEND\0";
 /// Where a part's blobs start: a multiple of this many bytes from the file's start.
 const ALIGN: usize = 16;
 /// The part format's version.
-pub const PART_VERSION: u32 = 3;
+pub const PART_VERSION: u32 = 4;
 /// Tile rows beyond its own that a shard settles the sides over, by default. On the sets
 /// measured (bench/README.md, "Distributed builds") one row already left no seam to settle
 /// again in the merge; two give margin for longer cascades at the cost of about `4 / rows`
@@ -149,6 +157,8 @@ pub struct ShardSummary {
     pub levels: Vec<LevelStats>,
     pub agreement_passes: u32,
     pub agreement_meshes: u64,
+    /// Tiles of the pyramid's layers it built.
+    pub pyramid_tiles: u64,
     pub part_bytes: u64,
 }
 
@@ -170,20 +180,6 @@ pub fn build_shard(
     progress: &(dyn Fn() + Sync),
 ) -> Result<ShardSummary, BuildError> {
     validate(params, texturing)?;
-    if let (
-        true,
-        Some(Texturing {
-            source: Source::Photo(_),
-            ..
-        }),
-    ) = (params.pyramid, texturing)
-    {
-        return Err(BuildError::Params(
-            "--pyramid with a photo texture cannot be sharded yet: the merge builds the \
-             pyramid, and does not read the photo"
-                .into(),
-        ));
-    }
     let shape = heights.shape();
     let (tiles_x, tiles_y) = tile_count(shape.width, shape.height).map_err(BuildError::Params)?;
     let rows = shard.rows_of(tiles_y)?;
@@ -311,8 +307,192 @@ pub fn build_shard(
             Ok(())
         },
     )?;
+    // The pyramid's layers (none without one).
+    let layers = layers_of(&header).map_err(BuildError::Internal)?;
+    let mut layer_summary = ShardLayers {
+        part: &mut part,
+        summary: &mut summary,
+        progress,
+    };
+    let prepared = prepared.as_ref();
+    layer_summary.build(heights, params, &header, &layers, prepared, (shard, halo))?;
     summary.part_bytes = part.finish()?;
     Ok(summary)
+}
+
+/// Where a shard writes its share of the pyramid's layers.
+struct ShardLayers<'a, 'p> {
+    part: &'a mut PartWriter,
+    summary: &'a mut ShardSummary,
+    progress: &'p (dyn Fn() + Sync),
+}
+
+/// The pyramid's layers of the set whose header (as the writer is given it, its version not
+/// set yet) is `header`.
+fn layers_of(header: &FileHeader) -> Result<Vec<LayerHeader>, String> {
+    let versioned = FileHeader {
+        version: crate::format::VERSION,
+        ..*header
+    };
+    Ok(layer_layout(&versioned)?.0)
+}
+
+/// The hull of two tile row ranges, an empty one adding nothing.
+fn hull(a: &Range<u32>, b: &Range<u32>) -> Range<u32> {
+    match (a.is_empty(), b.is_empty()) {
+        (true, _) => b.clone(),
+        (_, true) => a.clone(),
+        _ => a.start.min(b.start)..a.end.max(b.end),
+    }
+}
+
+impl ShardLayers<'_, '_> {
+    /// Builds the shard's tile rows of each pyramid layer into the part, after its base tiles:
+    /// in layer `p` of `T` tile rows, the rows that [`Shard::rows`] gives it of `T` (none
+    /// where `T` is below the shard count), so that every shard builds about its share of
+    /// each layer. What a layer tile depends on beyond its own samples, and where it comes
+    /// from:
+    ///
+    /// - **The layer's range and lattice step**: a scan of the whole layer, as the build's
+    ///   (it reads the input once a layer, every `2^p`-th row and column kept).
+    /// - **Its decimation error**, from its children's in the layer below
+    ///   ([`decimation_errors`]): measured here for the rows the shard's own and those of
+    ///   its layers above need, from the bottom up, so it reads only the rows under them.
+    /// - **Its shared sides**: settled over its rows and `halo` more either side, as the base
+    ///   grid's; the merge checks for the fixed point and resumes where a halo fell short.
+    /// - **Its morph units**, which follow the layer's tiles' deviations: the part records
+    ///   each tile's and the units it sealed with; the merge seals again where the layer's
+    ///   come out larger.
+    /// - **Its errors against the base grid** ([`crate::pyramid::base_errors`]): the base
+    ///   rows under its own tile row.
+    fn build(
+        &mut self,
+        heights: &dyn Heights,
+        params: &BuildParams,
+        header: &FileHeader,
+        layers: &[LayerHeader],
+        prepared: Option<&(Prepared, texture::Layout)>,
+        (shard, halo): (Shard, u32),
+    ) -> Result<(), BuildError> {
+        self.part.u32(layers.len() as u32)?;
+        let own = |l: &LayerHeader| shard.rows(l.tiles_y);
+        let windows: Vec<Range<u32>> = layers
+            .iter()
+            .map(|l| match own(l) {
+                rows if rows.is_empty() || !params.shared_sides => rows,
+                rows => rows.start.saturating_sub(halo)..(rows.end + halo).min(l.tiles_y),
+            })
+            .collect();
+        // The rows whose decimation errors are needed: each layer's window, and the children
+        // of those needed in the layer above.
+        let mut needed = windows.clone();
+        for i in (0..layers.len().saturating_sub(1)).rev() {
+            let (above, rows) = (&needed[i + 1], layers[i].tiles_y);
+            let children = (2 * above.start).min(rows)..(2 * above.end).min(rows);
+            needed[i] = hull(&needed[i], &children);
+        }
+        let mut below = vec![0.0f32; (header.tiles_x * header.tiles_y) as usize];
+        let mut below_tiles_x = header.tiles_x;
+        for (i, l) in layers.iter().enumerate() {
+            let p = i as u32 + 1;
+            let tiles = (l.tiles_x, l.tiles_y);
+            let layer_heights = Decimated::new(heights, p);
+            let finer_layer = Decimated::new(heights, p - 1);
+            let finer: &dyn Heights = if p == 1 { heights } else { &finer_layer };
+            let decimation =
+                decimation_errors(finer, &below, below_tiles_x, tiles, needed[i].clone())?;
+            let scanned = scan(&Bands::new(&layer_heights, tiles))?;
+            let rows = own(l);
+            let bounds = layer_bounds(params);
+            let agreed = match params.shared_sides && !rows.is_empty() {
+                true => {
+                    let window = windows[i].clone();
+                    let around = Bands::within(&layer_heights, tiles, window.clone());
+                    let (step, floors) = (scanned.step, Some(&decimation[..]));
+                    let mut agreed =
+                        settle(&around, params, step, floors, Remesh::Changed, window, None)?;
+                    let from = (rows.start - windows[i].start) as usize * l.tiles_x as usize;
+                    let count = rows.len() * l.tiles_x as usize;
+                    agreed.units = units_of(&bounds, &agreed.deviation[from..from + count]);
+                    Some(agreed)
+                }
+                false => None,
+            };
+            for v in [p, rows.start, rows.end, l.tiles_x, l.tiles_y] {
+                self.part.u32(v)?;
+            }
+            for v in [scanned.step, scanned.lo, scanned.hi] {
+                self.part.f32(v)?;
+            }
+            let units = agreed.as_ref().map(|a| a.units.clone()).unwrap_or_default();
+            for level in 0..params.levels as usize {
+                self.part.f64(units.get(level).copied().unwrap_or(0.0))?;
+            }
+            self.part.u32(agreed.as_ref().map_or(0, |a| a.passes))?;
+            self.part.u64(agreed.as_ref().map_or(0, |a| a.meshes))?;
+            let layer = Layer {
+                index: p,
+                bands: &Bands::within(&layer_heights, tiles, rows.clone()),
+                step: scanned.step,
+                bounds,
+                decimation: Some(&decimation),
+                prepared: prepared.map(|(s, l)| (s.for_layer(p), *l)),
+                base: Some(heights),
+            };
+            let compact = header.flags & FLAG_COMPACT_LEVELS != 0;
+            let none = vec![[[0u64; 5]; 4]; params.levels as usize];
+            let (part, summary, progress) = (&mut *self.part, &mut *self.summary, self.progress);
+            build_tiles(
+                &layer,
+                params,
+                agreed.as_ref(),
+                rows,
+                &mut |t, (built, texture), errors| {
+                    // The agreement's deviations: the layer's units are the set's largest.
+                    let (forced, sides, deviation) = match &agreed {
+                        Some(a) => {
+                            let k = t - a.first;
+                            (&a.forced[k], &a.sides[k], &a.deviation[k])
+                        }
+                        None => (&none, &none, &built.deviation),
+                    };
+                    part.sides(forced)?;
+                    part.sides(sides)?;
+                    for &d in deviation {
+                        part.f64(d)?;
+                    }
+                    part.f32(decimation[t])?;
+                    for &e in errors {
+                        part.f32(e)?;
+                    }
+                    let xy = (built.tx, built.ty);
+                    let compacted;
+                    let blob = if compact {
+                        let shape = (params.levels, scanned.step);
+                        compacted = compact_tile(&built.blob, xy, shape).map_err(|what| {
+                            let (tx, ty) = xy;
+                            BuildError::Internal(format!("layer {p} tile {tx},{ty}: {what}"))
+                        })?;
+                        &compacted[..]
+                    } else {
+                        &built.blob[..]
+                    };
+                    part.u64(blob.len() as u64)?;
+                    part.align()?;
+                    part.put(blob)?;
+                    let tex = texture.map(|(blob, _, _)| blob).unwrap_or_default();
+                    part.u64(tex.len() as u64)?;
+                    part.align()?;
+                    part.put(&tex)?;
+                    summary.pyramid_tiles += 1;
+                    progress();
+                    Ok(())
+                },
+            )?;
+            (below, below_tiles_x) = (decimation, l.tiles_x);
+        }
+        Ok(())
+    }
 }
 
 /// What a shard's scan found of its tile rows (`tiletool build --shard K/N --scan-only`): the range of
@@ -660,6 +840,10 @@ impl PartWriter {
         self.put(&v.to_le_bytes())
     }
 
+    fn f32(&mut self, v: f32) -> Result<(), BuildError> {
+        self.put(&v.to_le_bytes())
+    }
+
     fn sides(&mut self, sides: &CompactSides) -> Result<(), BuildError> {
         for level in sides {
             for side in level {
@@ -726,7 +910,26 @@ pub struct Part {
     pub bounds: Vec<f64>,
     pub agreement_passes: u32,
     pub agreement_meshes: u64,
+    /// Its share of each pyramid layer, from layer 1 up.
+    pub layers: Vec<PartLayer>,
     map: memmap2::Mmap,
+    /// Per owned tile: where its record starts.
+    tiles: Vec<usize>,
+}
+
+/// A part's tile rows of one pyramid layer.
+pub struct PartLayer {
+    pub rows: Range<u32>,
+    pub tiles_x: u32,
+    pub tiles_y: u32,
+    /// The layer's lattice step and range of heights, from the shard's scan of the layer.
+    pub step: f32,
+    pub lo: f32,
+    pub hi: f32,
+    /// The units its tiles were sealed with (0s with independent sides).
+    pub units: Vec<f64>,
+    pub agreement_passes: u32,
+    pub agreement_meshes: u64,
     /// Per owned tile: where its record starts.
     tiles: Vec<usize>,
 }
@@ -745,6 +948,7 @@ struct Preamble {
     passes: u32,
     meshes: u64,
     tiles: Vec<usize>,
+    layers: Vec<PartLayer>,
 }
 
 /// One tile of a part, as recorded.
@@ -752,6 +956,10 @@ pub struct PartTile<'a> {
     pub forced: CompactSides,
     pub sides: CompactSides,
     pub deviation: Vec<f64>,
+    /// A layer tile's decimation error and its levels' errors against the base grid (0 and
+    /// none in the base grid).
+    pub decimation: f32,
+    pub errors: Vec<f32>,
     pub blob: &'a [u8],
     pub texture: &'a [u8],
 }
@@ -795,6 +1003,21 @@ impl<'a> Cursor<'a> {
         ))
     }
 
+    fn f32(&mut self) -> Result<f32, String> {
+        Ok(f32::from_le_bytes(
+            self.take(4)?.try_into().expect("4 bytes"),
+        ))
+    }
+
+    /// A tile record's blob and texture, after its fixed fields; their offsets are checked.
+    fn blobs(&mut self) -> Result<(), String> {
+        let blob = self.len()?;
+        self.aligned(blob)?;
+        let texture = self.len()?;
+        self.aligned(texture)?;
+        Ok(())
+    }
+
     fn len(&mut self) -> Result<usize, String> {
         usize::try_from(self.u64()?).map_err(|_| "a length out of range".to_string())
     }
@@ -817,6 +1040,12 @@ impl<'a> Cursor<'a> {
 /// Bytes of a tile record's sides and deviations at `levels` levels.
 fn fixed_record_len(levels: u32) -> usize {
     levels as usize * (2 * 4 * size_of::<SideBits>() + 8)
+}
+
+/// Bytes of a layer tile record's fixed fields: a base tile's, its decimation error and its
+/// levels' errors against the base grid.
+fn fixed_layer_record_len(levels: u32) -> usize {
+    fixed_record_len(levels) + 4 + 4 * levels as usize
 }
 
 impl Part {
@@ -863,6 +1092,7 @@ impl Part {
             bounds: p.bounds,
             agreement_passes: p.passes,
             agreement_meshes: p.meshes,
+            layers: p.layers,
             map,
             tiles: p.tiles,
         })
@@ -910,11 +1140,9 @@ impl Part {
         for _ in 0..(r1 - r0) as usize * tiles_x as usize {
             tiles.push(c.at);
             c.take(fixed_record_len(levels))?;
-            let blob = c.len()?;
-            c.aligned(blob)?;
-            let texture = c.len()?;
-            c.aligned(texture)?;
+            c.blobs()?;
         }
+        let layers = Self::parse_layers(&mut c, &header, shard)?;
         if c.at != bytes.len() {
             return Err(format!("{} bytes after its last tile", bytes.len() - c.at));
         }
@@ -931,7 +1159,62 @@ impl Part {
             passes,
             meshes,
             tiles,
+            layers,
         })
+    }
+
+    /// The part's share of each pyramid layer, after its base tiles.
+    fn parse_layers(
+        c: &mut Cursor,
+        header: &FileHeader,
+        shard: Shard,
+    ) -> Result<Vec<PartLayer>, String> {
+        let expected = layers_of(header)?;
+        let count = c.u32()? as usize;
+        if count != expected.len() {
+            return Err(format!(
+                "it holds {count} pyramid layers, and its set {}",
+                expected.len()
+            ));
+        }
+        let levels = header.levels;
+        let mut layers = Vec::with_capacity(count);
+        for (i, l) in expected.iter().enumerate() {
+            let fields = [c.u32()?, c.u32()?, c.u32()?, c.u32()?, c.u32()?];
+            let [p, r0, r1, tiles_x, tiles_y] = fields;
+            if p as usize != i + 1
+                || (tiles_x, tiles_y) != (l.tiles_x, l.tiles_y)
+                || (r0..r1) != shard.rows(tiles_y)
+            {
+                return Err(format!(
+                    "its pyramid layer {} (rows {r0}..{r1} of {tiles_x} x {tiles_y} tiles) \
+                     does not add up",
+                    i + 1
+                ));
+            }
+            let (step, lo, hi) = (c.f32()?, c.f32()?, c.f32()?);
+            let units = (0..levels).map(|_| c.f64()).collect::<Result<_, _>>()?;
+            let (passes, meshes) = (c.u32()?, c.u64()?);
+            let mut tiles = Vec::new();
+            for _ in 0..(r1 - r0) as usize * tiles_x as usize {
+                tiles.push(c.at);
+                c.take(fixed_layer_record_len(levels))?;
+                c.blobs()?;
+            }
+            layers.push(PartLayer {
+                rows: r0..r1,
+                tiles_x,
+                tiles_y,
+                step,
+                lo,
+                hi,
+                units,
+                agreement_passes: passes,
+                agreement_meshes: meshes,
+                tiles,
+            });
+        }
+        Ok(layers)
     }
 
     /// Drops tile `t`'s record from this process's memory once it is copied: the merge maps
@@ -939,12 +1222,19 @@ impl Part {
     /// kernel's cache, and are read again from the file if touched).
     pub fn release(&self, t: usize) {
         let first = self.rows.start as usize * self.tiles_x as usize;
-        let start = self.tiles[t - first];
-        let end = self
-            .tiles
-            .get(t - first + 1)
-            .copied()
-            .unwrap_or(self.map.len());
+        self.release_record(&self.tiles, t - first);
+    }
+
+    /// [`release`](Self::release) for tile `t` of pyramid layer `p` (>= 1).
+    pub fn release_layer_tile(&self, p: u32, t: usize) {
+        let l = &self.layers[p as usize - 1];
+        self.release_record(&l.tiles, t - l.rows.start as usize * l.tiles_x as usize);
+    }
+
+    /// Drops record `k` of `records` (offsets into the map) from memory.
+    fn release_record(&self, records: &[usize], k: usize) {
+        let start = records[k];
+        let end = records.get(k + 1).copied().unwrap_or(self.map.len());
         let page = 4096;
         let (start, end) = (start.next_multiple_of(page), end / page * page);
         if start < end {
@@ -963,9 +1253,23 @@ impl Part {
     /// Tile `t` of the set (row-major), which this part must own.
     pub fn tile(&self, t: usize) -> PartTile<'_> {
         let first = self.rows.start as usize * self.tiles_x as usize;
+        self.record(self.tiles[t - first], false)
+    }
+
+    /// Tile `t` of pyramid layer `p` (>= 1, row-major in the layer), which this part must own.
+    pub fn layer_tile(&self, p: u32, t: usize) -> PartTile<'_> {
+        let l = &self.layers[p as usize - 1];
+        self.record(
+            l.tiles[t - l.rows.start as usize * l.tiles_x as usize],
+            true,
+        )
+    }
+
+    /// The tile record at `at`: a layer tile's (`layer`) or a base tile's.
+    fn record(&self, at: usize, layer: bool) -> PartTile<'_> {
         let mut c = Cursor {
             bytes: &self.map,
-            at: self.tiles[t - first],
+            at,
         };
         // The structure was checked when the part was opened.
         let mut read = || -> Result<PartTile<'_>, String> {
@@ -974,6 +1278,15 @@ impl Part {
             let deviation = (0..self.levels)
                 .map(|_| c.f64())
                 .collect::<Result<_, _>>()?;
+            let (decimation, errors) = match layer {
+                true => (
+                    c.f32()?,
+                    (0..self.levels)
+                        .map(|_| c.f32())
+                        .collect::<Result<_, _>>()?,
+                ),
+                false => (0.0, Vec::new()),
+            };
             let blob = c.len()?;
             let blob = c.aligned(blob)?;
             let texture = c.len()?;
@@ -982,6 +1295,8 @@ impl Part {
                 forced,
                 sides,
                 deviation,
+                decimation,
+                errors,
                 blob,
                 texture,
             })
@@ -1010,8 +1325,14 @@ pub struct MergeSummary {
     /// Per level, over the set's tiles: vertices, triangles and the largest measured error
     /// (the other figures of a build's summary are not kept in the parts).
     pub levels: Vec<LevelStats>,
-    /// Tiles of the pyramid's layers, which the merge builds (0 without a pyramid).
+    /// Tiles of the pyramid's layers (0 without a pyramid), as the shards built them; of
+    /// them, as for the base grid's above: unsettled, meshes to settle them, built again,
+    /// sealed again.
     pub pyramid_tiles: u64,
+    pub pyramid_unsettled: u64,
+    pub pyramid_remeshed: u64,
+    pub pyramid_rebuilt: u64,
+    pub pyramid_resealed: u64,
 }
 
 /// Checks that `paths` are the parts of one set, every shard exactly once, and writes the set
@@ -1261,42 +1582,191 @@ pub fn merge(
         progress();
         Ok::<(), BuildError>(())
     })?;
-    if params.pyramid {
-        // The layers above the base are built here, from the input, as a build makes them.
-        let (heights, texturing) = reopen(&first.recipe)?;
-        let prepared = texturing.as_ref().map(|t| {
-            let range = (header.height_min, header.height_max);
-            (Prepared::new(range, &t.source), t.layout)
-        });
-        let mut layers = crate::build::BuildSummary {
-            levels: vec![LevelStats::default(); params.levels as usize],
-            texture_mips: prepared
-                .as_ref()
-                .map(|(_, layout)| {
-                    (0..layout.mips)
-                        .map(|m| crate::build::MipStats {
-                            size: layout.mip_size(m),
-                            ..Default::default()
-                        })
-                        .collect()
-                })
-                .unwrap_or_default(),
-            ..Default::default()
-        };
-        crate::build::build_pyramid(
+    for p in 1..=header.pyramid_layers {
+        merge_layer(
             &mut writer,
-            heights.as_ref(),
+            &by_index,
+            p,
             &params,
-            &header,
-            prepared.as_ref(),
+            reopen,
+            &mut summary,
             progress,
-            &mut layers,
         )?;
-        summary.pyramid_tiles = layers.pyramid.iter().map(|l| l.tiles).sum();
     }
     writer.finish()?;
     summary.file_bytes = std::fs::metadata(out).map(|m| m.len()).unwrap_or(0);
     Ok(summary)
+}
+
+/// Writes pyramid layer `p` of the set from the parts' shares of it (`parts` by shard index),
+/// after the layers below: the shared sides checked for the fixed point and resumed from the
+/// input where a halo fell short (those tiles built again), the layer's morph units from
+/// every tile's deviations, and each tile copied, or sealed again where its part's units
+/// were smaller, as [`merge`] does the base grid's.
+fn merge_layer(
+    writer: &mut TileSetWriter,
+    parts: &[&Part],
+    p: u32,
+    params: &BuildParams,
+    reopen: &Reopen,
+    summary: &mut MergeSummary,
+    progress: &(dyn Fn() + Sync),
+) -> Result<(), BuildError> {
+    let i = p as usize - 1;
+    let (first, l) = (parts[0], &parts[0].layers[i]);
+    for part in parts {
+        let o = &part.layers[i];
+        if (o.step, o.lo, o.hi) != (l.step, l.lo, l.hi) {
+            return Err(BuildError::Params(format!(
+                "{}: its scan of pyramid layer {p} differs from {}'s (the input changed between \
+                 shards?)",
+                part.path.display(),
+                first.path.display()
+            )));
+        }
+    }
+    let (tiles_x, tiles_y) = (l.tiles_x, l.tiles_y);
+    let count = tiles_x as usize * tiles_y as usize;
+    let row_owner: Vec<&Part> = parts
+        .iter()
+        .flat_map(|part| part.layers[i].rows.clone().map(move |_| *part))
+        .collect();
+    if row_owner.len() != tiles_y as usize {
+        return Err(BuildError::Internal(format!(
+            "the shards' rows do not cover pyramid layer {p}"
+        )));
+    }
+    let owner = |t: usize| -> &Part { row_owner[t / tiles_x as usize] };
+    writer.set_layer_heights(p, l.step, l.lo, l.hi);
+    let levels = params.levels;
+    let bounds = layer_bounds(params);
+    let decimation: Vec<f32> = (0..count)
+        .map(|t| owner(t).layer_tile(p, t).decimation)
+        .collect();
+    // Tiles built again where the agreement moved their sides: blob and errors.
+    let mut rebuilt: std::collections::HashMap<usize, (Vec<u8>, Vec<f32>)> = Default::default();
+    let mut units = Vec::new();
+    if params.shared_sides {
+        let mut start = Start {
+            sides: Vec::with_capacity(count),
+            forced: Vec::with_capacity(count),
+            deviation: Vec::with_capacity(count),
+        };
+        for t in 0..count {
+            let tile = owner(t).layer_tile(p, t);
+            start.sides.push(tile.sides);
+            start.forced.push(tile.forced);
+            start.deviation.push(tile.deviation);
+        }
+        let unsettled = unsettled_tiles(&start, tiles_x, levels);
+        summary.pyramid_unsettled += unsettled as u64;
+        let mut deviation = start.deviation.clone();
+        if unsettled > 0 {
+            let (heights, _) = reopen(&first.recipe)?;
+            let layer_heights = Decimated::new(heights.as_ref(), p);
+            let bands = Bands::new(&layer_heights, (tiles_x, tiles_y));
+            let recorded = start.forced.clone();
+            let floors = Some(&decimation[..]);
+            let all = 0..tiles_y;
+            let mut agreed = settle(
+                &bands,
+                params,
+                l.step,
+                floors,
+                Remesh::Changed,
+                all,
+                Some(start),
+            )?;
+            summary.pyramid_remeshed += agreed.meshes;
+            deviation = agreed.deviation.clone();
+            agreed.units = units_of(&bounds, &deviation);
+            let changed: Vec<usize> = (0..count)
+                .filter(|&t| agreed.forced[t] != recorded[t])
+                .collect();
+            summary.pyramid_rebuilt += changed.len() as u64;
+            let layer = Layer {
+                index: p,
+                bands: &bands,
+                step: l.step,
+                bounds: bounds.clone(),
+                decimation: Some(&decimation),
+                prepared: None,
+                base: Some(heights.as_ref()),
+            };
+            let mut rows: Vec<u32> = changed
+                .iter()
+                .map(|&t| (t / tiles_x as usize) as u32)
+                .collect();
+            rows.dedup();
+            for row in rows {
+                build_tiles(
+                    &layer,
+                    params,
+                    Some(&agreed),
+                    row..row + 1,
+                    &mut |t, (b, _), errors| {
+                        if changed.binary_search(&t).is_ok() {
+                            rebuilt.insert(t, (b.blob, errors.to_vec()));
+                        }
+                        Ok(())
+                    },
+                )?;
+            }
+        }
+        units = units_of(&bounds, &deviation);
+    }
+    let compact = first.header.flags & FLAG_COMPACT_LEVELS != 0;
+    let shape = (levels, l.step);
+    let xy = |t: usize| ((t % tiles_x as usize) as u32, (t / tiles_x as usize) as u32);
+    let make = |t: usize| -> Result<Made, BuildError> {
+        let part = owner(t);
+        let (tx, ty) = xy(t);
+        let failed = |what: String| {
+            let path = part.path.display();
+            BuildError::Input(format!("{path}: pyramid layer {p} tile {tx},{ty}: {what}"))
+        };
+        if rebuilt.contains_key(&t) {
+            return Ok(Made::Rebuilt);
+        }
+        let stored = part.layer_tile(p, t).blob;
+        if !params.shared_sides || part.layers[i].units == units {
+            let entries = stored_tile_table(stored, (tx, ty), shape, compact).map_err(failed)?;
+            return Ok(Made::Copied(entries));
+        }
+        let out = match compact {
+            true => reseal_compact_tile(stored, (tx, ty), shape, &units),
+            false => reseal(stored, (tx, ty), levels, l.step, &units),
+        };
+        let out = out.map_err(failed)?;
+        let entries = stored_tile_table(&out, (tx, ty), shape, compact).map_err(failed)?;
+        Ok(Made::Resealed(out, entries))
+    };
+    let in_flight = 2 * rayon::current_num_threads();
+    crate::ordered::in_order(count, in_flight, make, |t, made| {
+        let tile = owner(t).layer_tile(p, t);
+        let (tx, ty) = xy(t);
+        let d = tile.decimation;
+        match made? {
+            Made::Rebuilt => {
+                let (blob, errors) = &rebuilt[&t];
+                writer.add_layer_tile(p, tx, ty, blob, d, errors)?;
+            }
+            Made::Resealed(stored, _) => {
+                summary.pyramid_resealed += 1;
+                writer.add_stored_layer_tile(p, (tx, ty), &stored, d, &tile.errors)?;
+            }
+            Made::Copied(_) => {
+                writer.add_stored_layer_tile(p, (tx, ty), tile.blob, d, &tile.errors)?;
+            }
+        }
+        if !tile.texture.is_empty() {
+            writer.add_layer_texture(p, tx, ty, tile.texture)?;
+        }
+        owner(t).release_layer_tile(p, t);
+        summary.pyramid_tiles += 1;
+        progress();
+        Ok::<(), BuildError>(())
+    })
 }
 
 /// What the merge makes of a part's tile before it is written, with its level table.

@@ -174,8 +174,8 @@ fn reopen(
 }
 
 /// The texture options a recipe's `texture` line holds (as [`recipe`] writes it); `None` for
-/// a photo, which the merge never needs: the shards refuse a photo under a pyramid, and the
-/// seams' tiles are built again without their textures.
+/// a photo, which the merge never needs: the shards make every tile's texture, the
+/// pyramid's too, and the seams' tiles are built again without their textures.
 fn texture_args(line: &str) -> Result<Option<TextureArgs>, String> {
     let mut fields = line.split(' ');
     if fields.next() != Some("-") {
@@ -232,6 +232,12 @@ pub fn print_shard(
         println!(
             "  sides     agreed over tile rows {}..{}: {} passes ({} tile meshes)",
             s.window.start, s.window.end, s.agreement_passes, s.agreement_meshes
+        );
+    }
+    if s.pyramid_tiles > 0 {
+        println!(
+            "  pyramid   {} tiles of its layers' rows (the same share of each layer's)",
+            s.pyramid_tiles
         );
     }
     let triangles: u64 = s.levels.iter().map(|l| l.triangles).sum();
@@ -300,9 +306,21 @@ pub fn merge(parts: &[PathBuf], output: &Path, quiet: bool) -> Result<ExitCode> 
         }
         if s.pyramid_tiles > 0 {
             println!(
-                "  pyramid   {} tiles of its layers built here, from the input",
+                "  pyramid   {} tiles of its layers, as the shards built them",
                 s.pyramid_tiles
             );
+            if s.pyramid_unsettled > 0 {
+                println!(
+                    "            {} layer tiles unsettled: {} meshes to settle them, {} layer tiles built again from the input",
+                    s.pyramid_unsettled, s.pyramid_remeshed, s.pyramid_rebuilt
+                );
+            }
+            if s.pyramid_resealed > 0 {
+                println!(
+                    "            {} layer tiles sealed again at their layer's morph units",
+                    s.pyramid_resealed
+                );
+            }
         }
         if s.resealed > 0 {
             println!(

@@ -48,9 +48,11 @@ fn same_bytes(a: &Path, b: &Path) -> bool {
 }
 
 /// Merged parts are the build's bytes: at 2 and 5 shards with the default halo, with a halo
-/// of 0 (the seams left for the merge to settle from the input: it must say so), with
-/// independent sides, with compact levels and a tinted relief, and with a pyramid (whose
-/// layers the merge builds from the input). The control: a set built
+/// of 0 (the seams left for the merge to settle from the input, the pyramid's layers' as
+/// well as the base grid's: it must say so), with independent sides, with compact levels and
+/// a tinted relief, and with a pyramid (whose layers the shards build, each its rows of
+/// every layer: 3 x 3, 2 x 2 and 1 x 1 tiles here, so some shards own no row of the upper
+/// layers), compact and not, and under a photo. The control: a set built
 /// with other options differs from the merged one, so the comparison can fail.
 #[test]
 fn merged_parts_are_the_builds_bytes() {
@@ -62,6 +64,7 @@ fn merged_parts_are_the_builds_bytes() {
         (3, &["--independent-sides", "--no-texture"][..]),
         (3, &["--compact", "--tint"][..]),
         (2, &["--pyramid"][..]),
+        (4, &["--pyramid", "--compact", "--tint"][..]),
     ]
     .into_iter()
     .enumerate()
@@ -123,12 +126,37 @@ fn merged_parts_are_the_builds_bytes() {
         weight(&v3_parts) > 2 * weight(&parts),
         "the control: version 3 parts are not heavier"
     );
+    // A photo over a pyramid: the shards texture the layers' tiles too.
+    let puget = data("puget/ps_height_1k.png");
+    let photo = data("puget/ps_texture_1k.png");
+    let photo_args = [
+        "--pyramid",
+        "--spacing",
+        "160",
+        "--vertical-scale",
+        "0.1",
+        "--texture",
+        s(&photo),
+    ];
+    let whole = dir.path().join("whole-photo.vkt");
+    build(&puget, &whole, &photo_args);
+    let sub = dir.path().join("photo");
+    std::fs::create_dir(&sub).expect("dir");
+    let parts = shards(&puget, &sub, 3, &photo_args);
+    let merged = sub.join("merged.vkt");
+    let o = merge(&parts, &merged);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        same_bytes(&merged, &whole),
+        "a photo over a pyramid: differs from the build"
+    );
     // A halo of 0: the shards see no neighbour across their seams, so the merge must resume
-    // the agreement there and build those tiles again.
-    let whole = dir.path().join("whole-0.vkt");
+    // the agreement there and build those tiles again, in the base grid and in the layers.
+    let whole = dir.path().join("whole-halo0.vkt");
+    build(&input, &whole, &["--pyramid"]);
     let sub = dir.path().join("halo0");
     std::fs::create_dir(&sub).expect("dir");
-    let parts = shards(&input, &sub, 3, &["--halo", "0"]);
+    let parts = shards(&input, &sub, 3, &["--halo", "0", "--pyramid"]);
     let merged = sub.join("merged.vkt");
     let o = tiletool(&[
         "merge",
@@ -141,8 +169,12 @@ fn merged_parts_are_the_builds_bytes() {
     assert!(o.status.success(), "{}", stderr(&o));
     let said = String::from_utf8_lossy(&o.stdout);
     assert!(
-        said.contains("tiles unsettled") && said.contains("built again from the input"),
+        said.contains(" tiles unsettled") && said.contains(" tiles built again from the input"),
         "the merge did not settle the seams itself: {said}"
+    );
+    assert!(
+        said.contains("layer tiles unsettled") && said.contains("layer tiles built again"),
+        "the merge did not settle the layers' seams itself: {said}"
     );
     assert!(
         same_bytes(&merged, &whole),
@@ -575,21 +607,4 @@ fn parts_that_do_not_belong_are_refused() {
         );
         assert!(!part.exists(), "--shard {shard}: a part was written");
     }
-    // The merge builds a pyramid's layers, and does not read photos: refused at the shard.
-    let photo = data("puget/ps_texture_1k.png");
-    let part = dir.path().join("p");
-    let o = tiletool(&[
-        "build",
-        s(&input),
-        "--shard",
-        "0/2",
-        "--pyramid",
-        "--texture",
-        s(&photo),
-        "-o",
-        s(&part),
-    ]);
-    assert!(!o.status.success(), "a photo-textured pyramid was sharded");
-    assert!(stderr(&o).contains("photo"), "{}", stderr(&o));
-    assert!(!part.exists());
 }
