@@ -7,7 +7,8 @@
 # made under $OUT and never committed (the 16K set's raw file is 537 MB, each set 5.8 GB).
 # Run from the repository root, as root, after `cargo build --release -p tiletool`.
 # usage: bench/shards.sh [SIZE] [SHARDS...]   (default: 16385 1 2 4; 4s: 4 shards after the
-# scan stage, each reading only its rows)
+# scan stage, each reading only its rows). EXTRA="--pyramid" adds build options (word-split).
+# TILETOOL_BIN picks the binary.
 set -euo pipefail
 root=$(pwd)
 T=${TILETOOL_BIN:-$root/target/release/tiletool}
@@ -16,7 +17,8 @@ size=${1:-16385}; shift || true
 counts=${*:-"1 2 4"}
 raw=$out/m$size.r16
 [ -f "$raw" ] || python3 bench/mirror.py ../shared/data/srtm/N55W003.hgt "$size" "$raw"
-opts=(--size "${size}x$size" --spacing 90)
+# shellcheck disable=SC2206 # EXTRA is split into words on purpose
+opts=(--size "${size}x$size" --spacing 90 ${EXTRA:-})
 
 /usr/bin/time -f "%e %M" -o "$out/whole.time" "$T" build "$raw" "${opts[@]}" --quiet -o "$out/whole.vkt"
 read -r wall kb < "$out/whole.time"
@@ -52,6 +54,6 @@ for spec in $counts; do
   fi
   grep -h "input read" "$out"/vkt-shard-"$array"_*.log | sed 's/.*input read/    input read/; s/, peak.*//'
   rm -f "$out"/vkt-shard-*.log
-  grep -h "seams\|units" "$out"/vkt-merge-"$merge".log | sed 's/^/    /'
+  grep -h "seams\|units\|pyramid\|layer tiles" "$out"/vkt-merge-"$merge".log | sed 's/^/    /'
 done
 rm -rf "$out/parts" "$out/merged.vkt"

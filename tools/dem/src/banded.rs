@@ -342,6 +342,11 @@ impl Plan {
 
     /// Rows `y0..y1` of the filled grid. `read(a, b)` gives rows `a..b` of the grid as read
     /// (NaN: void); it is called once, for the band and its margin.
+    /// True when the grid has no void, so [`fill`](Self::fill) reads exactly the rows asked.
+    pub fn fills_nothing(&self) -> bool {
+        self.depth == 0
+    }
+
     pub fn fill<E>(
         &self,
         y0: usize,

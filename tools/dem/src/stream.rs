@@ -397,6 +397,19 @@ impl Stream {
         }
     }
 
+    /// True when a read of a few rows costs about their share of a read of many: the grid held
+    /// whole, or read from raw or SRTM files with no void to fill. Then a reader that wants
+    /// every `k`-th row (a pyramid layer's) reads those alone. A GeoTIFF decodes whole strips
+    /// or tiles, and a fill reads the rows around the ones asked, so they are read in runs.
+    pub fn reads_rows_singly(&self) -> bool {
+        match &self.source {
+            Source::Whole(_) => true,
+            Source::Bands { rows, plan, .. } => {
+                matches!(**rows, Rows::Raw(_) | Rows::Srtm(_)) && plan.fills_nothing()
+            }
+        }
+    }
+
     /// True when the grid is read from its files a band at a time, false when it is held whole.
     pub fn is_banded(&self) -> bool {
         matches!(self.source, Source::Bands { .. })

@@ -98,6 +98,11 @@ pub trait Heights: Sync {
     fn band_tile_rows(&self) -> u32 {
         u32::MAX
     }
+    /// True when reading rows one at a time costs about what reading them in one run does (a
+    /// pyramid layer then reads only the rows it keeps, [`Decimated`]).
+    fn reads_rows_singly(&self) -> bool {
+        false
+    }
 }
 
 impl Heights for Grid<'_> {
@@ -120,6 +125,11 @@ impl Heights for Grid<'_> {
         Ok(Cow::Borrowed(
             &self.heights[(y0 - held.start) * w..(y1 - held.start) * w],
         ))
+    }
+
+    /// Rows held in memory: any are a slice.
+    fn reads_rows_singly(&self) -> bool {
+        true
     }
 }
 

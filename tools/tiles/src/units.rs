@@ -34,9 +34,10 @@
 //! the 4K mirror set). Each tile's final build still finds its deviations: were one past its
 //! bound, the units would rise to it, and the set stays correct: an unsharded build is built
 //! again at the raised bounds, and a sharded one's merge seals every tile again (test
-//! `tiles_past_their_bounds_raise_the_units`). Pyramid layers, built in the merge, keep
-//! `bound_k = e_k` and their agreement's deviations: a layer tile's floor raises its errors,
-//! tile by tile.
+//! `tiles_past_their_bounds_raise_the_units`). Pyramid layers keep `bound_k = e_k` and their
+//! agreement's deviations: a layer tile's floor raises its errors, tile by tile, so a shard
+//! seals its layer tiles at its own tiles' units and the merge seals again those of a part
+//! whose units came out below the layer's.
 
 use rayon::prelude::*;
 

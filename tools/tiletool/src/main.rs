@@ -556,6 +556,10 @@ impl tiles::build::Heights for StreamHeights {
             .map_err(|e| tiles::BuildError::Input(e.to_string()))
     }
 
+    fn reads_rows_singly(&self) -> bool {
+        self.stream.reads_rows_singly()
+    }
+
     fn band_tile_rows(&self) -> u32 {
         if self.stream.is_banded() {
             self.per_band
