@@ -309,13 +309,13 @@ pub fn build_shard(
     )?;
     // The pyramid's layers (none without one).
     let layers = layers_of(&header).map_err(BuildError::Internal)?;
-    let mut layer_summary = ShardLayers {
+    let mut into = ShardLayers {
         part: &mut part,
         summary: &mut summary,
         progress,
     };
     let prepared = prepared.as_ref();
-    layer_summary.build(heights, params, &header, &layers, prepared, (shard, halo))?;
+    into.build(heights, params, &header, &layers, prepared, (shard, halo))?;
     summary.part_bytes = part.finish()?;
     Ok(summary)
 }
@@ -354,7 +354,9 @@ impl ShardLayers<'_, '_> {
     /// from:
     ///
     /// - **The layer's range and lattice step**: a scan of the whole layer, as the build's
-    ///   (it reads the input once a layer, every `2^p`-th row and column kept).
+    ///   (every `2^p`-th row of the input, read alone where the source reads rows singly,
+    ///   else in runs of every row: [`Decimated`]). The shards' scan files do not carry the
+    ///   layers' yet.
     /// - **Its decimation error**, from its children's in the layer below
     ///   ([`decimation_errors`]): measured here for the rows the shard's own and those of
     ///   its layers above need, from the bottom up, so it reads only the rows under them.
@@ -1037,6 +1039,10 @@ impl<'a> Cursor<'a> {
     }
 }
 
+/// Bytes of a part summed before they are dropped from memory when it is opened (a multiple of
+/// the page size).
+const CHECKSUM_WINDOW: usize = 64 << 20;
+
 /// Bytes of a tile record's sides and deviations at `levels` levels.
 fn fixed_record_len(levels: u32) -> usize {
     levels as usize * (2 * 4 * size_of::<SideBits>() + 8)
@@ -1071,13 +1077,22 @@ impl Part {
         }
         let body = map.len() - 4 - END_MAGIC.len();
         let stored = u32::from_le_bytes(map[body..body + 4].try_into().expect("4 bytes"));
-        if crc32fast::hash(&map[..body]) != stored {
+        // The checksum reads every page: each window's pages go out of this process's memory
+        // as soon as they are summed, until the copy needs them (see `release`). Dropped only
+        // at the end, a part's every page was resident at once: a merge's peak was its
+        // largest part (7 GB for a 16K pyramid set in one shard).
+        let mut crc = crc32fast::Hasher::new();
+        for start in (0..body).step_by(CHECKSUM_WINDOW) {
+            let end = (start + CHECKSUM_WINDOW).min(body);
+            crc.update(&map[start..end]);
+            // SAFETY: as in `release`: a read-only file mapping, no slice of it held yet.
+            let _ = unsafe {
+                map.unchecked_advise_range(memmap2::UncheckedAdvice::DontNeed, start, end - start)
+            };
+        }
+        if crc.finalize() != stored {
             return Err(refuse("damaged: its checksum does not match".into()));
         }
-        // The checksum read every page: out of this process's memory until the copy needs
-        // them (see `release`).
-        // SAFETY: as in `release`: a read-only file mapping, no slice of it held yet.
-        let _ = unsafe { map.unchecked_advise(memmap2::UncheckedAdvice::DontNeed) };
         let p = Self::parse(&map[..body]).map_err(refuse)?;
         Ok(Part {
             path: path.to_path_buf(),
