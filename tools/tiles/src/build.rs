@@ -151,7 +151,7 @@ type HeldRows<'a> = (std::ops::Range<usize>, Arc<Cow<'a, [f32]>>);
 
 /// One band's rows, and the grid they make.
 pub(crate) struct Band<'a> {
-    rows: Arc<Cow<'a, [f32]>>,
+    pub rows: Arc<Cow<'a, [f32]>>,
     first_row: usize,
     pub tile_rows: std::ops::Range<u32>,
 }

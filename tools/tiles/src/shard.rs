@@ -315,7 +315,14 @@ pub fn build_shard(
         progress,
     };
     let prepared = prepared.as_ref();
-    into.build(heights, params, &header, &layers, prepared, (shard, halo))?;
+    into.build(
+        heights,
+        params,
+        &header,
+        &layers,
+        (prepared, known),
+        (shard, halo),
+    )?;
     summary.part_bytes = part.finish()?;
     Ok(summary)
 }
@@ -353,10 +360,11 @@ impl ShardLayers<'_, '_> {
     /// each layer. What a layer tile depends on beyond its own samples, and where it comes
     /// from:
     ///
-    /// - **The layer's range and lattice step**: a scan of the whole layer, as the build's
-    ///   (every `2^p`-th row of the input, read alone where the source reads rows singly,
-    ///   else in runs of every row: [`Decimated`]). The shards' scan files do not carry the
-    ///   layers' yet.
+    /// - **The layer's range and lattice step**: from every shard's scan of its rows of the
+    ///   layer ([`layer_scans`]) where they are given (`known`) and the grid has no void;
+    ///   else a scan of the whole layer, as the build's (every `2^p`-th row of the input,
+    ///   read alone where the source reads rows singly, else in runs of every row:
+    ///   [`Decimated`]).
     /// - **Its decimation error**, from its children's in the layer below
     ///   ([`decimation_errors`]): measured here for the rows the shard's own and those of
     ///   its layers above need, from the bottom up, so it reads only the rows under them.
@@ -373,7 +381,7 @@ impl ShardLayers<'_, '_> {
         params: &BuildParams,
         header: &FileHeader,
         layers: &[LayerHeader],
-        prepared: Option<&(Prepared, texture::Layout)>,
+        (prepared, known): (Option<&(Prepared, texture::Layout)>, Option<&Scans>),
         (shard, halo): (Shard, u32),
     ) -> Result<(), BuildError> {
         self.part.u32(layers.len() as u32)?;
@@ -403,7 +411,10 @@ impl ShardLayers<'_, '_> {
             let finer: &dyn Heights = if p == 1 { heights } else { &finer_layer };
             let decimation =
                 decimation_errors(finer, &below, below_tiles_x, tiles, needed[i].clone())?;
-            let scanned = scan(&Bands::new(&layer_heights, tiles))?;
+            let scanned = match known.and_then(|k| k.layer_scanned(p)) {
+                Some(scanned) => scanned,
+                None => scan(&Bands::new(&layer_heights, tiles))?,
+            };
             let rows = own(l);
             let bounds = layer_bounds(params);
             let agreed = match params.shared_sides && !rows.is_empty() {
@@ -515,11 +526,25 @@ pub struct ShardScan {
     pub spans: CellSpans,
     pub voids: u64,
     pub fill: Option<String>,
+    /// Its rows of each pyramid layer the grid would have ([`layer_scans`]); `None` for a
+    /// grid with voids, whose layers' figures are those of the grid filled.
+    pub layers: Option<Vec<LayerScan>>,
+}
+
+/// What a shard's scan found of its tile rows of one pyramid layer ([`Shard::rows`] of the
+/// layer's): its range of heights, its largest absolute height and its cell spans, which
+/// give the layer's lattice step once every shard's are joined.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LayerScan {
+    pub lo: f32,
+    pub hi: f32,
+    pub max_abs: f32,
+    pub spans: CellSpans,
 }
 
 /// The first line of a scan file, with its version; its first bytes are [`SCAN_MAGIC`].
-/// Version 1 held no fill, version 2 no cell spans.
-const SCAN_HEAD: &str = "VKTSCAN1 vkterrain shard scan, version 3";
+/// Version 1 held no fill, version 2 no cell spans, version 3 no layers.
+const SCAN_HEAD: &str = "VKTSCAN1 vkterrain shard scan, version 4";
 /// The first bytes of a scan file.
 pub const SCAN_MAGIC: [u8; 8] = *b"VKTSCAN1";
 
@@ -601,6 +626,41 @@ fn height_of(v: &str) -> Result<f32, String> {
         .map_err(|_| format!("a bad height `{v}`"))
 }
 
+/// Layer scans as `lo/hi/max-abs/spans` joined by `;` (`-` for none; empty for a grid with no
+/// layer above it).
+fn layers_text(layers: Option<&[LayerScan]>) -> String {
+    let Some(layers) = layers else {
+        return "-".into();
+    };
+    let one = |l: &LayerScan| {
+        let figures = [l.lo, l.hi, l.max_abs].map(height_text).join("/");
+        format!("{figures}/{}", spans_text(&l.spans))
+    };
+    layers.iter().map(one).collect::<Vec<_>>().join(";")
+}
+
+fn layers_of_text(v: &str) -> Result<Option<Vec<LayerScan>>, String> {
+    if v == "-" {
+        return Ok(None);
+    }
+    if v.is_empty() {
+        return Ok(Some(Vec::new()));
+    }
+    let one = |l: &str| -> Result<LayerScan, String> {
+        let f: Vec<&str> = l.split('/').collect();
+        let [lo, hi, max_abs, spans] = f[..] else {
+            return Err(format!("a bad layer scan `{l}`"));
+        };
+        Ok(LayerScan {
+            lo: height_of(lo)?,
+            hi: height_of(hi)?,
+            max_abs: height_of(max_abs)?,
+            spans: spans_of(spans)?,
+        })
+    };
+    v.split(';').map(one).collect::<Result<_, _>>().map(Some)
+}
+
 /// Cell spans as heights ([`height_text`]) joined by commas.
 fn spans_text(spans: &CellSpans) -> String {
     spans.map(height_text).join(",")
@@ -624,13 +684,23 @@ impl ShardScan {
             ("spans", spans_text(&self.spans)),
             ("voids", self.voids.to_string()),
             ("fill", self.fill.clone().unwrap_or_else(|| "-".into())),
+            ("layers", layers_text(self.layers.as_deref())),
         ];
         record_text(SCAN_HEAD, shard, &fields, recipe)
     }
 
     /// A scan file read back: its shard, figures and recipe.
     pub fn from_text(text: &str) -> Result<(Shard, ShardScan, String), String> {
-        let names = ["lo", "hi", "max-range", "max-abs", "spans", "voids", "fill"];
+        let names = [
+            "lo",
+            "hi",
+            "max-range",
+            "max-abs",
+            "spans",
+            "voids",
+            "fill",
+            "layers",
+        ];
         let (shard, v, recipe) = record_fields(text, SCAN_HEAD, &names)?;
         let scan = ShardScan {
             lo: height_of(&v[0])?,
@@ -640,6 +710,7 @@ impl ShardScan {
             spans: spans_of(&v[4])?,
             voids: v[5].parse().map_err(|_| "a bad void count")?,
             fill: (v[6] != "-").then(|| v[6].clone()),
+            layers: layers_of_text(&v[7])?,
         };
         Ok((shard, scan, recipe))
     }
@@ -670,7 +741,7 @@ impl ShardRanges {
 }
 
 /// Every shard's scan of one input, put together.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Scans {
     pub lo: f32,
     pub hi: f32,
@@ -678,12 +749,28 @@ pub struct Scans {
     pub max_abs: f32,
     pub spans: CellSpans,
     pub voids: u64,
+    /// Each pyramid layer's figures, where every shard's scan holds them.
+    pub layers: Option<Vec<LayerScan>>,
 }
 
 impl Scans {
     /// The scans of shards `0..N`, in any order; `None` for none.
     pub fn join(scans: &[ShardScan]) -> Option<Scans> {
         let first = scans.first()?;
+        let layers = first.layers.as_ref().and_then(|l| {
+            let joined = |a: LayerScan, b: &LayerScan| LayerScan {
+                lo: a.lo.min(b.lo),
+                hi: a.hi.max(b.hi),
+                max_abs: a.max_abs.max(b.max_abs),
+                spans: widest(&a.spans, &b.spans),
+            };
+            scans.iter().try_fold(l.clone(), |a, s| match &s.layers {
+                Some(b) if b.len() == a.len() => {
+                    Some(a.into_iter().zip(b).map(|(a, b)| joined(a, b)).collect())
+                }
+                _ => None,
+            })
+        });
         Some(scans.iter().fold(
             Scans {
                 lo: first.lo,
@@ -692,6 +779,7 @@ impl Scans {
                 max_abs: 0.0,
                 spans: CellSpans::default(),
                 voids: 0,
+                layers,
             },
             |a, s| Scans {
                 lo: a.lo.min(s.lo),
@@ -700,6 +788,7 @@ impl Scans {
                 max_abs: a.max_abs.max(s.max_abs),
                 spans: widest(&a.spans, &s.spans),
                 voids: a.voids + s.voids,
+                layers: a.layers,
             },
         ))
     }
@@ -712,8 +801,22 @@ impl Scans {
             spans: ranges
                 .iter()
                 .fold(CellSpans::default(), |m, r| widest(&m, &r.spans)),
+            // The layers' figures were of the grid before its fill.
+            layers: None,
             ..self
         }
+    }
+
+    /// What a scan of the whole of pyramid layer `p` (>= 1) finds, where the shards' scans
+    /// hold it.
+    fn layer_scanned(&self, p: u32) -> Option<crate::build::Scanned> {
+        let l = self.layers.as_ref()?.get(p as usize - 1)?;
+        Some(crate::build::Scanned {
+            lo: l.lo,
+            hi: l.hi,
+            step: crate::quantise::lattice_step(l.spans[CELL_SIZES - 1], l.max_abs),
+            spans: l.spans,
+        })
     }
 
     /// What the build's pass over the whole grid finds: the same range, the same step.
@@ -765,6 +868,39 @@ fn grid_rows(
     let cells = crate::mesh::TILE_CELLS as usize;
     let grid = rows.start as usize * cells..(rows.end as usize * cells + 1).min(height);
     Ok((grid, rows.end == tiles_y))
+}
+
+/// Shard `shard`'s rows ([`Shard::rows`]) of each pyramid layer a set of `heights` has with
+/// `--pyramid`, scanned as a build scans a whole layer (as stored: meaningful when the grid
+/// holds no void). Every shard's together make the layers' scans, so that a shard given them
+/// reads no layer whole.
+pub fn layer_scans(heights: &dyn Heights, shard: Shard) -> Result<Vec<LayerScan>, BuildError> {
+    let shape = heights.shape();
+    let layers = crate::format::pyramid_layers(shape.width, shape.height);
+    (1..=layers)
+        .map(|p| {
+            let layer = Decimated::new(heights, p);
+            let grid = layer.shape();
+            let tiles = tile_count(grid.width, grid.height).map_err(BuildError::Params)?;
+            let bands = Bands::within(&layer, tiles, shard.rows(tiles.1));
+            let mut found = LayerScan {
+                lo: f32::INFINITY,
+                hi: f32::NEG_INFINITY,
+                max_abs: 0.0,
+                spans: CellSpans::default(),
+            };
+            for b in 0..bands.count() {
+                let band = bands.load(b, 0)?;
+                for &h in band.rows.iter() {
+                    (found.lo, found.hi) = (found.lo.min(h), found.hi.max(h));
+                }
+                let (spans, abs) = cell_spans(&band.grid(&grid), tiles.0, band.tile_rows.clone());
+                found.spans = widest(&found.spans, &spans);
+                found.max_abs = found.max_abs.max(abs);
+            }
+            Ok(found)
+        })
+        .collect()
 }
 
 /// The largest tile range and absolute height, and the cell spans ([`crate::units`]), over

@@ -127,6 +127,7 @@ fn scans_of(grid: &Grid, spans: Option<tiles::units::CellSpans>) -> Scans {
         max_abs: ranges.max_abs,
         spans: spans.unwrap_or(ranges.spans),
         voids: 0,
+        layers: None,
     }
 }
 

@@ -342,7 +342,9 @@ pub fn merge(parts: &[PathBuf], output: &Path, quiet: bool) -> Result<ExitCode> 
 
 /// `tiletool build --shard K/N --scan-only`: shard K's rows of the input read and checked, and what the
 /// build needs of them written to `output` (temporary file, then rename): their range, tile
-/// ranges and voids, and the void fill's share of the pass over the grid.
+/// ranges and voids, the void fill's share of the pass over the grid, and, with no void, its
+/// rows of each pyramid layer the set would have with `--pyramid` (a shard given every scan
+/// then reads no layer whole).
 pub fn scan(input: &InputArgs, shard: tiles::shard::Shard, output: &Path) -> Result<ExitCode> {
     let opts = input.read.options();
     let stream = dem::open_unscanned(&input.inputs, &opts, (0.0, 0.0))?;
@@ -353,6 +355,10 @@ pub fn scan(input: &InputArgs, shard: tiles::shard::Shard, output: &Path) -> Res
     let per_band = default_band_rows(stream.width, Some((shard, stream.height)));
     let heights = StreamHeights { stream, per_band };
     let ranges = tiles::shard::tile_ranges(&heights, shard)?;
+    let layers = match read.voids {
+        0 => Some(tiles::shard::layer_scans(&heights, shard)?),
+        _ => None,
+    };
     let found = tiles::shard::ShardScan {
         lo: read.lo,
         hi: read.hi,
@@ -361,6 +367,7 @@ pub fn scan(input: &InputArgs, shard: tiles::shard::Shard, output: &Path) -> Res
         spans: ranges.spans,
         voids: read.voids,
         fill: read.pulled.map(|p| p.to_line()),
+        layers,
     };
     let text = found.to_text(shard, &input_recipe(input)?);
     tiles::format::write_atomically(output, text.as_bytes())

@@ -211,8 +211,9 @@ fn scan_all(input: &Path, dir: &Path, n: u32) {
 /// one tile row, halo 0 so that a shard's window is its row (the merge settles the seams): a
 /// shard says how much it read, under 0.6 of the file with scans (its row twice, and the
 /// inputs' fingerprints), and over twice the
-/// file without them (the control: it reads the whole input twice to scan it). A scan of
-/// other inputs is refused.
+/// file without them (the control: it reads the whole input twice to scan it). With a
+/// pyramid, the scans carry the layers' figures too (below). A scan of other inputs is
+/// refused.
 #[test]
 fn with_scans_a_shard_reads_only_its_rows_and_the_set_is_the_same() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -247,6 +248,73 @@ fn with_scans_a_shard_reads_only_its_rows_and_the_set_is_the_same() {
     assert!(
         with[2] < 0.6 * file && without > 2.0 * file,
         "shard 2/{n} read {} MB with scans and {without} MB without, of a {file} MB input",
+        with[2]
+    );
+    // With a pyramid: the scans hold each shard's rows of every layer, so a shard scans no
+    // layer whole, and the set is the build's. The control: the same scans without their
+    // layers (`layers -`, resealed) make the shard scan each layer itself, about 0.9 of the
+    // file more (every second, fourth and eighth row), for the same part.
+    let whole = dir.path().join("whole-pyramid.vkt");
+    build(&input, &whole, &["--no-texture", "--pyramid"]);
+    let pyramid_shard = |k: u32, part: &Path, scans: &Path| -> Output {
+        let shard = format!("{k}/{n}");
+        let o = tiletool(&[
+            "build",
+            s(&input),
+            "--no-texture",
+            "--pyramid",
+            "--halo",
+            "0",
+            "--shard",
+            &shard,
+            "--scans",
+            s(scans),
+            "-o",
+            s(part),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        o
+    };
+    let mut parts = Vec::new();
+    let mut with = Vec::new();
+    for k in 0..n {
+        let part = dir.path().join(format!("pyramid-{k}-of-{n}"));
+        with.push(input_read(&pyramid_shard(k, &part, &scans)));
+        parts.push(part);
+    }
+    let merged = dir.path().join("merged-pyramid.vkt");
+    let o = merge(&parts, &merged);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        same_bytes(&merged, &whole),
+        "a pyramid with scans: differs from the build"
+    );
+    let bare = dir.path().join("scans-without-layers");
+    std::fs::create_dir(&bare).expect("dir");
+    for k in 0..n {
+        let name = format!("scan-{k}-of-{n}.vktscan");
+        let text = std::fs::read_to_string(scans.join(&name)).expect("scan");
+        let (body, _) = text.trim_end().rsplit_once("\ncrc ").expect("crc line");
+        let body: String = body
+            .lines()
+            .map(|l| match l.starts_with("layers ") {
+                true => "layers -\n".to_string(),
+                false => format!("{l}\n"),
+            })
+            .collect();
+        let crc = crc32fast::hash(body.as_bytes());
+        std::fs::write(bare.join(&name), format!("{body}crc {crc:08x}\n")).expect("write");
+    }
+    let alone = dir.path().join("pyramid-alone");
+    let without = input_read(&pyramid_shard(2, &alone, &bare));
+    assert!(
+        same_bytes(&alone, &parts[2]),
+        "without the layers' scans: another part"
+    );
+    assert!(
+        without > with[2] + 0.5 * file,
+        "shard 2/{n} of a pyramid read {} MB with the layers' scans and {without} MB without, \
+         of a {file} MB input",
         with[2]
     );
     // A scan of another input: refused, naming the scan.
