@@ -269,31 +269,13 @@ pub fn build_shard(
                 Some(a) => (&a.forced[t - a.first], &a.sides[t - a.first]),
                 None => (&none, &none),
             };
-            part.sides(forced)?;
-            part.sides(sides)?;
             // The final build's deviations (the agreement's meshes find none: the units
             // come from the scan): the merge raises the set's units where one passes them.
-            for &d in &built.deviation {
-                part.f64(d)?;
-            }
-            // A compact set's tiles are compacted here, on the shards: the merge copies them.
-            let compacted;
-            let blob = if compact {
-                let xy = ((t % tiles_x as usize) as u32, (t / tiles_x as usize) as u32);
-                compacted = compact_tile(&built.blob, xy, (params.levels, scanned.step)).map_err(
-                    |what| BuildError::Internal(format!("tile {},{}: {what}", xy.0, xy.1)),
-                )?;
-                &compacted[..]
-            } else {
-                &built.blob[..]
-            };
-            part.u64(blob.len() as u64)?;
-            part.align()?;
-            part.put(blob)?;
+            part.sides_and_deviation(forced, sides, &built.deviation)?;
+            let xy = (0, built.tx, built.ty);
+            let compact = compact.then_some((params.levels, scanned.step));
             let tex = texture.map(|(blob, _, _)| blob).unwrap_or_default();
-            part.u64(tex.len() as u64)?;
-            part.align()?;
-            part.put(&tex)?;
+            part.blobs(&built.blob, xy, compact, &tex)?;
             summary.tiles += 1;
             for (sum, l) in summary.levels.iter_mut().zip(&built.levels) {
                 sum.vertices += l.vertices;
@@ -469,34 +451,15 @@ impl ShardLayers<'_, '_> {
                         }
                         None => (&none, &none, &built.deviation),
                     };
-                    part.sides(forced)?;
-                    part.sides(sides)?;
-                    for &d in deviation {
-                        part.f64(d)?;
-                    }
+                    part.sides_and_deviation(forced, sides, deviation)?;
                     part.f32(decimation[t])?;
                     for &e in errors {
                         part.f32(e)?;
                     }
-                    let xy = (built.tx, built.ty);
-                    let compacted;
-                    let blob = if compact {
-                        let shape = (params.levels, scanned.step);
-                        compacted = compact_tile(&built.blob, xy, shape).map_err(|what| {
-                            let (tx, ty) = xy;
-                            BuildError::Internal(format!("layer {p} tile {tx},{ty}: {what}"))
-                        })?;
-                        &compacted[..]
-                    } else {
-                        &built.blob[..]
-                    };
-                    part.u64(blob.len() as u64)?;
-                    part.align()?;
-                    part.put(blob)?;
+                    let xy = (p, built.tx, built.ty);
+                    let compact = compact.then_some((params.levels, scanned.step));
                     let tex = texture.map(|(blob, _, _)| blob).unwrap_or_default();
-                    part.u64(tex.len() as u64)?;
-                    part.align()?;
-                    part.put(&tex)?;
+                    part.blobs(&built.blob, xy, compact, &tex)?;
                     summary.pyramid_tiles += 1;
                     progress();
                     Ok(())
@@ -991,6 +954,47 @@ impl PartWriter {
             }
         }
         Ok(())
+    }
+
+    /// A tile record's first fields: its forced sides, its sides and its deviations.
+    fn sides_and_deviation(
+        &mut self,
+        forced: &CompactSides,
+        sides: &CompactSides,
+        deviation: &[f64],
+    ) -> Result<(), BuildError> {
+        self.sides(forced)?;
+        self.sides(sides)?;
+        deviation.iter().try_for_each(|&d| self.f64(d))
+    }
+
+    /// A tile record's last fields: tile `(tx, ty)` of layer `layer`'s version 3 blob, or with
+    /// compact levels (`compact`: the levels and the layer's lattice step) what the set stores
+    /// (compacted here, on the shard: the merge copies it), then its texture, each after its
+    /// length and aligned.
+    fn blobs(
+        &mut self,
+        blob: &[u8],
+        (layer, tx, ty): (u32, u32, u32),
+        compact: Option<(u32, f32)>,
+        texture: &[u8],
+    ) -> Result<(), BuildError> {
+        let compacted;
+        let blob = match compact {
+            Some(shape) => {
+                compacted = compact_tile(blob, (tx, ty), shape).map_err(|what| {
+                    BuildError::Internal(format!("layer {layer} tile {tx},{ty}: {what}"))
+                })?;
+                &compacted[..]
+            }
+            None => blob,
+        };
+        self.u64(blob.len() as u64)?;
+        self.align()?;
+        self.put(blob)?;
+        self.u64(texture.len() as u64)?;
+        self.align()?;
+        self.put(texture)
     }
 
     /// The checksum and end mark, then sync and rename into place. Returns the part's size.
