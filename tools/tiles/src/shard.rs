@@ -1590,17 +1590,7 @@ pub fn merge(
     let mut rebuilt: std::collections::HashMap<usize, Vec<u8>> = Default::default();
     let mut units = Vec::new();
     if params.shared_sides {
-        let mut start = Start {
-            sides: Vec::with_capacity(count),
-            forced: Vec::with_capacity(count),
-            deviation: Vec::with_capacity(count),
-        };
-        for t in 0..count {
-            let tile = owner(t).tile(t);
-            start.sides.push(tile.sides);
-            start.forced.push(tile.forced);
-            start.deviation.push(tile.deviation);
-        }
+        let start = recorded_start(count, |t| owner(t).tile(t));
         let recorded = start.forced.clone();
         let unsettled = unsettled_tiles(&start, tiles_x, params.levels);
         summary.unsettled = unsettled as u64;
@@ -1802,17 +1792,7 @@ fn merge_layer(
     let mut rebuilt: std::collections::HashMap<usize, (Vec<u8>, Vec<f32>)> = Default::default();
     let mut units = Vec::new();
     if params.shared_sides {
-        let mut start = Start {
-            sides: Vec::with_capacity(count),
-            forced: Vec::with_capacity(count),
-            deviation: Vec::with_capacity(count),
-        };
-        for t in 0..count {
-            let tile = owner(t).layer_tile(p, t);
-            start.sides.push(tile.sides);
-            start.forced.push(tile.forced);
-            start.deviation.push(tile.deviation);
-        }
+        let start = recorded_start(count, |t| owner(t).layer_tile(p, t));
         let unsettled = unsettled_tiles(&start, tiles_x, levels);
         summary.pyramid_unsettled += unsettled as u64;
         let mut deviation = start.deviation.clone();
@@ -1932,6 +1912,23 @@ enum Made {
     Resealed(Vec<u8>, Vec<crate::format::LevelEntry>),
     /// Copied as the part stores it.
     Copied(Vec<crate::format::LevelEntry>),
+}
+
+/// The agreement's state as the parts recorded it, for tiles `0..count` of a layer (`tile`
+/// reads each from its owner): where the merge checks for the fixed point, and resumes from.
+fn recorded_start<'p>(count: usize, tile: impl Fn(usize) -> PartTile<'p>) -> Start {
+    let mut start = Start {
+        sides: Vec::with_capacity(count),
+        forced: Vec::with_capacity(count),
+        deviation: Vec::with_capacity(count),
+    };
+    for t in 0..count {
+        let tile = tile(t);
+        start.sides.push(tile.sides);
+        start.forced.push(tile.forced);
+        start.deviation.push(tile.deviation);
+    }
+    start
 }
 
 /// Tiles whose recorded forced sides are not what their own and their neighbours' recorded
