@@ -22,7 +22,9 @@ use crate::pack::{morph_offset, morph_unit, pack};
 use crate::pyramid::{base_errors, decimation_errors, level_floor, Decimated, Surfaces};
 use crate::quantise::{lattice_step, Quantiser};
 use crate::texture::{self, Prepared, Source, Texturing};
-use crate::units::{cell_spans, deviation_bounds, layer_bounds, CellSpans, CELL_SIZES};
+use crate::units::{
+    cell_spans, decimation_bound, deviation_bounds, layer_deviation_bounds, CellSpans, CELL_SIZES,
+};
 use crate::BuildError;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -1514,7 +1516,7 @@ pub fn build_tileset_at(
         &mut writer,
         heights,
         params,
-        &header,
+        (&header, &scanned),
         prepared.as_ref(),
         progress,
         &mut summary,
@@ -1531,7 +1533,7 @@ pub(crate) fn build_pyramid(
     writer: &mut TileSetWriter,
     heights: &dyn Heights,
     params: &BuildParams,
-    header: &FileHeader,
+    (header, base): (&FileHeader, &Scanned),
     prepared: Option<&(Prepared, texture::Layout)>,
     progress: &(dyn Fn() + Sync),
     summary: &mut BuildSummary,
@@ -1540,6 +1542,9 @@ pub(crate) fn build_pyramid(
     // The pyramid: each layer from the grid subsampled, its error bound from the layer below.
     let mut below = vec![0.0f32; (tiles_x * tiles_y) as usize];
     let mut below_tiles_x = tiles_x;
+    // The spans of size 2 of the layers below, which bound a layer's decimation errors.
+    let mut size_two_spans = vec![base.spans[0]];
+    let max_abs = base.lo.abs().max(base.hi.abs());
     for p in 1..=header.pyramid_layers {
         let layer_heights = Decimated::new(heights, p);
         let finer = Decimated::new(heights, p - 1);
@@ -1573,7 +1578,13 @@ pub(crate) fn build_pyramid(
             index: p,
             bands: &layer_bands,
             step: scanned.step,
-            bounds: layer_bounds(params),
+            bounds: layer_deviation_bounds(
+                params,
+                spacing_of(&layer_heights),
+                scanned.step,
+                &scanned.spans,
+                decimation_bound(&size_two_spans, max_abs),
+            ),
             decimation: Some(&decimation),
             prepared: prepared.map(|(s, l)| (s.for_layer(p), *l)),
             base: Some(heights),
@@ -1595,8 +1606,15 @@ pub(crate) fn build_pyramid(
         });
         summary.texture_seconds += layer_summary.texture_seconds;
         (below, below_tiles_x) = (decimation, l.tiles_x);
+        size_two_spans.push(scanned.spans[0]);
     }
     Ok(())
+}
+
+/// The spacing a layer's mesher holds its spacing rule to: the smaller of its two.
+pub(crate) fn spacing_of(heights: &dyn Heights) -> f64 {
+    let shape = heights.shape();
+    shape.spacing_x.min(shape.spacing_y)
 }
 
 /// One layer of a build: the base grid (`index` 0) or a pyramid layer, read in bands.
@@ -2358,7 +2376,7 @@ mod tests {
         let params = BuildParams::default();
         let step = height_step(&grid).expect("step");
         let bands = Bands::new(&grid, (4, 4));
-        let bounds = layer_bounds(&params);
+        let bounds: Vec<f64> = (0..params.levels).map(|k| params.level_error(k)).collect();
         let agree =
             |remesh| agree_sides(&bands, &params, (step, &bounds), None, remesh).expect("agreed");
         let (fewer, every) = (agree(Remesh::Changed), agree(Remesh::NextToChange));

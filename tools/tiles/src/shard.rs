@@ -40,8 +40,8 @@
 //!
 //! The tile pyramid (`--pyramid`) is built on the shards, each its rows of every layer
 //! ([`Shard::rows`] of the layer's tile rows), the same way: a layer's shared sides and
-//! morph units are settled as the base grid's are (the layer's units follow its tiles'
-//! deviations, so the merge seals again the tiles of a part whose units were smaller), and
+//! morph units are settled as the base grid's are (the units from a bound every shard finds
+//! from the scans, [`crate::units::layer_deviation_bounds`], raised where a tile passes it), and
 //! what else a layer tile depends on beyond its samples (the layer's range and step, its
 //! decimation error from its children's, its errors against the base grid) each shard
 //! finds for itself (`ShardLayers::build` says how). The merge then copies the layers as it
@@ -58,20 +58,22 @@
 //! bytes the set stores, [`compact_tile`]: compacted on the shard, copied by the merge) and
 //! its texture; then the number of pyramid layers (0 without a pyramid) and per layer its
 //! index, owned rows (possibly none) and tile counts, its scan's lattice step and range, its
-//! units, passes and meshes, and per owned tile the same record with its agreement's
+//! units and the bounds under them, passes and meshes, and per owned tile the same record with its agreement's
 //! deviations, its decimation error and its levels' errors against the base grid before the
 //! blob; last, the crc32 of everything before it and `END_MAGIC`. It is written to a
 //! temporary file and renamed when complete, so a shard killed at any point leaves no part
-//! that reads as whole. Version 4 (the layers); version 3 parts held no layers (the merge
-//! built them), version 2 no bounds and version 1 version 3 blobs, and all are refused.
+//! that reads as whole. Version 5; version 4 parts held no layer bounds (a layer's units
+//! followed its tiles' deviations), version 3 no layers (the merge built them), version 2 no
+//! bounds and version 1 version 3 blobs, and all are refused.
 
 use std::io::{BufWriter, Write};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use crate::build::{
-    build_tiles, forced_sides, scan, set_header, settle, units_of, validate, Bands, BuildParams,
-    CompactSides, Heights, Layer, LevelStats, Remesh, SideBits, Start, TileSetMeta,
+    build_tiles, forced_sides, scan, set_header, settle, spacing_of, units_of, validate, Bands,
+    BuildParams, CompactSides, Heights, Layer, LevelStats, Remesh, Scanned, SideBits, Start,
+    TileSetMeta,
 };
 use crate::format::{
     compact_tile, layer_layout, reseal_compact_tile, stored_tile_table, temp_path, tile_count,
@@ -79,7 +81,9 @@ use crate::format::{
 };
 use crate::pyramid::{decimation_errors, Decimated};
 use crate::texture::{self, Prepared, Texturing};
-use crate::units::{cell_spans, deviation_bounds, layer_bounds, CellSpans, CELL_SIZES};
+use crate::units::{
+    cell_spans, decimation_bound, deviation_bounds, layer_deviation_bounds, CellSpans, CELL_SIZES,
+};
 use crate::BuildError;
 
 /// The first bytes of a part file.
@@ -89,7 +93,7 @@ const END_MAGIC: [u8; 8] = *b"VKTPEND\0";
 /// Where a part's blobs start: a multiple of this many bytes from the file's start.
 const ALIGN: usize = 16;
 /// The part format's version.
-pub const PART_VERSION: u32 = 4;
+pub const PART_VERSION: u32 = 5;
 /// Tile rows beyond its own that a shard settles the sides over, by default. On the sets
 /// measured (bench/README.md, "Distributed builds") one row already left no seam to settle
 /// again in the merge; two give margin for longer cascades at the cost of about `4 / rows`
@@ -300,7 +304,7 @@ pub fn build_shard(
     into.build(
         heights,
         params,
-        &header,
+        (&header, &scanned),
         &layers,
         (prepared, known),
         (shard, halo),
@@ -352,16 +356,17 @@ impl ShardLayers<'_, '_> {
     ///   its layers above need, from the bottom up, so it reads only the rows under them.
     /// - **Its shared sides**: settled over its rows and `halo` more either side, as the base
     ///   grid's; the merge checks for the fixed point and resumes where a halo fell short.
-    /// - **Its morph units**, which follow the layer's tiles' deviations: the part records
-    ///   each tile's and the units it sealed with; the merge seals again where the layer's
-    ///   come out larger.
+    /// - **Its morph units**: from the layer's bounds, which follow from the scans of the layers
+    ///   below and its own ([`crate::units::layer_deviation_bounds`]), the same on every shard;
+    ///   the part records them, each tile's deviations and the units it sealed with, and the
+    ///   merge seals again only where a tile's deviation passed the bounds.
     /// - **Its errors against the base grid** ([`crate::pyramid::base_errors`]): the base
     ///   rows under its own tile row.
     fn build(
         &mut self,
         heights: &dyn Heights,
         params: &BuildParams,
-        header: &FileHeader,
+        (header, base): (&FileHeader, &Scanned),
         layers: &[LayerHeader],
         (prepared, known): (Option<&(Prepared, texture::Layout)>, Option<&Scans>),
         (shard, halo): (Shard, u32),
@@ -385,6 +390,9 @@ impl ShardLayers<'_, '_> {
         }
         let mut below = vec![0.0f32; (header.tiles_x * header.tiles_y) as usize];
         let mut below_tiles_x = header.tiles_x;
+        // The spans of size 2 of the layers below, which bound a layer's decimation errors.
+        let mut size_two_spans = vec![base.spans[0]];
+        let max_abs = base.lo.abs().max(base.hi.abs());
         for (i, l) in layers.iter().enumerate() {
             let p = i as u32 + 1;
             let tiles = (l.tiles_x, l.tiles_y);
@@ -398,7 +406,14 @@ impl ShardLayers<'_, '_> {
                 None => scan(&Bands::new(&layer_heights, tiles))?,
             };
             let rows = own(l);
-            let bounds = layer_bounds(params);
+            let bounds = layer_deviation_bounds(
+                params,
+                spacing_of(&layer_heights),
+                scanned.step,
+                &scanned.spans,
+                decimation_bound(&size_two_spans, max_abs),
+            );
+            size_two_spans.push(scanned.spans[0]);
             let agreed = match params.shared_sides && !rows.is_empty() {
                 true => {
                     let window = windows[i].clone();
@@ -422,6 +437,9 @@ impl ShardLayers<'_, '_> {
             let units = agreed.as_ref().map(|a| a.units.clone()).unwrap_or_default();
             for level in 0..params.levels as usize {
                 self.part.f64(units.get(level).copied().unwrap_or(0.0))?;
+            }
+            for &b in &bounds {
+                self.part.f64(b)?;
             }
             self.part.u32(agreed.as_ref().map_or(0, |a| a.passes))?;
             self.part.u64(agreed.as_ref().map_or(0, |a| a.meshes))?;
@@ -1068,8 +1086,10 @@ pub struct PartLayer {
     pub step: f32,
     pub lo: f32,
     pub hi: f32,
-    /// The units its tiles were sealed with (0s with independent sides).
+    /// The units its tiles were sealed with (0s with independent sides, or no rows).
     pub units: Vec<f64>,
+    /// Per level, the floor of the layer's morph units from the scans ([`crate::units`]).
+    pub bounds: Vec<f64>,
     pub agreement_passes: u32,
     pub agreement_meshes: u64,
     /// Per owned tile: where its record starts.
@@ -1349,6 +1369,7 @@ impl Part {
             }
             let (step, lo, hi) = (c.f32()?, c.f32()?, c.f32()?);
             let units = (0..levels).map(|_| c.f64()).collect::<Result<_, _>>()?;
+            let bounds = (0..levels).map(|_| c.f64()).collect::<Result<_, _>>()?;
             let (passes, meshes) = (c.u32()?, c.u64()?);
             let mut tiles = Vec::new();
             for _ in 0..(r1 - r0) as usize * tiles_x as usize {
@@ -1364,6 +1385,7 @@ impl Part {
                 lo,
                 hi,
                 units,
+                bounds,
                 agreement_passes: passes,
                 agreement_meshes: meshes,
                 tiles,
@@ -1761,7 +1783,7 @@ fn merge_layer(
     let (first, l) = (parts[0], &parts[0].layers[i]);
     for part in parts {
         let o = &part.layers[i];
-        if (o.step, o.lo, o.hi) != (l.step, l.lo, l.hi) {
+        if (o.step, o.lo, o.hi, &o.bounds) != (l.step, l.lo, l.hi, &l.bounds) {
             return Err(BuildError::Params(format!(
                 "{}: its scan of pyramid layer {p} differs from {}'s (the input changed between \
                  shards?)",
@@ -1784,7 +1806,7 @@ fn merge_layer(
     let owner = |t: usize| -> &Part { row_owner[t / tiles_x as usize] };
     writer.set_layer_heights(p, l.step, l.lo, l.hi);
     let levels = params.levels;
-    let bounds = layer_bounds(params);
+    let bounds = l.bounds.clone();
     let decimation: Vec<f32> = (0..count)
         .map(|t| owner(t).layer_tile(p, t).decimation)
         .collect();

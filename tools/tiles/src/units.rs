@@ -34,16 +34,30 @@
 //! the 4K mirror set). Each tile's final build still finds its deviations: were one past its
 //! bound, the units would rise to it, and the set stays correct: an unsharded build is built
 //! again at the raised bounds, and a sharded one's merge seals every tile again (test
-//! `tiles_past_their_bounds_raise_the_units`). Pyramid layers keep `bound_k = e_k` and their
-//! agreement's deviations: a layer tile's floor raises its errors, tile by tile, so a shard
-//! seals its layer tiles at its own tiles' units and the merge seals again those of a part
-//! whose units came out below the layer's.
+//! `tiles_past_their_bounds_raise_the_units`).
+//!
+//! A pyramid layer's tile is built no finer than its floor, a share of its decimation error
+//! ([`crate::pyramid::level_floor`]): its level `k` refines as far as `e'_k = max(e_k,
+//! floor)` asks, and the floor follows the tile's data. Taken over the deviations, a layer's
+//! units were a shard's own tiles', and the merge sealed again most layer tiles of a
+//! distributed build (768 of the 1,365 of the 16K mirror set in 4 shards; at a hundred shards
+//! it would seal nearly all of them, on one node). So a layer's floor is bounded from the
+//! scans too ([`decimation_bound`]). A layer tile's decimation error is its children's plus
+//! how far a sample of the layer below lies from the layer's lattice blended over it; that
+//! blend and that sample both lie in the closure of the aligned cell of 2 samples of the layer
+//! below that holds the sample, so the distance is at most that layer's span of size 2, and
+//! the error at most their sum over the layers below. With `e'_k` from that bound the argument
+//! above holds in the layer's own samples, its spans from the layer's own scan
+//! ([`layer_deviation_bounds`]). As in the base grid, a tile past its bound raises the units
+//! (a layer's are taken with its agreement's deviations, the same meshes as its tiles'), and
+//! the set stays correct.
 
 use rayon::prelude::*;
 
 use crate::build::BuildParams;
 use crate::grid::Grid;
 use crate::mesh::TILE_CELLS;
+use crate::pyramid::FLOOR_SHARE;
 
 /// Aligned cell sizes the scan measures: 2, 4, ..., 256 samples.
 pub const CELL_SIZES: usize = 8;
@@ -158,9 +172,35 @@ pub fn deviation_bounds(
     step: f32,
     spans: &CellSpans,
 ) -> Vec<f64> {
+    bounds_over_floor(params, spacing, step, spans, 0.0)
+}
+
+/// [`deviation_bounds`] for a pyramid layer: `spacing`, `step` and `spans` are the layer's own
+/// (its samples `2^p` base samples apart, its scan's), `decimation` a bound on every one of
+/// its tiles' decimation errors ([`decimation_bound`]), whose share is the floor no level is
+/// built finer than.
+pub fn layer_deviation_bounds(
+    params: &BuildParams,
+    spacing: f64,
+    step: f32,
+    spans: &CellSpans,
+    decimation: f64,
+) -> Vec<f64> {
+    bounds_over_floor(params, spacing, step, spans, decimation * FLOOR_SHARE)
+}
+
+/// Per level `k`, `max(e', span) + 2 step` with `e' = max(e_k, floor)`, the error the level is
+/// refined to, and `span` the span of the largest cell the spacing rule may leave over `e'`.
+fn bounds_over_floor(
+    params: &BuildParams,
+    spacing: f64,
+    step: f32,
+    spans: &CellSpans,
+    floor: f64,
+) -> Vec<f64> {
     (0..params.levels)
         .map(|k| {
-            let e = params.level_error(k);
+            let e = params.level_error(k).max(floor);
             let span = match blocked_cell(e, spacing) {
                 0 => 0.0,
                 s => f64::from(spans[s.trailing_zeros() as usize - 1]),
@@ -170,10 +210,15 @@ pub fn deviation_bounds(
         .collect()
 }
 
-/// Per level, the bound a pyramid layer's units keep: its level errors (a layer tile's floor
-/// makes its own bound, [`crate::pyramid::level_floor`]).
-pub fn layer_bounds(params: &BuildParams) -> Vec<f64> {
-    (0..params.levels).map(|k| params.level_error(k)).collect()
+/// A bound on the decimation error of every tile of the layer above those whose scans found
+/// `size_two_spans` (each layer's span over cells of 2 samples, `spans[0]`, the base grid's
+/// first): their sum (see the module's doc), widened for the rounding of each layer's figure
+/// (measured in `f32` from blends taken in `f64`, then rounded up a step) at heights of up to
+/// `max_abs` metres.
+pub fn decimation_bound(size_two_spans: &[f32], max_abs: f32) -> f64 {
+    let sum: f64 = size_two_spans.iter().map(|&s| f64::from(s)).sum();
+    let layers = size_two_spans.len() as f64;
+    sum * (1.0 + 1e-5) + layers * 1e-5 * (f64::from(max_abs) + sum)
 }
 
 #[cfg(test)]

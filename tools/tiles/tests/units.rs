@@ -55,7 +55,11 @@ fn params() -> BuildParams {
 /// Every tile's stored morph unit per level (all tiles of a set with shared sides hold the
 /// same).
 fn stored_units(path: &Path) -> Vec<f32> {
-    let set = TileSet::open(path).expect("open");
+    set_units(&TileSet::open(path).expect("open"))
+}
+
+/// [`stored_units`] of an open set (or one of its pyramid layers).
+fn set_units(set: &TileSet) -> Vec<f32> {
     let (tx, ty) = (set.header().tiles_x, set.header().tiles_y);
     let mut units: Option<Vec<f32>> = None;
     for t in 0..tx * ty {
@@ -257,4 +261,129 @@ fn tiles_past_their_bounds_raise_the_units() {
         // The comparison can fail: the forged scans made other units.
         assert_ne!(stored_units(&merged), stored_units(&whole));
     }
+}
+
+/// A pyramid's layers take their units from bounds that every shard finds alike from the scans
+/// (`tiles::units::layer_deviation_bounds`), so no layer tile's deviation raises them and a
+/// sharded build's merge seals no layer tile again: the whole SRTM3 tile N43E007 (5 x 5 base
+/// tiles, three layers), unsharded and in 3 shards, the same bytes. The control: without the
+/// decimation error's share in the bound (bounds of `e_i`, as the layers' units had before),
+/// the layer tiles' stored offsets reach past it, so their units followed their tiles'
+/// deviations, and a shard's would be its own tiles'.
+#[test]
+fn a_pyramids_layer_units_are_the_bounds_of_its_scans() {
+    use tiles::build::Heights;
+    use tiles::pyramid::Decimated;
+    use tiles::units::{cell_spans, decimation_bound, layer_deviation_bounds};
+
+    let heights = crop(((0, 0), (1201, 1201)));
+    let grid = sized(&heights, (1201, 1201));
+    let params = BuildParams {
+        pyramid: true,
+        ..params()
+    };
+    let dir = tempfile::tempdir().expect("temp dir");
+    let built = dir.path().join("built.vkt");
+    build_tileset(&grid, &params, &TileSetMeta::default(), &built, &|| {}).expect("build");
+    let set = TileSet::open(&built).expect("open");
+    assert_eq!(set.pyramid_layers(), 3);
+
+    let max_abs = heights.iter().fold(0.0f32, |m, h| m.max(h.abs()));
+    let spans_of = |g: &Grid| {
+        let tiles = |n: usize| (n - 1).div_ceil(256) as u32;
+        cell_spans(g, tiles(g.width), 0..tiles(g.height)).0
+    };
+    let mut size_two = vec![spans_of(&grid)[0]];
+    let mut passed_without_floor = Vec::new();
+    for p in 1..=set.pyramid_layers() {
+        let layer = set.layer(p).expect("layer");
+        let decimated = Decimated::new(&grid, p);
+        let shape = decimated.shape();
+        let rows = decimated.rows(0, shape.height).expect("rows").into_owned();
+        let layer_grid = Grid {
+            heights: &rows,
+            ..shape
+        };
+        let spans = spans_of(&layer_grid);
+        let spacing = layer_grid.spacing_x.min(layer_grid.spacing_y);
+        let step = layer.header().height_step;
+        let bounds = layer_deviation_bounds(
+            &params,
+            spacing,
+            step,
+            &spans,
+            decimation_bound(&size_two, max_abs),
+        );
+        let want: Vec<f32> = bounds
+            .iter()
+            .map(|&b| tiles::pack::morph_unit(b, 0.0) as f32)
+            .collect();
+        assert_eq!(
+            set_units(&layer),
+            want,
+            "layer {p}: a tile raised a unit past its bound"
+        );
+        // The control: the largest offset stored onto each level, against the bound without
+        // the floor.
+        let plain = layer_deviation_bounds(&params, spacing, step, &spans, 0.0);
+        let (tx, ty) = (layer.header().tiles_x, layer.header().tiles_y);
+        for t in 0..tx * ty {
+            let tile = layer.tile(t % tx, t / tx).expect("tile");
+            for j in 1..tile.header.levels {
+                let block = tile.level(j).expect("level");
+                let n = block.entry.block_len as usize;
+                for k in 0..j as usize {
+                    let unit = f64::from(want[k]);
+                    let widest = block.morph[k * n..(k + 1) * n]
+                        .iter()
+                        .fold(0i32, |m, &o| m.max(i32::from(o).abs()));
+                    if f64::from(widest) * unit - unit / 2.0 > plain[k] {
+                        passed_without_floor.push((p, t, k));
+                    }
+                }
+            }
+        }
+        size_two.push(spans[0]);
+    }
+    assert!(
+        !passed_without_floor.is_empty(),
+        "no layer tile's offset passed the bounds without the decimation error's share"
+    );
+
+    // In 3 shards, each scanning the layers itself: no layer tile sealed again, and the
+    // build's bytes.
+    let parts: Vec<PathBuf> = (0..3)
+        .map(|index| {
+            let part = dir.path().join(format!("part.{index}"));
+            let shard = Shard { index, count: 3 };
+            let meta = TileSetMeta::default();
+            build_shard(
+                &grid,
+                &params,
+                None,
+                &meta,
+                (shard, 2),
+                None,
+                "n43e007",
+                &part,
+                &|| {},
+            )
+            .expect("shard");
+            part
+        })
+        .collect();
+    let merged = dir.path().join("merged.vkt");
+    let reopen = |_: &str| -> Result<_, tiles::BuildError> {
+        Err(tiles::BuildError::Params(
+            "the merge needs no input here".into(),
+        ))
+    };
+    let summary = merge(&parts, &merged, &reopen, &|| {}).expect("merge");
+    assert_eq!(summary.pyramid_resealed, 0, "layer tiles sealed again");
+    assert!(summary.pyramid_tiles > 0);
+    assert_eq!(
+        std::fs::read(&merged).expect("merged"),
+        std::fs::read(&built).expect("built"),
+        "the merged pyramid differs from the build"
+    );
 }
