@@ -72,8 +72,8 @@ use std::path::{Path, PathBuf};
 
 use crate::build::{
     build_tiles, forced_sides, scan, set_header, settle, spacing_of, units_of, validate, Bands,
-    BuildParams, CompactSides, Heights, Layer, LevelStats, Remesh, Scanned, SideBits, Start,
-    TileSetMeta,
+    BuildParams, BuiltTile, CompactSides, Heights, Layer, LevelStats, Remesh, Scanned, SideBits,
+    Start, TileSetMeta,
 };
 use crate::format::{
     compact_tile, layer_layout, reseal_compact_tile, stored_tile_table, temp_path, tile_count,
@@ -1394,18 +1394,48 @@ impl Part {
         Ok(layers)
     }
 
-    /// Drops tile `t`'s record from this process's memory once it is copied: the merge maps
-    /// parts as large as the set, and would otherwise hold them all (its pages stay in the
-    /// kernel's cache, and are read again from the file if touched).
-    pub fn release(&self, t: usize) {
-        let first = self.rows.start as usize * self.tiles_x as usize;
-        self.release_record(&self.tiles, t - first);
+    /// Its tile rows of grid `p` (0: the base grid, else pyramid layer `p`).
+    fn grid_rows(&self, p: u32) -> Range<u32> {
+        match p {
+            0 => self.rows.clone(),
+            p => self.layers[p as usize - 1].rows.clone(),
+        }
     }
 
-    /// [`release`](Self::release) for tile `t` of pyramid layer `p` (>= 1).
-    pub fn release_layer_tile(&self, p: u32, t: usize) {
-        let l = &self.layers[p as usize - 1];
-        self.release_record(&l.tiles, t - l.rows.start as usize * l.tiles_x as usize);
+    /// The units it sealed grid `p`'s tiles with.
+    fn grid_units(&self, p: u32) -> &[f64] {
+        match p {
+            0 => &self.units,
+            p => &self.layers[p as usize - 1].units,
+        }
+    }
+
+    /// Where grid `p`'s records start, and the index in the grid of the first.
+    fn grid_records(&self, p: u32) -> (&[usize], usize) {
+        match p {
+            0 => (
+                &self.tiles,
+                self.rows.start as usize * self.tiles_x as usize,
+            ),
+            p => {
+                let l = &self.layers[p as usize - 1];
+                (&l.tiles, l.rows.start as usize * l.tiles_x as usize)
+            }
+        }
+    }
+
+    /// Tile `t` (row-major) of grid `p`, which this part must own.
+    fn grid_tile(&self, p: u32, t: usize) -> PartTile<'_> {
+        let (records, first) = self.grid_records(p);
+        self.record(records[t - first], p > 0)
+    }
+
+    /// Drops tile `t` of grid `p`'s record from this process's memory once it is copied: the
+    /// merge maps parts as large as the set, and would otherwise hold them all (its pages stay
+    /// in the kernel's cache, and are read again from the file if touched).
+    fn release_grid_tile(&self, p: u32, t: usize) {
+        let (records, first) = self.grid_records(p);
+        self.release_record(records, t - first);
     }
 
     /// Drops record `k` of `records` (offsets into the map) from memory.
@@ -1425,21 +1455,6 @@ impl Part {
                 )
             };
         }
-    }
-
-    /// Tile `t` of the set (row-major), which this part must own.
-    pub fn tile(&self, t: usize) -> PartTile<'_> {
-        let first = self.rows.start as usize * self.tiles_x as usize;
-        self.record(self.tiles[t - first], false)
-    }
-
-    /// Tile `t` of pyramid layer `p` (>= 1, row-major in the layer), which this part must own.
-    pub fn layer_tile(&self, p: u32, t: usize) -> PartTile<'_> {
-        let l = &self.layers[p as usize - 1];
-        self.record(
-            l.tiles[t - l.rows.start as usize * l.tiles_x as usize],
-            true,
-        )
     }
 
     /// The tile record at `at`: a layer tile's (`layer`) or a base tile's.
@@ -1584,19 +1599,6 @@ pub fn merge(
     }
     let by_index: Vec<&Part> = by_index.into_iter().flatten().collect();
     let header = first.header;
-    let (tiles_x, tiles_y) = (header.tiles_x, header.tiles_y);
-    let count = tiles_x as usize * tiles_y as usize;
-    // Each tile row's part: the shards' rows cover the set (checked when each was opened).
-    let row_owner: Vec<&Part> = by_index
-        .iter()
-        .flat_map(|p| p.rows.clone().map(move |_| *p))
-        .collect();
-    if row_owner.len() != tiles_y as usize {
-        return Err(BuildError::Internal(
-            "the shards' rows do not cover the set".into(),
-        ));
-    }
-    let owner = |t: usize| -> &Part { row_owner[t / tiles_x as usize] };
     let params = BuildParams {
         levels: header.levels,
         base_error: header.base_error,
@@ -1608,322 +1610,290 @@ pub fn merge(
         levels: vec![LevelStats::default(); header.levels as usize],
         ..MergeSummary::default()
     };
-    // The shared sides: the owners' states, checked for a fixed point, resumed where not.
-    let mut rebuilt: std::collections::HashMap<usize, Vec<u8>> = Default::default();
-    let mut units = Vec::new();
-    if params.shared_sides {
-        let start = recorded_start(count, |t| owner(t).tile(t));
-        let recorded = start.forced.clone();
-        let unsettled = unsettled_tiles(&start, tiles_x, params.levels);
-        summary.unsettled = unsettled as u64;
-        // Each tile's final build's deviations, as its part recorded them.
-        let mut deviation = start.deviation.clone();
-        if unsettled > 0 {
-            let (heights, _) = reopen(&first.recipe)?;
-            let bands = Bands::new(heights.as_ref(), (tiles_x, tiles_y));
-            let step = header.height_step;
-            let all = 0..tiles_y;
-            let mut agreed = settle(
-                &bands,
-                &params,
-                step,
-                None,
-                Remesh::Changed,
-                all,
-                Some(start),
-            )?;
-            summary.remeshed = agreed.meshes;
-            // (The agreement's meshes of the base grid find no deviations: the recorded ones.)
-            agreed.units = units_of(&first.bounds, &deviation);
-            let changed: Vec<usize> = (0..count)
-                .filter(|&t| agreed.forced[t] != recorded[t])
-                .collect();
-            summary.rebuilt = changed.len() as u64;
-            if !changed.is_empty() {
-                let layer = Layer {
-                    index: 0,
-                    bands: &bands,
-                    step,
-                    bounds: first.bounds.clone(),
-                    decimation: None,
-                    prepared: None,
-                    base: None,
-                };
-                // Whole tile rows are built; the changed tiles of each are kept.
-                let mut rows: Vec<u32> = changed
-                    .iter()
-                    .map(|&t| (t / tiles_x as usize) as u32)
-                    .collect();
-                rows.dedup();
-                for row in rows {
-                    build_tiles(
-                        &layer,
-                        &params,
-                        Some(&agreed),
-                        row..row + 1,
-                        &mut |i, (b, _), _| {
-                            if changed.binary_search(&i).is_ok() {
-                                deviation[i] = b.deviation;
-                                rebuilt.insert(i, b.blob);
-                            }
-                            Ok(())
-                        },
-                    )?;
-                }
-            }
-            if units_of(&first.bounds, &deviation) != agreed.units {
-                return Err(BuildError::Internal(
-                    "a tile built again at the seams passed the set's morph units".into(),
-                ));
-            }
-        }
-        units = units_of(&first.bounds, &deviation);
-    }
+    // The base grid, then each layer above it, as the build writes them.
     let mut writer = TileSetWriter::create(out, header)?;
-    let step = header.height_step;
-    let xy = |t: usize| ((t % tiles_x as usize) as u32, (t / tiles_x as usize) as u32);
-    // Each tile's blob as the set holds it: rebuilt above, sealed again at the set's units
-    // (on every core: it is most of a merge's work when the units differ), or as the part has
-    // it. Written in row-major order, as the build writes them. With compact levels a part
-    // holds each tile as the set stores it: one sealed again keeps its stream under a new
-    // table and checksum, and the rest are copied once their streams decode as their tables
-    // say.
-    let shared = params.shared_sides;
-    let compact = header.flags & FLAG_COMPACT_LEVELS != 0;
-    let shape = (header.levels, step);
-    let make = |t: usize| -> Result<Made, BuildError> {
-        let part = owner(t);
-        let (tx, ty) = xy(t);
-        let failed = |what: String| {
-            BuildError::Input(format!("{}: tile {tx},{ty}: {what}", part.path.display()))
-        };
-        let stored = part.tile(t).blob;
-        if rebuilt.contains_key(&t) {
-            return Ok(Made::Rebuilt);
-        }
-        if !shared || part.units == units {
-            let entries = stored_tile_table(stored, (tx, ty), shape, compact).map_err(failed)?;
-            return Ok(Made::Copied(entries));
-        }
-        let out = match compact {
-            true => reseal_compact_tile(stored, (tx, ty), shape, &units),
-            false => reseal(stored, (tx, ty), header.levels, step, &units),
-        };
-        let out = out.map_err(failed)?;
-        let entries = stored_tile_table(&out, (tx, ty), shape, compact).map_err(failed)?;
-        Ok(Made::Resealed(out, entries))
-    };
-    let in_flight = 2 * rayon::current_num_threads();
-    crate::ordered::in_order(count, in_flight, make, |t, made| {
-        let tile = owner(t).tile(t);
-        let (tx, ty) = xy(t);
-        let entries = match made? {
-            Made::Rebuilt => {
-                let blob = &rebuilt[&t];
-                writer.add_tile(tx, ty, blob)?;
-                let parsed = Tile::parse(blob, tx, ty, header.levels, step).map_err(|what| {
-                    BuildError::Internal(format!("tile {tx},{ty} of the merged set: {what}"))
-                })?;
-                parsed.levels().to_vec()
-            }
-            Made::Resealed(stored, entries) => {
-                summary.resealed += 1;
-                writer.add_stored_tile(tx, ty, &stored)?;
-                entries
-            }
-            Made::Copied(entries) => {
-                writer.add_stored_tile(tx, ty, tile.blob)?;
-                entries
-            }
-        };
-        for (sum, e) in summary.levels.iter_mut().zip(&entries) {
-            sum.vertices += u64::from(e.vertex_count());
-            sum.triangles += u64::from(e.triangle_count);
-            sum.max_error = sum.max_error.max(f64::from(e.max_error));
-        }
-        if !tile.texture.is_empty() {
-            writer.add_texture(tx, ty, tile.texture)?;
-        }
-        owner(t).release(t);
-        summary.tiles += 1;
-        progress();
-        Ok::<(), BuildError>(())
-    })?;
+    let base = PartsGrid::of(&by_index, 0)?;
+    let run = (&params, reopen, progress);
+    let m = merge_grid(&mut writer, &base, run, Some(&mut summary.levels))?;
+    summary.tiles = m.tiles;
+    (summary.unsettled, summary.remeshed) = (m.unsettled, m.remeshed);
+    (summary.rebuilt, summary.resealed) = (m.rebuilt, m.resealed);
     for p in 1..=header.pyramid_layers {
-        merge_layer(
-            &mut writer,
-            &by_index,
-            p,
-            &params,
-            reopen,
-            &mut summary,
-            progress,
-        )?;
+        let layer = PartsGrid::of(&by_index, p)?;
+        let l = &first.layers[p as usize - 1];
+        writer.set_layer_heights(p, l.step, l.lo, l.hi);
+        let m = merge_grid(&mut writer, &layer, run, None)?;
+        summary.pyramid_tiles += m.tiles;
+        summary.pyramid_unsettled += m.unsettled;
+        summary.pyramid_remeshed += m.remeshed;
+        summary.pyramid_rebuilt += m.rebuilt;
+        summary.pyramid_resealed += m.resealed;
     }
     writer.finish()?;
     summary.file_bytes = std::fs::metadata(out).map(|m| m.len()).unwrap_or(0);
     Ok(summary)
 }
 
-/// Writes pyramid layer `p` of the set from the parts' shares of it (`parts` by shard index),
-/// after the layers below: the shared sides checked for the fixed point and resumed from the
-/// input where a halo fell short (those tiles built again), the layer's morph units from
-/// every tile's deviations, and each tile copied, or sealed again where its part's units
-/// were smaller, as [`merge`] does the base grid's.
-fn merge_layer(
-    writer: &mut TileSetWriter,
-    parts: &[&Part],
+/// One grid of the set that the parts hold, as the merge reads it: the base grid (`p` 0) or
+/// pyramid layer `p`, each tile row from the part that built it.
+struct PartsGrid<'a> {
     p: u32,
-    params: &BuildParams,
-    reopen: &Reopen,
-    summary: &mut MergeSummary,
-    progress: &(dyn Fn() + Sync),
-) -> Result<(), BuildError> {
-    let i = p as usize - 1;
-    let (first, l) = (parts[0], &parts[0].layers[i]);
-    for part in parts {
-        let o = &part.layers[i];
-        if (o.step, o.lo, o.hi, &o.bounds) != (l.step, l.lo, l.hi, &l.bounds) {
-            return Err(BuildError::Params(format!(
-                "{}: its scan of pyramid layer {p} differs from {}'s (the input changed between \
-                 shards?)",
-                part.path.display(),
-                first.path.display()
+    tiles: (u32, u32),
+    /// Its height lattice's step.
+    step: f32,
+    /// Per level, the floor of its morph units ([`crate::units`]).
+    bounds: Vec<f64>,
+    /// Each tile row's part.
+    row_owner: Vec<&'a Part>,
+}
+
+impl<'a> PartsGrid<'a> {
+    /// Grid `p` of `parts` (by shard index, every shard present; the base grid's header and
+    /// bounds checked alike in each). A layer's scan and bounds must be the same in every part.
+    fn of(parts: &[&'a Part], p: u32) -> Result<PartsGrid<'a>, BuildError> {
+        let first = parts[0];
+        let (tiles, step, bounds) = match p {
+            0 => {
+                let h = &first.header;
+                ((h.tiles_x, h.tiles_y), h.height_step, first.bounds.clone())
+            }
+            _ => {
+                let l = &first.layers[p as usize - 1];
+                for part in parts {
+                    let o = &part.layers[p as usize - 1];
+                    if (o.step, o.lo, o.hi, &o.bounds) != (l.step, l.lo, l.hi, &l.bounds) {
+                        return Err(BuildError::Params(format!(
+                            "{}: its scan of pyramid layer {p} differs from {}'s (the input \
+                             changed between shards?)",
+                            part.path.display(),
+                            first.path.display()
+                        )));
+                    }
+                }
+                ((l.tiles_x, l.tiles_y), l.step, l.bounds.clone())
+            }
+        };
+        // The shards' rows cover each grid (checked when each part was opened).
+        let row_owner: Vec<&Part> = parts
+            .iter()
+            .flat_map(|part| part.grid_rows(p).map(move |_| *part))
+            .collect();
+        if row_owner.len() != tiles.1 as usize {
+            let grid = match p {
+                0 => "the set".to_string(),
+                p => format!("pyramid layer {p}"),
+            };
+            return Err(BuildError::Internal(format!(
+                "the shards' rows do not cover {grid}"
             )));
         }
+        Ok(PartsGrid {
+            p,
+            tiles,
+            step,
+            bounds,
+            row_owner,
+        })
     }
-    let (tiles_x, tiles_y) = (l.tiles_x, l.tiles_y);
+
+    /// The part that built tile `t` (row-major).
+    fn owner(&self, t: usize) -> &'a Part {
+        self.row_owner[t / self.tiles.0 as usize]
+    }
+
+    /// Tile `t` as its part recorded it.
+    fn tile(&self, t: usize) -> PartTile<'a> {
+        self.owner(t).grid_tile(self.p, t)
+    }
+
+    /// How problems name tile `(tx, ty)`.
+    fn tile_name(&self, (tx, ty): (u32, u32)) -> String {
+        match self.p {
+            0 => format!("tile {tx},{ty}"),
+            p => format!("pyramid layer {p} tile {tx},{ty}"),
+        }
+    }
+}
+
+/// What [`merge_grid`] did with one grid's tiles (see [`MergeSummary`]).
+#[derive(Default)]
+struct GridMerged {
+    tiles: u64,
+    unsettled: u64,
+    remeshed: u64,
+    rebuilt: u64,
+    resealed: u64,
+}
+
+/// Writes `grid` of the set from the parts' shares of it, after the grids below it: its shared
+/// sides checked for the fixed point and resumed from the input where a halo fell short (those
+/// tiles built again), its morph units from its bounds and every tile's deviations, and each
+/// tile copied, or sealed again where its part's units were smaller. `(params, reopen,
+/// progress)` as [`merge`] has them; `levels`: the per-level figures to add each tile's to
+/// (the base grid's).
+fn merge_grid(
+    writer: &mut TileSetWriter,
+    grid: &PartsGrid,
+    (params, reopen, progress): (&BuildParams, &Reopen, &(dyn Fn() + Sync)),
+    mut levels: Option<&mut Vec<LevelStats>>,
+) -> Result<GridMerged, BuildError> {
+    let p = grid.p;
+    let (tiles_x, tiles_y) = grid.tiles;
     let count = tiles_x as usize * tiles_y as usize;
-    let row_owner: Vec<&Part> = parts
-        .iter()
-        .flat_map(|part| part.layers[i].rows.clone().map(move |_| *part))
-        .collect();
-    if row_owner.len() != tiles_y as usize {
-        return Err(BuildError::Internal(format!(
-            "the shards' rows do not cover pyramid layer {p}"
-        )));
-    }
-    let owner = |t: usize| -> &Part { row_owner[t / tiles_x as usize] };
-    writer.set_layer_heights(p, l.step, l.lo, l.hi);
-    let levels = params.levels;
-    let bounds = l.bounds.clone();
-    let decimation: Vec<f32> = (0..count)
-        .map(|t| owner(t).layer_tile(p, t).decimation)
-        .collect();
-    // Tiles built again where the agreement moved their sides: blob and errors.
+    let mut merged = GridMerged::default();
+    // Each tile's decimation error (0 in the base grid): a layer tile's floor.
+    let decimation: Vec<f32> = (0..count).map(|t| grid.tile(t).decimation).collect();
+    let floors = (p > 0).then_some(&decimation[..]);
+    // Tiles built again where the agreement moved their sides: blob, and above the base
+    // grid, its levels' errors against it.
     let mut rebuilt: std::collections::HashMap<usize, (Vec<u8>, Vec<f32>)> = Default::default();
     let mut units = Vec::new();
     if params.shared_sides {
-        let start = recorded_start(count, |t| owner(t).layer_tile(p, t));
-        let unsettled = unsettled_tiles(&start, tiles_x, levels);
-        summary.pyramid_unsettled += unsettled as u64;
+        let start = recorded_start(count, |t| grid.tile(t));
+        let recorded = start.forced.clone();
+        let unsettled = unsettled_tiles(&start, tiles_x, params.levels);
+        merged.unsettled = unsettled as u64;
+        // Each tile's deviations as its part recorded them: the final build's in the base
+        // grid, the agreement's (the same meshes) in a layer.
         let mut deviation = start.deviation.clone();
         if unsettled > 0 {
-            let (heights, _) = reopen(&first.recipe)?;
-            let layer_heights = Decimated::new(heights.as_ref(), p);
-            let bands = Bands::new(&layer_heights, (tiles_x, tiles_y));
-            let recorded = start.forced.clone();
-            let floors = Some(&decimation[..]);
+            let (heights, _) = reopen(&grid.row_owner[0].recipe)?;
+            let decimated;
+            let grid_heights: &dyn Heights = match p {
+                0 => heights.as_ref(),
+                _ => {
+                    decimated = Decimated::new(heights.as_ref(), p);
+                    &decimated
+                }
+            };
+            let bands = Bands::new(grid_heights, (tiles_x, tiles_y));
             let all = 0..tiles_y;
-            let mut agreed = settle(
-                &bands,
-                params,
-                l.step,
-                floors,
-                Remesh::Changed,
-                all,
-                Some(start),
-            )?;
-            summary.pyramid_remeshed += agreed.meshes;
-            deviation = agreed.deviation.clone();
-            agreed.units = units_of(&bounds, &deviation);
+            let (changes, step) = (Remesh::Changed, grid.step);
+            let mut agreed = settle(&bands, params, step, floors, changes, all, Some(start))?;
+            merged.remeshed = agreed.meshes;
+            // A layer's agreement measures its meshes' deviations; the base grid's finds none,
+            // and the recorded ones stand.
+            if p > 0 {
+                deviation = agreed.deviation.clone();
+            }
+            agreed.units = units_of(&grid.bounds, &deviation);
             let changed: Vec<usize> = (0..count)
                 .filter(|&t| agreed.forced[t] != recorded[t])
                 .collect();
-            summary.pyramid_rebuilt += changed.len() as u64;
+            merged.rebuilt = changed.len() as u64;
             let layer = Layer {
                 index: p,
                 bands: &bands,
-                step: l.step,
-                bounds: bounds.clone(),
-                decimation: Some(&decimation),
+                step,
+                bounds: grid.bounds.clone(),
+                decimation: floors,
                 prepared: None,
-                base: Some(heights.as_ref()),
+                base: (p > 0).then_some(heights.as_ref()),
             };
+            // Whole tile rows are built; the changed tiles of each are kept.
             let mut rows: Vec<u32> = changed
                 .iter()
                 .map(|&t| (t / tiles_x as usize) as u32)
                 .collect();
             rows.dedup();
             for row in rows {
-                build_tiles(
-                    &layer,
-                    params,
-                    Some(&agreed),
-                    row..row + 1,
-                    &mut |t, (b, _), errors| {
-                        if changed.binary_search(&t).is_ok() {
-                            rebuilt.insert(t, (b.blob, errors.to_vec()));
+                let mut keep = |t: usize, (b, _): (BuiltTile, _), errors: &[f32]| {
+                    if changed.binary_search(&t).is_ok() {
+                        if p == 0 {
+                            deviation[t] = b.deviation;
                         }
-                        Ok(())
-                    },
-                )?;
+                        rebuilt.insert(t, (b.blob, errors.to_vec()));
+                    }
+                    Ok(())
+                };
+                build_tiles(&layer, params, Some(&agreed), row..row + 1, &mut keep)?;
+            }
+            if units_of(&grid.bounds, &deviation) != agreed.units {
+                return Err(BuildError::Internal(
+                    "a tile built again at the seams passed the set's morph units".into(),
+                ));
             }
         }
-        units = units_of(&bounds, &deviation);
+        units = units_of(&grid.bounds, &deviation);
     }
-    let compact = first.header.flags & FLAG_COMPACT_LEVELS != 0;
-    let shape = (levels, l.step);
+    // Each tile's blob as the set holds it: rebuilt above, sealed again at the grid's units
+    // (on every core: it is most of a merge's work when the units differ), or as the part has
+    // it. Written in row-major order, as the build writes them. With compact levels a part
+    // holds each tile as the set stores it: one sealed again keeps its stream under a new
+    // table and checksum, and the rest are copied once their streams decode as their tables
+    // say.
+    let compact = grid.row_owner[0].header.flags & FLAG_COMPACT_LEVELS != 0;
+    let shape = (params.levels, grid.step);
     let xy = |t: usize| ((t % tiles_x as usize) as u32, (t / tiles_x as usize) as u32);
     let make = |t: usize| -> Result<Made, BuildError> {
-        let part = owner(t);
-        let (tx, ty) = xy(t);
+        let part = grid.owner(t);
         let failed = |what: String| {
-            let path = part.path.display();
-            BuildError::Input(format!("{path}: pyramid layer {p} tile {tx},{ty}: {what}"))
+            let (path, name) = (part.path.display(), grid.tile_name(xy(t)));
+            BuildError::Input(format!("{path}: {name}: {what}"))
         };
         if rebuilt.contains_key(&t) {
             return Ok(Made::Rebuilt);
         }
-        let stored = part.layer_tile(p, t).blob;
-        if !params.shared_sides || part.layers[i].units == units {
-            let entries = stored_tile_table(stored, (tx, ty), shape, compact).map_err(failed)?;
+        let stored = grid.tile(t).blob;
+        if !params.shared_sides || part.grid_units(p) == &units[..] {
+            let entries = stored_tile_table(stored, xy(t), shape, compact).map_err(failed)?;
             return Ok(Made::Copied(entries));
         }
         let out = match compact {
-            true => reseal_compact_tile(stored, (tx, ty), shape, &units),
-            false => reseal(stored, (tx, ty), levels, l.step, &units),
+            true => reseal_compact_tile(stored, xy(t), shape, &units),
+            false => reseal(stored, xy(t), params.levels, grid.step, &units),
         };
         let out = out.map_err(failed)?;
-        let entries = stored_tile_table(&out, (tx, ty), shape, compact).map_err(failed)?;
+        let entries = stored_tile_table(&out, xy(t), shape, compact).map_err(failed)?;
         Ok(Made::Resealed(out, entries))
     };
     let in_flight = 2 * rayon::current_num_threads();
     crate::ordered::in_order(count, in_flight, make, |t, made| {
-        let tile = owner(t).layer_tile(p, t);
+        let tile = grid.tile(t);
         let (tx, ty) = xy(t);
         let d = tile.decimation;
-        match made? {
+        let entries = match made? {
             Made::Rebuilt => {
                 let (blob, errors) = &rebuilt[&t];
                 writer.add_layer_tile(p, tx, ty, blob, d, errors)?;
+                match levels {
+                    Some(_) => Tile::parse(blob, tx, ty, params.levels, grid.step)
+                        .map_err(|what| {
+                            BuildError::Internal(format!(
+                                "tile {tx},{ty} of the merged set: {what}"
+                            ))
+                        })?
+                        .levels()
+                        .to_vec(),
+                    None => Vec::new(),
+                }
             }
-            Made::Resealed(stored, _) => {
-                summary.pyramid_resealed += 1;
+            Made::Resealed(stored, entries) => {
+                merged.resealed += 1;
                 writer.add_stored_layer_tile(p, (tx, ty), &stored, d, &tile.errors)?;
+                entries
             }
-            Made::Copied(_) => {
+            Made::Copied(entries) => {
                 writer.add_stored_layer_tile(p, (tx, ty), tile.blob, d, &tile.errors)?;
+                entries
+            }
+        };
+        if let Some(levels) = levels.as_deref_mut() {
+            for (sum, e) in levels.iter_mut().zip(&entries) {
+                sum.vertices += u64::from(e.vertex_count());
+                sum.triangles += u64::from(e.triangle_count);
+                sum.max_error = sum.max_error.max(f64::from(e.max_error));
             }
         }
         if !tile.texture.is_empty() {
             writer.add_layer_texture(p, tx, ty, tile.texture)?;
         }
-        owner(t).release_layer_tile(p, t);
-        summary.pyramid_tiles += 1;
+        grid.owner(t).release_grid_tile(p, t);
+        merged.tiles += 1;
         progress();
         Ok::<(), BuildError>(())
-    })
+    })?;
+    Ok(merged)
 }
 
 /// What the merge makes of a part's tile before it is written, with its level table.
