@@ -263,10 +263,16 @@ fn tiles_past_their_bounds_raise_the_units() {
     }
 }
 
+/// The whole SRTM3 tile N55W003 (southern Scotland, no voids): 5 x 5 tiles, three pyramid
+/// layers.
+fn scotland() -> Vec<f32> {
+    hgt_crop("srtm/N55W003.hgt", 1201, (0, 0), (1201, 1201))
+}
+
 /// A pyramid's layers take their units from bounds that every shard finds alike from the scans
 /// (`tiles::units::layer_deviation_bounds`), so no layer tile's deviation raises them and a
-/// sharded build's merge seals no layer tile again: the whole SRTM3 tile N43E007 (5 x 5 base
-/// tiles, three layers), unsharded and in 3 shards, the same bytes. The control: without the
+/// sharded build's merge seals no layer tile again: N55W003 (three layers), unsharded and in
+/// 3 shards, the same bytes. The control: without the
 /// decimation error's share in the bound (bounds of `e_i`, as the layers' units had before),
 /// the layer tiles' stored offsets reach past it, so their units followed their tiles'
 /// deviations, and a shard's would be its own tiles'.
@@ -276,7 +282,7 @@ fn a_pyramids_layer_units_are_the_bounds_of_its_scans() {
     use tiles::pyramid::Decimated;
     use tiles::units::{cell_spans, decimation_bound, layer_deviation_bounds};
 
-    let heights = crop(((0, 0), (1201, 1201)));
+    let heights = scotland();
     let grid = sized(&heights, (1201, 1201));
     let params = BuildParams {
         pyramid: true,
@@ -386,4 +392,71 @@ fn a_pyramids_layer_units_are_the_bounds_of_its_scans() {
         std::fs::read(&built).expect("built"),
         "the merged pyramid differs from the build"
     );
+}
+
+/// Parts whose scans give other morph unit bounds belong to no one set: the merge refuses
+/// them with one line naming the part, for the base grid's bounds (the second part's scan
+/// forged, its cell spans doubled) and for a pyramid layer's (its layer 1 scan's span of size
+/// 2 doubled: layer 2's floor takes it in, so layer 2's bounds differ), and leaves no set
+/// behind. The control: the same shards with the same
+/// scans merge.
+#[test]
+fn parts_whose_scans_give_other_bounds_are_refused() {
+    let heights = scotland();
+    let grid = sized(&heights, (1201, 1201));
+    let params = BuildParams {
+        pyramid: true,
+        ..params()
+    };
+    let real = Scans {
+        layers: Some(
+            tiles::shard::layer_scans(&grid, Shard { index: 0, count: 1 }).expect("layers"),
+        ),
+        ..scans_of(&grid, None)
+    };
+    let mut other_base = real.clone();
+    for span in other_base.spans.iter_mut() {
+        *span *= 2.0;
+    }
+    let mut other_layer = real.clone();
+    other_layer.layers.as_mut().expect("layers")[0].spans[0] *= 2.0;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let part = |index: u32, scans: &Scans, name: &str| {
+        let path = dir.path().join(name);
+        let meta = TileSetMeta::default();
+        let shard = Shard { index, count: 2 };
+        build_shard(
+            &grid,
+            &params,
+            None,
+            &meta,
+            (shard, 2),
+            Some(scans),
+            "alps",
+            &path,
+            &|| {},
+        )
+        .expect("shard");
+        path
+    };
+    let first = part(0, &real, "first");
+    let reopen = |_: &str| -> Result<_, tiles::BuildError> {
+        Err(tiles::BuildError::Params(
+            "the merge needs no input here".into(),
+        ))
+    };
+    let out = dir.path().join("set.vkt");
+    for (scans, name, what) in [
+        (&other_base, "base", "morph unit bounds differ"),
+        (&other_layer, "layer", "its scan of pyramid layer 2 differs"),
+    ] {
+        let second = part(1, scans, name);
+        let refused = merge(&[first.clone(), second], &out, &reopen, &|| {})
+            .expect_err("parts of other bounds merged");
+        let line = refused.to_string();
+        assert!(line.contains(name) && line.contains(what), "{line}");
+        assert!(!out.exists(), "a refused merge left a set");
+    }
+    let second = part(1, &real, "second");
+    merge(&[first, second], &out, &reopen, &|| {}).expect("the control's merge");
 }
