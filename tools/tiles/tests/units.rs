@@ -11,22 +11,27 @@ use tiles::shard::{build_shard, merge, tile_ranges, MergeSummary, Scans, Shard};
 use tiles::units::deviation_bounds;
 use tiles::{build_tileset, BuildParams, Grid, TileSet, TileSetMeta};
 
-/// 3 x 3 tiles of the SRTM3 tile N43E007 (the Alps: rough ground, where a coarse level's
-/// spacing rule leaves triangles far over its error).
+/// 3 x 3 tiles of the SRTM1 tile N48W125 (Vancouver Island's mountains, 796 m of relief, a
+/// window without voids), at its own spacing: rough ground at 21 x 31 m, where a coarse level's
+/// spacing rule leaves triangles far over its error. (These tests ran on a crop of N43E007
+/// until 2026-12-08, whose roughness was its voids read as -32768 m.)
 const SIZE: (usize, usize) = (769, 769);
-/// A crop (from the tile's north-west corner) whose last tiles' data end on an odd column and
-/// row (255 and 247), so that they are meshed one column and row further, copies of the last.
-/// Its edges are steep enough that, were those copies not held within each level's error,
-/// finer vertices on them would pass the bounds of levels 2-7.
-const PADDED: ((usize, usize), (usize, usize)) = ((0, 0), (768, 760));
-const SPACING: (f64, f64) = (67.5, 92.6);
+/// Where the window starts in the tile.
+const ORIGIN: (usize, usize) = (2368, 2368);
+/// A crop of the same window whose last tiles' data end on an odd column and row (255 and
+/// 247), so that they are meshed one column and row further, copies of the last. Its edges
+/// are steep enough that, were those copies not held within each level's error, finer vertices
+/// on them would pass the bounds of levels 4-7 (checked by leaving them out of refinement).
+const PADDED: ((usize, usize), (usize, usize)) = (ORIGIN, (768, 760));
+/// SRTM1's spacing at 48.5 N: 1 arc-second east and north.
+const SPACING: (f64, f64) = (20.6, 30.9);
 
-fn alps() -> Vec<f32> {
-    crop(((300, 300), SIZE))
+fn mountains() -> Vec<f32> {
+    crop((ORIGIN, SIZE))
 }
 
 fn crop((origin, size): ((usize, usize), (usize, usize))) -> Vec<f32> {
-    hgt_crop("srtm/N43E007.hgt", 1201, origin, size)
+    hgt_crop("srtm/N48W125.hgt", 3601, origin, size)
 }
 
 fn grid(heights: &[f32]) -> Grid<'_> {
@@ -97,7 +102,7 @@ fn sharded(
                 &meta,
                 (shard, 2),
                 Some(scans),
-                "alps",
+                "mountains",
                 &part,
                 &|| {},
             )
@@ -146,10 +151,10 @@ fn a_sets_morph_units_are_the_bounds_of_its_scan() {
     let spacing = SPACING.0.min(SPACING.1);
     let mut step = 0.0;
     let mut from_bounds = Vec::new();
-    for (origin, size) in [PADDED, ((300, 300), SIZE)] {
+    for (origin, size) in [PADDED, (ORIGIN, SIZE)] {
         let heights = crop((origin, size));
         let grid = sized(&heights, size);
-        let out = dir.path().join(format!("alps-{}.vkt", size.0));
+        let out = dir.path().join(format!("mountains-{}.vkt", size.0));
         build_tileset(&grid, &params(), &TileSetMeta::default(), &out, &|| {}).expect("build");
         step = TileSet::open(&out).expect("open").header().height_step;
         let bounds = deviation_bounds(&params(), spacing, step, &scans_of(&grid, None).spans);
@@ -163,7 +168,7 @@ fn a_sets_morph_units_are_the_bounds_of_its_scan() {
             "{size:?}: a tile raised a unit past its bound"
         );
     }
-    let heights = alps();
+    let heights = mountains();
     let grid = grid(&heights);
 
     // The control: one shard of all the tiles, its scan without cell spans (its tiles sealed
@@ -195,7 +200,7 @@ fn a_sets_morph_units_are_the_bounds_of_its_scan() {
 /// every tile, and is the build's bytes.
 #[test]
 fn tiles_past_their_bounds_raise_the_units() {
-    let heights = alps();
+    let heights = mountains();
     let grid = grid(&heights);
     for compact in [false, true] {
         let dir = tempfile::tempdir().expect("temp dir");
@@ -269,6 +274,15 @@ fn scotland() -> Vec<f32> {
     hgt_crop("srtm/N55W003.hgt", 1201, (0, 0), (1201, 1201))
 }
 
+/// [`scotland`]'s heights as a grid, at SRTM3's spacing there (3 arc-seconds at 55.5 N).
+fn scotland_grid(heights: &[f32]) -> Grid<'_> {
+    Grid {
+        spacing_x: 52.5,
+        spacing_y: 92.6,
+        ..sized(heights, (1201, 1201))
+    }
+}
+
 /// A pyramid's layers take their units from bounds that every shard finds alike from the scans
 /// (`tiles::units::layer_deviation_bounds`), so no layer tile's deviation raises them and a
 /// sharded build's merge seals no layer tile again: N55W003 (three layers), unsharded and in
@@ -283,7 +297,7 @@ fn a_pyramids_layer_units_are_the_bounds_of_its_scans() {
     use tiles::units::{cell_spans, decimation_bound, layer_deviation_bounds};
 
     let heights = scotland();
-    let grid = sized(&heights, (1201, 1201));
+    let grid = scotland_grid(&heights);
     let params = BuildParams {
         pyramid: true,
         ..params()
@@ -396,14 +410,13 @@ fn a_pyramids_layer_units_are_the_bounds_of_its_scans() {
 
 /// Parts whose scans give other morph unit bounds belong to no one set: the merge refuses
 /// them with one line naming the part, for the base grid's bounds (the second part's scan
-/// forged, its cell spans doubled) and for a pyramid layer's (its layer 1 scan's span of size
-/// 2 doubled: layer 2's floor takes it in, so layer 2's bounds differ), and leaves no set
-/// behind. The control: the same shards with the same
+/// forged, its cell spans doubled) and for a pyramid layer's (its layer 1 scan's cell spans
+/// doubled), and leaves no set behind. The control: the same shards with the same
 /// scans merge.
 #[test]
 fn parts_whose_scans_give_other_bounds_are_refused() {
     let heights = scotland();
-    let grid = sized(&heights, (1201, 1201));
+    let grid = scotland_grid(&heights);
     let params = BuildParams {
         pyramid: true,
         ..params()
@@ -419,7 +432,12 @@ fn parts_whose_scans_give_other_bounds_are_refused() {
         *span *= 2.0;
     }
     let mut other_layer = real.clone();
-    other_layer.layers.as_mut().expect("layers")[0].spans[0] *= 2.0;
+    for span in other_layer.layers.as_mut().expect("layers")[0]
+        .spans
+        .iter_mut()
+    {
+        *span *= 2.0;
+    }
     let dir = tempfile::tempdir().expect("temp dir");
     let part = |index: u32, scans: &Scans, name: &str| {
         let path = dir.path().join(name);
@@ -432,7 +450,7 @@ fn parts_whose_scans_give_other_bounds_are_refused() {
             &meta,
             (shard, 2),
             Some(scans),
-            "alps",
+            "scotland",
             &path,
             &|| {},
         )
@@ -448,7 +466,7 @@ fn parts_whose_scans_give_other_bounds_are_refused() {
     let out = dir.path().join("set.vkt");
     for (scans, name, what) in [
         (&other_base, "base", "morph unit bounds differ"),
-        (&other_layer, "layer", "its scan of pyramid layer 2 differs"),
+        (&other_layer, "layer", "its scan of pyramid layer 1 differs"),
     ] {
         let second = part(1, scans, name);
         let refused = merge(&[first.clone(), second], &out, &reopen, &|| {})
