@@ -77,7 +77,7 @@ fn found_where_it_is(set: &TileSet, k: u32, splits: &[&[u32]], names: &[&str]) {
 fn checks_in_pieces_find_what_one_pass_finds() {
     let dir = tempfile::tempdir().expect("temp dir");
     // One full tile and a partial one.
-    let file = common::alps_set(dir.path(), (256 + 1 + 90, 257));
+    let file = common::relief_set(dir.path(), (256 + 1 + 90, 257));
     let splits: [&[u32]; 4] = [&[], &[3], &[1, 5], &[1, 2, 3, 4, 5, 6, 7, 8]];
     let sound = TileSet::open(&file).expect("open");
     for cuts in splits {

@@ -16,7 +16,7 @@ type Damage = fn(&mut LevelEntry, u32);
 #[test]
 fn tables_read_from_the_file_are_the_outlines() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let file = common::alps_set(dir.path(), (2 * 256 + 1, 256 + 1));
+    let file = common::relief_set(dir.path(), (2 * 256 + 1, 256 + 1));
     let sound = TileSet::open(&file).expect("open");
     let h = *sound.header();
     for ty in 0..h.tiles_y {

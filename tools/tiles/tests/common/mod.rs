@@ -35,11 +35,13 @@ pub fn srtm3_grid(heights: &[f32], (w, h): (usize, usize)) -> tiles::Grid<'_> {
     }
 }
 
-/// A `w x h` crop of the SRTM3 tile N43E007 (the Alps; rough ground, every level distinct)
-/// built as `dir/alps.vkt`: 67.5 x 92.6 m spacing, 9 levels, base error 1 m, shared sides.
+/// A `w x h` crop of the SRTM3 tile N41E001 from column 0, row 416 (inland Catalonia north of
+/// Tarragona, 278-1,017 m, no voids; rough ground, every level distinct), built as
+/// `dir/relief.vkt`: 67.5 x 92.6 m spacing, 9 levels, base error 1 m, shared sides. (Until
+/// 2026-12-08 a crop of N43E007 whose roughness was 18 voids read as -32768 m.)
 #[allow(dead_code)]
-pub fn alps_set(dir: &std::path::Path, (w, h): (usize, usize)) -> std::path::PathBuf {
-    let heights = hgt_crop("srtm/N43E007.hgt", 1201, (400, 300), (w, h));
+pub fn relief_set(dir: &std::path::Path, (w, h): (usize, usize)) -> std::path::PathBuf {
+    let heights = hgt_crop("srtm/N41E001.hgt", 1201, (0, 416), (w, h));
     let grid = tiles::Grid {
         width: w,
         height: h,
@@ -48,7 +50,7 @@ pub fn alps_set(dir: &std::path::Path, (w, h): (usize, usize)) -> std::path::Pat
         spacing_x: 67.5,
         spacing_y: 92.6,
     };
-    let out = dir.join("alps.vkt");
+    let out = dir.join("relief.vkt");
     let params = tiles::BuildParams {
         levels: 9,
         base_error: 1.0,
