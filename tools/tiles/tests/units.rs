@@ -78,8 +78,41 @@ fn set_units(set: &TileSet) -> Vec<f32> {
     units.expect("a tile")
 }
 
-/// Shards `0..n` of the grid built into `dir` with the scans `scans` given (as `--scans`
-/// gives them), then merged; the merge's summary and the set.
+/// Shard `shard` of `grid` built into `part` with `params` and `meta`, a halo of 2, and the
+/// scans `scans` given (as `--scans` gives them) or none (each shard scans for itself).
+fn shard_part(
+    (grid, params, meta): (&Grid, &BuildParams, &TileSetMeta),
+    scans: Option<&Scans>,
+    shard: Shard,
+    part: &Path,
+) {
+    let recipe = "units test";
+    build_shard(
+        grid,
+        params,
+        None,
+        meta,
+        (shard, 2),
+        scans,
+        recipe,
+        part,
+        &|| {},
+    )
+    .expect("shard");
+}
+
+/// `parts` merged into `out`, which needs no input (their seams settled by their halos).
+fn merged(parts: &[PathBuf], out: &Path) -> Result<MergeSummary, tiles::BuildError> {
+    let reopen = |_: &str| -> Result<_, tiles::BuildError> {
+        Err(tiles::BuildError::Params(
+            "the merge needs no input here".into(),
+        ))
+    };
+    merge(parts, out, &reopen, &|| {})
+}
+
+/// Shards `0..n` of the grid built into `dir` with the scans `scans` given, then merged; the
+/// merge's summary and the set.
 fn sharded(
     grid: &Grid,
     scans: &Scans,
@@ -95,29 +128,12 @@ fn sharded(
         .map(|index| {
             let part = dir.join(format!("part.{index}.of.{n}"));
             let shard = Shard { index, count: n };
-            build_shard(
-                grid,
-                &params(),
-                None,
-                &meta,
-                (shard, 2),
-                Some(scans),
-                "mountains",
-                &part,
-                &|| {},
-            )
-            .expect("shard");
+            shard_part((grid, &params(), &meta), Some(scans), shard, &part);
             part
         })
         .collect();
     let out = dir.join(format!("merged.{n}.vkt"));
-    let reopen = |_: &str| -> Result<_, tiles::BuildError> {
-        Err(tiles::BuildError::Params(
-            "the merge needs no input here".into(),
-        ))
-    };
-    let summary = merge(&parts, &out, &reopen, &|| {}).expect("merge");
-    (summary, out)
+    (merged(&parts, &out).expect("merge"), out)
 }
 
 /// The whole grid's scan as the shards' scans give it, with its cell spans replaced.
@@ -286,10 +302,10 @@ fn scotland_grid(heights: &[f32]) -> Grid<'_> {
 /// A pyramid's layers take their units from bounds that every shard finds alike from the scans
 /// (`tiles::units::layer_deviation_bounds`), so no layer tile's deviation raises them and a
 /// sharded build's merge seals no layer tile again: N55W003 (three layers), unsharded and in
-/// 3 shards, the same bytes. The control: without the
-/// decimation error's share in the bound (bounds of `e_i`, as the layers' units had before),
-/// the layer tiles' stored offsets reach past it, so their units followed their tiles'
-/// deviations, and a shard's would be its own tiles'.
+/// 3 shards, the same bytes. The control: without the decimation error's share in the bound
+/// (bounds of `e_i`, as the layers' units had before), the layer tiles' stored offsets reach
+/// past it, so their units followed their tiles' deviations, and a shard's would be its own
+/// tiles'.
 #[test]
 fn a_pyramids_layer_units_are_the_bounds_of_its_scans() {
     use tiles::build::Heights;
@@ -376,33 +392,21 @@ fn a_pyramids_layer_units_are_the_bounds_of_its_scans() {
         .map(|index| {
             let part = dir.path().join(format!("part.{index}"));
             let shard = Shard { index, count: 3 };
-            let meta = TileSetMeta::default();
-            build_shard(
-                &grid,
-                &params,
+            shard_part(
+                (&grid, &params, &TileSetMeta::default()),
                 None,
-                &meta,
-                (shard, 2),
-                None,
-                "n43e007",
+                shard,
                 &part,
-                &|| {},
-            )
-            .expect("shard");
+            );
             part
         })
         .collect();
-    let merged = dir.path().join("merged.vkt");
-    let reopen = |_: &str| -> Result<_, tiles::BuildError> {
-        Err(tiles::BuildError::Params(
-            "the merge needs no input here".into(),
-        ))
-    };
-    let summary = merge(&parts, &merged, &reopen, &|| {}).expect("merge");
+    let set = dir.path().join("merged.vkt");
+    let summary = merged(&parts, &set).expect("merge");
     assert_eq!(summary.pyramid_resealed, 0, "layer tiles sealed again");
     assert!(summary.pyramid_tiles > 0);
     assert_eq!(
-        std::fs::read(&merged).expect("merged"),
+        std::fs::read(&set).expect("merged"),
         std::fs::read(&built).expect("built"),
         "the merged pyramid differs from the build"
     );
@@ -441,40 +445,28 @@ fn parts_whose_scans_give_other_bounds_are_refused() {
     let dir = tempfile::tempdir().expect("temp dir");
     let part = |index: u32, scans: &Scans, name: &str| {
         let path = dir.path().join(name);
-        let meta = TileSetMeta::default();
         let shard = Shard { index, count: 2 };
-        build_shard(
-            &grid,
-            &params,
-            None,
-            &meta,
-            (shard, 2),
+        shard_part(
+            (&grid, &params, &TileSetMeta::default()),
             Some(scans),
-            "scotland",
+            shard,
             &path,
-            &|| {},
-        )
-        .expect("shard");
+        );
         path
     };
     let first = part(0, &real, "first");
-    let reopen = |_: &str| -> Result<_, tiles::BuildError> {
-        Err(tiles::BuildError::Params(
-            "the merge needs no input here".into(),
-        ))
-    };
     let out = dir.path().join("set.vkt");
     for (scans, name, what) in [
         (&other_base, "base", "morph unit bounds differ"),
         (&other_layer, "layer", "its scan of pyramid layer 1 differs"),
     ] {
         let second = part(1, scans, name);
-        let refused = merge(&[first.clone(), second], &out, &reopen, &|| {})
-            .expect_err("parts of other bounds merged");
+        let refused =
+            merged(&[first.clone(), second], &out).expect_err("parts of other bounds merged");
         let line = refused.to_string();
         assert!(line.contains(name) && line.contains(what), "{line}");
         assert!(!out.exists(), "a refused merge left a set");
     }
     let second = part(1, &real, "second");
-    merge(&[first, second], &out, &reopen, &|| {}).expect("the control's merge");
+    merged(&[first, second], &out).expect("the control's merge");
 }
