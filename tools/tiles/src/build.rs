@@ -22,9 +22,7 @@ use crate::pack::{morph_offset, morph_unit, pack};
 use crate::pyramid::{base_errors, decimation_errors, level_floor, Decimated, Surfaces};
 use crate::quantise::{lattice_step, Quantiser};
 use crate::texture::{self, Prepared, Source, Texturing};
-use crate::units::{
-    cell_spans, decimation_bound, deviation_bounds, layer_deviation_bounds, CellSpans, CELL_SIZES,
-};
+use crate::units::{cell_spans, deviation_bounds, CellSpans, LayerBounds, CELL_SIZES};
 use crate::BuildError;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -153,7 +151,7 @@ type HeldRows<'a> = (std::ops::Range<usize>, Arc<Cow<'a, [f32]>>);
 
 /// One band's rows, and the grid they make.
 pub(crate) struct Band<'a> {
-    pub rows: Arc<Cow<'a, [f32]>>,
+    rows: Arc<Cow<'a, [f32]>>,
     first_row: usize,
     pub tile_rows: std::ops::Range<u32>,
 }
@@ -1321,6 +1319,8 @@ pub fn build_tileset_textured(
 pub(crate) struct Scanned {
     pub lo: f32,
     pub hi: f32,
+    /// The largest absolute height (with the largest span, what the step follows from).
+    pub max_abs: f32,
     pub step: f32,
     pub spans: CellSpans,
 }
@@ -1352,6 +1352,7 @@ pub(crate) fn scan(bands: &Bands) -> Result<Scanned, BuildError> {
     Ok(Scanned {
         lo,
         hi,
+        max_abs,
         step: lattice_step(spans[CELL_SIZES - 1], max_abs),
         spans,
     })
@@ -1542,9 +1543,7 @@ pub(crate) fn build_pyramid(
     // The pyramid: each layer from the grid subsampled, its error bound from the layer below.
     let mut below = vec![0.0f32; (tiles_x * tiles_y) as usize];
     let mut below_tiles_x = tiles_x;
-    // The spans of size 2 of the layers below, which bound a layer's decimation errors.
-    let mut size_two_spans = vec![base.spans[0]];
-    let max_abs = base.lo.abs().max(base.hi.abs());
+    let mut bounds = LayerBounds::above(base);
     for p in 1..=header.pyramid_layers {
         let layer_heights = Decimated::new(heights, p);
         let finer = Decimated::new(heights, p - 1);
@@ -1578,13 +1577,7 @@ pub(crate) fn build_pyramid(
             index: p,
             bands: &layer_bands,
             step: scanned.step,
-            bounds: layer_deviation_bounds(
-                params,
-                spacing_of(&layer_heights),
-                scanned.step,
-                &scanned.spans,
-                decimation_bound(&size_two_spans, max_abs),
-            ),
+            bounds: bounds.next(params, &layer_heights, &scanned),
             decimation: Some(&decimation),
             prepared: prepared.map(|(s, l)| (s.for_layer(p), *l)),
             base: Some(heights),
@@ -1606,7 +1599,6 @@ pub(crate) fn build_pyramid(
         });
         summary.texture_seconds += layer_summary.texture_seconds;
         (below, below_tiles_x) = (decimation, l.tiles_x);
-        size_two_spans.push(scanned.spans[0]);
     }
     Ok(())
 }

@@ -71,9 +71,9 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use crate::build::{
-    build_tiles, forced_sides, scan, set_header, settle, spacing_of, units_of, validate, Bands,
-    BuildParams, BuiltTile, CompactSides, Heights, Layer, LevelStats, Remesh, Scanned, SideBits,
-    Start, TileSetMeta,
+    build_tiles, forced_sides, scan, set_header, settle, units_of, validate, Bands, BuildParams,
+    BuiltTile, CompactSides, Heights, Layer, LevelStats, Remesh, Scanned, SideBits, Start,
+    TileSetMeta,
 };
 use crate::format::{
     compact_tile, layer_layout, reseal_compact_tile, stored_tile_table, temp_path, tile_count,
@@ -81,9 +81,7 @@ use crate::format::{
 };
 use crate::pyramid::{decimation_errors, Decimated};
 use crate::texture::{self, Prepared, Texturing};
-use crate::units::{
-    cell_spans, decimation_bound, deviation_bounds, layer_deviation_bounds, CellSpans, CELL_SIZES,
-};
+use crate::units::{cell_spans, deviation_bounds, CellSpans, LayerBounds, CELL_SIZES};
 use crate::BuildError;
 
 /// The first bytes of a part file.
@@ -390,9 +388,7 @@ impl ShardLayers<'_, '_> {
         }
         let mut below = vec![0.0f32; (header.tiles_x * header.tiles_y) as usize];
         let mut below_tiles_x = header.tiles_x;
-        // The spans of size 2 of the layers below, which bound a layer's decimation errors.
-        let mut size_two_spans = vec![base.spans[0]];
-        let max_abs = base.lo.abs().max(base.hi.abs());
+        let mut layer_bounds = LayerBounds::above(base);
         for (i, l) in layers.iter().enumerate() {
             let p = i as u32 + 1;
             let tiles = (l.tiles_x, l.tiles_y);
@@ -406,14 +402,7 @@ impl ShardLayers<'_, '_> {
                 None => scan(&Bands::new(&layer_heights, tiles))?,
             };
             let rows = own(l);
-            let bounds = layer_deviation_bounds(
-                params,
-                spacing_of(&layer_heights),
-                scanned.step,
-                &scanned.spans,
-                decimation_bound(&size_two_spans, max_abs),
-            );
-            size_two_spans.push(scanned.spans[0]);
+            let bounds = layer_bounds.next(params, &layer_heights, &scanned);
             let agreed = match params.shared_sides && !rows.is_empty() {
                 true => {
                     let window = windows[i].clone();
@@ -795,6 +784,7 @@ impl Scans {
         Some(crate::build::Scanned {
             lo: l.lo,
             hi: l.hi,
+            max_abs: l.max_abs,
             step: crate::quantise::lattice_step(l.spans[CELL_SIZES - 1], l.max_abs),
             spans: l.spans,
         })
@@ -805,6 +795,7 @@ impl Scans {
         crate::build::Scanned {
             lo: self.lo,
             hi: self.hi,
+            max_abs: self.max_abs,
             step: crate::quantise::lattice_step(self.max_range, self.max_abs),
             spans: self.spans,
         }
@@ -863,23 +854,13 @@ pub fn layer_scans(heights: &dyn Heights, shard: Shard) -> Result<Vec<LayerScan>
             let layer = Decimated::new(heights, p);
             let grid = layer.shape();
             let tiles = tile_count(grid.width, grid.height).map_err(BuildError::Params)?;
-            let bands = Bands::within(&layer, tiles, shard.rows(tiles.1));
-            let mut found = LayerScan {
-                lo: f32::INFINITY,
-                hi: f32::NEG_INFINITY,
-                max_abs: 0.0,
-                spans: CellSpans::default(),
-            };
-            for b in 0..bands.count() {
-                let band = bands.load(b, 0)?;
-                for &h in band.rows.iter() {
-                    (found.lo, found.hi) = (found.lo.min(h), found.hi.max(h));
-                }
-                let (spans, abs) = cell_spans(&band.grid(&grid), tiles.0, band.tile_rows.clone());
-                found.spans = widest(&found.spans, &spans);
-                found.max_abs = found.max_abs.max(abs);
-            }
-            Ok(found)
+            let found = scan(&Bands::within(&layer, tiles, shard.rows(tiles.1)))?;
+            Ok(LayerScan {
+                lo: found.lo,
+                hi: found.hi,
+                max_abs: found.max_abs,
+                spans: found.spans,
+            })
         })
         .collect()
 }

@@ -54,7 +54,7 @@
 
 use rayon::prelude::*;
 
-use crate::build::BuildParams;
+use crate::build::{spacing_of, BuildParams, Heights, Scanned};
 use crate::grid::Grid;
 use crate::mesh::TILE_CELLS;
 use crate::pyramid::FLOOR_SHARE;
@@ -219,6 +219,44 @@ pub fn decimation_bound(size_two_spans: &[f32], max_abs: f32) -> f64 {
     let sum: f64 = size_two_spans.iter().map(|&s| f64::from(s)).sum();
     let layers = size_two_spans.len() as f64;
     sum * (1.0 + 1e-5) + layers * 1e-5 * (f64::from(max_abs) + sum)
+}
+
+/// A pyramid's layers' bounds, bottom up ([`layer_deviation_bounds`]): each layer's from its
+/// own scan and the spans of size 2 of the layers below it, the base grid's first
+/// ([`decimation_bound`]). The build and every shard take them so, alike.
+pub(crate) struct LayerBounds {
+    size_two_spans: Vec<f32>,
+    max_abs: f32,
+}
+
+impl LayerBounds {
+    /// Above a base grid whose scan found `base`.
+    pub(crate) fn above(base: &Scanned) -> LayerBounds {
+        LayerBounds {
+            size_two_spans: vec![base.spans[0]],
+            max_abs: base.max_abs,
+        }
+    }
+
+    /// The bounds of the next layer up, whose heights are `layer` and whose scan found
+    /// `scanned`.
+    pub(crate) fn next(
+        &mut self,
+        params: &BuildParams,
+        layer: &dyn Heights,
+        scanned: &Scanned,
+    ) -> Vec<f64> {
+        let decimation = decimation_bound(&self.size_two_spans, self.max_abs);
+        let bounds = layer_deviation_bounds(
+            params,
+            spacing_of(layer),
+            scanned.step,
+            &scanned.spans,
+            decimation,
+        );
+        self.size_two_spans.push(scanned.spans[0]);
+        bounds
+    }
 }
 
 #[cfg(test)]
