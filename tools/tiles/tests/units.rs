@@ -299,6 +299,14 @@ fn scotland_grid(heights: &[f32]) -> Grid<'_> {
     }
 }
 
+/// [`params`] with a tile pyramid.
+fn pyramid_params() -> BuildParams {
+    BuildParams {
+        pyramid: true,
+        ..params()
+    }
+}
+
 /// A pyramid's layers take their units from bounds that every shard finds alike from the scans
 /// (`tiles::units::layer_deviation_bounds`), so no layer tile's deviation raises them and a
 /// sharded build's merge seals no layer tile again: N55W003 (three layers), unsharded and in
@@ -314,10 +322,7 @@ fn a_pyramids_layer_units_are_the_bounds_of_its_scans() {
 
     let heights = scotland();
     let grid = scotland_grid(&heights);
-    let params = BuildParams {
-        pyramid: true,
-        ..params()
-    };
+    let params = pyramid_params();
     let dir = tempfile::tempdir().expect("temp dir");
     let built = dir.path().join("built.vkt");
     build_tileset(&grid, &params, &TileSetMeta::default(), &built, &|| {}).expect("build");
@@ -421,10 +426,7 @@ fn a_pyramids_layer_units_are_the_bounds_of_its_scans() {
 fn parts_whose_scans_give_other_bounds_are_refused() {
     let heights = scotland();
     let grid = scotland_grid(&heights);
-    let params = BuildParams {
-        pyramid: true,
-        ..params()
-    };
+    let params = pyramid_params();
     let real = Scans {
         layers: Some(
             tiles::shard::layer_scans(&grid, Shard { index: 0, count: 1 }).expect("layers"),

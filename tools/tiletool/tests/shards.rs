@@ -225,17 +225,12 @@ fn with_scans_a_shard_reads_only_its_rows_and_the_set_is_the_same() {
     let n = 5;
     scan_all(&input, &scans, n);
     let shard_args = |k: u32, part: &Path, with_scans: bool| -> Output {
-        let o = halo_0_shard(&input, (k, n), part, with_scans.then_some(scans.as_path()));
+        let given = with_scans.then_some(scans.as_path());
+        let o = halo_0_shard(&input, (k, n), part, (given, &[]));
         assert!(o.status.success(), "{}", stderr(&o));
         o
     };
-    let mut parts = Vec::new();
-    let mut with = Vec::new();
-    for k in 0..n {
-        let part = dir.path().join(format!("part-{k}-of-{n}"));
-        with.push(input_read(&shard_args(k, &part, true)));
-        parts.push(part);
-    }
+    let (parts, with) = shard_all(dir.path(), "part", n, |k, part| shard_args(k, part, true));
     let merged = dir.path().join("merged.vkt");
     let o = merge(&parts, &merged);
     assert!(o.status.success(), "{}", stderr(&o));
@@ -257,31 +252,13 @@ fn with_scans_a_shard_reads_only_its_rows_and_the_set_is_the_same() {
     let whole = dir.path().join("whole-pyramid.vkt");
     build(&input, &whole, &["--no-texture", "--pyramid"]);
     let pyramid_shard = |k: u32, part: &Path, scans: &Path| -> Output {
-        let shard = format!("{k}/{n}");
-        let o = tiletool(&[
-            "build",
-            s(&input),
-            "--no-texture",
-            "--pyramid",
-            "--halo",
-            "0",
-            "--shard",
-            &shard,
-            "--scans",
-            s(scans),
-            "-o",
-            s(part),
-        ]);
+        let o = halo_0_shard(&input, (k, n), part, (Some(scans), &["--pyramid"]));
         assert!(o.status.success(), "{}", stderr(&o));
         o
     };
-    let mut parts = Vec::new();
-    let mut with = Vec::new();
-    for k in 0..n {
-        let part = dir.path().join(format!("pyramid-{k}-of-{n}"));
-        with.push(input_read(&pyramid_shard(k, &part, &scans)));
-        parts.push(part);
-    }
+    let (parts, with) = shard_all(dir.path(), "pyramid", n, |k, part| {
+        pyramid_shard(k, part, &scans)
+    });
     let merged = dir.path().join("merged-pyramid.vkt");
     let o = merge(&parts, &merged);
     assert!(o.status.success(), "{}", stderr(&o));
@@ -337,7 +314,12 @@ fn with_scans_a_shard_reads_only_its_rows_and_the_set_is_the_same() {
 /// Shard `k` of `n` of `input`, untextured, with a halo of 0 (a shard's window is its rows;
 /// the merge settles the seams), into `part`, given every shard's scans (and ranges) in
 /// `scans` when there are some.
-fn halo_0_shard(input: &Path, (k, n): (u32, u32), part: &Path, scans: Option<&Path>) -> Output {
+fn halo_0_shard(
+    input: &Path,
+    (k, n): (u32, u32),
+    part: &Path,
+    (scans, extra): (Option<&Path>, &[&str]),
+) -> Output {
     let shard = format!("{k}/{n}");
     let mut args = vec![
         "build",
@@ -353,7 +335,25 @@ fn halo_0_shard(input: &Path, (k, n): (u32, u32), part: &Path, scans: Option<&Pa
     if let Some(dir) = scans {
         args.extend(["--scans", s(dir)]);
     }
+    args.extend(extra);
     tiletool(&args)
+}
+
+/// Shards `0..n` built by `shard` (given the index and the part's path) into `dir`, their
+/// parts named `{name}-{k}-of-{n}`: the parts, and what each read of its input (MB).
+fn shard_all(
+    dir: &Path,
+    name: &str,
+    n: u32,
+    shard: impl Fn(u32, &Path) -> Output,
+) -> (Vec<PathBuf>, Vec<f64>) {
+    (0..n)
+        .map(|k| {
+            let part = dir.join(format!("{name}-{k}-of-{n}"));
+            let read = input_read(&shard(k, &part));
+            (part, read)
+        })
+        .unzip()
 }
 
 /// The figure a shard prints of what it read of its input, MB.
@@ -389,7 +389,12 @@ fn with_scans_and_ranges_a_shard_fills_its_voids_from_its_rows() {
     let n = 5;
     scan_all(&voids, &scans, n);
     let shard_build = |k: u32, part: &Path, with_scans: bool| -> Output {
-        halo_0_shard(&voids, (k, n), part, with_scans.then_some(scans.as_path()))
+        halo_0_shard(
+            &voids,
+            (k, n),
+            part,
+            (with_scans.then_some(scans.as_path()), &[]),
+        )
     };
     // Without the second stage: refused, naming the ranges file.
     let o = shard_build(0, &dir.path().join("early"), true);
