@@ -1722,8 +1722,11 @@ fn merge_grid(
     let (tiles_x, tiles_y) = grid.tiles;
     let count = tiles_x as usize * tiles_y as usize;
     let mut merged = GridMerged::default();
-    // Each tile's decimation error (0 in the base grid): a layer tile's floor.
-    let decimation: Vec<f32> = (0..count).map(|t| grid.tile(t).decimation).collect();
+    // Each layer tile's decimation error, its floor (none in the base grid).
+    let decimation: Vec<f32> = match p {
+        0 => Vec::new(),
+        _ => (0..count).map(|t| grid.tile(t).decimation).collect(),
+    };
     let floors = (p > 0).then_some(&decimation[..]);
     // Tiles built again where the agreement moved their sides: blob, and above the base
     // grid, its levels' errors against it.
